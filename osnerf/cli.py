@@ -1,0 +1,85 @@
+"""The ``osnerf`` command line: ``osnerf <command> [options]``.
+
+Each command lives in ``osnerf/commands/<name>.py`` with ``add_arguments(parser)`` and
+``run(args) -> int``. Results go to files (or stdout), progress and logs to stderr.
+Exit codes: 0 success, 2 bad arguments or input, 1 runtime failure; always with a
+one-line message naming what was wrong.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module, one-line help). One table; `osnerf sweep` uses it too.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "ber": ("osnerf.commands.ber", "uncoded BER vs SNR over AWGN or Rayleigh, against theory"),
+    "eval-codec": ("osnerf.commands.eval_codec", "image transmission: JSCC vs digital vs ideal"),
+    "train-codec": ("osnerf.commands.train_codec", "train the semantic codec (JSCC)"),
+    "train-nerf": ("osnerf.commands.train_nerf", "train a radiance field on a nerfstudio folder"),
+    "render": ("osnerf.commands.render", "render a camera path from a trained field"),
+    "hil": ("osnerf.commands.hil", "SDR front-ends: `osnerf hil info [--emulate]`"),
+    "ota": ("osnerf.commands.ota", "send images over the air (real or emulated HackRFs)"),
+    "scenes": ("osnerf.commands.scenes", "list built-in scenes and their objects"),
+    "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
+    "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),
+    "plot": ("osnerf.commands.plot", "plots from a sweep results file"),
+    "demo": ("osnerf.commands.demo", "the main job on its embedded default"),
+}
+
+
+class UsageError(ValueError):
+    """Bad arguments or input: exit code 2."""
+
+
+def available_commands() -> dict[str, tuple[str, str]]:
+    """Commands whose module exists in this checkout."""
+    import importlib.util
+
+    return {k: v for k, v in COMMANDS.items() if importlib.util.find_spec(v[0]) is not None}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="osnerf", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module, help_text) in available_commands().items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if command is None or name == command:
+            importlib.import_module(module).add_arguments(p)
+    return parser
+
+
+def _first_command(argv: list[str]) -> str | None:
+    for a in argv:
+        if not a.startswith("-"):
+            return a
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = _first_command(argv)
+    parser = build_parser(command if command in COMMANDS else None)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse already printed its message
+        return int(e.code or 0)
+    module = importlib.import_module(COMMANDS[args.command][0])
+    try:
+        return int(module.run(args) or 0)
+    except (UsageError, ValueError, KeyError, FileNotFoundError) as e:
+        msg = e.args[0] if isinstance(e, KeyError) and e.args else e
+        print(f"osnerf {args.command}: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"osnerf {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 - the CLI boundary: one line, exit 1
+        print(f"osnerf {args.command}: failed: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+
+
+def entry() -> None:
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""The import boundaries of the developers' guide, enforced by walking every import with ast."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+OURS = {"phy", "semcodec", "renderer", "hil", "osnerf"}
+ALLOWED = {
+    "phy": set(),
+    "semcodec": {"phy"},
+    "renderer": set(),
+    "hil": {"phy"},
+    "osnerf": {"phy", "semcodec", "renderer", "hil"},
+}
+PUBLIC_ONLY = ("tests", "benchmarks")
+
+
+def _imports(path: Path):
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield node.lineno, alias.name
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            yield node.lineno, node.module
+            for alias in node.names:
+                yield node.lineno, f"{node.module}.{alias.name}"
+
+
+@pytest.mark.parametrize("package", sorted(ALLOWED))
+def test_package_imports_only_what_it_may(package):
+    bad = []
+    for path in sorted((ROOT / package).rglob("*.py")):
+        for lineno, name in _imports(path):
+            top = name.split(".")[0]
+            if top in OURS and top != package and top not in ALLOWED[package]:
+                bad.append(f"{path.relative_to(ROOT)}:{lineno} imports {name}")
+    assert not bad, f"{package} may import only {sorted(ALLOWED[package]) or 'nothing of ours'}:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("folder", PUBLIC_ONLY)
+def test_tests_and_benchmarks_use_public_names(folder):
+    """tests/ and benchmarks/ import our packages' public names, never private modules."""
+    bad = []
+    for path in sorted((ROOT / folder).rglob("*.py")):
+        for lineno, name in _imports(path):
+            parts = name.split(".")
+            if parts[0] in OURS and any(p.startswith("_") and not p.startswith("__") for p in parts[1:]):
+                bad.append(f"{path.relative_to(ROOT)}:{lineno} imports private {name}")
+    assert not bad, "\n".join(bad)
+
+
+def test_checker_catches_a_forbidden_edge(tmp_path):
+    """The walker itself must see an import of osnerf from phy."""
+    f = tmp_path / "x.py"
+    f.write_text("import numpy\nfrom osnerf.cli import main\nimport semcodec.model as m\n")
+    names = [n for _, n in _imports(f)]
+    assert "osnerf.cli" in names and "semcodec.model" in names
