@@ -1,0 +1,64 @@
+"""`osnerf sweep SPEC --out results.jsonl [--executor local|ray|serial] [--workers N]`.
+
+Runs every point of a YAML/TOML sweep spec (see ``osnerf.sweeps.spec``) that is not yet in
+the results file, appending one JSON line per finished point. Re-running the same command
+skips finished points and retries failed ones. Exit 1 when a point failed (the others are
+kept; their errors are in ``<out>.errors.jsonl``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("spec", metavar="SPEC", help="sweep spec (.yaml, .yml or .toml)")
+    p.add_argument("--out", required=True, help="results file, JSON Lines (appended; resumed)")
+    p.add_argument(
+        "--executor",
+        default="local",
+        choices=["local", "ray", "serial"],
+        help="local process pool (default), a Ray cluster, or serial in this process",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="points run in parallel (default: half the CPU cores)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        help="Ray cluster address for --executor ray (default: $RAY_ADDRESS or a local instance)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from osnerf.sweeps import errors_path, load_spec, run_sweep
+
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    spec = load_spec(args.spec)
+    summary = run_sweep(
+        spec,
+        args.out,
+        executor=args.executor,
+        workers=args.workers,
+        progress=not args.no_progress,
+        ray_address=args.ray_address,
+    )
+    print(
+        f"osnerf sweep: {summary.total} points: {summary.skipped} already done, "
+        f"{summary.finished} finished now, {len(summary.failed)} failed -> {args.out}",
+        file=sys.stderr,
+    )
+    if summary.failed:
+        print(
+            f"osnerf sweep: failed: {len(summary.failed)} point(s), errors in "
+            f"{errors_path(args.out)}; re-run the same command to retry them",
+            file=sys.stderr,
+        )
+        return 1
+    return 0

@@ -1,0 +1,319 @@
+"""Run a sweep: expand the spec, skip finished points, execute the rest, append each result.
+
+Each point runs ``osnerf.cli.main([command, *argv, "--out", TMP])`` in a worker (in-process,
+a spawned process of a ``concurrent.futures`` pool, or a Ray task), and the worker returns
+the command's result JSON. The driver extracts the metrics (:mod:`osnerf.sweeps.metrics`)
+and appends one line per finished point to the results file (:mod:`osnerf.sweeps.store`).
+Failed points are not written there: they go to ``<out>.errors.jsonl`` and are retried by
+the next run of the same spec.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import multiprocessing
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from osnerf.sweeps.metrics import metric_rule
+from osnerf.sweeps.spec import Point, SweepSpec, command_options, command_parser, expand, point_key
+from osnerf.sweeps.store import append_record, open_results
+
+Task = dict[str, Any]  # plain data, picklable: what a worker needs to run one point
+Outcome = dict[str, Any]  # {"ok", "result", "error", "seconds"}
+
+
+def execute_point(task: Task) -> Outcome:
+    """Run one point in this process and return its outcome (never raises).
+
+    Args:
+        task: ``{"command", "module", "argv", "out_kind", "json_name", "threads"}``;
+            ``module`` is the command's module from the driver's ``osnerf.cli.COMMANDS``, so
+            a worker runs exactly the command the driver validated.
+    Returns:
+        ``{"ok": bool, "result": dict | None, "error": str | None, "seconds": float}``.
+    """
+    import osnerf.cli
+
+    t0 = time.perf_counter()
+    if task.get("threads"):
+        n = str(task["threads"])
+        for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+            os.environ[var] = n
+        import torch
+
+        torch.set_num_threads(int(task["threads"]))
+    osnerf.cli.COMMANDS.setdefault(task["command"], (task["module"], task["command"]))
+    err = io.StringIO()
+    with tempfile.TemporaryDirectory(prefix="osnerf-sweep-") as tmp:
+        out = Path(tmp) / ("result.json" if task["out_kind"] == "file" else "run")
+        try:
+            with contextlib.redirect_stderr(err):
+                rc = osnerf.cli.main([task["command"], *task["argv"], "--out", str(out)])
+        except BaseException as e:  # noqa: BLE001 - SystemExit from a command, for example
+            rc, msg = 1, f"{type(e).__name__}: {e}"
+        else:
+            lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+            msg = lines[-1] if lines else f"exit code {rc}"
+        seconds = time.perf_counter() - t0
+        if rc != 0:
+            return {"ok": False, "result": None, "error": f"exit {rc}: {msg}", "seconds": seconds}
+        path = out if task["out_kind"] == "file" else out / task["json_name"]
+        try:
+            result = json.loads(path.read_text())
+        except (OSError, ValueError) as e:
+            return {
+                "ok": False,
+                "result": None,
+                "seconds": seconds,
+                "error": f"the command succeeded but its result {path.name} is unreadable: {e}",
+            }
+    return {"ok": True, "result": result, "error": None, "seconds": seconds}
+
+
+# --- executors: (tasks, workers, options) -> (key, outcome) in completion order ---------------
+
+
+def _serial(tasks: list[tuple[str, Task]], workers: int, **_: Any) -> Iterator[tuple[str, Outcome]]:
+    for key, task in tasks:
+        yield key, execute_point(task)
+
+
+def _local(tasks: list[tuple[str, Task]], workers: int, **_: Any) -> Iterator[tuple[str, Outcome]]:
+    ctx = multiprocessing.get_context("spawn")  # fork after torch/OpenMP threads is unsafe
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
+        futures = {pool.submit(execute_point, task): key for key, task in tasks}
+        for fut in as_completed(futures):
+            try:
+                outcome = fut.result()
+            except Exception as e:  # noqa: BLE001 - a worker died (BrokenProcessPool, ...)
+                outcome = {
+                    "ok": False,
+                    "result": None,
+                    "error": f"worker failed: {type(e).__name__}: {e}",
+                    "seconds": 0.0,
+                }
+            yield futures[fut], outcome
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _ray(
+    tasks: list[tuple[str, Task]],
+    workers: int,
+    ray_address: str | None = None,
+    ray_runtime_env: dict | None = None,
+    **_: Any,
+) -> Iterator[tuple[str, Outcome]]:
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(
+            "--executor ray needs the 'ray' package: pip install 'osnerf[ray]'"
+        ) from None
+    started = False
+    if not ray.is_initialized():
+        kwargs: dict[str, Any] = {
+            "address": ray_address,
+            "include_dashboard": False,
+            "runtime_env": ray_runtime_env,
+            "log_to_driver": False,
+        }
+        if ray_address is None and not os.environ.get("RAY_ADDRESS"):
+            kwargs["num_cpus"] = workers  # a local instance sized like the local pool
+        ray.init(**kwargs)
+        started = True
+    remote = ray.remote(num_cpus=1)(execute_point)
+    refs = {remote.remote(task): key for key, task in tasks}
+    pending = list(refs)
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for ref in ready:
+                try:
+                    outcome = ray.get(ref)
+                except Exception as e:  # noqa: BLE001 - a task or its worker died
+                    outcome = {
+                        "ok": False,
+                        "result": None,
+                        "seconds": 0.0,
+                        "error": f"ray task failed: {type(e).__name__}: {str(e).splitlines()[0]}",
+                    }
+                yield refs[ref], outcome
+    finally:
+        for ref in pending:
+            ray.cancel(ref, force=True)
+        if started:
+            ray.shutdown()
+
+
+EXECUTORS: dict[str, Callable[..., Iterator[tuple[str, Outcome]]]] = {
+    "local": _local,
+    "ray": _ray,
+    "serial": _serial,
+}
+
+
+def get_executor(name: str) -> Callable[..., Iterator[tuple[str, Outcome]]]:
+    if name not in EXECUTORS:
+        raise KeyError(f"unknown executor {name!r}; known: {sorted(EXECUTORS)}")
+    return EXECUTORS[name]
+
+
+@dataclass
+class SweepSummary:
+    """What one run of a sweep did.
+
+    Attributes:
+        total: points in the spec.
+        skipped: points already in the results file (not run again).
+        finished: points run and appended now.
+        failed: ``(point values, seed, error)`` of points that failed now (retried next run).
+    """
+
+    total: int
+    skipped: int
+    finished: int = 0
+    failed: list[tuple[dict[str, Any], int | None, str]] = field(default_factory=list)
+
+
+def errors_path(out: str | Path) -> Path:
+    out = Path(out)
+    return out.with_name(out.name + ".errors.jsonl")
+
+
+def run_sweep(
+    spec: SweepSpec,
+    out: str | Path,
+    executor: str = "local",
+    workers: int | None = None,
+    progress: bool = True,
+    ray_address: str | None = None,
+    ray_runtime_env: dict | None = None,
+) -> SweepSummary:
+    """Run every point of ``spec`` not yet in ``out``; append each as it finishes.
+
+    Args:
+        spec: the sweep.
+        out: results file (JSON Lines); created if absent, repaired if its last line is torn.
+        executor: "local" (process pool), "ray", or "serial" (in this process, for debugging).
+        workers: parallel points (default: half the CPU cores, at least 1).
+        ray_address: Ray cluster address for ``executor="ray"`` (None: ``$RAY_ADDRESS`` or a
+            local instance).
+        ray_runtime_env: Ray runtime environment for the tasks (e.g. ``env_vars``).
+    Raises:
+        ValueError / KeyError: a bad spec, executor or results file, before anything runs.
+    """
+    from osnerf.cli import COMMANDS
+    from osnerf.provenance import git_commit
+
+    run_executor = get_executor(executor)
+    points = expand(spec)
+    if "out" not in command_options(command_parser(spec.command)):
+        raise ValueError(
+            f"command {spec.command!r} has no --out option: a sweep point needs its JSON result"
+        )
+    cpus = os.cpu_count() or 1
+    workers = max(1, cpus // 2) if workers is None else workers
+    if workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    rule = metric_rule(spec.command)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = {point_key(r["point"], r.get("seed")) for r in open_results(out, spec.sha256)}
+    todo: list[Point] = [p for p in points if p.key not in done]
+    summary = SweepSummary(total=len(points), skipped=len(points) - len(todo))
+    errors = errors_path(out)
+    if errors.exists():
+        errors.unlink()  # failures of an earlier run are retried now
+    if not todo:
+        return summary
+    threads = max(1, cpus // workers) if executor != "serial" else None
+    by_key = {p.key: p for p in todo}
+    tasks = [
+        (
+            p.key,
+            {
+                "command": spec.command,
+                "module": COMMANDS[spec.command][0],
+                "argv": list(p.argv),
+                "out_kind": rule.out_kind,
+                "json_name": rule.json_name,
+                "threads": threads,
+            },
+        )
+        for p in todo
+    ]
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=len(points),
+        initial=summary.skipped,
+        unit="point",
+        desc=f"sweep {spec.command}",
+        disable=not progress,
+        file=sys.stderr,
+        dynamic_ncols=True,
+    )
+    try:
+        for key, outcome in run_executor(
+            tasks, workers, ray_address=ray_address, ray_runtime_env=ray_runtime_env
+        ):
+            p = by_key[key]
+            if outcome["ok"]:
+                result = outcome["result"]
+                try:
+                    metrics = rule.extract(result)
+                except (KeyError, IndexError, TypeError) as e:
+                    outcome = {
+                        **outcome,
+                        "ok": False,
+                        "error": f"result of `osnerf {spec.command}` lacks the field {e} its metric rule reads",
+                    }
+            if outcome["ok"]:
+                append_record(
+                    out,
+                    {
+                        "point": p.values,
+                        "config": result.get("config"),
+                        "seed": p.seed,
+                        "git_commit": result.get("git_commit") or git_commit(),
+                        "metrics": metrics,
+                        "seconds": outcome["seconds"],
+                        "command": spec.command,
+                        "argv": list(p.argv),
+                        "spec_hash": spec.sha256,
+                        "versions": result.get("versions"),
+                    },
+                )
+                summary.finished += 1
+            else:
+                summary.failed.append((p.values, p.seed, outcome["error"]))
+                append_record(
+                    errors,
+                    {
+                        "point": p.values,
+                        "seed": p.seed,
+                        "error": outcome["error"],
+                        "seconds": outcome["seconds"],
+                        "spec_hash": spec.sha256,
+                    },
+                )
+                bar.write(
+                    f"osnerf sweep: point {p.values} seed {p.seed} failed: {outcome['error']}",
+                    file=sys.stderr,
+                )
+            bar.update(1)
+    finally:
+        bar.close()
+    return summary

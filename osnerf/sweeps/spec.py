@@ -1,0 +1,295 @@
+"""A sweep spec: the osnerf command each point runs, its fixed options, its axes, its seeds.
+
+A spec is a small YAML or TOML file::
+
+    command: ber
+    fixed: {channel: awgn, num_bits: 200000}
+    axes: {modulation: [qpsk, 16qam], snr_db: [0, 5, 10]}
+    seeds: [0]
+
+Option names are those of the command's command line without the dashes (``snr_db`` or
+``snr-db`` both name ``--snr-db``). The spec is checked against the command's own argparse
+options (from :func:`osnerf.cli.build_parser`) before anything runs: an unknown option, a
+value outside its choices or of the wrong type, a missing required option, an empty axis or
+an empty seed list is a one-line ``ValueError`` naming the field and what is allowed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+RESERVED = ("out", "seed")  # set by the sweep itself, per point
+SPEC_KEYS = ("command", "fixed", "axes", "seeds")
+
+
+@dataclass(frozen=True)
+class Point:
+    """One point of a sweep: the axis values, the seed, and the command line it runs.
+
+    Attributes:
+        values: axis name -> value (names as written in the spec).
+        seed: the seed passed as ``--seed`` (None when the command has no ``--seed``).
+        argv: the command's arguments without ``--out`` (the runner adds it).
+    """
+
+    values: dict[str, Any]
+    seed: int | None
+    argv: tuple[str, ...]
+
+    @property
+    def key(self) -> str:
+        """Identity of the point in a results file: canonical JSON of (values, seed)."""
+        return point_key(self.values, self.seed)
+
+
+def point_key(values: dict[str, Any], seed: int | None) -> str:
+    """Canonical JSON of a point's axis values and seed (what a results line is matched on)."""
+    return json.dumps({"point": values, "seed": seed}, sort_keys=True, separators=(",", ":"))
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A validated sweep.
+
+    Attributes:
+        command: osnerf command each point runs (a key of ``osnerf.cli.COMMANDS``).
+        fixed: option -> value, the same for every point.
+        axes: option -> non-empty list of values; points are their cartesian product
+            (in the spec's order, last axis fastest).
+        seeds: seeds each point runs with (``[None]`` for a command without ``--seed``).
+    """
+
+    command: str
+    fixed: dict[str, Any] = field(default_factory=dict)
+    axes: dict[str, list[Any]] = field(default_factory=dict)
+    seeds: tuple[int | None, ...] = (0,)
+
+    def __post_init__(self):
+        if not isinstance(self.command, str) or not self.command:
+            raise ValueError(
+                f"spec field 'command' must be an osnerf command name, got {self.command!r}"
+            )
+        if not isinstance(self.fixed, dict):
+            raise ValueError(
+                f"spec field 'fixed' must be a mapping option -> value, got {type(self.fixed).__name__}"
+            )
+        if not isinstance(self.axes, dict):
+            raise ValueError(
+                f"spec field 'axes' must be a mapping option -> list of values, got {type(self.axes).__name__}"
+            )
+        for name, values in self.axes.items():
+            if not isinstance(values, list | tuple):
+                raise ValueError(f"axis {name!r} must be a list of values, got {values!r}")
+            if len(values) == 0:
+                raise ValueError(f"empty sweep: axis {name!r} has no values")
+        if len(self.seeds) == 0:
+            raise ValueError("empty sweep: 'seeds' has no values")
+        for s in self.seeds:
+            if s is not None and (isinstance(s, bool) or not isinstance(s, int)):
+                raise ValueError(f"spec field 'seeds' must hold integers, got {s!r}")
+        both = sorted(_norm(k) for k in self.fixed)
+        dup = sorted(set(both) & {_norm(k) for k in self.axes})
+        if dup:
+            raise ValueError(f"option(s) {dup} appear in both 'fixed' and 'axes'; put each in one")
+
+    @property
+    def num_points(self) -> int:
+        n = len(self.seeds)
+        for values in self.axes.values():
+            n *= len(values)
+        return n
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "command": self.command,
+            "fixed": dict(self.fixed),
+            "axes": {k: list(v) for k, v in self.axes.items()},
+            "seeds": list(self.seeds),
+        }
+
+    @property
+    def sha256(self) -> str:
+        """Hash of the canonical spec: a results file belongs to exactly one spec."""
+        blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), default=str)
+        return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _norm(name: str) -> str:
+    return str(name).replace("-", "_")
+
+
+def spec_from_dict(d: dict[str, Any]) -> SweepSpec:
+    """Build a :class:`SweepSpec` from a parsed YAML/TOML mapping (unknown keys refused)."""
+    if not isinstance(d, dict):
+        raise ValueError(
+            f"a sweep spec must be a mapping with keys {list(SPEC_KEYS)}, got {type(d).__name__}"
+        )
+    unknown = sorted(set(d) - set(SPEC_KEYS))
+    if unknown:
+        raise ValueError(f"unknown spec field(s) {unknown}; allowed: {list(SPEC_KEYS)}")
+    if "command" not in d:
+        raise ValueError(f"spec field 'command' is missing; allowed keys: {list(SPEC_KEYS)}")
+    seeds = d.get("seeds", [0])
+    if isinstance(seeds, int) and not isinstance(seeds, bool):
+        if seeds < 1:
+            raise ValueError(
+                f"empty sweep: 'seeds' must be a list of integers or a count >= 1, got {seeds}"
+            )
+        seeds = list(range(seeds))
+    if not isinstance(seeds, list | tuple):
+        raise ValueError(f"spec field 'seeds' must be a list of integers or a count, got {seeds!r}")
+    return SweepSpec(
+        command=d["command"],
+        fixed=dict(d.get("fixed") or {}),
+        axes=dict(d.get("axes") or {}),
+        seeds=tuple(seeds),
+    )
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    """Read a ``.yaml``/``.yml`` or ``.toml`` spec file (not yet checked against the command)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"SPEC: no such file {str(path)!r}")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".toml":
+            d = tomllib.loads(text)
+        elif path.suffix.lower() in (".yaml", ".yml"):
+            d = yaml.safe_load(text)
+        else:
+            raise ValueError(f"SPEC must end in .yaml, .yml or .toml, got {path.name!r}")
+    except (yaml.YAMLError, tomllib.TOMLDecodeError) as e:
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(
+            f"SPEC {path.name}: not valid {path.suffix[1:].upper()}: {first}"
+        ) from None
+    return spec_from_dict(d)
+
+
+# --- checking against the command's own argparse options ----------------------------------
+
+
+class _ParseError(ValueError):
+    pass
+
+
+def _raise(msg: str):
+    raise _ParseError(msg)
+
+
+def command_parser(command: str) -> argparse.ArgumentParser:
+    """The argparse sub-parser of ``osnerf <command>`` (errors raise instead of exiting)."""
+    from osnerf.cli import COMMANDS, build_parser
+
+    if command not in COMMANDS:
+        raise KeyError(
+            f"unknown command {command!r} in spec field 'command'; known: {sorted(COMMANDS)}"
+        )
+    top = build_parser(command)
+    sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
+    if command not in sub.choices:
+        raise ValueError(
+            f"command {command!r} is not available in this checkout (its module "
+            f"{COMMANDS[command][0]} is missing)"
+        )
+    p = sub.choices[command]
+    p.error = _raise  # one-line ValueError instead of printing usage and exiting
+    return p
+
+
+def command_options(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
+    """dest name (underscores) -> action, for every long option of the parser."""
+    out = {}
+    for a in parser._actions:
+        longs = [s for s in a.option_strings if s.startswith("--")]
+        if not longs or isinstance(a, argparse._HelpAction):
+            continue
+        for s in longs:
+            out[_norm(s[2:])] = a
+        out.setdefault(_norm(a.dest), a)
+    return out
+
+
+def _format_value(name: str, value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list | tuple):
+        return ",".join(_format_value(name, v) for v in value)
+    if isinstance(value, dict) or value is None:
+        raise ValueError(f"option {name!r}: value {value!r} is not a scalar or a list of scalars")
+    return str(value)
+
+
+def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
+    flag = next(s for s in action.option_strings if s.startswith("--"))
+    if action.nargs == 0:  # store_true / store_false / store_const flags
+        if not isinstance(value, bool):
+            raise ValueError(
+                f"option {name!r} is a flag: its value must be true or false, got {value!r}"
+            )
+        wanted = value if not isinstance(action, argparse._StoreFalseAction) else not value
+        return [flag] if wanted else []
+    return [flag, _format_value(name, value)]
+
+
+def expand(spec: SweepSpec) -> list[Point]:
+    """Check ``spec`` against the command's options and expand it into points.
+
+    Every point's command line is parsed by the command's own parser, so a bad value
+    fails here, before anything runs.
+    """
+    parser = command_parser(spec.command)
+    opts = command_options(parser)
+    allowed = sorted({_norm(a.dest) for a in opts.values()} - set(RESERVED))
+    for kind, names in (("fixed", spec.fixed), ("axes", spec.axes)):
+        for name in names:
+            n = _norm(name)
+            if n in RESERVED:
+                raise ValueError(
+                    f"option {name!r} in '{kind}' is set by the sweep itself "
+                    f"({'use the seeds list' if n == 'seed' else 'use osnerf sweep --out'})"
+                )
+            if n not in opts:
+                raise ValueError(
+                    f"unknown option {name!r} in '{kind}' for command "
+                    f"{spec.command!r}; allowed: {allowed}"
+                )
+    has_seed = "seed" in opts
+    if not has_seed and any(s is not None for s in spec.seeds):
+        raise ValueError(f"command {spec.command!r} has no --seed option: leave 'seeds' out")
+    seeds = spec.seeds if has_seed else (None,)
+
+    fixed_argv: list[str] = []
+    for name, value in spec.fixed.items():
+        fixed_argv += _args_for(name, value, opts[_norm(name)])
+    names = list(spec.axes)
+    points = []
+    for combo in itertools.product(*(spec.axes[n] for n in names)):
+        argv = list(fixed_argv)
+        for name, value in zip(names, combo):
+            argv += _args_for(name, value, opts[_norm(name)])
+        for seed in seeds:
+            full = argv + (["--seed", str(seed)] if seed is not None else [])
+            check = full + (["--out", "__sweep_check__"] if "out" in opts else [])
+            try:
+                parser.parse_args(check)
+            except _ParseError as e:
+                values = dict(zip(names, combo))
+                raise ValueError(
+                    f"point {values} of the spec is not a valid `osnerf {spec.command}` "
+                    f"command line: {e}"
+                ) from None
+            points.append(Point(values=dict(zip(names, combo)), seed=seed, argv=tuple(full)))
+    if not points:
+        raise ValueError("empty sweep: the spec expands to no points")
+    return points

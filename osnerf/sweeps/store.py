@@ -1,0 +1,107 @@
+"""The results file of a sweep: JSON Lines, one finished point per line, appended atomically.
+
+Each line is written with one ``os.write`` of the whole line on an ``O_APPEND`` descriptor,
+then ``fsync``: a crash leaves at most a partial *last* line, which :func:`open_results`
+detects and cuts off (saving the cut bytes beside the file) without touching earlier points.
+Only the sweep's driver process writes the file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def _dumps(record: dict[str, Any]) -> str:
+    from osnerf.provenance import _default
+
+    return json.dumps(record, default=_default, allow_nan=True, separators=(",", ":"))
+
+
+def read_results(path: str | Path) -> list[dict[str, Any]]:
+    """Every complete, valid record of a results file (a partial last line is ignored).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a line before the last is not valid JSON (not a crash artefact).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"results file {str(path)!r} does not exist")
+    records, _ = _parse(path.read_bytes(), path)
+    return records
+
+
+def _parse(data: bytes, path: Path) -> tuple[list[dict[str, Any]], int]:
+    """Records and the byte length of the valid prefix (anything after it is a torn tail).
+
+    A torn tail is an unterminated last line, or a last line that is not a JSON object.
+    A bad line *before* the last is not something a crash mid-write can make: ValueError.
+    """
+    *complete, tail = data.split(b"\n")
+    records: list[dict[str, Any]] = []
+    good = 0
+    for i, line in enumerate(complete):
+        try:
+            rec = json.loads(line) if line.strip() else None
+            if rec is not None and not isinstance(rec, dict):
+                raise ValueError("not an object")
+        except ValueError:
+            if i == len(complete) - 1 and not tail:
+                return records, good
+            raise ValueError(
+                f"{path}: line {i + 1} is not a valid JSON record and is not the last "
+                "line; the file is damaged beyond a torn last write: fix or remove it"
+            ) from None
+        if rec is not None:
+            records.append(rec)
+        good += len(line) + 1
+    return records, good
+
+
+def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
+    """Load a results file for appending; repair a torn last line; refuse another spec's file.
+
+    Returns:
+        The records already in the file (all from this spec).
+    Raises:
+        ValueError: the file holds records of another spec (a different ``spec_hash``).
+    """
+    path = Path(path)
+    if not path.exists():
+        return []
+    data = path.read_bytes()
+    records, good = _parse(data, path)
+    if good < len(data):
+        torn = path.with_name(path.name + ".torn")
+        with open(torn, "ab") as f:
+            f.write(data[good:] + b"\n")
+        os.truncate(path, good)
+        print(
+            f"osnerf sweep: repaired {path}: cut a partial last line ({len(data) - good} bytes, "
+            f"saved to {torn.name}); {len(records)} finished points kept",
+            file=sys.stderr,
+        )
+    others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
+    if others:
+        raise ValueError(
+            f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
+            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
+        )
+    return records
+
+
+def append_record(path: str | Path, record: dict[str, Any]) -> None:
+    """Append one record as one line: a single write of the whole line, flushed and fsynced."""
+    line = (_dumps(record) + "\n").encode()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    try:
+        n = os.write(fd, line)
+        if n != len(line):  # pragma: no cover - regular files write fully or raise
+            raise OSError(f"short write to {path}: {n} of {len(line)} bytes")
+        os.fsync(fd)
+    finally:
+        os.close(fd)

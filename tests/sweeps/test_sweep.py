@@ -1,0 +1,378 @@
+"""The sweep runner: spec validation, resume after a failure or a kill, torn-line repair, executors.
+
+Runs against a stand-in command (tests/sweeps/sweep_fake_command.py) registered in
+osnerf.cli.COMMANDS for the test, whose metric is a known function of its options and seed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+import sweep_fake_command as fake
+
+import osnerf.cli
+from osnerf.sweeps import (
+    append_record,
+    errors_path,
+    expand,
+    load_spec,
+    open_results,
+    read_results,
+    run_sweep,
+    spec_from_dict,
+)
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+
+
+@pytest.fixture(autouse=True)
+def fake_command(monkeypatch):
+    monkeypatch.setitem(osnerf.cli.COMMANDS, fake.NAME, fake.ENTRY)
+
+
+def _spec(tmp_path, **over):
+    d = {
+        "command": "fake",
+        "fixed": {"log": str(tmp_path / "calls.log")},
+        "axes": {"snr_db": [0, 5, 10], "mode": ["a", "b"]},
+        "seeds": [0, 1],
+    }
+    d.update(over)
+    return spec_from_dict(d)
+
+
+def _write_yaml(path: Path, d: dict) -> Path:
+    import yaml
+
+    path.write_text(yaml.safe_dump(d))
+    return path
+
+
+def _calls(tmp_path) -> Counter:
+    log = tmp_path / "calls.log"
+    lines = log.read_text().splitlines() if log.exists() else []
+    return Counter(tuple(line.split()[:3]) for line in lines)
+
+
+def _check_complete(out: Path, spec) -> list[dict]:
+    """Every point of the spec exactly once, each with the metric the command must report."""
+    records = read_results(out)
+    keys = Counter((json.dumps(r["point"], sort_keys=True), r["seed"]) for r in records)
+    assert len(records) == spec.num_points
+    assert set(keys.values()) == {1}
+    for r in records:
+        want = fake.expected_value(
+            float(r["point"]["snr_db"]), r["point"].get("mode", "a"), r["seed"]
+        )
+        assert r["metrics"]["results"][0]["value"] == pytest.approx(want, abs=0, rel=1e-15)
+        assert r["spec_hash"] == spec.sha256
+        assert r["git_commit"]
+        assert r["seconds"] >= 0
+        assert r["config"]["mode"] == r["point"].get("mode", "a")
+    return records
+
+
+# --- spec -----------------------------------------------------------------------------------
+
+
+def test_expand_is_the_cartesian_product_with_each_points_command_line(tmp_path):
+    spec = _spec(tmp_path, fixed={"verbose": True, "sleep-s": 0})
+    points = expand(spec)
+    assert spec.num_points == len(points) == 3 * 2 * 2
+    assert [(p.values["snr_db"], p.values["mode"], p.seed) for p in points[:4]] == [
+        (0, "a", 0),
+        (0, "a", 1),
+        (0, "b", 0),
+        (0, "b", 1),
+    ]
+    assert points[0].argv == (
+        "--verbose",
+        "--sleep-s",
+        "0",
+        "--snr-db",
+        "0",
+        "--mode",
+        "a",
+        "--seed",
+        "0",
+    )
+    assert len({p.key for p in points}) == len(points)
+    # a false flag is left off the command line
+    assert "--verbose" not in expand(_spec(tmp_path, fixed={"verbose": False}))[0].argv
+
+
+def test_yaml_and_toml_specs_read_the_same(tmp_path):
+    y = _write_yaml(
+        tmp_path / "s.yaml", {"command": "fake", "axes": {"snr_db": [1, 2]}, "seeds": [3]}
+    )
+    t = tmp_path / "s.toml"
+    t.write_text('command = "fake"\nseeds = [3]\n[axes]\nsnr_db = [1, 2]\n')
+    assert load_spec(y) == load_spec(t)
+    assert load_spec(y).sha256 == load_spec(t).sha256
+    assert spec_from_dict({"command": "fake", "axes": {"snr_db": [1]}, "seeds": 3}).seeds == (
+        0,
+        1,
+        2,
+    )
+
+
+@pytest.mark.parametrize(
+    "over, match",
+    [
+        (
+            {"axes": {"snr_db": [0], "bogus": [1]}},
+            r"unknown option 'bogus' in 'axes'.*allowed: \[.*'mode'",
+        ),
+        ({"axes": {"snr_db": [0], "mode": ["a", "c"]}}, r"'mode': 'c'.*invalid choice: 'c'"),
+        (
+            {"axes": {"snr_db": ["loud"]}},
+            r"point \{'snr_db': 'loud'\}.*--snr-db: invalid float value",
+        ),
+        ({"axes": {"snr_db": []}}, r"empty sweep: axis 'snr_db' has no values"),
+        ({"seeds": []}, r"empty sweep: 'seeds' has no values"),
+        ({"axes": {"snr_db": [0]}, "seeds": 0}, r"empty sweep"),
+        ({"axes": {"snr_db": [0], "seed": [1]}}, r"'seed' in 'axes' is set by the sweep itself"),
+        ({"axes": {"snr_db": [0]}, "fixed": {"out": "x"}}, r"'out' in 'fixed' is set by the sweep"),
+        ({"axes": {"mode": ["a"]}, "fixed": {}}, r"required: --snr-db"),
+        ({"axes": {"snr_db": [0]}, "fixed": {"snr_db": 1}}, r"both 'fixed' and 'axes'"),
+        (
+            {"axes": {"snr_db": [0]}, "fixed": {"verbose": "yes"}},
+            r"'verbose' is a flag: .* true or false",
+        ),
+        ({"axes": {"snr_db": [0]}, "seeds": [1.5]}, r"'seeds' must hold integers"),
+    ],
+)
+def test_bad_specs_fail_before_anything_runs(tmp_path, over, match):
+    with pytest.raises(ValueError, match=match):
+        run_sweep(_spec(tmp_path, **over), tmp_path / "r.jsonl", executor="serial", progress=False)
+    assert not (tmp_path / "r.jsonl").exists()
+    assert not (tmp_path / "calls.log").exists()
+
+
+def test_unknown_command_and_spec_fields_list_the_allowed_ones(tmp_path):
+    with pytest.raises(KeyError, match=r"unknown command 'nope'.*known: \[.*'ber'"):
+        expand(spec_from_dict({"command": "nope"}))
+    with pytest.raises(
+        ValueError, match=r"unknown spec field\(s\) \['axis'\]; allowed: \['command'"
+    ):
+        spec_from_dict({"command": "fake", "axis": {}})
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("command: fake\naxes: {snr_db: [0, 1\n")
+    with pytest.raises(ValueError, match=r"bad.yaml: not valid YAML"):
+        load_spec(bad)
+    with pytest.raises(ValueError, match=r"must end in .yaml, .yml or .toml"):
+        load_spec(_write_yaml(tmp_path / "s.json", {"command": "fake"}))
+
+
+def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    spec = _write_yaml(
+        tmp_path / "s.yaml", {"command": "fake", "axes": {"snr_db": [0], "volume": [1]}}
+    )
+    out = tmp_path / "r.jsonl"
+    assert osnerf.cli.main(["sweep", str(spec), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown option 'volume'" in err[0] and "allowed:" in err[0]
+    assert osnerf.cli.main(["sweep", str(tmp_path / "missing.yaml"), "--out", str(out)]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert osnerf.cli.main(["sweep", str(spec), "--out", str(out), "--executor", "slurm"]) == 2
+    assert not out.exists()
+
+
+# --- results file ---------------------------------------------------------------------------
+
+
+def test_results_of_another_spec_are_refused(tmp_path, capsys):
+    out = tmp_path / "r.jsonl"
+    run_sweep(_spec(tmp_path, axes={"snr_db": [0]}), out, executor="serial", progress=False)
+    before = out.read_bytes()
+    with pytest.raises(ValueError, match=r"holds results of another sweep spec"):
+        run_sweep(_spec(tmp_path, axes={"snr_db": [0, 1]}), out, executor="serial", progress=False)
+    spec = _write_yaml(tmp_path / "s.yaml", {"command": "fake", "axes": {"snr_db": [7]}})
+    assert osnerf.cli.main(["sweep", str(spec), "--out", str(out), "--no-progress"]) == 2
+    assert "another sweep spec" in capsys.readouterr().err
+    assert out.read_bytes() == before
+
+
+def test_a_torn_last_line_is_cut_and_the_sweep_completes(tmp_path):
+    spec = _spec(tmp_path)
+    out = tmp_path / "r.jsonl"
+    run_sweep(
+        _spec(tmp_path, axes={"snr_db": [0, 5, 10], "mode": ["a", "b"]}, seeds=[0, 1]),
+        out,
+        executor="serial",
+        progress=False,
+    )
+    full = out.read_bytes()
+    lines = full.splitlines(keepends=True)
+    # a crash mid-write: the first 3 lines whole, the 4th cut in the middle
+    out.write_bytes(b"".join(lines[:3]) + lines[3][: len(lines[3]) // 2])
+    kept = open_results(out, spec.sha256)
+    assert len(kept) == 3
+    assert out.read_bytes() == b"".join(lines[:3])  # earlier points untouched
+    assert (tmp_path / "r.jsonl.torn").read_bytes() == lines[3][: len(lines[3]) // 2] + b"\n"
+    summary = run_sweep(spec, out, executor="serial", progress=False)
+    assert (summary.skipped, summary.finished, summary.failed) == (3, 9, [])
+    _check_complete(out, spec)
+    # the three kept points did not run again: twice in total (first run + none now)
+    calls = _calls(tmp_path)
+    assert sum(calls.values()) == 12 + 9
+
+
+def test_a_bad_line_before_the_last_is_an_error_not_a_repair(tmp_path):
+    out = tmp_path / "r.jsonl"
+    out.write_text(
+        '{"point": {}, "seed": 0, "spec_hash": "x"}\nnot json\n{"point": {}, "seed": 1}\n'
+    )
+    with pytest.raises(ValueError, match=r"line 2 is not a valid JSON record and is not the last"):
+        open_results(out, "x")
+
+
+def test_append_writes_whole_lines(tmp_path):
+    out = tmp_path / "r.jsonl"
+    for i in range(3):
+        append_record(out, {"i": i, "x": float("nan") if i == 1 else 0.5})
+    assert [json.loads(line)["i"] for line in out.read_text().splitlines()] == [0, 1, 2]
+    assert out.read_bytes().endswith(b"\n")
+
+
+# --- resume ---------------------------------------------------------------------------------
+
+
+def test_a_failing_point_is_retried_and_the_rerun_completes_each_point_once(tmp_path, capsys):
+    flag = tmp_path / "fixed-it"
+    spec = _spec(
+        tmp_path,
+        fixed={"log": str(tmp_path / "calls.log"), "fail_snr_db": 5, "fail_once_flag": str(flag)},
+    )
+    out = tmp_path / "r.jsonl"
+    s1 = run_sweep(spec, out, executor="local", workers=2, progress=False)
+    assert (s1.total, s1.skipped, s1.finished, len(s1.failed)) == (12, 0, 8, 4)
+    assert all("planned failure at snr_db=5.0" in err for _, _, err in s1.failed)
+    assert all(r["point"]["snr_db"] != 5 for r in read_results(out))
+    assert len(errors_path(out).read_text().splitlines()) == 4
+    flag.touch()
+    # through the CLI: the 8 finished points are skipped, the 4 failed ones retried
+    yml = _write_yaml(tmp_path / "s.yaml", spec.to_dict())
+    assert (
+        osnerf.cli.main(
+            ["sweep", str(yml), "--out", str(out), "--executor", "serial", "--no-progress"]
+        )
+        == 0
+    )
+    assert "4 finished now" in capsys.readouterr().err
+    assert not errors_path(out).exists()
+    _check_complete(out, spec)
+    calls = _calls(tmp_path)
+    assert all(n == (2 if snr == "5.0" else 1) for (snr, _, _), n in calls.items())
+
+
+def test_cli_reports_failed_points_with_exit_1(tmp_path, capsys):
+    spec = _write_yaml(
+        tmp_path / "s.yaml",
+        {"command": "fake", "fixed": {"fail_snr_db": 1}, "axes": {"snr_db": [0, 1]}},
+    )
+    out = tmp_path / "r.jsonl"
+    assert (
+        osnerf.cli.main(
+            ["sweep", str(spec), "--out", str(out), "--executor", "serial", "--no-progress"]
+        )
+        == 1
+    )
+    err = capsys.readouterr().err
+    assert "1 failed" in err and "re-run the same command to retry" in err
+    assert len(read_results(out)) == 1
+
+
+def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
+    spec_d = {
+        "command": "fake",
+        "fixed": {"log": str(tmp_path / "calls.log"), "sleep_s": 0.4},
+        "axes": {"snr_db": [0, 1, 2, 3, 4, 5]},
+        "seeds": [0],
+    }
+    yml = _write_yaml(tmp_path / "s.yaml", spec_d)
+    out = tmp_path / "r.jsonl"
+    driver = (
+        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
+        f"sys.exit(osnerf.cli.main(['sweep', {str(yml)!r}, '--out', {str(out)!r}, "
+        "'--executor', 'serial', '--no-progress']))"
+    )
+    env = dict(
+        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=subprocess.PIPE
+    )
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if out.exists() and len(out.read_bytes().splitlines()) >= 2:
+            break
+        assert proc.poll() is None, proc.stderr.read().decode()
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    proc.stderr.close()
+    n_before = len(read_results(out))
+    assert 2 <= n_before < 6, "the kill must land mid-sweep"
+    spec = load_spec(yml)
+    summary = run_sweep(spec, out, executor="serial", progress=False)
+    assert summary.skipped == n_before and summary.finished == 6 - n_before and not summary.failed
+    _check_complete(out, spec)
+    calls = _calls(tmp_path)
+    assert set(calls) == {(f"{s}.0", "a", "0") for s in range(6)}
+    assert sum(calls.values()) <= 7  # at most the point being run when killed ran twice
+
+
+# --- executors ------------------------------------------------------------------------------
+
+
+def test_the_local_pool_gives_the_serial_results(tmp_path):
+    spec = _spec(tmp_path, axes={"snr_db": [0, 5], "mode": ["a", "b"]}, seeds=[0, 7])
+    serial, local = tmp_path / "serial.jsonl", tmp_path / "local.jsonl"
+    run_sweep(spec, serial, executor="serial", progress=False)
+    run_sweep(spec, local, executor="local", workers=2, progress=False)
+
+    def by_point(path):
+        return {
+            (json.dumps(r["point"], sort_keys=True), r["seed"]): r["metrics"]
+            for r in read_results(path)
+        }
+
+    assert by_point(serial) == by_point(local)
+    _check_complete(local, spec)
+
+
+def test_a_local_ray_instance_gives_the_local_results(tmp_path):
+    ray = pytest.importorskip("ray")
+    spec = _spec(tmp_path, axes={"snr_db": [0, 5], "mode": ["a", "b"]}, seeds=[0, 7])
+    local, on_ray = tmp_path / "local.jsonl", tmp_path / "ray.jsonl"
+    run_sweep(spec, local, executor="local", workers=2, progress=False)
+    run_sweep(
+        spec,
+        on_ray,
+        executor="ray",
+        workers=2,
+        progress=False,
+        ray_runtime_env={"env_vars": {"PYTHONPATH": str(HERE)}},
+    )
+    assert not ray.is_initialized()  # the sweep shut down the instance it started
+
+    def by_point(path):
+        return {
+            (json.dumps(r["point"], sort_keys=True), r["seed"]): r["metrics"]
+            for r in read_results(path)
+        }
+
+    assert by_point(local) == by_point(on_ray)
+    _check_complete(on_ray, spec)
+    pids = {line.split()[3] for line in (tmp_path / "calls.log").read_text().splitlines()}
+    assert os.getpid() not in {int(p) for p in pids}  # the points ran in worker processes
