@@ -1,0 +1,52 @@
+"""The one registry of built-in scenes."""
+
+from __future__ import annotations
+
+from osnerf.scenes.compact import build_firefighter, build_tiny
+from osnerf.scenes.spec import SceneInfo
+
+SCENES: dict[str, SceneInfo] = {}
+
+
+def register(info: SceneInfo) -> SceneInfo:
+    """Add a scene to :data:`SCENES` (names are unique)."""
+    if info.name in SCENES:
+        raise ValueError(f"scene {info.name!r} is already registered")
+    SCENES[info.name] = info
+    return info
+
+
+def get_scene(name: str) -> SceneInfo:
+    """The registry entry of ``name``; KeyError listing the known scenes otherwise."""
+    try:
+        return SCENES[name]
+    except KeyError:
+        raise KeyError(f"unknown scene {name!r}; known scenes: {', '.join(SCENES)}") from None
+
+
+DEFAULT_SCENE = "firefighter"
+
+register(
+    SceneInfo(
+        name="firefighter",
+        description="fire hydrant beside a small brick building, a tree, paved plot (Mitsuba primitives)",
+        objects=("hydrant", "building", "tree"),
+        default_demand=("hydrant",),
+        build=build_firefighter,
+        elevations_deg=(20.0, 40.0),
+        fov_deg=40.0,
+        min_radius_m=2.5,
+    )
+)
+register(
+    SceneInfo(
+        name="tiny",
+        description="a crate and a post on a small disk (for tests)",
+        objects=("crate", "post"),
+        default_demand=("post",),
+        build=build_tiny,
+        elevations_deg=(25.0, 45.0),
+        fov_deg=45.0,
+        min_radius_m=1.6,
+    )
+)
