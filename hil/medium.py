@@ -1,0 +1,167 @@
+"""The virtual air that connects emulated radios, on a virtual sample clock.
+
+One transmitter, any number of receivers. The transmitter's timeline is every sample it
+has sent (its own sample clock, index 0 = when the medium was made); each receiver's
+timeline is every sample it has received (its own clock). Receiver sample ``k`` is taken
+at time ``t = k / fs_rx_true`` and sees the transmitter's signal at index
+``(t - delay) * fs_tx_true`` through the multipath, rotated by the carrier offset, plus
+noise, receiver gain, I/Q imbalance, DC and the int8 ADC.
+
+Determinism: with ``wait_for_bursts = B``, receivers block until the transmitter has sent
+what they need or has completed ``B`` bursts, so what they receive does not depend on how
+threads interleave. Afterwards an idle transmitter's timeline advances with silence as
+receivers read on (a later burst starts "now").
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+
+from hil.air import RESAMPLER_TAPS, AirChannel, fractional_resample, iq_imbalance, quantize_ci8
+
+AMP_GAIN_DB = 14.0
+
+
+class Medium:
+    """Shared air for emulated radios (thread-safe).
+
+    Args:
+        channel: the :class:`hil.AirChannel` between the transmitter and every receiver.
+        seed: seeds each receiver's noise (``numpy`` PCG64 keyed by (seed, receiver index)).
+        wait_for_bursts: receivers wait for this many completed transmit bursts (see module doc).
+        wait_timeout_s: wall-clock limit of one such wait; past it the read times out.
+    """
+
+    def __init__(
+        self,
+        channel: AirChannel | None = None,
+        seed: int = 0,
+        wait_for_bursts: int = 0,
+        wait_timeout_s: float = 10.0,
+    ):
+        self.channel = channel or AirChannel()
+        self.seed = int(seed)
+        self.wait_for_bursts = int(wait_for_bursts)
+        self.wait_timeout_s = float(wait_timeout_s)
+        self.cond = threading.Condition()
+        self.transmitter = None
+        self._tx = np.zeros(1 << 16, np.complex64)
+        self.tx_len = 0
+        self.tx_streaming = False
+        self.bursts_completed = 0
+        self._rngs: dict[int, np.random.Generator] = {}
+
+    # ------------------------------------------------------------------ transmit side
+    def start_tx(self, radio) -> None:
+        with self.cond:
+            if self.transmitter is not None and self.transmitter is not radio:
+                raise RuntimeError("this medium already has a transmitter (one TX, many RX)")
+            self.transmitter = radio
+            self.tx_streaming = True
+            self.cond.notify_all()
+
+    def end_tx(self, radio) -> None:
+        with self.cond:
+            if self.transmitter is radio and self.tx_streaming:
+                self.tx_streaming = False
+                self.bursts_completed += 1
+            self.cond.notify_all()
+
+    def append_tx(self, radio, raw: np.ndarray) -> None:
+        """Add ``raw`` [2 * num_samples] int8 written by the transmitter at its current gains."""
+        scale = 10 ** (
+            (
+                radio.txvga_gain_db
+                + AMP_GAIN_DB * radio.amp_enabled
+                - self.channel.reference_txvga_db
+            )
+            / 20
+        )
+        x = (raw.astype(np.float32) * np.float32(scale / 128.0)).view(np.complex64)
+        with self.cond:
+            self._ensure(self.tx_len + len(x))
+            self._tx[self.tx_len : self.tx_len + len(x)] = x
+            self.tx_len += len(x)
+            self.cond.notify_all()
+
+    def _ensure(self, n: int) -> None:
+        if n > len(self._tx):
+            grown = np.zeros(max(n, 2 * len(self._tx)), np.complex64)
+            grown[: self.tx_len] = self._tx[: self.tx_len]
+            self._tx = grown
+
+    def notify(self) -> None:
+        with self.cond:
+            self.cond.notify_all()
+
+    # ------------------------------------------------------------------ receive side
+    def _rng(self, radio) -> np.random.Generator:
+        key = radio.index
+        if key not in self._rngs:
+            self._rngs[key] = np.random.default_rng([self.seed, key])
+        return self._rngs[key]
+
+    def render(self, radio, k0: int, n: int, still_receiving) -> np.ndarray | None:
+        """Receiver ``radio``'s samples ``k0 .. k0+n-1`` as [2n] int8, or None on a timeout.
+
+        ``still_receiving()`` is polled while waiting: when it turns False the wait ends
+        (returns None), as a real transfer would be cancelled.
+        """
+        ch = self.channel
+        fs_rx = radio.sample_rate_hz * (1 + radio.ppm * 1e-6)
+        t = (k0 + np.arange(n, dtype=np.float64)) / fs_rx
+        sig = np.zeros(n, np.complex64)
+        deadline = time.monotonic() + self.wait_timeout_s
+        with self.cond:
+            while True:
+                tx = self.transmitter
+                if tx is None and self.wait_for_bursts == 0:
+                    break
+                if tx is not None:
+                    fs_tx = tx.sample_rate_hz * (1 + tx.ppm * 1e-6)
+                    u_last = (t[-1] - ch.delay_s) * fs_tx
+                    need = int(math.ceil(u_last)) + RESAMPLER_TAPS // 2 + 1
+                    if self.tx_len >= need:
+                        break
+                if not (self.tx_streaming or self.bursts_completed < self.wait_for_bursts):
+                    break
+                if not still_receiving():
+                    return None
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self.cond.wait(min(left, 0.05))
+            if tx is not None:
+                u = (t - ch.delay_s) * fs_tx
+                if not self.tx_streaming and self.bursts_completed >= self.wait_for_bursts:
+                    idle_to = max(0, int(math.floor(u[-1])) + 1)
+                    if idle_to > self.tx_len:  # an idle transmitter's clock runs on in silence
+                        self._ensure(idle_to)
+                        self._tx[self.tx_len : idle_to] = 0
+                        self.tx_len = idle_to
+                taps = ch.taps
+                lo = max(0, int(math.floor(u[0])) - RESAMPLER_TAPS - len(taps))
+                hi = min(self.tx_len, int(math.ceil(u[-1])) + RESAMPLER_TAPS + 1)
+                seg = self._tx[lo:hi].copy() if hi > lo else np.zeros(0, np.complex64)
+                tx_freq = tx.center_freq_hz * (1 + tx.ppm * 1e-6)
+                df = tx_freq - radio.center_freq_hz * (1 + radio.ppm * 1e-6)
+        if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx:
+            if len(taps) > 1:
+                seg = np.convolve(seg, taps.astype(np.complex64))[: len(seg)]
+            sig = fractional_resample(seg, u - lo)
+            if df != 0:
+                sig = sig * np.exp(2j * np.pi * df * t).astype(np.complex64)
+        rng = self._rng(radio)
+        noise = rng.standard_normal(2 * n, dtype=np.float32).view(np.complex64) * np.float32(
+            math.sqrt(ch.noise_var / 2)
+        )
+        rx_gain_db = radio.lna_gain_db + radio.vga_gain_db + AMP_GAIN_DB * radio.amp_enabled
+        y = (sig + noise) * np.float32(10 ** ((rx_gain_db - ch.reference_rx_gain_db) / 20))
+        y = iq_imbalance(y, ch.iq_gain_imbalance_db, ch.iq_phase_imbalance_deg)
+        if ch.dc_offset:
+            y = y + np.complex64(ch.dc_offset)
+        return quantize_ci8(y)
