@@ -1,0 +1,125 @@
+"""How a payload is cut into LDPC codewords and how many symbols it needs (pure arithmetic).
+
+Layout of ``num_symbols`` channel symbols at one MCS (TS 38.212 5.2.2 / 5.4.2 in spirit):
+
+* ``G = num_symbols * bits_per_symbol`` coded bits are split into
+  ``C = ceil(G / MAX_CODED_BITS)`` codewords whose lengths differ by at most one symbol
+  (the first ``C - num_symbols % C`` codewords get ``floor(num_symbols / C)`` symbols, the
+  rest one more), so a codeword never straddles a symbol.
+* A codeword of ``E`` coded bits carries ``k = floor(E * code_rate)`` LDPC information
+  bits, of which the last ``CRC_BITS`` (24, CRC24B as for 5G code blocks) are its own CRC:
+  ``k - 24`` payload bits. Every codeword is checked on its own, so a receiver knows which
+  codewords failed.
+* Payload bits fill the codewords in order; unused capacity is zero padding.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from phy.digital.mcs import MCS, get_mcs
+
+CRC_POLY = "CRC24B"
+CRC_BITS = 24
+MAX_CODED_BITS = 3840
+"""Longest codeword in coded bits (a multiple of 2, 4 and 6). Longer payloads use more
+codewords; decoding cost per bit does not depend on this length."""
+
+
+@dataclass(frozen=True)
+class CodewordLayout:
+    """Codeword sizes for ``num_symbols`` symbols at one MCS.
+
+    Attributes:
+        num_symbols: channel symbols in the block.
+        mcs: the scheme.
+        num_short: number of codewords with ``short_symbols`` symbols (they come first).
+        num_long: number with ``short_symbols + 1`` symbols (they follow).
+        short_symbols: symbols of a short codeword.
+    """
+
+    num_symbols: int
+    mcs: MCS
+    num_short: int
+    num_long: int
+    short_symbols: int
+
+    @property
+    def num_codewords(self) -> int:
+        return self.num_short + self.num_long
+
+    def coded_bits(self, index: int) -> int:
+        """E: coded bits of codeword ``index``."""
+        extra = 1 if index >= self.num_short else 0
+        return (self.short_symbols + extra) * self.mcs.bits_per_symbol
+
+    def ldpc_k(self, index: int) -> int:
+        """k: LDPC information bits of codeword ``index`` (payload + CRC)."""
+        return math.floor(self.coded_bits(index) * self.mcs.code_rate)
+
+    def payload_bits(self, index: int) -> int:
+        """Payload bits of codeword ``index`` (``ldpc_k - CRC_BITS``)."""
+        return self.ldpc_k(index) - CRC_BITS
+
+    @property
+    def capacity_bits(self) -> int:
+        """Payload bits the whole block carries (0 when a codeword cannot hold a CRC)."""
+        if self.payload_bits(0) < 1:  # only possible with a single, tiny codeword
+            return 0
+        return sum(count * (k - CRC_BITS) for _, count, k, _ in self.groups())
+
+    def groups(self) -> list[tuple[int, int, int, int]]:
+        """Runs of equal codewords: ``(first_index, count, ldpc_k, coded_bits)``."""
+        out = []
+        if self.num_short:
+            out.append((0, self.num_short, self.ldpc_k(0), self.coded_bits(0)))
+        if self.num_long:
+            i = self.num_short
+            out.append((i, self.num_long, self.ldpc_k(i), self.coded_bits(i)))
+        return out
+
+
+def _check_num_symbols(num_symbols) -> int:
+    if isinstance(num_symbols, bool) or not isinstance(num_symbols, int) or num_symbols < 1:
+        raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
+    return num_symbols
+
+
+def codeword_layout(num_symbols: int, mcs: str | MCS) -> CodewordLayout:
+    """Codeword sizes for a block of ``num_symbols`` symbols (see the module docstring)."""
+    num_symbols = _check_num_symbols(num_symbols)
+    m = get_mcs(mcs)
+    coded = num_symbols * m.bits_per_symbol
+    c = -(-coded // MAX_CODED_BITS)
+    short_symbols, num_long = divmod(num_symbols, c)
+    return CodewordLayout(num_symbols, m, c - num_long, num_long, short_symbols)
+
+
+def payload_capacity_bits(num_symbols: int, mcs: str | MCS) -> int:
+    """Payload bits that fit in ``num_symbols`` channel uses at ``mcs``, CRC overhead removed.
+
+    ``encode_bytes(payload, mcs, num_symbols)`` accepts any payload of up to
+    ``payload_capacity_bits(num_symbols, mcs) // 8`` bytes. Returns 0 when the block is too
+    short for one codeword with its 24-bit CRC.
+    """
+    return codeword_layout(num_symbols, mcs).capacity_bits
+
+
+def min_num_symbols(num_bytes: int, mcs: str | MCS) -> int:
+    """Fewest symbols whose capacity holds ``num_bytes`` bytes at ``mcs``.
+
+    This is how many symbols ``encode_bytes(payload, mcs)`` emits when ``num_symbols`` is
+    not given.
+    """
+    if isinstance(num_bytes, bool) or not isinstance(num_bytes, int) or num_bytes < 1:
+        raise ValueError(f"num_bytes must be an integer >= 1, got {num_bytes!r}")
+    m = get_mcs(mcs)
+    bits = 8 * num_bytes
+    # capacity(s) <= s * bits_per_symbol * code_rate - 24, so start at that lower bound and
+    # step up (capacity is not monotone across a change in the number of codewords).
+    per_symbol = m.bits_per_symbol * m.code_rate
+    s = max(1, math.ceil((bits + CRC_BITS) / per_symbol))
+    while codeword_layout(s, m).capacity_bits < bits:
+        s += 1
+    return s

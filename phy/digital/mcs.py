@@ -1,0 +1,83 @@
+"""Modulation and coding schemes (MCS) of the digital baseline: QAM order x LDPC code rate.
+
+A 5G-like table (TS 38.214 Table 5.1.3.1-1 spans the same ground): QPSK at rates 1/3..3/4,
+16-QAM at 1/2..3/4, 64-QAM at 2/3..5/6. Names read ``<modulation>-<rate>``, e.g.
+``"16qam-3/4"``. Spectral efficiency ``bits_per_symbol * code_rate`` counts the CRC as
+payload overhead (see :func:`phy.digital.payload_capacity_bits` for the exact count).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+
+MODULATION_BITS = {"qpsk": 2, "16qam": 4, "64qam": 6}
+
+
+@dataclass(frozen=True)
+class MCS:
+    """One modulation and coding scheme.
+
+    Attributes:
+        name: registry key, ``"<modulation>-<p>/<q>"``.
+        modulation: ``"qpsk"``, ``"16qam"`` or ``"64qam"`` (Gray-mapped square QAM, unit
+            average energy, sionna's ``Constellation("qam", bits_per_symbol)``).
+        code_rate: LDPC code rate k/n as an exact fraction in (0, 1) (k includes the CRC).
+    """
+
+    name: str
+    modulation: str
+    code_rate: Fraction
+
+    def __post_init__(self):
+        if self.modulation not in MODULATION_BITS:
+            raise ValueError(
+                f"modulation must be one of {sorted(MODULATION_BITS)}, got {self.modulation!r}"
+            )
+        if not isinstance(self.code_rate, Fraction) or not 0 < self.code_rate < 1:
+            raise ValueError(f"code_rate must be a Fraction in (0, 1), got {self.code_rate!r}")
+
+    @property
+    def bits_per_symbol(self) -> int:
+        """Coded bits per complex channel symbol (2, 4 or 6)."""
+        return MODULATION_BITS[self.modulation]
+
+    @property
+    def spectral_efficiency(self) -> float:
+        """Coded-rate bits per channel use, ``bits_per_symbol * code_rate`` (CRC included)."""
+        return float(self.bits_per_symbol * self.code_rate)
+
+
+def _mcs(modulation: str, rate: str) -> MCS:
+    return MCS(f"{modulation}-{rate}", modulation, Fraction(rate))
+
+
+MCS_TABLE: dict[str, MCS] = {
+    m.name: m
+    for m in (
+        _mcs("qpsk", "1/3"),
+        _mcs("qpsk", "1/2"),
+        _mcs("qpsk", "2/3"),
+        _mcs("qpsk", "3/4"),
+        _mcs("16qam", "1/2"),
+        _mcs("16qam", "2/3"),
+        _mcs("16qam", "3/4"),
+        _mcs("64qam", "2/3"),
+        _mcs("64qam", "3/4"),
+        _mcs("64qam", "5/6"),
+    )
+}
+"""name -> :class:`MCS`, ordered by increasing spectral efficiency."""
+
+
+def get_mcs(mcs: str | MCS) -> MCS:
+    """Return the :class:`MCS` for a name (or pass one through).
+
+    Raises:
+        KeyError: unknown name; the message lists the known names.
+    """
+    if isinstance(mcs, MCS):
+        return mcs
+    if isinstance(mcs, str) and mcs in MCS_TABLE:
+        return MCS_TABLE[mcs]
+    raise KeyError(f"mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
