@@ -1,0 +1,747 @@
+"""The end-to-end pipeline: scene -> collector -> encoder -> link -> decoder -> NeRF -> scores.
+
+One run renders (or reuses) the drone views of a scene, lets the semantic control unit pick
+what to send, pushes it through the link under each scheme, trains a radiance field per
+scheme on what arrived and scores it on held-out views against ground-truth renders:
+
+* ``jscc``: on-demand: only views showing the demanded objects, masked to them, through the
+  semantic codec (CBR per view from the measured SNR).
+* ``digital``: the same views and the same symbol budget per view, through an image codec
+  + 5G LDPC + QAM (semcodec.transmit_digital).
+* ``full``: every drone view, whole, through the semantic codec (no on-demand selection).
+* ``gt``: the on-demand views undistorted (nothing crosses the channel): the ceiling.
+
+Stages are cached under ``RUN_DIR/cache/<config hash>/`` so an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from osnerf.collect import Collection, Demand, collect
+from osnerf.scenes import (
+    DEFAULT_SCENE,
+    RenderConfig,
+    SceneViews,
+    build_scene_dataset,
+    check_demand,
+    drone_channels,
+    get_scene,
+    load_scene_views,
+)
+from osnerf.scu import RatePolicy, SemanticControlUnit, measure_snr_db
+
+SCHEMES = ("jscc", "digital", "full", "gt")
+CHANNELS = ("awgn", "rayleigh", "raytraced")
+OBJECT_ROUTED = {"jscc": True, "digital": True, "full": False, "gt": True}
+CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One pipeline run.
+
+    Attributes:
+        scene: built-in scene name (``osnerf scenes`` lists them).
+        demand: ``OBJECT[:WEIGHT][,OBJECT...]``; None = the scene's default demand.
+        channel: "awgn", "rayleigh" (block fading, perfect CSI, MMSE) or "raytraced"
+            (each drone position's ray-traced channel to the ground station).
+        snr_db: Es/N0 in dB (for "raytraced": at the median drone position; each position
+            gets its path-gain difference on top).
+        schemes: subset of ("jscc", "digital", "full", "gt").
+        seed: seeds every random draw.
+        max_seconds: NeRF training budget per scheme, seconds (> 0).
+        resolution_px: drone image size (16..512).
+        num_train_views: drone views captured (2..512); num_test_views: held-out views.
+        symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
+        codec: transmitter codec checkpoint path (None = semcodec's default).
+        receiver_codec: receiver codec checkpoint (None = the same as ``codec``).
+        mcs: digital baseline MCS: "envelope" or a phy.digital.MCS_TABLE name.
+        image_codec: digital baseline image codec ("avif", "jpeg", "webp").
+        render_spp: Mitsuba samples per pixel.
+    """
+
+    scene: str = DEFAULT_SCENE
+    demand: str | None = None
+    channel: str = "rayleigh"
+    snr_db: float = 0.0
+    schemes: tuple[str, ...] = SCHEMES
+    seed: int = 0
+    max_seconds: float = 60.0
+    resolution_px: int = 80
+    num_train_views: int = 24
+    num_test_views: int = 8
+    symbol_rate_hz: float = 1e6
+    codec: str | None = None
+    receiver_codec: str | None = None
+    mcs: str = "envelope"
+    image_codec: str = "avif"
+    render_spp: int = 32
+
+    def __post_init__(self):
+        get_scene(self.scene)
+        if self.channel not in CHANNELS:
+            raise ValueError(f"channel must be one of {', '.join(CHANNELS)}, got {self.channel!r}")
+        if not self.schemes:
+            raise ValueError(f"schemes must name at least one of {', '.join(SCHEMES)}")
+        for s in self.schemes:
+            if s not in SCHEMES:
+                raise ValueError(f"schemes must be a subset of {','.join(SCHEMES)}, got {s!r}")
+        if not math.isfinite(self.snr_db):
+            raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
+        if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
+            raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
+        if not self.symbol_rate_hz > 0:
+            raise ValueError(f"symbol_rate_hz must be > 0, got {self.symbol_rate_hz!r}")
+        self.render_config()  # validates the view settings
+
+    def render_config(self) -> RenderConfig:
+        return RenderConfig(
+            resolution_px=self.resolution_px,
+            num_train_views=self.num_train_views,
+            num_test_views=self.num_test_views,
+            spp=self.render_spp,
+        )
+
+    def demand_obj(self) -> Demand:
+        text = self.demand or ",".join(get_scene(self.scene).default_demand)
+        d = Demand.parse(text)
+        check_demand(self.scene, d.objects)
+        return d
+
+    def key(self) -> str:
+        """Hash of everything that changes results (the cache key)."""
+        blob = json.dumps({**asdict(self), "v": CACHE_VERSION}, sort_keys=True, default=str)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+# ----------------------------------------------------------------------------- links
+
+
+class PerPositionChannel(torch.nn.Module):
+    """A frequency-selective channel fixed by one drone position (a ray-traced CFR).
+
+    Symbol ``k`` of a block rides subcarrier ``k mod num_subcarriers``; the CFR is normalised
+    to unit mean power, so ``snr_db`` is the received SNR of this position.
+
+    Args:
+        h: [num_subcarriers] complex64 frequency response.
+    """
+
+    def __init__(self, h: np.ndarray):
+        super().__init__()
+        h = torch.as_tensor(np.asarray(h, np.complex64))
+        p = float((h.abs() ** 2).mean())
+        self.register_buffer("h", h / math.sqrt(p) if p > 0 else h)
+
+    def forward(self, x: torch.Tensor, snr_db, generator: torch.Generator | None = None):
+        from phy import ChannelOutput, snr_db_to_noise_var
+
+        n = x.shape[-1]
+        hk = self.h[torch.arange(n) % self.h.numel()].expand(x.shape[0], n)  # [batch, num_symbols]
+        nv = float(snr_db_to_noise_var(float(snr_db)))
+        noise = torch.complex(
+            torch.randn(x.shape, generator=generator), torch.randn(x.shape, generator=generator)
+        )
+        y = hk * x + noise.to(torch.complex64) * math.sqrt(nv / 2)
+        return ChannelOutput(
+            y, hk, torch.full((x.shape[0],), nv), torch.zeros(x.shape[0], dtype=torch.bool)
+        )
+
+
+@dataclass
+class ViewLinks:
+    """One link and one SNR per drone view (the same link for awgn/rayleigh).
+
+    Attributes:
+        links: view index -> link callable ``link(x, snr_db, generator=None) -> LinkOutput``.
+        snr_db: view index -> SNR its link runs at.
+        outage: view indices without any propagation path (never sent).
+        info: what the report says about the channel.
+    """
+
+    links: dict[int, object]
+    snr_db: dict[int, float]
+    outage: set[int] = field(default_factory=set)
+    info: dict = field(default_factory=dict)
+
+
+def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewLinks:
+    """Links for the drone views ``indices`` of ``views`` under ``cfg.channel``."""
+    import phy
+
+    idx = [int(i) for i in indices]
+    if cfg.channel in ("awgn", "rayleigh"):
+        link = phy.FlatLink(phy.make_channel(cfg.channel), csi="perfect", equalizer="mmse")
+        return ViewLinks(
+            {i: link for i in idx},
+            {i: float(cfg.snr_db) for i in idx},
+            info={
+                "channel": cfg.channel,
+                "csi": "perfect",
+                "equalizer": "mmse",
+                "fading": "block (one h per view)" if cfg.channel == "rayleigh" else None,
+            },
+        )
+    ch = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
+    gain = ch.path_gain_db
+    ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
+    links, snrs, outage = {}, {}, set()
+    for k, i in enumerate(idx):
+        if ch.outage[k]:
+            outage.add(i)
+            continue
+        links[i] = phy.FlatLink(PerPositionChannel(ch.h[k]), csi="perfect", equalizer="mmse")
+        snrs[i] = float(cfg.snr_db + gain[k] - ref)
+    info = {
+        "channel": "raytraced",
+        "csi": "perfect",
+        "equalizer": "mmse",
+        "path_gain_db": {i: float(g) for i, g in zip(idx, gain)},
+        "reference_path_gain_db": ref,
+        "outage_views": sorted(outage),
+        "num_subcarriers": int(ch.h.shape[1]),
+        "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
+        "stats": ch.stats,
+    }
+    return ViewLinks(links, snrs, outage, info)
+
+
+# ----------------------------------------------------------------------------- stages
+
+
+class StageCache:
+    """``RUN_DIR/cache/<key>/<stage>.npz`` (+ ``.json``): written atomically, read on resume."""
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    def load(self, stage: str):
+        npz, js = self.root / f"{stage}.npz", self.root / f"{stage}.json"
+        if not (npz.exists() and js.exists()):
+            return None
+        with np.load(npz) as f:
+            arrays = {k: f[k] for k in f.files}
+        return arrays, json.loads(js.read_text())
+
+    def save(self, stage: str, arrays: dict, info: dict) -> None:
+        from osnerf.provenance import write_json_atomic
+
+        tmp = self.root / f".{stage}.tmp.npz"
+        np.savez_compressed(tmp, **arrays)
+        tmp.replace(self.root / f"{stage}.npz")
+        write_json_atomic(self.root / f"{stage}.json", info)
+
+
+def _log(msg: str) -> None:
+    print(f"[osnerf run] {msg}", file=sys.stderr, flush=True)
+
+
+def _to_nchw(images: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(images)).permute(0, 3, 1, 2).float()
+
+
+def _to_nhwc(images: torch.Tensor) -> np.ndarray:
+    return images.detach().clamp(0, 1).permute(0, 2, 3, 1).cpu().numpy().astype(np.float32)
+
+
+def transmit_jscc(
+    codec,
+    rx_codec,
+    images: np.ndarray,
+    masks,
+    importance,
+    view_ids,
+    links: ViewLinks,
+    snr_enc: dict,
+    cbrs: dict,
+    generator: torch.Generator,
+):
+    """Each view through the semantic codec and its link; returns (received, symbols, seconds)."""
+    out, symbols = [], []
+    sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0}
+    for k, v in enumerate(view_ids):
+        x = _to_nchw(images[k : k + 1])
+        kw = {}
+        if masks is not None:
+            kw = {"mask": masks[k : k + 1], "demand_weights": importance[k : k + 1]}
+        t = time.perf_counter()
+        with torch.no_grad():
+            enc = codec.encode(x, snr_enc[v], cbrs[v], **kw)
+        sec["encode"] += time.perf_counter() - t
+        t = time.perf_counter()
+        with torch.no_grad():
+            lo = links.links[v](enc.symbols, links.snr_db[v], generator=generator)
+        sec["channel"] += time.perf_counter() - t
+        t = time.perf_counter()
+        with torch.no_grad():
+            img = rx_codec.decode(lo.x_hat, enc.meta, snr_enc[v], expected_sha256=codec.sha256)
+        sec["decode"] += time.perf_counter() - t
+        out.append(_to_nhwc(img)[0])
+        symbols.append(int(enc.symbols.shape[-1]))
+    return np.stack(out), np.asarray(symbols, np.int64), sec
+
+
+def transmit_digital_views(
+    images: np.ndarray,
+    view_ids,
+    links: ViewLinks,
+    budgets,
+    cfg: RunConfig,
+    generator: torch.Generator,
+):
+    """Each view through image codec + LDPC + QAM with its symbol budget."""
+    import semcodec
+
+    out, failed, info = [], 0, []
+    t = time.perf_counter()
+    for k, v in enumerate(view_ids):
+        res = semcodec.transmit_digital(
+            _to_nchw(images[k : k + 1]),
+            links.links[v],
+            links.snr_db[v],
+            int(budgets[k]),
+            mcs=cfg.mcs,
+            image_codec=cfg.image_codec,
+            generator=generator,
+        )
+        rec, stats = (res[0], res[1]) if isinstance(res, tuple) else (res.images, res.stats)
+        out.append(_to_nhwc(rec)[0])
+        stats = stats if isinstance(stats, dict) else vars(stats)
+        failed += (
+            int(np.sum(stats.get("failed_codewords", 0)))
+            if not isinstance(stats.get("failed_codewords", 0), list)
+            else len(stats["failed_codewords"])
+        )
+        info.append({k2: v2 for k2, v2 in stats.items() if isinstance(v2, (int, float, str, bool))})
+    return np.stack(out), {"encode_decode_channel": time.perf_counter() - t}, failed, info
+
+
+def write_views_folder(
+    folder: Path,
+    images: np.ndarray,
+    poses: np.ndarray,
+    intr,
+    aabb,
+    background,
+    masks: np.ndarray | None = None,
+) -> Path:
+    """A nerfstudio folder of the views a scheme received (PNG, 8 bit)."""
+    from PIL import Image
+
+    from osnerf.provenance import write_json_atomic
+
+    folder = Path(folder)
+    (folder / "images").mkdir(parents=True, exist_ok=True)
+    frames = []
+    for k in range(len(images)):
+        name = f"images/r_{k:03d}.png"
+        Image.fromarray(np.round(np.clip(images[k], 0, 1) * 255).astype(np.uint8)).save(
+            folder / name
+        )
+        frame = {
+            "file_path": name,
+            "transform_matrix": np.asarray(poses[k]).tolist(),
+            "split": "train",
+        }
+        if masks is not None:
+            mname = f"masks/r_{k:03d}.png"
+            (folder / "masks").mkdir(exist_ok=True)
+            Image.fromarray(np.round(np.clip(masks[k], 0, 1) * 255).astype(np.uint8)).save(
+                folder / mname
+            )
+            frame["mask_path"] = mname
+        frames.append(frame)
+    meta = {
+        "camera_model": "PINHOLE",
+        "fl_x": intr.fx,
+        "fl_y": intr.fy,
+        "cx": intr.cx,
+        "cy": intr.cy,
+        "w": intr.width,
+        "h": intr.height,
+        "aabb": np.asarray(aabb).tolist(),
+        "background": np.asarray(background).tolist(),
+        "frames": frames,
+    }
+    write_json_atomic(folder / "transforms.json", meta)
+    return folder
+
+
+def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
+    """[2, 3] box grown by ``pad_fraction`` of its largest side on every face."""
+    b = np.asarray(bounds, np.float64)
+    pad = pad_fraction * float((b[1] - b[0]).max())
+    return np.stack([b[0] - pad, b[1] + pad])
+
+
+def mask_iou(opacity: np.ndarray, mask: np.ndarray, threshold: float = 0.5) -> float:
+    """Intersection over union of ``opacity > t`` and ``mask > t`` (1.0 when both are empty)."""
+    a, b = opacity > threshold, mask > threshold
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 1.0
+
+
+def train_and_score(folder: Path, views: SceneViews, demand: Demand, cfg: RunConfig, seed: int):
+    """Train the renderer on ``folder`` and score it on the held-out views.
+
+    Returns:
+        (metrics dict, renders [num_test, height, width, 3], opacity [num_test, height, width]).
+    """
+    import renderer
+
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+    ds = renderer.load_dataset(folder, split="train", resolution=cfg.resolution_px)
+    tc = renderer.TrainConfig(max_seconds=float(cfg.max_seconds))
+    gen = torch.Generator().manual_seed(seed)
+    t = time.perf_counter()
+    result = renderer.train(ds, tc, generator=gen)
+    seconds = time.perf_counter() - t
+    test = views.indices("test")
+    poses = torch.as_tensor(views.poses[test], dtype=torch.float32)
+    with torch.no_grad():
+        out = renderer.render_views(
+            result.model, poses, ds.intrinsics, views.intrinsics.height, views.intrinsics.width
+        )
+    rgb = np.asarray(
+        out["rgb"].detach().cpu() if hasattr(out["rgb"], "detach") else out["rgb"], np.float32
+    )
+    op = out.get("opacity")
+    op = np.asarray(op.detach().cpu() if hasattr(op, "detach") else op, np.float32).reshape(
+        rgb.shape[:3]
+    )
+    gt = views.images[test]
+    union = np.stack([views.masks[o][test] for o in demand.objects]).max(0)
+    seen = [k for k in range(len(test)) if (union[k] > 0.5).sum() >= 4]
+    metrics = {
+        "psnr": float(np.mean([renderer.psnr(rgb[k], gt[k]) for k in range(len(test))])),
+        "ssim": float(np.mean([renderer.ssim(rgb[k], gt[k]) for k in range(len(test))])),
+        "psnr_object": float(
+            np.mean([renderer.masked_psnr(rgb[k], gt[k], union[k] > 0.5) for k in seen])
+        )
+        if seen
+        else None,
+        "mask_iou": float(np.mean([mask_iou(op[k], union[k]) for k in seen])) if seen else None,
+        "num_test_views": int(len(test)),
+        "num_test_views_with_object": len(seen),
+        "nerf_steps": int(getattr(result, "steps", 0)),
+        "nerf_seconds": seconds,
+    }
+    return metrics, rgb, op
+
+
+def view_metrics(received: np.ndarray, sent: np.ndarray, masks: np.ndarray | None) -> dict:
+    """PSNR of the received views against what was sent (mean of per-view PSNR)."""
+    mse = ((received - sent) ** 2).reshape(len(sent), -1).mean(1)
+    out = {"psnr_received": float(np.mean(-10 * np.log10(np.maximum(mse, 1e-10))))}
+    if masks is not None:
+        m = masks > 0.5
+        obj = [
+            float(-10 * np.log10(max(((received[k] - sent[k]) ** 2)[m[k]].mean(), 1e-10)))
+            for k in range(len(sent))
+            if m[k].sum() > 0
+        ]
+        out["psnr_received_object"] = float(np.mean(obj)) if obj else None
+    return out
+
+
+# ----------------------------------------------------------------------------- the run
+
+
+@dataclass
+class Prepared:
+    """What the cheap checks produce before any heavy work."""
+
+    demand: Demand
+    codec: object
+    rx_codec: object
+    scu: SemanticControlUnit
+
+
+def prepare(cfg: RunConfig) -> Prepared:
+    """Validate names, the SNR against the codec's range and the knowledge base (cheap)."""
+    demand = cfg.demand_obj()
+    scu = SemanticControlUnit(demand, rate_policy=RatePolicy())
+    codec = rx = None
+    if any(s in cfg.schemes for s in ("jscc", "full")):
+        import semcodec
+
+        codec = semcodec.load_codec(cfg.codec)
+        lo, hi = (float(v) for v in codec.snr_range_db)
+        if not lo <= cfg.snr_db <= hi:
+            raise ValueError(
+                f"--snr-db {cfg.snr_db:g} is outside the codec's range [{lo:g}, {hi:g}] dB"
+            )
+        rx = semcodec.load_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
+        scu.check_knowledge_base(codec.sha256, rx.sha256)
+    return Prepared(demand, codec, rx, scu)
+
+
+def _num_symbols_for(cbr: float, h: int, w: int) -> int:
+    return int(round(cbr * h * w * 3))
+
+
+def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -> dict:
+    """Run every stage (resuming cached ones) and return the report dict (not yet written).
+
+    Args:
+        out_dir: RUN_DIR; stage caches go to ``out_dir/cache/<cfg.key()>/``.
+        cache_dir: where rendered scenes are cached (default ``osnerf.scenes.default_cache_dir``).
+    """
+    t_run = time.perf_counter()
+    prep = prepare(cfg)
+    demand, scu = prep.demand, prep.scu
+    cache = StageCache(Path(out_dir) / "cache" / cfg.key())
+
+    t = time.perf_counter()
+    folder = build_scene_dataset(
+        cfg.scene, demand.objects, cfg.render_config(), cache_dir=cache_dir
+    )
+    views = load_scene_views(folder)
+    scene_seconds = time.perf_counter() - t
+    _log(f"scene {cfg.scene}: {len(views.images)} views in {folder} ({scene_seconds:.1f} s)")
+
+    col = collect(views, demand, scu.collector_settings())
+    for v, why in sorted(col.reasons.items()):
+        scu.log("collector", f"view {v}: not sent", view=v, reason=why)
+    scu.log(
+        "collector",
+        f"send {col.num_sent} of {len(col.candidates)} views",
+        views=col.indices.tolist(),
+    )
+    candidates = col.candidates
+    links = build_links(cfg, views, candidates)
+    if links.outage:
+        scu.log("link", "views in outage are not sent", views=sorted(links.outage))
+    sent_ids = [int(v) for v in col.indices if int(v) not in links.outage]
+    if not sent_ids:
+        raise ValueError(
+            "every view showing the demanded objects is in outage: nothing can be sent"
+        )
+    full_ids = [int(v) for v in candidates if int(v) not in links.outage]
+    keep = np.isin(col.indices, sent_ids)
+    col = Collection(
+        col.indices[keep],
+        col.images[keep],
+        col.masks[keep],
+        col.importance[keep],
+        col.candidates,
+        col.reasons,
+    )
+
+    # rate: measured SNR per view -> CBR per view
+    cached = cache.load("rate")
+    if cached is None:
+        gen = torch.Generator().manual_seed(cfg.seed * 7 + 1)
+        measured = np.asarray(
+            [measure_snr_db([links.links[v]], [links.snr_db[v]], gen)[0] for v in full_ids]
+        )
+        cached = ({"views": np.asarray(full_ids), "measured_snr_db": measured}, {})
+        cache.save("rate", *cached)
+    measured = dict(zip(cached[0]["views"].tolist(), cached[0]["measured_snr_db"].tolist()))
+    codec = prep.codec
+    cbr_range = tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6)
+    snr_range = tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0)
+    cbrs = dict(
+        zip(
+            full_ids,
+            scu.choose_cbr(np.asarray([measured[v] for v in full_ids]), cbr_range, full_ids),
+        )
+    )
+    snr_enc = {v: float(np.clip(measured[v], *snr_range)) for v in full_ids}
+    h, w = views.intrinsics.height, views.intrinsics.width
+    routing = scu.feature_routing(col)
+
+    schemes: dict[str, dict] = {}
+    received_all: dict[str, np.ndarray] = {}
+    renders: dict[str, np.ndarray] = {}
+    jscc_symbols = None
+    for si, scheme in enumerate(cfg.schemes):
+        object_routed = OBJECT_ROUTED[scheme]
+        ids = sent_ids if object_routed else full_ids
+        sent = col.images if object_routed else views.images[ids]
+        masks = col.masks if object_routed else None
+        tx = cache.load(f"{scheme}_tx")
+        if tx is None:
+            _log(f"{scheme}: sending {len(ids)} views over {cfg.channel} at {cfg.snr_db:g} dB")
+            gen = torch.Generator().manual_seed(cfg.seed * 1000 + 17 * si + 3)
+            info: dict = {"views": ids}
+            if scheme == "gt":
+                rec, symbols, sec = (
+                    sent.copy(),
+                    np.zeros(len(ids), np.int64),
+                    {"encode": 0.0, "decode": 0.0},
+                )
+            elif scheme in ("jscc", "full"):
+                rec, symbols, sec = transmit_jscc(
+                    codec,
+                    prep.rx_codec,
+                    sent,
+                    routing[0] if object_routed else None,
+                    routing[1] if object_routed else None,
+                    ids,
+                    links,
+                    snr_enc,
+                    cbrs,
+                    gen,
+                )
+            else:  # digital: same views and symbol budget per view as jscc
+                budgets = (
+                    jscc_symbols
+                    if jscc_symbols is not None
+                    else np.asarray([_num_symbols_for(cbrs[v], h, w) for v in ids])
+                )
+                rec, sec, failed, dinfo = transmit_digital_views(
+                    sent, ids, links, budgets, cfg, gen
+                )
+                symbols = np.asarray(budgets, np.int64)
+                info.update(failed_codewords=failed, per_view=dinfo)
+            info["seconds"] = sec
+            tx = ({"received": rec, "symbols": symbols}, info)
+            cache.save(f"{scheme}_tx", *tx)
+        rec, symbols = tx[0]["received"], tx[0]["symbols"]
+        if scheme == "jscc":
+            jscc_symbols = symbols
+        received_all[scheme] = rec
+        if object_routed:
+            b = np.stack([np.asarray(views.meta["object_aabb"][o]) for o in demand.objects])
+            aabb = padded_aabb(np.stack([b[:, 0].min(0), b[:, 1].max(0)]))
+        else:
+            aabb = np.asarray(views.meta["aabb"])
+        scu.route_to_renderer(scheme, len(ids), aabb, object_routed)
+        nerf = cache.load(f"{scheme}_nerf")
+        if nerf is None:
+            _log(f"{scheme}: training the radiance field ({cfg.max_seconds:g} s)")
+            vf = write_views_folder(
+                Path(out_dir) / "received" / scheme,
+                rec,
+                views.poses[ids],
+                views.intrinsics,
+                aabb,
+                views.background,
+                masks,
+            )
+            metrics, rgb, op = train_and_score(vf, views, demand, cfg, seed=cfg.seed * 1000 + si)
+            nerf = ({"rgb": rgb, "opacity": op}, metrics)
+            cache.save(f"{scheme}_nerf", *nerf)
+        metrics = dict(nerf[1])
+        renders[scheme] = nerf[0]["rgb"]
+        sec = tx[1]["seconds"]
+        n_sym = int(np.sum(symbols))
+        air = n_sym / cfg.symbol_rate_hz
+        seconds = {
+            "encode": float(sec.get("encode", 0.0)),
+            "air": air,
+            "decode": float(sec.get("decode", 0.0)),
+            "nerf": float(metrics.pop("nerf_seconds")),
+        }
+        if "encode_decode_channel" in sec:
+            seconds["codec_and_ldpc"] = float(sec["encode_decode_channel"])
+        schemes[scheme] = {
+            "psnr": metrics["psnr"],
+            "psnr_object": metrics["psnr_object"],
+            "ssim": metrics["ssim"],
+            "mask_iou": metrics["mask_iou"] if object_routed else None,
+            "symbols_sent": n_sym,
+            "views_sent": len(ids),
+            "seconds": seconds,
+            "processing_seconds": seconds["encode"]
+            + seconds["decode"]
+            + seconds["nerf"]
+            + seconds.get("codec_and_ldpc", 0.0),
+            **view_metrics(rec, sent, masks),
+            **{
+                k: v
+                for k, v in metrics.items()
+                if k not in ("psnr", "psnr_object", "ssim", "mask_iou")
+            },
+            **({"failed_codewords": tx[1].get("failed_codewords")} if scheme == "digital" else {}),
+            "training_bounds": "demanded objects" if object_routed else "whole scene",
+        }
+        _log(f"{scheme}: psnr_object {schemes[scheme]['psnr_object']}, symbols {n_sym}")
+
+    test = views.indices("test")
+    report = {
+        "scene": {
+            "name": cfg.scene,
+            "folder": str(folder),
+            "objects": list(views.objects),
+            "num_train_views": int(len(candidates)),
+            "num_test_views": int(len(test)),
+            "resolution_px": [h, w],
+            "render_seconds": views.meta.get("render_seconds"),
+            "ground_station_m": views.meta["ground_station_m"],
+        },
+        "demand": {"objects": list(demand.objects), "weights": list(demand.weights)},
+        "link": links.info,
+        "snr_db": cfg.snr_db,
+        "symbol_rate_hz": cfg.symbol_rate_hz,
+        "codec": None
+        if codec is None
+        else {
+            "sha256": codec.sha256,
+            "cbr_range": list(cbr_range),
+            "snr_range_db": list(snr_range),
+        },
+        "views": {
+            "candidates": [int(v) for v in candidates],
+            "sent_on_demand": sent_ids,
+            "not_sent": {str(k): v for k, v in sorted(col.reasons.items())},
+            "outage": sorted(links.outage),
+            "link_snr_db": {str(v): links.snr_db[v] for v in full_ids},
+            "measured_snr_db": {str(v): measured[v] for v in full_ids},
+            "cbr": {str(v): float(cbrs[v]) for v in full_ids},
+        },
+        "schemes": schemes,
+        "comparisons": comparisons(schemes),
+        "scu_decisions": scu.decisions,
+        "metric_notes": "psnr/ssim: mean over held-out views of per-view values on the whole view; psnr_object: "
+        "PSNR over the demanded objects' visible pixels (mask > 0.5) of held-out views showing them; "
+        "mask_iou: rendered opacity > 0.5 vs the objects' mask (object-routed schemes only); "
+        "air = symbols_sent / symbol_rate_hz; gt sends nothing (undistorted on-demand views).",
+        "seconds_total": time.perf_counter() - t_run,
+        "scene_seconds": scene_seconds,
+    }
+    pictures = {
+        "gt": views.images[test],
+        "gt_masks": np.stack([views.masks[o][test] for o in demand.objects]).max(0),
+        "received": received_all,
+        "renders": renders,
+    }
+    return report, pictures
+
+
+def comparisons(schemes: dict) -> dict:
+    """The headline numbers: jscc vs the gt ceiling and vs digital, symbols jscc vs full."""
+    out = {}
+
+    def get(s, k):
+        return schemes.get(s, {}).get(k)
+
+    if get("jscc", "psnr_object") is not None and get("gt", "psnr_object") is not None:
+        out["jscc_minus_gt_psnr_object_db"] = get("jscc", "psnr_object") - get("gt", "psnr_object")
+    if get("jscc", "psnr_object") is not None and get("digital", "psnr_object") is not None:
+        out["jscc_minus_digital_psnr_object_db"] = get("jscc", "psnr_object") - get(
+            "digital", "psnr_object"
+        )
+    if get("jscc", "symbols_sent") and get("full", "symbols_sent"):
+        out["symbols_jscc_over_full"] = get("jscc", "symbols_sent") / get("full", "symbols_sent")
+        if get("full", "psnr_object") is not None:
+            out["jscc_minus_full_psnr_object_db"] = get("jscc", "psnr_object") - get(
+                "full", "psnr_object"
+            )
+    if get("jscc", "processing_seconds") and get("full", "processing_seconds"):
+        out["processing_jscc_over_full"] = get("jscc", "processing_seconds") / get(
+            "full", "processing_seconds"
+        )
+    return out

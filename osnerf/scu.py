@@ -1,0 +1,160 @@
+"""The semantic control unit (SCU): demand -> collector and encoder settings, rate per view,
+the knowledge-base check, and routing of decoded views to the renderer. Every decision is
+logged (``SemanticControlUnit.decisions``) and ends up in the report.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+
+from osnerf.collect import Collection, CollectorConfig, Demand
+
+
+class KnowledgeBaseError(ValueError):
+    """Transmitter and receiver hold different codec versions (different sha256)."""
+
+
+@dataclass(frozen=True)
+class RatePolicy:
+    """CBR per measured SNR: lower SNR -> more channel symbols per source value.
+
+    The SNR (dB) falls in band ``k`` when it is below ``thresholds_db[k]`` (and above the
+    previous one); the last band is everything above the last threshold.
+
+    Attributes:
+        thresholds_db: ascending band edges, dB.
+        cbrs: one CBR per band (len(thresholds_db) + 1), each in (0, 1].
+    """
+
+    thresholds_db: tuple[float, ...] = (0.0, 5.0, 10.0)
+    cbrs: tuple[float, ...] = (1 / 8, 1 / 12, 1 / 16, 1 / 24)
+
+    def __post_init__(self):
+        if len(self.cbrs) != len(self.thresholds_db) + 1:
+            raise ValueError(
+                f"cbrs must have len(thresholds_db) + 1 = {len(self.thresholds_db) + 1} entries"
+            )
+        if list(self.thresholds_db) != sorted(self.thresholds_db):
+            raise ValueError(f"thresholds_db must be ascending, got {self.thresholds_db}")
+        if any(not 0 < c <= 1 for c in self.cbrs):
+            raise ValueError(f"cbrs must be in (0, 1], got {self.cbrs}")
+
+    def cbr_for(self, snr_db: float) -> float:
+        """The CBR of the band ``snr_db`` falls in."""
+        k = int(np.searchsorted(np.asarray(self.thresholds_db), float(snr_db), side="right"))
+        return float(self.cbrs[k])
+
+
+@dataclass
+class SemanticControlUnit:
+    """Drives one run: turns the demand into settings and logs why.
+
+    Attributes:
+        demand: the user's objects and weights.
+        collector: the collector settings it chose.
+        rate_policy: CBR per measured SNR.
+        decisions: the log (one dict per decision: ``stage``, ``decision``, details).
+    """
+
+    demand: Demand
+    collector: CollectorConfig = field(default_factory=CollectorConfig)
+    rate_policy: RatePolicy = field(default_factory=RatePolicy)
+    decisions: list[dict] = field(default_factory=list)
+
+    def log(self, stage: str, decision: str, **details) -> None:
+        self.decisions.append({"stage": stage, "decision": decision, **details})
+
+    def collector_settings(self) -> CollectorConfig:
+        """Collector settings for the demand (logged)."""
+        self.log(
+            "collector",
+            f"send views where one of {', '.join(self.demand.objects)} is visible enough",
+            **asdict(self.collector),
+            demand=str(self.demand),
+        )
+        return self.collector
+
+    def check_knowledge_base(self, transmitter_sha256: str, receiver_sha256: str) -> None:
+        """Refuse to run when the two ends hold different codecs.
+
+        Raises:
+            KnowledgeBaseError: the hashes differ (names both, short).
+        """
+        if transmitter_sha256 != receiver_sha256:
+            self.log(
+                "knowledge_base",
+                "refused",
+                transmitter=transmitter_sha256,
+                receiver=receiver_sha256,
+            )
+            raise KnowledgeBaseError(
+                f"knowledge-base mismatch: transmitter codec sha256 {transmitter_sha256[:12]} != "
+                f"receiver codec sha256 {receiver_sha256[:12]}; load the same checkpoint on both ends"
+            )
+        self.log("knowledge_base", "agreed", sha256=transmitter_sha256)
+
+    def feature_routing(self, collection: Collection) -> tuple[torch.Tensor, torch.Tensor]:
+        """Encoder routing for the selected views: (mask [n, 1, h, w], importance [n, 1, h, w])."""
+        m = torch.from_numpy(collection.masks).float()[:, None]
+        imp = torch.from_numpy(collection.importance).float()[:, None]
+        self.log(
+            "encoder",
+            "route features of the demanded objects",
+            views=collection.indices.tolist(),
+            mean_mask_fraction=float(m.mean()),
+        )
+        return m, imp
+
+    def choose_cbr(
+        self, measured_snr_db: np.ndarray, cbr_range: tuple[float, float], views
+    ) -> np.ndarray:
+        """CBR per view from its measured SNR, clamped to the codec's range (logged per view)."""
+        lo, hi = cbr_range
+        out = []
+        for v, s in zip(views, measured_snr_db):
+            c = float(np.clip(self.rate_policy.cbr_for(float(s)), lo, hi))
+            out.append(c)
+            self.log(
+                "rate", f"view {int(v)}: cbr {c:.4f}", view=int(v), measured_snr_db=float(s), cbr=c
+            )
+        return np.asarray(out, np.float64)
+
+    def route_to_renderer(self, scheme: str, num_views: int, aabb, object_routed: bool) -> None:
+        self.log(
+            "renderer",
+            f"{scheme}: train on {num_views} decoded views",
+            scheme=scheme,
+            aabb=np.asarray(aabb).tolist(),
+            bounds="demanded objects" if object_routed else "whole scene",
+        )
+
+
+def measure_snr_db(
+    links, snr_db, generator: torch.Generator, num_pilots: int = 256, num_blocks: int = 8
+) -> np.ndarray:
+    """Post-equalisation SNR per view from known QPSK pilot blocks sent through its link.
+
+    The mean squared error of the equalised pilots estimates the effective noise; for an
+    MMSE receiver the unbiased SNR is ``1 / mse - 1``. Averaged over ``num_blocks`` blocks
+    (independent fades on a block-fading link: the long-term SNR the rate is chosen on).
+
+    Args:
+        links: one link per view, ``link(x, snr_db, generator=None) -> LinkOutput``.
+        snr_db: one SNR per view (what its link runs at).
+    Returns:
+        [num_views] float measured SNR in dB.
+    """
+    out = []
+    for link, s in zip(links, snr_db):
+        bits = torch.randint(0, 2, (num_blocks, num_pilots, 2), generator=generator)
+        x = ((1 - 2 * bits[..., 0]) + 1j * (1 - 2 * bits[..., 1])).to(torch.complex64) / math.sqrt(
+            2
+        )
+        y = link(x, float(s), generator=generator)
+        mse = float((y.x_hat - x).abs().pow(2).mean())
+        out.append(10 * math.log10(max(1.0 / max(mse, 1e-12) - 1.0, 1e-3)))
+    return np.asarray(out)
