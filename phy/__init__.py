@@ -30,18 +30,65 @@ from phy.conventions import (  # noqa: E402
     snr_db_to_noise_var,
     validate_snr_db,
 )
-from phy.link import FlatLink, LinkOutput  # noqa: E402
-from phy.ofdm import equalize, post_equalization_snr  # noqa: E402
+from phy.link import FlatLink, LinkOutput, OFDMLink  # noqa: E402
+from phy.modulation import (  # noqa: E402
+    MODULATIONS,
+    bits_per_symbol,
+    constellation,
+    demap_hard,
+    hard_decision,
+    map_bits,
+)
+from phy.ofdm import (  # noqa: E402
+    ResourceGrid,
+    equalize,
+    extract_data,
+    interpolation_matrix,
+    ls_channel_estimate,
+    map_to_grid,
+    ofdm_demodulate,
+    ofdm_modulate,
+    post_equalization_snr,
+)
+from phy.theory import ber_theory, ser_theory  # noqa: E402
+
+
+def __getattr__(name: str):
+    """TDLChannel / CDLChannel on first use (they import sionna, about 2 s)."""
+    if name in ("TDLChannel", "CDLChannel"):
+        from phy.channels import tr38901
+
+        return getattr(tr38901, name)
+    raise AttributeError(f"module 'phy' has no attribute {name!r}")
+
 
 __all__ = [
     "AWGN",
+    "CDLChannel",
     "CHANNELS",
     "Channel",
     "ChannelOutput",
     "FlatLink",
     "LinkOutput",
+    "MODULATIONS",
+    "OFDMLink",
     "RayleighFading",
+    "ResourceGrid",
     "RicianFading",
+    "TDLChannel",
+    "ber_theory",
+    "bits_per_symbol",
+    "constellation",
+    "demap_hard",
+    "extract_data",
+    "hard_decision",
+    "interpolation_matrix",
+    "ls_channel_estimate",
+    "map_bits",
+    "map_to_grid",
+    "ofdm_demodulate",
+    "ofdm_modulate",
+    "ser_theory",
     "cbr",
     "clip_papr",
     "configure_llvm",

@@ -15,8 +15,11 @@ from torch import Tensor
 from phy.channels._common import check_symbols
 from phy.channels.base import Channel
 from phy.ofdm.equalization import EQUALIZERS, equalize
+from phy.ofdm.estimation import INTERPOLATIONS, ls_channel_estimate
+from phy.ofdm.resource_grid import ResourceGrid, extract_data, map_to_grid
 
 CSI_FLAT = ("perfect", "none")
+CSI_OFDM = ("perfect", "ls")
 
 
 @dataclass
@@ -80,3 +83,80 @@ class FlatLink(torch.nn.Module):
 
     def extra_repr(self) -> str:
         return f"csi={self.csi!r}, equalizer={self.equalizer!r}"
+
+
+class OFDMLink(torch.nn.Module):
+    """Symbols on an OFDM resource grid with pilots, a frequency-domain channel, estimation
+    and one-tap equalisation per resource element.
+
+    The symbols fill the data resource elements of as many slots as needed (zero-padded);
+    the grid ``[batch, num_slots * num_ofdm_symbols, fft_size]`` goes through the channel in
+    the frequency domain (a cyclic prefix longer than the channel is assumed; the
+    time-domain path with real synchronisation is :func:`phy.receive_frame`). ``snr_db`` is
+    Es/N0 per resource element (data and pilots have unit power).
+
+    Args:
+        grid: the :class:`ResourceGrid`.
+        channel: a channel accepting ``[batch, num_ofdm_symbols, fft_size]`` grids (all flat
+            channels, ``TDLChannel``, ``CDLChannel``).
+        csi: ``"perfect"`` (the channel's h) or ``"ls"`` (pilot LS estimate, interpolated);
+            with ``"ls"`` the estimation error is added to the reported ``noise_var``.
+        equalizer: ``"mmse"`` or ``"zf"``.
+        interpolation: ``"linear"`` or ``"nearest"`` (for ``csi="ls"``).
+    """
+
+    def __init__(
+        self,
+        grid: ResourceGrid,
+        channel: Channel,
+        csi: str = "ls",
+        equalizer: str = "mmse",
+        interpolation: str = "linear",
+    ):
+        super().__init__()
+        if not isinstance(grid, ResourceGrid):
+            raise ValueError(f"grid must be a phy.ResourceGrid, got {type(grid).__name__}")
+        if not isinstance(channel, torch.nn.Module) or not callable(channel):
+            raise ValueError(f"channel must be a phy Channel, got {type(channel).__name__}")
+        if csi not in CSI_OFDM:
+            raise ValueError(f"csi must be one of {list(CSI_OFDM)}, got {csi!r}")
+        if equalizer not in EQUALIZERS:
+            raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(
+                f"interpolation must be one of {list(INTERPOLATIONS)}, got {interpolation!r}"
+            )
+        if csi == "ls" and not grid.pilot_ofdm_symbols:
+            raise ValueError("csi='ls' needs a grid with pilot_ofdm_symbols")
+        self.grid = grid
+        self.channel = channel
+        self.csi = csi
+        self.equalizer = equalizer
+        self.interpolation = interpolation
+
+    def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> LinkOutput:
+        """Args: x [batch, num_symbols] complex64; snr_db float or [batch].
+
+        Returns: LinkOutput(x_hat [batch, num_symbols] complex64, noise_var [batch, num_symbols]).
+        """
+        check_link_input(x)
+        b, n = x.shape
+        total = self.grid.num_slots(n) * self.grid.num_data_symbols
+        xp = torch.nn.functional.pad(x, (0, total - n)) if total > n else x
+        g = map_to_grid(xp, self.grid)  # [batch, num_slots * num_ofdm_symbols, fft_size]
+        out = self.channel(g, snr_db, generator=generator)
+        nv = out.noise_var.to(torch.float32)
+        if self.csi == "perfect":
+            h = torch.ones_like(g) if out.h is None else torch.broadcast_to(out.h, g.shape)
+            err = 0.0
+        else:
+            h, err = ls_channel_estimate(out.y, self.grid, nv, self.interpolation)
+        x_hat, nv_eff = equalize(out.y, h, nv, self.equalizer, err)
+        x_hat = extract_data(x_hat, self.grid)[:, :n]
+        nv_eff = extract_data(nv_eff, self.grid)[:, :n]
+        return LinkOutput(x_hat, nv_eff, out.outage)
+
+    def extra_repr(self) -> str:
+        return (
+            f"csi={self.csi!r}, equalizer={self.equalizer!r}, interpolation={self.interpolation!r}"
+        )

@@ -96,7 +96,7 @@ def test_every_flat_channel_builds_and_is_differentiable(name):
 
 
 def test_registry_lists_the_required_names():
-    for name in ("awgn", "rayleigh", "rayleigh_fast", "rician"):
+    for name in ("awgn", "rayleigh", "rayleigh_fast", "rician", "tdl", "cdl"):
         assert name in phy.CHANNELS
 
 
