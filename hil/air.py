@@ -132,7 +132,7 @@ def fractional_resample(x: np.ndarray, positions: np.ndarray) -> np.ndarray:
 
 
 def iq_imbalance(y: np.ndarray, gain_db: float, phase_deg: float) -> np.ndarray:
-    """Receiver I/Q imbalance: I' = I, Q' = g (Q cos(phi) + I sin(phi)) ... as mu y + nu conj(y).
+    """Receiver I/Q imbalance as ``mu y + nu conj(y)``: I' = I, Q' = g (Q cos(phi) - I sin(phi)).
 
     Args:
         y: [num_samples] complex.

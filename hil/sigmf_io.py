@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -161,7 +162,9 @@ def read_sigmf(path) -> Recording:
     if not data_path.is_file():
         raise SigmfError(f"SigMF data file not found: {data_path}")
     try:
-        meta = sigmf.fromfile(str(meta_path))
+        with warnings.catch_warnings():  # a truncated file warns first; we raise below
+            warnings.simplefilter("ignore")
+            meta = sigmf.fromfile(str(meta_path))
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise SigmfError(f"{meta_path}: metadata is not valid JSON: {e}") from e
     except sigmf.error.SigMFError as e:

@@ -1,0 +1,63 @@
+"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+ACTIONS = ("info",)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "action", choices=ACTIONS, help="info: board id, firmware, serial, USB API of each HackRF"
+    )
+    p.add_argument(
+        "--emulate", action="store_true", help="use two emulated boards instead of USB hardware"
+    )
+    p.add_argument("--serial", default=None, help="only the board whose serial ends with this")
+
+
+def _info_lines(index: int, dev) -> list[str]:
+    from hil import protocol
+
+    board = protocol.BOARD_IDS.get(dev.board_id, "unknown")
+    return [
+        "Found HackRF",
+        f"Index: {index}",
+        f"Serial number: {dev.serial_number}",
+        f"Board ID Number: {dev.board_id} ({board})",
+        f"Firmware Version: {dev.firmware_version} (API:{protocol.usb_api_version_string(dev.usb_api_version)})",
+        f"Part ID Number: 0x{dev.part_id[0]:08x} 0x{dev.part_id[1]:08x}",
+    ]
+
+
+def run(args: argparse.Namespace) -> int:
+    import usb.core
+
+    from hil import DeviceNotFoundError, Emulator, HackRF, HilError, protocol
+
+    backend = Emulator().backend if args.emulate else None
+    try:
+        found = list(usb.core.find(find_all=True, idVendor=protocol.VENDOR_ID, backend=backend))
+    except usb.core.NoBackendError as e:
+        raise DeviceNotFoundError(
+            "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0) or use --emulate"
+        ) from e
+    serials = [d.serial_number for d in found if d.idProduct in protocol.PRODUCT_IDS]
+    if args.serial:
+        serials = [s for s in serials if s.endswith(args.serial.lower())]
+    print("osnerf hil info (pure pyusb, no libhackrf)")
+    if not serials:
+        print("No HackRF boards found.")
+        return 1
+    for i, serial in enumerate(serials):
+        try:
+            with HackRF.open(serial, backend=backend, configure=False) as dev:
+                print("\n".join(_info_lines(i, dev)))
+        except HilError as e:
+            print(f"Index: {i}\nSerial number: {serial}\nerror: {e}", file=sys.stderr)
+            return 1
+        if i + 1 < len(serials):
+            print()
+    return 0
