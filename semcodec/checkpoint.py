@@ -1,0 +1,103 @@
+"""The knowledge base on disk: safetensors weights + a model card JSON, identified by a hash.
+
+The hash (``sha256``) covers the architecture config and every tensor (name, dtype, shape,
+bytes) in sorted order, not the card's metrics, so re-scoring a checkpoint keeps its
+identity; transmitter and receiver compare it before decoding.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import torch
+from safetensors import safe_open
+from safetensors.torch import load_file, save_file
+
+from semcodec.model import JSCCConfig, JSCCModel
+
+CARD_KEY = "model_card"
+FORMAT_VERSION = "1"
+
+
+class KnowledgeBaseMismatch(ValueError):
+    """The receiver's codec is not the one the transmitter used (hashes differ)."""
+
+
+def weights_sha256(state: dict[str, torch.Tensor], cfg: JSCCConfig) -> str:
+    """sha256 hex of the architecture and the weights (names, dtypes, shapes, bytes)."""
+    h = hashlib.sha256()
+    h.update(json.dumps(cfg.to_dict(), sort_keys=True).encode())
+    for name in sorted(state):
+        t = state[name].detach().cpu().contiguous()
+        h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())
+        h.update(t.view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+    return h.hexdigest()
+
+
+def save_checkpoint(path: str | os.PathLike, model: JSCCModel, card: dict | None = None) -> str:
+    """Write weights + card atomically; returns the sha256. The card gets architecture and hash.
+
+    Args:
+        path: ``*.safetensors`` target.
+        model: the trained model.
+        card: extra model-card fields (training data, metrics, ...).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    sha = weights_sha256(state, model.cfg)
+    full = {
+        **(card or {}),
+        "format_version": FORMAT_VERSION,
+        "architecture": model.cfg.to_dict(),
+        "cbr_range": list(model.cfg.cbr_range),
+        "snr_range_db": [model.cfg.snr_min_db, model.cfg.snr_max_db],
+        "sha256": sha,
+    }
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    try:
+        save_file(state, tmp, metadata={CARD_KEY: json.dumps(full, sort_keys=True)})
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return sha
+
+
+def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
+    """Load a checkpoint; returns (model in eval mode, card). Verifies the stored hash.
+
+    Raises FileNotFoundError when missing and ValueError (one line) when corrupt.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = f.metadata() or {}
+        card = json.loads(meta[CARD_KEY])
+        cfg = JSCCConfig(**card["architecture"])
+        state = load_file(str(path))
+    except (
+        Exception
+    ) as e:  # safetensors raises a variety of errors on garbage (e.g. header too large)
+        raise ValueError(
+            f"checkpoint {path} is corrupt or not a semcodec checkpoint ({type(e).__name__})"
+        ) from None
+    sha = weights_sha256(state, cfg)
+    if card.get("sha256") != sha:
+        raise ValueError(
+            f"checkpoint {path} is corrupt: weights hash {sha[:12]} != card {str(card.get('sha256'))[:12]}"
+        )
+    model = JSCCModel(cfg)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError:
+        raise ValueError(f"checkpoint {path} does not match its architecture {cfg.name}") from None
+    return model.eval(), card
