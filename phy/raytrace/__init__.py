@@ -1,0 +1,29 @@
+"""Ray-traced channels: a sionna-rt scene, a drone (transmitter) and a ground station.
+
+``import phy.raytrace`` is cheap; sionna.rt (and Dr.Jit's LLVM check) loads on first use.
+"""
+
+from phy.raytrace.channel import GAIN_NORMALIZATIONS, RayTracedChannel
+from phy.raytrace.scene import builtin_scenes, load_scene
+from phy.raytrace.stats import RayStats, cir_stats
+from phy.raytrace.tracer import (
+    RayCIR,
+    RayTracer,
+    RayTracingConfig,
+    check_positions,
+    clear_cache,
+)
+
+__all__ = [
+    "GAIN_NORMALIZATIONS",
+    "RayCIR",
+    "RayStats",
+    "RayTracedChannel",
+    "RayTracer",
+    "RayTracingConfig",
+    "builtin_scenes",
+    "check_positions",
+    "cir_stats",
+    "clear_cache",
+    "load_scene",
+]
