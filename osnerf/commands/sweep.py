@@ -32,6 +32,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="Ray cluster address for --executor ray (default: $RAY_ADDRESS or a local instance)",
     )
+    p.add_argument(
+        "--keep-outputs",
+        default=None,
+        metavar="DIR",
+        help="keep each point's own output (JSON, or run folder with views) in DIR (default: deleted)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -48,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         workers=args.workers,
         progress=not args.no_progress,
         ray_address=args.ray_address,
+        keep=args.keep_outputs,
     )
     print(
         f"osnerf sweep: {summary.total} points: {summary.skipped} already done, "

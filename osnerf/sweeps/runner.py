@@ -11,16 +11,20 @@ the next run of the same spec.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import io
 import json
 import multiprocessing
 import os
+import re
+import shutil
 import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -36,11 +40,16 @@ def execute_point(task: Task) -> Outcome:
     """Run one point in this process and return its outcome (never raises).
 
     Args:
-        task: ``{"command", "module", "argv", "out_kind", "json_name", "threads"}``;
-            ``module`` is the command's module from the driver's ``osnerf.cli.COMMANDS``, so
-            a worker runs exactly the command the driver validated.
+        task: ``{"command", "module", "argv", "out_kind", "json_name", "threads", "keep",
+            "slug"}``; ``module`` is the command's module from the driver's
+            ``osnerf.cli.COMMANDS``, so a worker runs exactly the command the driver
+            validated; ``keep`` (or None) is a folder where the point's output is copied as
+            ``<slug>`` (``<slug>.json`` for a file).
     Returns:
-        ``{"ok": bool, "result": dict | None, "error": str | None, "seconds": float}``.
+        ``{"ok": bool, "result": dict | None, "error": str | None, "seconds": float,
+        "kept": str | None}``.
+    Raises:
+        KeyboardInterrupt: the command was interrupted (the sweep stops).
     """
     import osnerf.cli
 
@@ -59,11 +68,15 @@ def execute_point(task: Task) -> Outcome:
         try:
             with contextlib.redirect_stderr(err):
                 rc = osnerf.cli.main([task["command"], *task["argv"], "--out", str(out)])
+        except KeyboardInterrupt:
+            raise
         except BaseException as e:  # noqa: BLE001 - SystemExit from a command, for example
             rc, msg = 1, f"{type(e).__name__}: {e}"
         else:
             lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
             msg = lines[-1] if lines else f"exit code {rc}"
+        if rc == 130:  # osnerf.cli's code for an interrupted command: stop the sweep too
+            raise KeyboardInterrupt
         seconds = time.perf_counter() - t0
         if rc != 0:
             return {"ok": False, "result": None, "error": f"exit {rc}: {msg}", "seconds": seconds}
@@ -77,7 +90,23 @@ def execute_point(task: Task) -> Outcome:
                 "seconds": seconds,
                 "error": f"the command succeeded but its result {path.name} is unreadable: {e}",
             }
-    return {"ok": True, "result": result, "error": None, "seconds": seconds}
+        kept = None
+        if task.get("keep"):  # copy the point's own output (views, report) before tmp goes
+            kept = Path(task["keep"]) / (
+                task["slug"] + (".json" if task["out_kind"] == "file" else "")
+            )
+            kept.parent.mkdir(parents=True, exist_ok=True)
+            if task["out_kind"] == "file":
+                shutil.copy2(out, kept)
+            else:
+                shutil.copytree(out, kept, dirs_exist_ok=True)
+    return {
+        "ok": True,
+        "result": result,
+        "error": None,
+        "seconds": seconds,
+        "kept": kept and str(kept),
+    }
 
 
 # --- executors: (tasks, workers, options) -> (key, outcome) in completion order ---------------
@@ -187,6 +216,13 @@ class SweepSummary:
     failed: list[tuple[dict[str, Any], int | None, str]] = field(default_factory=list)
 
 
+def point_slug(p: Point) -> str:
+    """A file name for a point: ``snr_db=0_mode=a_seed=0-<8 hex of its key>``."""
+    text = "_".join(f"{k}={v}" for k, v in p.values.items()) + f"_seed={p.seed}"
+    text = re.sub(r"[^A-Za-z0-9.=+-]+", "-", text).strip("-")[:80]
+    return f"{text}-{hashlib.sha256(p.key.encode()).hexdigest()[:8]}"
+
+
 def errors_path(out: str | Path) -> Path:
     out = Path(out)
     return out.with_name(out.name + ".errors.jsonl")
@@ -200,6 +236,7 @@ def run_sweep(
     progress: bool = True,
     ray_address: str | None = None,
     ray_runtime_env: dict | None = None,
+    keep: str | Path | None = None,
 ) -> SweepSummary:
     """Run every point of ``spec`` not yet in ``out``; append each as it finishes.
 
@@ -211,6 +248,10 @@ def run_sweep(
         ray_address: Ray cluster address for ``executor="ray"`` (None: ``$RAY_ADDRESS`` or a
             local instance).
         ray_runtime_env: Ray runtime environment for the tasks (e.g. ``env_vars``).
+        keep: folder where each finished point's own output (its JSON file, or its run
+            folder with views and report) is kept as ``<slug>``; recorded in the line as
+            ``"output"``. None: outputs are deleted. On a cluster it must be a path every
+            worker can write.
     Raises:
         ValueError / KeyError: a bad spec, executor or results file, before anything runs.
     """
@@ -238,7 +279,7 @@ def run_sweep(
         errors.unlink()  # failures of an earlier run are retried now
     if not todo:
         return summary
-    threads = max(1, cpus // workers) if executor != "serial" else None
+    threads = max(1, cpus // workers) if executor == "local" else None  # Ray sets its own
     by_key = {p.key: p for p in todo}
     tasks = [
         (
@@ -250,6 +291,8 @@ def run_sweep(
                 "out_kind": rule.out_kind,
                 "json_name": rule.json_name,
                 "threads": threads,
+                "keep": str(Path(keep).resolve()) if keep else None,
+                "slug": point_slug(p),
             },
         )
         for p in todo
@@ -294,6 +337,8 @@ def run_sweep(
                         "argv": list(p.argv),
                         "spec_hash": spec.sha256,
                         "versions": result.get("versions"),
+                        "output": outcome.get("kept"),
+                        "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
                     },
                 )
                 summary.finished += 1

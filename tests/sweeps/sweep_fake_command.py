@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sleep-s", type=float, default=0.0)
     p.add_argument("--fail-snr-db", type=float, default=None, help="raise at this SNR")
     p.add_argument("--fail-once-flag", default=None, help="fail while this file does not exist")
+    p.add_argument("--interrupt-snr-db", type=float, default=None, help="Ctrl-C at this SNR")
     p.add_argument("--log", default=None)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
@@ -46,10 +48,16 @@ def run(args: argparse.Namespace) -> int:
     if args.fail_snr_db is not None and args.snr_db == args.fail_snr_db:
         if args.fail_once_flag is None or not os.path.exists(args.fail_once_flag):
             raise RuntimeError(f"planned failure at snr_db={args.snr_db}")
+    if args.interrupt_snr_db is not None and args.snr_db == args.interrupt_snr_db:
+        raise KeyboardInterrupt
     config = {"snr_db": args.snr_db, "mode": args.mode}
     out = result_header(config, args.seed)
     out["results"] = [
         {"snr_db": args.snr_db, "value": expected_value(args.snr_db, args.mode, args.seed)}
     ]
-    write_json_atomic(args.out, out)
+    # `--out x.json` names the file; any other --out is a run folder holding metrics.json
+    path = Path(args.out) if args.out.endswith(".json") else Path(args.out) / "metrics.json"
+    write_json_atomic(path, out)
+    if path.name == "metrics.json":
+        (path.parent / "view.txt").write_text("a rendered view\n")
     return 0

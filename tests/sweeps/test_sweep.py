@@ -20,6 +20,8 @@ import sweep_fake_command as fake
 
 import osnerf.cli
 from osnerf.sweeps import (
+    METRIC_RULES,
+    MetricRule,
     append_record,
     errors_path,
     expand,
@@ -330,6 +332,46 @@ def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     calls = _calls(tmp_path)
     assert set(calls) == {(f"{s}.0", "a", "0") for s in range(6)}
     assert sum(calls.values()) <= 7  # at most the point being run when killed ran twice
+
+
+def test_ctrl_c_stops_the_sweep_and_keeps_the_finished_points(tmp_path):
+    spec = _spec(
+        tmp_path,
+        axes={"snr_db": [0, 1, 2, 3]},
+        fixed={"interrupt_snr_db": 2, "log": str(tmp_path / "calls.log")},
+    )
+    out = tmp_path / "r.jsonl"
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, out, executor="serial", progress=False)
+    assert sorted(r["point"]["snr_db"] for r in read_results(out)) == [0, 0, 1, 1]  # 2 seeds
+    assert not any(
+        line.startswith("3.0") for line in (tmp_path / "calls.log").read_text().splitlines()
+    )
+
+
+def test_kept_outputs_files_and_run_folders(tmp_path, monkeypatch):
+    spec = _spec(tmp_path, axes={"snr_db": [0, 5]}, seeds=[0])
+    run_sweep(spec, tmp_path / "f.jsonl", executor="serial", progress=False, keep=tmp_path / "keep")
+    for r in read_results(tmp_path / "f.jsonl"):
+        kept = json.loads(Path(r["output"]).read_text())
+        assert (
+            kept["results"] == r["metrics"]["results"]
+            and Path(r["output"]).parent == tmp_path / "keep"
+        )
+    # a command whose --out is a folder: the rule reads metrics.json inside, the folder is kept
+    monkeypatch.setitem(osnerf.cli.COMMANDS, "fake-dir", fake.ENTRY)
+    monkeypatch.setitem(
+        METRIC_RULES, "fake-dir", MetricRule("dir", lambda d: d["results"][0], "metrics.json")
+    )
+    spec = spec_from_dict({**spec.to_dict(), "command": "fake-dir"})
+    run_sweep(spec, tmp_path / "d.jsonl", executor="serial", progress=False, keep=tmp_path / "keep")
+    records = read_results(tmp_path / "d.jsonl")
+    assert [r["metrics"]["value"] for r in records] == [
+        fake.expected_value(s, "a", 0) for s in (0, 5)
+    ]
+    for r in records:
+        assert (Path(r["output"]) / "view.txt").read_text() == "a rendered view\n"
+    assert len({r["output"] for r in records}) == 2
 
 
 # --- executors ------------------------------------------------------------------------------
