@@ -138,9 +138,11 @@ def measure_snr_db(
 ) -> np.ndarray:
     """Post-equalisation SNR per view from known QPSK pilot blocks sent through its link.
 
-    The mean squared error of the equalised pilots estimates the effective noise; for an
-    MMSE receiver the unbiased SNR is ``1 / mse - 1``. Averaged over ``num_blocks`` blocks
-    (independent fades on a block-fading link: the long-term SNR the rate is chosen on).
+    Per block, the equalised pilots are ``x_hat = g x + e``: the gain ``g = <x, x_hat> / <x, x>``
+    and the residual variance give the unbiased SNR ``|g|^2 / var(e)`` (for an MMSE
+    receiver this is ``1 / mse - 1``; without equalisation on AWGN it is ``1 / noise_var``).
+    The linear SNR is averaged over ``num_blocks`` blocks (independent fades on a
+    block-fading link: the long-term SNR the rate is chosen on).
 
     Args:
         links: one link per view, ``link(x, snr_db, generator=None) -> LinkOutput``.
@@ -155,6 +157,10 @@ def measure_snr_db(
             2
         )
         y = link(x, float(s), generator=generator)
-        mse = float((y.x_hat - x).abs().pow(2).mean())
-        out.append(10 * math.log10(max(1.0 / max(mse, 1e-12) - 1.0, 1e-3)))
+        g = (x.conj() * y.x_hat).sum(-1, keepdim=True) / (x.abs() ** 2).sum(
+            -1, keepdim=True
+        )  # [blocks, 1]
+        e = (y.x_hat - g * x).abs().pow(2).mean(-1)  # [blocks]
+        snr = (g.abs().squeeze(-1) ** 2 / e.clamp_min(1e-12)).mean()
+        out.append(10 * math.log10(max(float(snr), 1e-3)))
     return np.asarray(out)

@@ -121,7 +121,8 @@ def build_firefighter() -> SceneGeometry:
 
 
 def build_tiny() -> SceneGeometry:
-    """A minimal test scene: a box (the "crate") and a cylinder (the "post") on the ground."""
+    """A minimal test scene: a box (the "crate"), a cylinder (the "post") and a "cable" hidden inside
+    the crate (an object no camera can see)."""
     return SceneGeometry(
         name="tiny",
         parts=(
@@ -140,6 +141,13 @@ def build_tiny() -> SceneGeometry:
                 "metal",
             ),
             Part(
+                "cable",
+                "cable",
+                box((-0.5, 0.0, 0.1), (0.2, 0.2, 0.2), tile_m=0.3),
+                tx.bark(),
+                "metal",
+            ),
+            Part(
                 "ground",
                 "ground",
                 disk((0.0, 0.0, 0.0), 1.6, tile_m=0.8),
@@ -148,5 +156,5 @@ def build_tiny() -> SceneGeometry:
             ),
         ),
         ground_station_m=(5.0, 3.0, 1.5),
-        scorable_objects=("crate", "post"),
+        scorable_objects=("crate", "post", "cable"),
     )

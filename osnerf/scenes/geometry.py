@@ -207,8 +207,9 @@ def read_ply(path: str | Path) -> Mesh:
 
     Meshes without texture coordinates get :func:`planar_uv` with a 1 m tile.
     """
-    import mitsuba as mi
+    from osnerf.scenes.mitsuba_env import import_mitsuba
 
+    mi = import_mitsuba()
     with mi.util.scoped_set_variant("scalar_rgb"):
         shape = mi.load_dict({"type": "ply", "filename": str(path), "face_normals": True})
         params = mi.traverse(shape)

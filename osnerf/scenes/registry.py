@@ -41,8 +41,8 @@ register(
 register(
     SceneInfo(
         name="tiny",
-        description="a crate and a post on a small disk (for tests)",
-        objects=("crate", "post"),
+        description="a crate and a post on a small disk, a cable hidden in the crate (for tests)",
+        objects=("crate", "post", "cable"),
         default_demand=("post",),
         build=build_tiny,
         elevations_deg=(25.0, 45.0),

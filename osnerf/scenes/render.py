@@ -16,9 +16,10 @@ import numpy as np
 
 from osnerf.scenes.cameras import MITSUBA_FROM_GL, Intrinsics, pixel_rays
 from osnerf.scenes.geometry import write_ply
+from osnerf.scenes.mitsuba_env import RGB_VARIANT, import_mitsuba
 from osnerf.scenes.spec import SceneGeometry
 
-VARIANT = "llvm_ad_rgb"
+VARIANT = RGB_VARIANT
 GAMMA = 2.2
 
 

@@ -1,0 +1,128 @@
+"""The on-demand collector and the semantic control unit, on synthetic views (no rendering)."""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import phy
+from osnerf.collect import CollectorConfig, Demand, collect, masked_images
+from osnerf.scenes import Intrinsics, SceneViews
+from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit, measure_snr_db
+
+
+def synthetic_views(visible_hydrant, visible_tree, n_test=2, size=8):
+    """Views where the hydrant covers a known square with the given visible fractions."""
+    n = len(visible_hydrant) + n_test
+    rng = np.random.default_rng(0)
+    images = rng.random((n, size, size, 3)).astype(np.float32)
+    masks = {
+        "hydrant": np.zeros((n, size, size), np.float32),
+        "tree": np.zeros((n, size, size), np.float32),
+    }
+    vis = {"hydrant": np.zeros(n), "tree": np.zeros(n)}
+    for k, (vh, vt) in enumerate(zip(visible_hydrant, visible_tree)):
+        if vh > 0:
+            masks["hydrant"][k, 2:6, 2:6] = 1.0
+        if vt > 0:
+            masks["tree"][k, 0:2, :] = 1.0
+        vis["hydrant"][k], vis["tree"][k] = vh, vt
+    split = np.array(["train"] * len(visible_hydrant) + ["test"] * n_test)
+    return SceneViews(
+        folder=Path("."),
+        images=images,
+        poses=np.tile(np.eye(4), (n, 1, 1)),
+        intrinsics=Intrinsics.from_fov(40, size, size),
+        split=split,
+        masks=masks,
+        visible_fraction=vis,
+        pixel_fraction={o: masks[o].mean((1, 2)) for o in masks},
+        drone_positions_m=np.zeros((n, 3)),
+        meta={"objects": ["hydrant", "tree"], "background": [1.0, 1.0, 1.0]},
+    )
+
+
+def test_demand_parsing_and_weights():
+    d = Demand.parse("hydrant:3, tree")
+    assert d.objects == ("hydrant", "tree") and d.weights == pytest.approx((0.75, 0.25))
+    for bad in ("", "hydrant:x", "hydrant:-1", "hydrant,hydrant"):
+        with pytest.raises(ValueError):
+            Demand.parse(bad)
+
+
+def test_views_without_the_object_are_never_sent():
+    views = synthetic_views([1.0, 0.0, 0.5, 0.9, 0.0], [0.0, 1.0, 1.0, 0.0, 0.0])
+    col = collect(views, Demand.parse("hydrant"), CollectorConfig(min_visible_fraction=0.8))
+    assert col.indices.tolist() == [0, 3]
+    assert set(col.reasons) == {1, 2, 4}
+    assert "hydrant: visible 0.50" in col.reasons[2]
+    # what is sent holds nothing but the object: outside its mask every pixel is background
+    assert np.all(col.images[:, :2] == 1.0) and np.all(col.images[:, 6:] == 1.0)
+    np.testing.assert_array_equal(col.images[:, 2:6, 2:6], views.images[[0, 3], 2:6, 2:6])
+    assert 5 not in col.indices and 6 not in col.indices  # held-out views are never candidates
+
+
+def test_two_objects_union_and_importance():
+    views = synthetic_views([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    col = collect(views, Demand.parse("hydrant:1,tree:3"))
+    assert col.indices.tolist() == [0, 1]
+    assert col.importance[1, 0, 0] == pytest.approx(1.0)  # tree carries the larger weight
+    assert col.importance[0, 3, 3] == pytest.approx(1 / 3)
+    assert col.masks[0].sum() == 16 and col.masks[1].sum() == 16
+
+
+def test_no_camera_sees_the_demand_and_unknown_object():
+    views = synthetic_views([0.1, 0.0], [1.0, 1.0])
+    with pytest.raises(ValueError, match="no drone camera sees the demanded object"):
+        collect(views, Demand.parse("hydrant"))
+    with pytest.raises(KeyError, match="known objects: hydrant, tree"):
+        collect(views, Demand.parse("car"))
+
+
+def test_masked_images_composite():
+    img = np.full((1, 1, 2, 3), 0.2, np.float32)
+    m = np.array([[[1.0, 0.25]]], np.float32)
+    out = masked_images(img, m, np.array([1.0, 0.0, 0.5]))
+    np.testing.assert_allclose(out[0, 0, 0], [0.2, 0.2, 0.2])
+    np.testing.assert_allclose(out[0, 0, 1], [0.2 * 0.25 + 0.75, 0.05, 0.05 + 0.375])
+
+
+def test_knowledge_base_refusal_is_logged():
+    scu = SemanticControlUnit(Demand.parse("hydrant"))
+    scu.check_knowledge_base("ab" * 32, "ab" * 32)
+    with pytest.raises(KnowledgeBaseError, match="knowledge-base mismatch"):
+        scu.check_knowledge_base("ab" * 32, "cd" * 32)
+    assert [d["decision"] for d in scu.decisions] == ["agreed", "refused"]
+    assert isinstance(KnowledgeBaseError("x"), ValueError)  # the CLI maps it to exit 2
+
+
+def test_rate_policy_bands_and_clamp():
+    p = RatePolicy(thresholds_db=(0.0, 10.0), cbrs=(1 / 6, 1 / 12, 1 / 24))
+    assert p.cbr_for(-3) == pytest.approx(1 / 6)
+    assert p.cbr_for(0.0) == pytest.approx(1 / 12)  # a threshold belongs to the band above
+    assert p.cbr_for(15) == pytest.approx(1 / 24)
+    scu = SemanticControlUnit(Demand.parse("hydrant"), rate_policy=p)
+    cbr = scu.choose_cbr(np.array([-3.0, 15.0]), (1 / 16, 1 / 8), [4, 9])
+    np.testing.assert_allclose(cbr, [1 / 8, 1 / 16])
+    assert [d["view"] for d in scu.decisions] == [4, 9]
+    with pytest.raises(ValueError, match="cbrs must have"):
+        RatePolicy(thresholds_db=(0.0,), cbrs=(0.1,))
+
+
+@pytest.mark.parametrize("snr_db", [0.0, 10.0])
+def test_measured_snr_matches_the_awgn_link(snr_db):
+    link = phy.FlatLink(phy.make_channel("awgn"))
+    gen = torch.Generator().manual_seed(1)
+    est = measure_snr_db([link], [snr_db], gen, num_pilots=4096, num_blocks=4)[0]
+    assert est == pytest.approx(snr_db, abs=0.15)  # 16k samples: std of the estimate ~0.05 dB
+
+
+def test_measured_snr_of_rayleigh_mmse_is_the_mean_post_equalisation_snr():
+    """Perfect-CSI MMSE on block Rayleigh: per block the unbiased SNR is |h|^2 / noise_var,
+    so the average over many blocks is E|h|^2 / noise_var = the link SNR."""
+    link = phy.FlatLink(phy.make_channel("rayleigh"), csi="perfect", equalizer="mmse")
+    gen = torch.Generator().manual_seed(2)
+    est = measure_snr_db([link], [5.0], gen, num_pilots=1024, num_blocks=2000)[0]
+    assert est == pytest.approx(5.0, abs=0.3)
