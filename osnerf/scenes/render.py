@@ -16,7 +16,7 @@ import numpy as np
 
 from osnerf.scenes.cameras import MITSUBA_FROM_GL, Intrinsics, pixel_rays
 from osnerf.scenes.geometry import write_ply
-from osnerf.scenes.mitsuba_env import RGB_VARIANT, import_mitsuba
+from osnerf.scenes.mitsuba_env import RGB_VARIANT
 from osnerf.scenes.spec import SceneGeometry
 
 VARIANT = RGB_VARIANT

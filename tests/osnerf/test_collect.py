@@ -1,6 +1,5 @@
 """The on-demand collector and the semantic control unit, on synthetic views (no rendering)."""
 
-import math
 from pathlib import Path
 
 import numpy as np
