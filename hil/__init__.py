@@ -7,6 +7,7 @@ May import ``phy`` only. Public names::
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
+    OtaConfig, send_blocks, save_sigmf   over-the-air bursts in phy's frames
     HilError and subclasses
 """
 
@@ -33,11 +34,18 @@ from hil.errors import (
 from hil.hackrf import HackRF, StreamStats, to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
+from hil.ota import BurstResult, FrameReport, OtaConfig, PhyFrames, save_sigmf, send_blocks
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 
 __all__ = [
     "AirChannel",
+    "BurstResult",
+    "FrameReport",
+    "OtaConfig",
+    "PhyFrames",
+    "save_sigmf",
+    "send_blocks",
     "Annotation",
     "ControlRequest",
     "DeviceNotFoundError",

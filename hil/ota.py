@@ -1,0 +1,382 @@
+"""Over the air: blocks of channel symbols -> phy frames -> TX HackRF -> air -> RX HackRF -> back.
+
+The frame (preamble, pilots, OFDM, synchronisation, equalisation) is ``phy``'s
+(``phy.FrameConfig``, ``build_frame``, ``find_frames``, ``receive_frame``). This module
+adds what the radio link needs around it:
+
+* each frame starts with a 16-bit frame number, BPSK, repeated ``header_repeat`` times,
+  so frames can be lost or found out of order without mixing up images;
+* PAPR control (``phy.clip_papr``) and scaling so the clipped peak is exactly full scale:
+  mean power is ``-max_papr_db`` dBFS and the int8 DAC never clips;
+* the transmit burst (frames separated by silent gaps) is sent while the receiver
+  captures, on two threads, with the driver's clean end-of-burst;
+* per-frame reports (detected, SNR from the pilots, CFO) and SigMF files of the burst and
+  the capture, with one annotation per frame.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hil.errors import HilError
+from hil.sigmf_io import Annotation, write_sigmf
+
+HEADER_BITS = 16
+ERASED_NOISE_VAR = 1e3  # noise variance reported for symbols of lost frames (an erasure)
+
+
+@dataclass(frozen=True)
+class OtaConfig:
+    """Radio settings and framing of an over-the-air run.
+
+    Attributes:
+        sample_rate_hz: both radios, 2-20 MS/s.
+        center_freq_hz: both radios, Hz.
+        symbols_per_frame: data symbols per frame (after the header), >= 64.
+        header_repeat: repetitions of each header bit, >= 1.
+        max_papr_db: PAPR limit of each frame's waveform, dB; the burst's mean power is
+            ``-max_papr_db`` dBFS so the clipped peak is full scale.
+        gap_samples: silence before, between and after frames, samples.
+        rx_margin_samples: extra samples captured after the burst.
+        lna_gain_db, vga_gain_db, txvga_gain_db: radio gains (quantised by the driver).
+    """
+
+    sample_rate_hz: float = 4e6
+    center_freq_hz: float = 2.45e9
+    symbols_per_frame: int = 2048
+    header_repeat: int = 4
+    max_papr_db: float = 9.0
+    gap_samples: int = 2000
+    rx_margin_samples: int = 20000
+    lna_gain_db: float = 16
+    vga_gain_db: float = 24
+    txvga_gain_db: float = 30
+
+    def __post_init__(self):
+        if not 2e6 <= self.sample_rate_hz <= 20e6:
+            raise ValueError(f"sample_rate_hz must be in [2e6, 20e6], got {self.sample_rate_hz!r}")
+        if not isinstance(self.symbols_per_frame, int) or self.symbols_per_frame < 64:
+            raise ValueError(
+                f"symbols_per_frame must be an integer >= 64, got {self.symbols_per_frame!r}"
+            )
+        if not isinstance(self.header_repeat, int) or not 1 <= self.header_repeat <= 64:
+            raise ValueError(
+                f"header_repeat must be an integer in [1, 64], got {self.header_repeat!r}"
+            )
+        if not 3.0 <= self.max_papr_db <= 20.0:
+            raise ValueError(f"max_papr_db must be in [3, 20] dB, got {self.max_papr_db!r}")
+        if self.gap_samples < 0 or self.rx_margin_samples < 0:
+            raise ValueError("gap_samples and rx_margin_samples must be >= 0")
+
+    @property
+    def tx_power_dbfs(self) -> float:
+        """Mean power of the transmitted frames, dB re full scale."""
+        return -self.max_papr_db
+
+    @property
+    def header_symbols(self) -> int:
+        return HEADER_BITS * self.header_repeat
+
+
+def header_symbols(frame_number: int, repeat: int) -> np.ndarray:
+    """The frame number as BPSK (+1 for a 0 bit), LSB first, each bit ``repeat`` times.
+
+    Returns:
+        [16 * repeat] complex64.
+    """
+    if not 0 <= int(frame_number) < 2**HEADER_BITS:
+        raise ValueError(f"frame_number must be in [0, {2**HEADER_BITS - 1}], got {frame_number!r}")
+    bits = (int(frame_number) >> np.arange(HEADER_BITS)) & 1
+    return np.repeat(1.0 - 2.0 * bits, repeat).astype(np.complex64)
+
+
+def decode_header(x_hat: np.ndarray, repeat: int) -> int:
+    """Inverse of :func:`header_symbols` from equalised symbols (soft-combined repeats)."""
+    soft = (
+        np.real(np.asarray(x_hat)[: HEADER_BITS * repeat]).reshape(HEADER_BITS, repeat).sum(axis=1)
+    )
+    return int(np.sum((soft < 0).astype(np.int64) << np.arange(HEADER_BITS)))
+
+
+def _np(x) -> np.ndarray:
+    if hasattr(x, "detach"):
+        x = x.detach().cpu().numpy()
+    return np.asarray(x)
+
+
+class PhyFrames:
+    """``phy``'s over-the-air frame (FrameConfig, build_frame, find_frames, receive_frame).
+
+    Args:
+        frame_config: a ``phy.FrameConfig`` (None: phy's default for ``sample_rate_hz``).
+    """
+
+    def __init__(self, frame_config=None, sample_rate_hz: float | None = None):
+        import phy
+
+        missing = [
+            n
+            for n in ("FrameConfig", "build_frame", "find_frames", "receive_frame")
+            if not hasattr(phy, n)
+        ]
+        if missing:
+            raise HilError(
+                f"phy's frame API is not in this checkout (missing phy.{', phy.'.join(missing)})"
+            )
+        self.phy = phy
+        if frame_config is None:
+            try:
+                frame_config = (
+                    phy.FrameConfig(sample_rate_hz=sample_rate_hz)
+                    if sample_rate_hz
+                    else phy.FrameConfig()
+                )
+            except TypeError:
+                frame_config = phy.FrameConfig()
+        self.cfg = frame_config
+
+    def build(self, symbols: np.ndarray) -> np.ndarray:
+        import torch
+
+        return _np(
+            self.phy.build_frame(torch.as_tensor(symbols, dtype=torch.complex64), self.cfg)
+        ).astype(np.complex64)
+
+    def find(self, iq: np.ndarray) -> list[int]:
+        import torch
+
+        return [
+            int(s)
+            for s in self.phy.find_frames(torch.as_tensor(iq, dtype=torch.complex64), self.cfg)
+        ]
+
+    def receive(self, iq: np.ndarray, num_symbols: int):
+        import torch
+
+        return self.phy.receive_frame(
+            torch.as_tensor(iq, dtype=torch.complex64), self.cfg, num_symbols
+        )
+
+
+@dataclass
+class FrameReport:
+    """What the receiver made of one transmitted frame."""
+
+    number: int
+    block: int
+    detected: bool = False
+    start_index: int | None = None
+    num_samples: int = 0
+    snr_db: float | None = None
+    cfo_hz: float | None = None
+    crc_ok: bool | None = None
+
+
+@dataclass
+class BurstResult:
+    """Received blocks and per-frame reports of one over-the-air burst.
+
+    Attributes:
+        blocks: per input block, ``(x_hat [num_symbols] complex64, noise_var [num_symbols]
+            float32)``; symbols of lost frames are 0 with noise_var ``ERASED_NOISE_VAR``.
+        frames: one :class:`FrameReport` per transmitted frame.
+        burst: [num_samples] complex64 as transmitted (full scale 1.0).
+        capture: [num_samples] complex64 as received.
+    """
+
+    blocks: list
+    frames: list
+    burst: np.ndarray
+    capture: np.ndarray
+    sigmf: list = field(default_factory=list)
+
+    @property
+    def frames_sent(self) -> int:
+        return len(self.frames)
+
+    @property
+    def frames_lost(self) -> int:
+        return sum(not f.detected for f in self.frames)
+
+    def block_frames(self, block: int) -> list:
+        return [f for f in self.frames if f.block == block]
+
+    def snr_db_measured(self, block: int | None = None) -> float | None:
+        """Mean SNR (linear mean, in dB) over the detected frames (of one block)."""
+        frames = self.frames if block is None else self.block_frames(block)
+        snrs = [f.snr_db for f in frames if f.detected and f.snr_db is not None]
+        return float(10 * np.log10(np.mean(10 ** (np.array(snrs) / 10)))) if snrs else None
+
+
+def build_burst(
+    blocks: list, cfg: OtaConfig, frames
+) -> tuple[np.ndarray, list[FrameReport], list[tuple]]:
+    """Frame every block and lay the frames out with gaps, PAPR-clipped and scaled.
+
+    Args:
+        blocks: list of [num_symbols] complex64 arrays (unit mean power by convention).
+    Returns:
+        (burst [num_samples] complex64 with |I|, |Q| <= 1, reports, layout) where layout
+        holds ``(block, offset, length)`` of each frame's data symbols.
+    """
+    import torch
+
+    from phy import clip_papr
+
+    reports, layout, parts = [], [], [np.zeros(cfg.gap_samples, np.complex64)]
+    number = 0
+    for b, block in enumerate(blocks):
+        block = np.asarray(block, np.complex64).reshape(-1)
+        for offset in range(0, max(len(block), 1), cfg.symbols_per_frame):
+            chunk = block[offset : offset + cfg.symbols_per_frame]
+            data = np.zeros(cfg.symbols_per_frame, np.complex64)
+            data[: len(chunk)] = chunk
+            iq = frames.build(np.concatenate([header_symbols(number, cfg.header_repeat), data]))
+            mean_p = float(np.mean(np.abs(iq) ** 2))
+            clipped = clip_papr(torch.as_tensor(iq)[None], cfg.max_papr_db)[0].numpy()
+            iq = clipped / math.sqrt(
+                10 ** (cfg.max_papr_db / 10) * mean_p
+            )  # the clip level is full scale
+            iq = (np.clip(iq.real, -1, 1) + 1j * np.clip(iq.imag, -1, 1)).astype(np.complex64)
+            reports.append(FrameReport(number, b, num_samples=len(iq)))
+            layout.append((b, offset, len(chunk)))
+            parts += [iq, np.zeros(cfg.gap_samples, np.complex64)]
+            number += 1
+    return np.concatenate(parts), reports, layout
+
+
+def _configure(dev, cfg: OtaConfig) -> None:
+    dev.sample_rate_hz = cfg.sample_rate_hz
+    dev.center_freq_hz = cfg.center_freq_hz
+    dev.lna_gain_db = cfg.lna_gain_db
+    dev.vga_gain_db = cfg.vga_gain_db
+    dev.txvga_gain_db = cfg.txvga_gain_db
+
+
+def transmit_and_capture(tx, rx, burst: np.ndarray, num_rx_samples: int) -> np.ndarray:
+    """Capture ``num_rx_samples`` on ``rx`` (own thread) while ``tx`` sends ``burst``.
+
+    Returns:
+        [num_rx_samples] complex64. Errors of either side are raised here.
+    """
+    out: dict = {}
+
+    def receive():
+        try:
+            out["capture"] = rx.rx(num_rx_samples)
+        except BaseException as e:  # noqa: BLE001 - re-raised in the caller's thread
+            out["error"] = e
+
+    thread = threading.Thread(target=receive, name="ota-rx", daemon=True)
+    thread.start()
+    try:
+        tx.tx(burst)
+    finally:
+        thread.join(timeout=120)
+    if "error" in out:
+        raise out["error"]
+    if "capture" not in out:
+        raise HilError("receive did not finish within 120 s")
+    return out["capture"][0]
+
+
+def receive_burst(
+    capture: np.ndarray, reports: list, layout: list, block_sizes: list, cfg: OtaConfig, frames
+):
+    """Find, synchronise and equalise every frame of ``capture``; reassemble the blocks.
+
+    Fills ``reports`` (detected, start, SNR, CFO) in place.
+    Returns:
+        list of ``(x_hat [n] complex64, noise_var [n] float32)``, one per block.
+    """
+    x_hats = [np.zeros(n, np.complex64) for n in block_sizes]
+    nvs = [np.full(n, ERASED_NOISE_VAR, np.float32) for n in block_sizes]
+    n_frame_syms = cfg.header_symbols + cfg.symbols_per_frame
+    frame_len = max(r.num_samples for r in reports) if reports else 0
+    for start in frames.find(capture):
+        lo = max(0, start - cfg.gap_samples // 2)
+        seg = capture[lo : start + frame_len + cfg.gap_samples // 2]
+        res = frames.receive(seg, n_frame_syms)
+        if not bool(getattr(res, "detected", True)):
+            continue
+        sym = _np(res.symbols).reshape(-1).astype(np.complex64)
+        nv = np.broadcast_to(_np(res.noise_var).astype(np.float32).reshape(-1), sym.shape)
+        number = decode_header(sym, cfg.header_repeat)
+        if number >= len(reports) or reports[number].detected:
+            continue  # a corrupted header or a duplicate detection
+        rep = reports[number]
+        rep.detected = True
+        rep.start_index = lo + int(getattr(res, "start_index", start - lo))
+        snr = getattr(res, "snr_db_estimate", None)
+        rep.snr_db = None if snr is None else float(_np(snr))
+        cfo = getattr(res, "cfo_hz", None)
+        rep.cfo_hz = None if cfo is None else float(_np(cfo))
+        b, offset, length = layout[number]
+        x_hats[b][offset : offset + length] = sym[cfg.header_symbols : cfg.header_symbols + length]
+        nvs[b][offset : offset + length] = nv[cfg.header_symbols : cfg.header_symbols + length]
+    return list(zip(x_hats, nvs))
+
+
+def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None) -> BurstResult:
+    """Send symbol blocks from ``tx`` to ``rx`` (HackRFs, real, emulated or loopback).
+
+    Args:
+        tx, rx: open :class:`hil.HackRF` devices (configured here from ``cfg``).
+        blocks: list of [num_symbols] complex64, unit mean power each (one per image).
+        cfg: :class:`OtaConfig`.
+        frames: the frame layer (default :class:`PhyFrames`).
+    Returns:
+        :class:`BurstResult`.
+    """
+    cfg = cfg or OtaConfig()
+    frames = frames or PhyFrames(sample_rate_hz=cfg.sample_rate_hz)
+    for dev in (tx, rx):
+        _configure(dev, cfg)
+    burst, reports, layout = build_burst(blocks, cfg, frames)
+    capture = transmit_and_capture(tx, rx, burst, len(burst) + cfg.rx_margin_samples)
+    sizes = [len(np.asarray(b).reshape(-1)) for b in blocks]
+    received = receive_burst(capture, reports, layout, sizes, cfg, frames)
+    return BurstResult(received, reports, burst, capture)
+
+
+def save_sigmf(result: BurstResult, stem, cfg: OtaConfig, hw: str = "HackRF One") -> list[Path]:
+    """Write the burst (TX) and the capture (RX, one annotation per detected frame) as ci8 SigMF."""
+    stem = Path(stem)
+    anns = [
+        Annotation(
+            f.start_index,
+            f.num_samples,
+            f"frame {f.number}",
+            f.snr_db,
+            f.crc_ok,
+            {"block": f.block, "cfo_hz": f.cfo_hz},
+        )
+        for f in result.frames
+        if f.detected and f.start_index is not None
+    ]
+    paths = [
+        write_sigmf(
+            stem.with_name(stem.name + "_tx"),
+            result.burst,
+            sample_rate_hz=cfg.sample_rate_hz,
+            center_freq_hz=cfg.center_freq_hz,
+            hw=f"{hw} (TX)",
+            description="transmitted burst",
+        ),
+        write_sigmf(
+            stem.with_name(stem.name + "_rx"),
+            result.capture,
+            sample_rate_hz=cfg.sample_rate_hz,
+            center_freq_hz=cfg.center_freq_hz,
+            annotations=anns,
+            hw=f"{hw} (RX)",
+            description="received capture; annotations: detected frames",
+        ),
+    ]
+    result.sigmf = [str(p) for p in paths]
+    return paths

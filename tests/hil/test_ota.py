@@ -1,0 +1,133 @@
+"""Over-the-air plumbing around the frame layer: headers, PAPR scaling, threads, reassembly,
+lost frames, SigMF annotations. A small single-carrier frame layer stands in for phy's here
+(test double); the end-to-end runs with phy's frames are in test_ota_cli.py."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hil import AirChannel, Emulator, HackRF, OtaConfig, read_sigmf, save_sigmf, send_blocks
+from hil.ota import ERASED_NOISE_VAR, decode_header, header_symbols
+
+PRE = np.exp(2j * np.pi * np.random.default_rng(99).integers(0, 4, 64) / 4).astype(np.complex64)
+
+
+class ToyFrames:
+    """Two copies of a 64-symbol QPSK preamble, then the symbols at 1 sample per symbol;
+    one-tap LS channel from the preamble. Enough for an ideal-clock test link."""
+
+    def __init__(self, drop=()):
+        self.drop = set(drop)
+
+    def build(self, symbols):
+        return np.concatenate([PRE, PRE, symbols]).astype(np.complex64)
+
+    def _metric(self, iq):
+        c = np.abs(np.correlate(iq, PRE, "valid")) ** 2
+        e = np.convolve(np.abs(iq) ** 2, np.ones(64), "valid")
+        return c / (64 * e + 1e-12)
+
+    def find(self, iq):
+        m, starts, k = self._metric(iq), [], 0
+        while k < len(m):
+            if m[k] > 0.7:
+                k = k + int(np.argmax(m[k : k + 8]))
+                starts.append(k)
+                k += 400  # past the second preamble copy, before the next frame
+            else:
+                k += 1
+        return [s for i, s in enumerate(starts) if i not in self.drop]
+
+    def receive(self, seg, n):
+        k0 = int(np.argmax(self._metric(seg)[:200] > 0.7))
+        h = np.vdot(PRE, seg[k0 : k0 + 64]) / 64
+        nv_raw = np.mean(np.abs(seg[k0 : k0 + 128] - h * np.tile(PRE, 2)) ** 2)
+        sym = seg[k0 + 128 : k0 + 128 + n] / h
+        return SimpleNamespace(
+            symbols=sym,
+            noise_var=np.full(n, nv_raw / abs(h) ** 2, np.float32),
+            start_index=k0,
+            snr_db_estimate=10 * np.log10(abs(h) ** 2 / nv_raw),
+            cfo_hz=0.0,
+            detected=True,
+        )
+
+
+def qpsk(n, seed):
+    return (np.exp(2j * np.pi * (np.random.default_rng(seed).integers(0, 4, n) + 0.5) / 4)).astype(
+        np.complex64
+    )
+
+
+def pair(snr_db=20.0, seed=0):
+    cfg = OtaConfig(
+        sample_rate_hz=2e6, symbols_per_frame=256, gap_samples=300, rx_margin_samples=2000
+    )
+    emu = Emulator(
+        AirChannel(snr_db=snr_db, reference_power_dbfs=cfg.tx_power_dbfs, delay_s=1e-6),
+        ppm=(0.0, 0.0),
+        seed=seed,
+        wait_for_bursts=1,
+    )
+    tx = HackRF.open(emu.serials[0], backend=emu.backend)
+    rx = HackRF.open(emu.serials[1], backend=emu.backend, rx_chunk_bytes=16384)
+    return cfg, tx, rx
+
+
+def test_header_round_trip_and_soft_combining():
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 777, 65535):
+        h = header_symbols(n, 4)
+        assert h.shape == (64,) and decode_header(h, 4) == n
+        noisy = (
+            h + (rng.standard_normal(64) + 1j * rng.standard_normal(64)) * 0.5
+        )  # 3 dB, 4 repeats
+        assert decode_header(noisy, 4) == n
+    with pytest.raises(ValueError, match="frame_number must be in"):
+        header_symbols(70000, 4)
+
+
+def test_blocks_cross_the_emulated_air(tmp_path):
+    cfg, tx, rx = pair(snr_db=20)
+    blocks = [qpsk(600, 1), qpsk(256, 2)]
+    with tx, rx:
+        res = send_blocks(tx, rx, blocks, cfg, frames=ToyFrames())
+    assert res.frames_sent == 4 and res.frames_lost == 0  # 600 -> 3 frames, 256 -> 1
+    peak = max(np.abs(res.burst.real).max(), np.abs(res.burst.imag).max())
+    assert peak <= 1.0
+    frames_only = np.concatenate(
+        [res.burst[f.start_index - 2 : f.start_index - 2 + f.num_samples] for f in res.frames]
+    )  # TX positions: start minus the 2-sample delay
+    assert 10 * np.log10(np.mean(np.abs(frames_only) ** 2)) == pytest.approx(
+        cfg.tx_power_dbfs, abs=0.1
+    )
+    for (x_hat, nv), x in zip(res.blocks, blocks):
+        evm_db = 10 * np.log10(np.mean(np.abs(x_hat - x) ** 2))
+        assert evm_db == pytest.approx(-20, abs=1.0)
+        assert np.all(nv < 0.05)
+    assert res.snr_db_measured() == pytest.approx(20, abs=1.0)
+    meta_paths = save_sigmf(res, tmp_path / "ota", cfg)
+    rec = read_sigmf(meta_paths[1])
+    assert [a.label for a in rec.annotations] == ["frame 0", "frame 1", "frame 2", "frame 3"]
+    assert rec.annotations[0].sample_start == res.frames[0].start_index
+    assert rec.annotations[0].snr_db == pytest.approx(res.frames[0].snr_db, abs=1e-3)
+    assert np.array_equal(rec.samples, res.capture)
+
+
+def test_lost_frame_is_an_erasure_not_a_crash():
+    cfg, tx, rx = pair(snr_db=20)
+    blocks = [qpsk(768, 3)]
+    with tx, rx:
+        res = send_blocks(tx, rx, blocks, cfg, frames=ToyFrames(drop={1}))
+    assert res.frames_lost == 1 and [f.detected for f in res.frames] == [True, False, True]
+    x_hat, nv = res.blocks[0]
+    assert np.all(x_hat[256:512] == 0) and np.all(nv[256:512] == ERASED_NOISE_VAR)
+    assert np.mean(np.abs(x_hat[:256] - blocks[0][:256]) ** 2) < 0.05
+
+
+def test_ota_config_validation():
+    with pytest.raises(ValueError, match="symbols_per_frame must be"):
+        OtaConfig(symbols_per_frame=10)
+    with pytest.raises(ValueError, match="max_papr_db must be in"):
+        OtaConfig(max_papr_db=1)
