@@ -31,8 +31,10 @@ class AirChannel:
             scale it by the difference, then the int8 ADC clips.
         delay_s: propagation delay, s (fractional samples allowed).
         multipath: extra echoes as ``(delay_samples, gain)`` pairs at the TX sample rate
-            (integer delays >= 1, complex gains); the direct path has gain 1. The path
-            power is normalised to 1.
+            (integer delays >= 1, complex gains) after the direct path.
+        direct_gain: complex gain of the direct path (tap 0).
+        normalize_taps: scale the taps to unit energy (a pure multipath profile); False
+            keeps the gains as given (a fading realisation, e.g. from a ``phy`` channel).
         dc_offset: complex DC added at the receiver's ADC input, full-scale units.
         iq_gain_imbalance_db: receiver I/Q amplitude imbalance, dB.
         iq_phase_imbalance_deg: receiver I/Q phase imbalance, degrees.
@@ -44,6 +46,8 @@ class AirChannel:
     reference_rx_gain_db: float = 40.0
     delay_s: float = 0.0
     multipath: tuple[tuple[int, complex], ...] = ()
+    direct_gain: complex = 1 + 0j
+    normalize_taps: bool = True
     dc_offset: complex = 0j
     iq_gain_imbalance_db: float = 0.0
     iq_phase_imbalance_deg: float = 0.0
@@ -67,15 +71,31 @@ class AirChannel:
                 "iq_gain_imbalance_db must be in [-6, 6] and iq_phase_imbalance_deg in [-30, 30]"
             )
 
+    @classmethod
+    def from_taps(cls, taps, normalize: bool = False, **kwargs) -> AirChannel:
+        """A channel whose FIR is ``taps`` [num_taps] complex (numpy or torch; tap l delays l
+        samples), e.g. one realisation of a ``phy`` TDL or Rayleigh channel; ``kwargs`` set
+        the other fields."""
+        t = np.asarray(
+            taps.detach().cpu().numpy() if hasattr(taps, "detach") else taps, np.complex128
+        ).reshape(-1)
+        if t.size == 0 or not np.all(np.isfinite(t)) or not np.any(t):
+            raise ValueError("taps must be a non-empty, finite, non-zero [num_taps] complex array")
+        echoes = tuple((int(d), complex(t[d])) for d in range(1, len(t)) if t[d] != 0)
+        return cls(multipath=echoes, direct_gain=complex(t[0]), normalize_taps=normalize, **kwargs)
+
     @property
     def taps(self) -> np.ndarray:
-        """[max_delay + 1] complex128 FIR of the multipath, unit energy."""
+        """[max_delay + 1] complex128 FIR: direct path then echoes (unit energy if normalize_taps)."""
         n = 1 + max((int(d) for d, _ in self.multipath), default=0)
         h = np.zeros(n, np.complex128)
-        h[0] = 1.0
+        h[0] = complex(self.direct_gain)
         for d, g in self.multipath:
             h[int(d)] += complex(g)
-        return h / np.sqrt(np.sum(np.abs(h) ** 2))
+        energy = np.sum(np.abs(h) ** 2)
+        if energy == 0:
+            raise ValueError("the channel taps are all zero")
+        return h / np.sqrt(energy) if self.normalize_taps else h
 
     @property
     def noise_var(self) -> float:

@@ -162,7 +162,7 @@ class HackRF:
     Use ``HackRF.open(serial=None, backend=None)`` as a context manager::
 
         with HackRF.open() as sdr:
-            sdr.sample_rate_hz = 4e6          # also sets the 3.5 MHz baseband filter
+            sdr.sample_rate_hz = 4e6          # also sets the 2.5 MHz baseband filter (<= 0.75 Fs)
             sdr.center_freq_hz = 2.45e9
             sdr.lna_gain_db = 17              # reads back 16 (8 dB steps)
             iq = sdr.rx(400_000)              # [1, 400000] complex64, full scale 1.0

@@ -150,7 +150,7 @@ class Medium:
                 tx_freq = tx.center_freq_hz * (1 + tx.ppm * 1e-6)
                 df = tx_freq - radio.center_freq_hz * (1 + radio.ppm * 1e-6)
         if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx:
-            if len(taps) > 1:
+            if len(taps) > 1 or taps[0] != 1:
                 seg = np.convolve(seg, taps.astype(np.complex64))[: len(seg)]
             sig = fractional_resample(seg, u - lo)
             if df != 0:

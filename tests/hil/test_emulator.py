@@ -179,3 +179,18 @@ def test_channel_validation_names_fields():
         AirChannel(snr_db=200)
     with pytest.raises(ValueError, match="multipath delays must be integers"):
         AirChannel(multipath=((0.5, 1),))
+
+
+def test_from_taps_keeps_a_fading_realisation():
+    """A drawn channel (tap gains as given, not normalised) fades the received power."""
+    taps = np.array([0.1j, 0, 0.05 - 0.02j])
+    ch = AirChannel.from_taps(taps, snr_db=100)
+    assert ch.multipath == ((2, 0.05 - 0.02j),) and ch.direct_gain == 0.1j
+    x = burst(4000, power_dbfs=-3)
+    y = send_and_capture(x, 4000, ch)
+    expected = np.convolve(q(x), taps)[:4000]
+    assert np.max(np.abs(y - expected)) < 1.0 / 128
+    p_ratio_db = 10 * np.log10(np.mean(np.abs(y) ** 2) / np.mean(np.abs(q(x)) ** 2))
+    assert p_ratio_db == pytest.approx(10 * np.log10(np.sum(np.abs(taps) ** 2)), abs=0.3)
+    with pytest.raises(ValueError, match="taps must be"):
+        AirChannel.from_taps(np.zeros(3))
