@@ -1,1 +1,118 @@
+"""renderer: radiance fields that train in minutes on 2 CPU cores, and the paper's
+lightweight renderer. Imports nothing else of ours.
 
+Data (``renderer.dataset``)
+    ``load_dataset(root, split="train", resolution=100, background=None, aabb=None) -> Dataset``
+    reads nerfstudio/Blender ``transforms*.json`` folders. ``Dataset``: ``images``
+    [num_views, height, width, 3] float32 in [0, 1] composited on ``background``, ``masks``
+    [num_views, height, width] or None, ``poses`` [num_views, 4, 4] camera-to-world (OpenGL),
+    ``intrinsics`` (:class:`Intrinsics` fx, fy, cx, cy, height, width), ``aabb`` [2, 3]
+    (the file's ``aabb`` field, else fitted from the poses: :func:`default_aabb`).
+    ``write_transforms(path, poses, intrinsics, file_paths, aabb=None)`` writes one.
+
+Pieces
+    fields: :class:`GridField` (dense density + colour grids, DVGO post-activation),
+    :class:`MLPField` (vanilla NeRF); sampler: :class:`OccupancyGrid`,
+    :func:`sample_along_rays` (packed samples); volume rendering (eq. 4, pure functions):
+    :func:`alpha_from_density`, :func:`transmittance`, :func:`render_weights`,
+    :func:`composite`, :func:`expected_depth`, :func:`packed_render`.
+
+Training and rendering
+    ``train(dataset, TrainConfig(field="grid"|"mlp", max_seconds=120, ...), generator=None,
+    eval_dataset=None) -> TrainResult(model, steps, seconds, curve)``;
+    ``render_views(model, poses, intrinsics, height=None, width=None) -> {"rgb" [n, h, w, 3],
+    "depth" [n, h, w], "opacity" [n, h, w]}``; ``evaluate(model, dataset) -> {"psnr", "ssim",
+    "num_views", "psnr_per_view", "seconds_per_view"[, "masked_psnr"]}`` (means of per-view
+    values); ``save_model(model, path)`` / ``load_model(path)``.
+
+Lightweight renderer (§3.3)
+    ``train_lightweight(model, dataset, LightweightConfig(...)) -> (LightweightRenderer, stats)``;
+    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view"}``;
+    :func:`reproject` warps a previous frame into the current view by depth.
+
+Metrics
+    :func:`psnr`, :func:`ssim` (scikit-image, data_range=1.0), :func:`masked_psnr`,
+    :func:`image_metrics`. LPIPS is not provided (it needs pretrained weights).
+
+Cameras
+    :func:`camera_rays`, :func:`project_points`, :func:`look_at`, :func:`orbit_path`.
+"""
+
+from renderer.cameras import (
+    Intrinsics,
+    camera_rays,
+    intersect_aabb,
+    look_at,
+    orbit_path,
+    project_points,
+)
+from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
+from renderer.fields import GridField, MLPField, positional_encoding
+from renderer.lightweight import (
+    LightweightConfig,
+    LightweightRenderer,
+    UNetDecoder,
+    train_lightweight,
+)
+from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
+from renderer.model import RadianceField, load_model, render_views, save_model
+from renderer.reprojection import reproject, rotate_pose_about
+from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
+from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
+from renderer.volume import (
+    alpha_from_density,
+    composite,
+    expected_depth,
+    normalized_depth,
+    packed_render,
+    packed_weights,
+    render_weights,
+    transmittance,
+)
+
+__all__ = [
+    "FIELDS",
+    "Dataset",
+    "GridField",
+    "Intrinsics",
+    "LightweightConfig",
+    "LightweightRenderer",
+    "MLPField",
+    "OccupancyGrid",
+    "RadianceField",
+    "RaySamples",
+    "TrainConfig",
+    "TrainResult",
+    "UNetDecoder",
+    "alpha_from_density",
+    "camera_rays",
+    "composite",
+    "default_aabb",
+    "evaluate",
+    "expected_depth",
+    "image_metrics",
+    "intersect_aabb",
+    "load_dataset",
+    "load_model",
+    "look_at",
+    "masked_psnr",
+    "normalized_depth",
+    "orbit_path",
+    "packed_render",
+    "packed_weights",
+    "positional_encoding",
+    "project_points",
+    "psnr",
+    "render_views",
+    "render_weights",
+    "reproject",
+    "rotate_pose_about",
+    "sample_along_rays",
+    "save_model",
+    "ssim",
+    "to_uint8",
+    "write_transforms",
+    "train",
+    "train_lightweight",
+    "transmittance",
+]

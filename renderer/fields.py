@@ -1,0 +1,166 @@
+"""Radiance fields: what the network predicts at a point (density and colour).
+
+* :class:`GridField`: dense density (1 channel) and colour (3 channels) voxel grids read
+  with trilinear ``grid_sample`` over the scene box, DVGO-style post-activation
+  (``sigma = softplus(grid + bias)``, ``rgb = sigmoid(grid)``, diffuse), upsampled
+  coarse-to-fine by :meth:`GridField.upsample`.
+* :class:`MLPField`: the vanilla NeRF: positional encoding + MLP, view-dependent colour.
+
+Both map points ``[num_points, 3]`` (and unit directions) to ``(sigma [num_points],
+rgb [num_points, 3])`` and expose ``density(points)`` for the occupancy grid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+
+def _normalize(points: Tensor, aabb: Tensor) -> Tensor:
+    """World points to grid_sample's [-1, 1] coordinates of the box. [num_points, 3]."""
+    return (points - aabb[0]) / (aabb[1] - aabb[0]) * 2.0 - 1.0
+
+
+def grid_resolution(aabb: Tensor, resolution: int) -> tuple[int, int, int]:
+    """Vertices per axis (x, y, z): ``resolution`` on the longest axis, equal voxel sizes."""
+    extent = aabb[1] - aabb[0]
+    voxel = extent.max().item() / (resolution - 1)
+    return tuple(max(2, int(round(e / voxel)) + 1) for e in extent.tolist())
+
+
+class GridField(nn.Module):
+    """Dense voxel grids over ``aabb`` with DVGO post-activation.
+
+    Grid values sit on vertices (``align_corners=True``): vertex i of axis a is at
+    ``aabb[0, a] + i * extent_a / (n_a - 1)``.
+    """
+
+    def __init__(
+        self, aabb: Tensor, resolution: int = 48, alpha_init: float = 1e-2, step_m: float = 0.02
+    ):
+        super().__init__()
+        if resolution < 2:
+            raise ValueError(f"resolution must be >= 2 vertices per axis, got {resolution}")
+        if not 0.0 < alpha_init < 1.0:
+            raise ValueError(f"alpha_init must be in (0, 1), got {alpha_init}")
+        self.register_buffer("aabb", torch.as_tensor(aabb, dtype=torch.float32).clone())
+        nx, ny, nz = grid_resolution(self.aabb, resolution)
+        # softplus(bias) * step = -log(1 - alpha_init): empty space starts almost transparent.
+        sigma0 = -math.log(1.0 - alpha_init) / step_m
+        self.density_bias = math.log(math.expm1(sigma0))
+        self.density_grid = nn.Parameter(torch.zeros(1, 1, nz, ny, nx))  # [1, 1, z, y, x]
+        self.color_grid = nn.Parameter(torch.zeros(1, 3, nz, ny, nx))  # [1, 3, z, y, x]
+
+    @property
+    def resolution(self) -> tuple[int, int, int]:
+        """Vertices per axis (x, y, z)."""
+        d = self.density_grid.shape
+        return (d[4], d[3], d[2])
+
+    def _sample(self, grid: Tensor, points: Tensor) -> Tensor:
+        coords = _normalize(points, self.aabb).reshape(1, 1, 1, -1, 3)
+        out = F.grid_sample(
+            grid, coords, mode="bilinear", align_corners=True, padding_mode="border"
+        )
+        return out.reshape(grid.shape[1], -1).t()  # [num_points, channels]
+
+    def density(self, points: Tensor) -> Tensor:
+        """sigma (1/m) at points [num_points, 3] -> [num_points]."""
+        return F.softplus(self._sample(self.density_grid, points)[:, 0] + self.density_bias)
+
+    def vertex_density(self) -> Tensor:
+        """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
+        return F.softplus(self.density_grid[0, 0] + self.density_bias)
+
+    def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3]."""
+        sigma = self.density(points)
+        rgb = torch.sigmoid(self._sample(self.color_grid, points))
+        return sigma, rgb
+
+    @torch.no_grad()
+    def upsample(self, resolution: int) -> None:
+        """Trilinearly resample both grids to ``resolution`` vertices on the longest axis."""
+        nx, ny, nz = grid_resolution(self.aabb, resolution)
+        for name in ("density_grid", "color_grid"):
+            g = getattr(self, name)
+            new = F.interpolate(g.data, size=(nz, ny, nx), mode="trilinear", align_corners=True)
+            setattr(self, name, nn.Parameter(new))
+
+    def total_variation(self) -> Tensor:
+        """Mean squared difference of neighbouring density-grid values (a scalar)."""
+        g = self.density_grid
+        return (
+            (g[..., 1:, :, :] - g[..., :-1, :, :]).pow(2).mean()
+            + (g[..., :, 1:, :] - g[..., :, :-1, :]).pow(2).mean()
+            + (g[..., :, :, 1:] - g[..., :, :, :-1]).pow(2).mean()
+        )
+
+
+def positional_encoding(x: Tensor, num_frequencies: int) -> Tensor:
+    """NeRF's gamma(x) = (x, sin(2^k pi x), cos(2^k pi x)) for k < num_frequencies.
+
+    Args:
+        x: [num_points, dims].
+    Returns:
+        [num_points, dims * (1 + 2 * num_frequencies)].
+    """
+    freqs = (2.0 ** torch.arange(num_frequencies, dtype=x.dtype)) * math.pi
+    xf = x[:, None, :] * freqs[:, None]  # [num_points, num_frequencies, dims]
+    return torch.cat([x, torch.sin(xf).flatten(1), torch.cos(xf).flatten(1)], dim=-1)
+
+
+class MLPField(nn.Module):
+    """Vanilla NeRF: gamma(x) -> MLP -> sigma, feature; (feature, gamma(d)) -> rgb.
+
+    Positions are normalised to [-1, 1] over ``aabb`` before encoding. The paper uses
+    width 256, depth 8; the CPU default is smaller so that it trains at all in minutes.
+    """
+
+    def __init__(
+        self,
+        aabb: Tensor,
+        width: int = 128,
+        depth: int = 4,
+        position_frequencies: int = 10,
+        direction_frequencies: int = 4,
+    ):
+        super().__init__()
+        if width < 1 or depth < 1:
+            raise ValueError(f"width and depth must be >= 1, got {width}, {depth}")
+        self.register_buffer("aabb", torch.as_tensor(aabb, dtype=torch.float32).clone())
+        self.position_frequencies = position_frequencies
+        self.direction_frequencies = direction_frequencies
+        in_x = 3 * (1 + 2 * position_frequencies)
+        in_d = 3 * (1 + 2 * direction_frequencies)
+        layers: list[nn.Module] = []
+        for i in range(depth):
+            layers += [nn.Linear(in_x if i == 0 else width, width), nn.ReLU()]
+        self.trunk = nn.Sequential(*layers)
+        self.sigma_head = nn.Linear(width, 1)
+        self.feature = nn.Linear(width, width)
+        self.rgb_head = nn.Sequential(
+            nn.Linear(width + in_d, width // 2), nn.ReLU(), nn.Linear(width // 2, 3)
+        )
+
+    def _trunk(self, points: Tensor) -> Tensor:
+        return self.trunk(
+            positional_encoding(_normalize(points, self.aabb), self.position_frequencies)
+        )
+
+    def density(self, points: Tensor) -> Tensor:
+        """sigma (1/m) at points [num_points, 3] -> [num_points]."""
+        return F.softplus(self.sigma_head(self._trunk(points))[:, 0] - 1.0)
+
+    def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """(sigma [num_points], rgb [num_points, 3]); directions [num_points, 3] unit."""
+        h = self._trunk(points)
+        sigma = F.softplus(self.sigma_head(h)[:, 0] - 1.0)
+        if directions is None:
+            directions = torch.zeros_like(points)
+        d = positional_encoding(directions, self.direction_frequencies)
+        rgb = torch.sigmoid(self.rgb_head(torch.cat([self.feature(h), d], dim=-1)))
+        return sigma, rgb

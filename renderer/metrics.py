@@ -1,0 +1,72 @@
+"""Image quality of rendered views: PSNR (peak 1.0), SSIM (scikit-image, data_range=1.0),
+PSNR inside an object mask. Multi-view results are means of per-view values.
+
+LPIPS is not provided: it needs pretrained AlexNet/VGG weights that we never download.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from skimage.metrics import structural_similarity
+from torch import Tensor
+
+
+def _np(x) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, Tensor) else np.asarray(x)
+
+
+def psnr(pred, target) -> float:
+    """-10 log10(MSE) of one image pair in [0, 1]: [height, width, 3]. inf when equal."""
+    mse = float(np.mean((_np(pred).astype(np.float64) - _np(target).astype(np.float64)) ** 2))
+    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+
+
+def ssim(pred, target) -> float:
+    """SSIM of one image pair [height, width, 3] in [0, 1] (scikit-image, data_range=1.0,
+    7x7 window, mean over channels)."""
+    p, t = _np(pred).astype(np.float64), _np(target).astype(np.float64)
+    return float(structural_similarity(p, t, data_range=1.0, channel_axis=-1))
+
+
+def masked_psnr(pred, target, mask) -> float:
+    """PSNR over the pixels where mask > 0.5: pred, target [height, width, 3], mask
+    [height, width]. NaN when the mask is empty."""
+    m = _np(mask) > 0.5
+    if not m.any():
+        return math.nan
+    diff = _np(pred).astype(np.float64)[m] - _np(target).astype(np.float64)[m]
+    mse = float(np.mean(diff**2))
+    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+
+
+def image_metrics(preds, targets, masks=None) -> dict:
+    """Mean over views of per-view PSNR and SSIM (and masked PSNR when masks are given).
+
+    Args:
+        preds, targets: [num_views, height, width, 3] in [0, 1].
+        masks: [num_views, height, width] or None.
+    Returns:
+        {"psnr", "ssim", "num_views", "psnr_per_view", ["masked_psnr"]}: means of per-view values.
+    """
+    preds, targets = _np(preds), _np(targets)
+    if preds.shape != targets.shape:
+        raise ValueError(f"preds {preds.shape} and targets {targets.shape} differ in shape")
+    per_view = [psnr(p, t) for p, t in zip(preds, targets)]
+    out = {
+        "psnr": float(np.mean(per_view)),
+        "ssim": float(np.mean([ssim(p, t) for p, t in zip(preds, targets)])),
+        "num_views": int(preds.shape[0]),
+        "psnr_per_view": per_view,
+    }
+    if masks is not None:
+        vals = [masked_psnr(p, t, m) for p, t, m in zip(preds, targets, _np(masks))]
+        vals = [v for v in vals if not math.isnan(v)]
+        out["masked_psnr"] = float(np.mean(vals)) if vals else math.nan
+    return out
+
+
+def to_uint8(image) -> np.ndarray:
+    """[height, width, 3] float in [0, 1] -> uint8 RGB."""
+    return (np.clip(_np(image), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)

@@ -1,0 +1,153 @@
+"""A trained scene: field + occupancy grid + sampler settings + background; rendering of
+rays and whole views; saving and loading."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from torch import Tensor, nn
+
+from renderer.cameras import Intrinsics, camera_rays, intersect_aabb
+from renderer.fields import GridField, MLPField
+from renderer.sampler import OccupancyGrid, sample_along_rays
+from renderer.volume import normalized_depth, packed_render
+
+
+class RadianceField(nn.Module):
+    """What :func:`renderer.train` returns as ``model``: renders rays of a scene."""
+
+    def __init__(
+        self,
+        field: nn.Module,
+        occupancy: OccupancyGrid,
+        step_m: float,
+        background: tuple[float, float, float],
+        spec: dict,
+    ):
+        super().__init__()
+        self.field = field
+        self.occupancy = occupancy
+        self.step_m = float(step_m)
+        self.register_buffer("background", torch.tensor(background, dtype=torch.float32))
+        self.spec = dict(spec)  # how to rebuild the field: {"field": "grid"|"mlp", ...}
+
+    @property
+    def aabb(self) -> Tensor:
+        return self.field.aabb
+
+    def render_rays(
+        self,
+        origins: Tensor,
+        directions: Tensor,
+        perturb: bool = False,
+        generator: torch.Generator | None = None,
+        chunk: int = 16384,
+    ) -> dict[str, Tensor]:
+        """Volume-render rays.
+
+        Args:
+            origins, directions: [num_rays, 3] float32 (unit directions).
+        Returns:
+            dict: ``rgb`` [num_rays, 3], ``opacity`` [num_rays], ``depth`` [num_rays]
+            (expected depth sum w t, m), ``num_samples`` (int, samples evaluated).
+        """
+        outs = []
+        total = 0
+        for i in range(0, max(origins.shape[0], 1), chunk):
+            o, d = origins[i : i + chunk], directions[i : i + chunk]
+            s = sample_along_rays(o, d, self.aabb, self.step_m, self.occupancy, perturb, generator)
+            sigma, rgb = self.field(s.positions, s.directions)
+            outs.append(
+                packed_render(sigma, rgb, s.t, s.deltas, s.ray_indices, o.shape[0], self.background)
+            )
+            total += s.t.numel()
+        result = {k: torch.cat([r[k] for r in outs]) for k in ("rgb", "opacity", "depth")}
+        result["num_samples"] = total
+        return result
+
+
+@torch.no_grad()
+def render_views(
+    model: RadianceField,
+    poses: Tensor,
+    intrinsics: Intrinsics,
+    height: int | None = None,
+    width: int | None = None,
+) -> dict[str, Tensor]:
+    """Render whole views.
+
+    Args:
+        poses: [num_views, 4, 4] camera-to-world.
+        intrinsics: the camera; resized to ``height`` x ``width`` when given.
+    Returns:
+        dict: ``rgb`` [num_views, height, width, 3] float32 in [0, 1], ``depth``
+        [num_views, height, width] (distance along the ray to the visible surface, m; the
+        far end of the box where nothing is hit), ``opacity`` [num_views, height, width].
+    """
+    if height is not None or width is not None:
+        intrinsics = intrinsics.resized(height or intrinsics.height, width or intrinsics.width)
+    h, w = intrinsics.height, intrinsics.width
+    rgbs, depths, opacities = [], [], []
+    for pose in poses:
+        o, d = camera_rays(pose[None], intrinsics)
+        o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+        out = model.render_rays(o, d)
+        _, t_far = intersect_aabb(o, d, model.aabb)
+        far = float(t_far.max().clamp_min(0.0))
+        rgbs.append(out["rgb"].clamp(0, 1).reshape(h, w, 3))
+        depths.append(normalized_depth(out["depth"], out["opacity"], far).reshape(h, w))
+        opacities.append(out["opacity"].reshape(h, w))
+    return {
+        "rgb": torch.stack(rgbs),
+        "depth": torch.stack(depths),
+        "opacity": torch.stack(opacities),
+    }
+
+
+def build_field(spec: dict, aabb: Tensor) -> nn.Module:
+    """Rebuild an empty field from its spec (``{"field": "grid", "resolution": ...}``)."""
+    kind = spec.get("field")
+    if kind == "grid":
+        return GridField(aabb, resolution=spec["resolution"], step_m=spec["step_m"])
+    if kind == "mlp":
+        return MLPField(aabb, width=spec["width"], depth=spec["depth"])
+    raise KeyError(f"unknown field {kind!r}; known: ['grid', 'mlp']")
+
+
+def save_model(model: RadianceField, path) -> Path:
+    """Save to one ``.pt`` file (state dict + spec + settings); read with :func:`load_model`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {
+        "spec": model.spec,
+        "step_m": model.step_m,
+        "background": model.background.tolist(),
+        "aabb": model.aabb.tolist(),
+        "occupancy_cells": list(model.occupancy.cells),
+        "state_dict": model.state_dict(),
+    }
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+    return path
+
+
+def load_model(path) -> RadianceField:
+    """Load a model written by :func:`save_model`."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: model file not found")
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    aabb = torch.tensor(payload["aabb"])
+    spec = json.loads(json.dumps(payload["spec"]))
+    field = build_field(spec, aabb)
+    state = payload["state_dict"]
+    if isinstance(field, GridField):  # grids may have been upsampled since construction
+        field.density_grid = nn.Parameter(torch.empty_like(state["field.density_grid"]))
+        field.color_grid = nn.Parameter(torch.empty_like(state["field.color_grid"]))
+    occ = OccupancyGrid(aabb, tuple(payload["occupancy_cells"]))
+    model = RadianceField(field, occ, payload["step_m"], tuple(payload["background"]), spec)
+    model.load_state_dict(state)
+    return model

@@ -1,0 +1,181 @@
+"""Where along a ray to evaluate the field: uniform steps inside the scene box, minus the
+steps that fall into cells an occupancy grid marks empty (empty-space skipping).
+
+nerfacc's ray marching is CUDA-only; this is the same idea in plain torch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from renderer.cameras import intersect_aabb
+
+
+class OccupancyGrid(nn.Module):
+    """A boolean grid of cells over ``aabb``; a cell is occupied when its largest alpha
+    ``1 - exp(-sigma * step_m)`` exceeds ``threshold`` (then dilated by one cell).
+
+    A cell's largest density is taken over its 8 corners and its centre. For a
+    :class:`~renderer.fields.GridField` whose vertices are this grid's corners
+    (``OccupancyGrid.for_grid_field``) that is exact: a trilinear field takes its extreme
+    values at the corners and softplus is monotonic, so no occupied cell is ever skipped.
+    All cells start occupied.
+    """
+
+    def __init__(self, aabb: Tensor, cells: tuple[int, int, int]):
+        super().__init__()
+        if min(cells) < 1:
+            raise ValueError(f"cells must be >= 1 per axis, got {cells}")
+        self.register_buffer("aabb", torch.as_tensor(aabb, dtype=torch.float32).clone())
+        nx, ny, nz = cells
+        self.register_buffer("occupied", torch.ones(nz, ny, nx, dtype=torch.bool))  # [z, y, x]
+
+    @classmethod
+    def for_grid_field(cls, field) -> OccupancyGrid:
+        """Cells whose corners are the vertices of ``field``'s grids."""
+        nx, ny, nz = field.resolution
+        return cls(field.aabb, (nx - 1, ny - 1, nz - 1))
+
+    @property
+    def cells(self) -> tuple[int, int, int]:
+        """Cells per axis (x, y, z)."""
+        return (self.occupied.shape[2], self.occupied.shape[1], self.occupied.shape[0])
+
+    @property
+    def fraction_occupied(self) -> float:
+        return self.occupied.float().mean().item()
+
+    def _lattice(self, offset: float) -> Tensor:
+        """Points at (i + offset) cell sizes from the min corner: [z, y, x, 3] (x, y, z order)."""
+        nx, ny, nz = self.cells
+        extra = 1 if offset == 0.0 else 0
+        axes = [
+            self.aabb[0, a]
+            + (torch.arange(n + extra, dtype=torch.float32) + offset)
+            * (self.aabb[1, a] - self.aabb[0, a])
+            / n
+            for a, n in enumerate((nx, ny, nz))
+        ]
+        z, y, x = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        return torch.stack([x, y, z], dim=-1)
+
+    @torch.no_grad()
+    def update(
+        self,
+        density_fn: Callable[[Tensor], Tensor],
+        step_m: float,
+        threshold: float = 1e-3,
+        vertex_density: Tensor | None = None,
+        chunk: int = 65536,
+    ) -> float:
+        """Recompute occupancy from ``density_fn(points [n, 3]) -> sigma [n]``.
+
+        Args:
+            vertex_density: [z+1, y+1, x+1] sigma at the cell corners when already known
+                (a grid field's own vertices); otherwise evaluated with ``density_fn``.
+        Returns:
+            the fraction of cells occupied.
+        """
+
+        def evaluate(points: Tensor) -> Tensor:
+            flat = points.reshape(-1, 3)
+            out = torch.cat(
+                [density_fn(flat[i : i + chunk]) for i in range(0, flat.shape[0], chunk)]
+            )
+            return out.reshape(points.shape[:-1])
+
+        corners = vertex_density if vertex_density is not None else evaluate(self._lattice(0.0))
+        cell_max = F.max_pool3d(corners[None, None], kernel_size=2, stride=1)[0, 0]  # [z, y, x]
+        if vertex_density is None:
+            cell_max = torch.maximum(cell_max, evaluate(self._lattice(0.5)))
+        alpha = -torch.expm1(-cell_max * step_m)
+        occ = (alpha > threshold).float()
+        occ = F.max_pool3d(occ[None, None], kernel_size=3, stride=1, padding=1)[0, 0]
+        self.occupied = occ > 0
+        return self.fraction_occupied
+
+    def query(self, points: Tensor) -> Tensor:
+        """Whether each point lies in an occupied cell: points [n, 3] -> [n] bool
+        (False outside the box)."""
+        nx, ny, nz = self.cells
+        size = torch.tensor([nx, ny, nz], dtype=torch.float32)
+        rel = (points - self.aabb[0]) * (size / (self.aabb[1] - self.aabb[0]))  # [n, 3] in cells
+        inside = (rel.amin(dim=-1) >= 0) & ((rel - size).amax(dim=-1) <= 0)
+        cell = torch.minimum(rel.clamp_min(0.0), size - 1).floor_()  # [n, 3] (x, y, z)
+        flat = (cell @ torch.tensor([1.0, nx, nx * ny])).long()  # exact below 2^24 cells
+        return inside & self.occupied.reshape(-1)[flat]
+
+
+@dataclass(frozen=True)
+class RaySamples:
+    """Packed samples: only those in occupied cells, ray by ray in order of t."""
+
+    positions: Tensor
+    """[num_packed, 3] float32 world points."""
+    directions: Tensor
+    """[num_packed, 3] float32 unit directions of their rays."""
+    t: Tensor
+    """[num_packed] float32 distance along the ray (m)."""
+    deltas: Tensor
+    """[num_packed] float32 segment length (m): the step size."""
+    ray_indices: Tensor
+    """[num_packed] int64, non-decreasing."""
+
+
+def sample_along_rays(
+    origins: Tensor,
+    directions: Tensor,
+    aabb: Tensor,
+    step_m: float,
+    occupancy: OccupancyGrid | None = None,
+    perturb: bool = False,
+    generator: torch.Generator | None = None,
+    near_m: float = 0.0,
+) -> RaySamples:
+    """Uniform samples ``t_k = t_near + (k + u) * step_m`` inside the box, empty cells dropped.
+
+    Args:
+        origins, directions: [num_rays, 3] float32 (unit directions).
+        aabb: [2, 3] box.
+        step_m: step (m), > 0.
+        occupancy: cells to keep; None keeps every sample in the box.
+        perturb: u ~ U[0, 1) per ray (training); else u = 0.5.
+        near_m: no sample nearer than this to the origin.
+    Returns:
+        :class:`RaySamples`.
+    """
+    if not step_m > 0:
+        raise ValueError(f"step_m must be > 0, got {step_m}")
+    num_rays = origins.shape[0]
+    t_near, t_far = intersect_aabb(origins, directions, aabb)
+    t_near = t_near.clamp_min(near_m)
+    span = (t_far - t_near).clamp_min(0.0)
+    num_steps = int(torch.ceil(span.max() / step_m).item()) if num_rays else 0
+    if num_steps == 0:
+        empty = origins.new_zeros(0)
+        return RaySamples(
+            origins.new_zeros(0, 3),
+            origins.new_zeros(0, 3),
+            empty,
+            empty,
+            torch.zeros(0, dtype=torch.long),
+        )
+    if perturb:
+        u = torch.rand(num_rays, 1, generator=generator)
+    else:
+        u = torch.full((num_rays, 1), 0.5)
+    t = (
+        t_near[:, None] + (torch.arange(num_steps, dtype=torch.float32) + u) * step_m
+    )  # [num_rays, num_steps]
+    pos = origins[:, None, :] + t[..., None] * directions[:, None, :]  # [num_rays, num_steps, 3]
+    live = t < t_far[:, None]
+    if occupancy is not None:
+        live &= occupancy.query(pos.reshape(-1, 3)).reshape(num_rays, num_steps)
+    ray_idx = live.nonzero()[:, 0]
+    t, pos = t[live], pos[live]
+    return RaySamples(pos, directions[ray_idx], t, torch.full_like(t, step_m), ray_idx)

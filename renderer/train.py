@@ -1,0 +1,296 @@
+"""Training a radiance field on posed views within a wall-clock budget."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+
+import torch
+
+from renderer.cameras import camera_rays
+from renderer.dataset import Dataset
+from renderer.fields import GridField, MLPField
+from renderer.metrics import image_metrics
+from renderer.model import RadianceField, render_views
+from renderer.sampler import OccupancyGrid
+
+FIELDS = ("grid", "mlp")
+CLOCKS = ("wall", "cpu")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How to train. ``max_seconds`` counts optimisation only (not curve evaluations)."""
+
+    field: str = "grid"
+    """"grid" (dense voxel grids, the fast field) or "mlp" (vanilla NeRF)."""
+    max_seconds: float = 120.0
+    """Wall-clock training budget (s), > 0."""
+    clock: str = "wall"
+    """What the budget and curve count: "wall" (perf_counter seconds) or "cpu" (this
+    process's CPU seconds divided by torch's thread count: the wall time the same work
+    would take on otherwise idle cores; use it on a shared machine)."""
+    max_steps: int | None = None
+    """Optional cap on optimiser steps (>= 1); whichever of the two ends first."""
+    grid_resolutions: tuple[int, ...] = (48, 96, 128)
+    """Grid vertices on the longest axis per coarse-to-fine stage (grid field)."""
+    stage_starts: tuple[float, ...] = (0.0, 0.12, 0.35)
+    """Fraction of the budget at which each stage starts (first must be 0, increasing)."""
+    step_voxels: float = 0.85
+    """Ray-marching step in voxels of the current stage (grid field), > 0."""
+    batch_rays: int = 4096
+    """Rays per optimiser step (grid field; the first stage uses half), >= 1."""
+    lr: float = 0.1
+    """Adam learning rate on the grids (decays exponentially to lr_final_ratio * lr)."""
+    lr_final_ratio: float = 0.1
+    """Learning rate at the end of the budget relative to the start, in (0, 1]."""
+    tv_weight: float = 1e-4
+    """Weight of the density total-variation term in the last stage (>= 0)."""
+    occupancy_every_steps: int = 50
+    """Steps between occupancy-grid updates, >= 1."""
+    occupancy_threshold: float = 1e-3
+    """Alpha below which a cell is empty, in (0, 1)."""
+    mlp_width: int = 128
+    """Hidden width of the vanilla NeRF MLP."""
+    mlp_depth: int = 4
+    """Hidden layers of the vanilla NeRF MLP."""
+    mlp_lr: float = 2e-3
+    """Adam learning rate of the MLP."""
+    mlp_batch_rays: int = 1024
+    """Rays per step for the MLP."""
+    mlp_step_voxels: float = 1.0
+    """MLP ray-marching step in cells of a 96-cell occupancy grid."""
+    use_masks: bool = True
+    """When the dataset has masks, train on targets with the background outside the mask
+    (object-only training)."""
+    eval_every_seconds: float = 10.0
+    """Training seconds between points of the PSNR curve (needs ``eval_dataset``), > 0."""
+    eval_views: int = 10
+    """Views of ``eval_dataset`` (evenly spaced) used for the curve, >= 1."""
+    progress: bool = True
+    """Progress bar on stderr."""
+
+    def __post_init__(self):
+        if self.field not in FIELDS:
+            raise KeyError(f"unknown field {self.field!r}; known: {list(FIELDS)}")
+        if self.clock not in CLOCKS:
+            raise KeyError(f"unknown clock {self.clock!r}; known: {list(CLOCKS)}")
+        if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
+            raise ValueError(f"max_seconds must be > 0 and finite, got {self.max_seconds}")
+        if self.max_steps is not None and self.max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1 or None, got {self.max_steps}")
+        if len(self.grid_resolutions) != len(self.stage_starts) or not self.grid_resolutions:
+            raise ValueError("grid_resolutions and stage_starts must be non-empty and equally long")
+        if self.stage_starts[0] != 0.0 or list(self.stage_starts) != sorted(self.stage_starts):
+            raise ValueError(f"stage_starts must start at 0 and increase, got {self.stage_starts}")
+        if min(self.grid_resolutions) < 2:
+            raise ValueError(f"grid_resolutions must be >= 2, got {self.grid_resolutions}")
+        for name in ("step_voxels", "lr", "mlp_lr", "eval_every_seconds", "mlp_step_voxels"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("batch_rays", "mlp_batch_rays", "occupancy_every_steps", "eval_views"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.lr_final_ratio <= 1:
+            raise ValueError(f"lr_final_ratio must be in (0, 1], got {self.lr_final_ratio}")
+        if self.tv_weight < 0:
+            raise ValueError(f"tv_weight must be >= 0, got {self.tv_weight}")
+        if not 0 < self.occupancy_threshold < 1:
+            raise ValueError(
+                f"occupancy_threshold must be in (0, 1), got {self.occupancy_threshold}"
+            )
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class TrainResult:
+    model: RadianceField
+    """The trained scene (render with :func:`renderer.render_views`)."""
+    steps: int
+    """Optimiser steps taken."""
+    seconds: float
+    """Training wall-clock seconds (without curve evaluations)."""
+    curve: list[dict]
+    """[{"seconds", "step", "psnr"}] on the evaluation views, when an eval set was given."""
+
+
+def _voxel_m(aabb: torch.Tensor, resolution: int) -> float:
+    return (aabb[1] - aabb[0]).max().item() / (resolution - 1)
+
+
+def _targets(dataset: Dataset, use_masks: bool) -> torch.Tensor:
+    images = dataset.images
+    if use_masks and dataset.masks is not None:
+        bg = torch.tensor(dataset.background)
+        m = dataset.masks[..., None]
+        images = images * m + bg * (1 - m)
+    return images.reshape(-1, 3)
+
+
+def _curve_subset(eval_dataset: Dataset, n: int) -> Dataset:
+    idx = (
+        torch.linspace(0, eval_dataset.num_views - 1, min(n, eval_dataset.num_views)).round().long()
+    )
+    return eval_dataset.subset(idx.unique().tolist())
+
+
+def train(
+    dataset: Dataset,
+    config: TrainConfig = TrainConfig(),
+    generator: torch.Generator | None = None,
+    eval_dataset: Dataset | None = None,
+) -> TrainResult:
+    """Fit a radiance field to ``dataset``'s views within ``config.max_seconds``.
+
+    Each step draws ``batch_rays`` random pixels of all training views, marches them
+    through the occupancy grid, renders with eq. 4 and minimises the MSE to the pixels.
+    Grid field: coarse-to-fine (``grid_resolutions`` at ``stage_starts`` of the budget,
+    grids trilinearly upsampled, Adam reset), occupancy recomputed every
+    ``occupancy_every_steps`` from the exact per-cell maxima of the density grid.
+
+    Returns:
+        :class:`TrainResult`; ``curve`` holds PSNR on (up to ``eval_views``) views of
+        ``eval_dataset`` every ``eval_every_seconds`` of training and at the end.
+    """
+    if generator is None:
+        generator = torch.Generator().manual_seed(0)
+    aabb = dataset.aabb
+    origins, dirs = camera_rays(dataset.poses, dataset.intrinsics)
+    origins, dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
+    targets = _targets(dataset, config.use_masks)
+    num_pixels = targets.shape[0]
+    background = dataset.background
+    curve_set = _curve_subset(eval_dataset, config.eval_views) if eval_dataset is not None else None
+
+    if config.field == "grid":
+        stage = 0
+        res = config.grid_resolutions[0]
+        step_m = config.step_voxels * _voxel_m(aabb, res)
+        field_ = GridField(aabb, resolution=res, step_m=step_m)
+        occupancy = OccupancyGrid.for_grid_field(field_)
+        spec = {"field": "grid", "resolution": res, "step_m": step_m}
+        lr, batch = config.lr, max(1, config.batch_rays // 2)
+    else:
+        step_m = config.mlp_step_voxels * (aabb[1] - aabb[0]).max().item() / 96
+        field_ = MLPField(aabb, width=config.mlp_width, depth=config.mlp_depth)
+        occupancy = OccupancyGrid(aabb, (64, 64, 64))
+        spec = {"field": "mlp", "width": config.mlp_width, "depth": config.mlp_depth}
+        lr, batch = config.mlp_lr, config.mlp_batch_rays
+    model = RadianceField(field_, occupancy, step_m, background, spec)
+
+    def make_optimizer():
+        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99))
+
+    optimizer = make_optimizer()
+    threads = torch.get_num_threads()
+
+    def now() -> float:
+        return time.perf_counter() if config.clock == "wall" else time.process_time() / threads
+
+    curve: list[dict] = []
+    train_seconds = 0.0
+    next_eval = 0.0
+    step = 0
+    bar = None
+    if config.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=int(config.max_seconds), unit="s", file=sys.stderr, desc=f"train {config.field}"
+        )
+
+    def progress_fraction() -> float:
+        p = train_seconds / config.max_seconds
+        if config.max_steps is not None:
+            p = max(p, step / config.max_steps)
+        return p
+
+    def record_curve():
+        model.eval()
+        out = render_views(model, curve_set.poses, curve_set.intrinsics)
+        m = image_metrics(out["rgb"], curve_set.images)
+        curve.append({"seconds": round(train_seconds, 3), "step": step, "psnr": m["psnr"]})
+        model.train()
+
+    while progress_fraction() < 1.0:
+        if curve_set is not None and train_seconds >= next_eval:
+            record_curve()
+            next_eval += config.eval_every_seconds
+        t0 = now()
+        frac = progress_fraction()
+        if (
+            config.field == "grid"
+            and stage + 1 < len(config.grid_resolutions)
+            and frac >= config.stage_starts[stage + 1]
+        ):
+            stage += 1
+            res = config.grid_resolutions[stage]
+            model.field.upsample(res)
+            model.occupancy = OccupancyGrid.for_grid_field(model.field)
+            model.step_m = config.step_voxels * _voxel_m(aabb, res)
+            batch = config.batch_rays
+            optimizer = make_optimizer()
+        current_lr = lr * config.lr_final_ratio ** min(frac, 1.0)
+        for g in optimizer.param_groups:
+            g["lr"] = current_lr
+        if step % config.occupancy_every_steps == 0 or (
+            config.field == "grid" and step < 50 and step % 10 == 0
+        ):
+            vd = model.field.vertex_density().detach() if config.field == "grid" else None
+            model.occupancy.update(
+                model.field.density, model.step_m, config.occupancy_threshold, vertex_density=vd
+            )
+        idx = torch.randint(0, num_pixels, (batch,), generator=generator)
+        out = model.render_rays(
+            origins[idx], dirs[idx], perturb=True, generator=generator, chunk=batch
+        )
+        loss = torch.mean((out["rgb"] - targets[idx]) ** 2)
+        if (
+            config.field == "grid"
+            and config.tv_weight > 0
+            and stage == len(config.grid_resolutions) - 1
+        ):
+            loss = loss + config.tv_weight * model.field.total_variation()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        step += 1
+        dt = now() - t0
+        train_seconds += dt
+        if bar is not None:
+            bar.n = min(int(train_seconds), int(config.max_seconds))
+            bar.set_postfix(
+                step=step,
+                loss=f"{loss.item():.4f}",
+                occ=f"{model.occupancy.fraction_occupied:.2f}",
+                refresh=False,
+            )
+            bar.refresh()
+    if bar is not None:
+        bar.close()
+    if config.field == "grid":
+        model.spec["resolution"] = config.grid_resolutions[stage]
+    model.eval()
+    if curve_set is not None:
+        record_curve()
+    return TrainResult(model=model, steps=step, seconds=train_seconds, curve=curve)
+
+
+@torch.no_grad()
+def evaluate(model: RadianceField, dataset: Dataset) -> dict:
+    """Render every view of ``dataset`` and compare with its images.
+
+    Returns:
+        {"psnr", "ssim", "num_views", "psnr_per_view", "seconds_per_view"[, "masked_psnr"]}:
+        means of per-view values (PSNR peak 1.0, SSIM scikit-image data_range=1.0).
+    """
+    t0 = time.perf_counter()
+    out = render_views(model, dataset.poses, dataset.intrinsics)
+    seconds = (time.perf_counter() - t0) / max(dataset.num_views, 1)
+    m = image_metrics(out["rgb"], dataset.images, dataset.masks)
+    m["seconds_per_view"] = seconds
+    return m
