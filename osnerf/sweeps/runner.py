@@ -5,7 +5,9 @@ a spawned process of a ``concurrent.futures`` pool, or a Ray task), and the work
 the command's result JSON. The driver extracts the metrics (:mod:`osnerf.sweeps.metrics`)
 and appends one line per finished point to the results file (:mod:`osnerf.sweeps.store`).
 Failed points are not written there: they go to ``<out>.errors.jsonl`` and are retried by
-the next run of the same spec.
+the next run of the same spec. A point whose command rejects its arguments (exit 2: a value
+its parser accepted but the command does not) stops the sweep with a ValueError: the spec
+is wrong, and every other point with that value would fail the same way.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ def execute_point(task: Task) -> Outcome:
             ``<slug>`` (``<slug>.json`` for a file).
     Returns:
         ``{"ok": bool, "result": dict | None, "error": str | None, "seconds": float,
-        "kept": str | None}``.
+        "kept": str | None}``, and ``"rc"`` (the command's exit code) when it failed.
     Raises:
         KeyboardInterrupt: the command was interrupted (the sweep stops).
     """
@@ -79,7 +81,13 @@ def execute_point(task: Task) -> Outcome:
             raise KeyboardInterrupt
         seconds = time.perf_counter() - t0
         if rc != 0:
-            return {"ok": False, "result": None, "error": f"exit {rc}: {msg}", "seconds": seconds}
+            return {
+                "ok": False,
+                "result": None,
+                "error": f"exit {rc}: {msg}",
+                "seconds": seconds,
+                "rc": rc,
+            }
         path = out if task["out_kind"] == "file" else out / task["json_name"]
         try:
             result = json.loads(path.read_text())
@@ -254,6 +262,8 @@ def run_sweep(
             worker can write.
     Raises:
         ValueError / KeyError: a bad spec, executor or results file, before anything runs.
+        ValueError: during the run, a point's command rejected its arguments (exit 2); the
+            points finished before are kept.
     """
     from osnerf.cli import COMMANDS
     from osnerf.provenance import git_commit
@@ -299,6 +309,7 @@ def run_sweep(
     ]
     from tqdm import tqdm
 
+    stream = run_executor(tasks, workers, ray_address=ray_address, ray_runtime_env=ray_runtime_env)
     bar = tqdm(
         total=len(points),
         initial=summary.skipped,
@@ -309,9 +320,7 @@ def run_sweep(
         dynamic_ncols=True,
     )
     try:
-        for key, outcome in run_executor(
-            tasks, workers, ray_address=ray_address, ray_runtime_env=ray_runtime_env
-        ):
+        for key, outcome in stream:
             p = by_key[key]
             if outcome["ok"]:
                 result = outcome["result"]
@@ -358,7 +367,14 @@ def run_sweep(
                     f"osnerf sweep: point {p.values} seed {p.seed} failed: {outcome['error']}",
                     file=sys.stderr,
                 )
+                if outcome.get("rc") == 2:  # the command rejected its arguments: a bad spec
+                    raise ValueError(
+                        f"point {p.values} seed {p.seed}: `osnerf {spec.command}` rejected its "
+                        f"arguments ({outcome['error'].partition(': ')[2]}); fix the spec "
+                        "(finished points are kept)"
+                    )
             bar.update(1)
     finally:
+        stream.close()  # stop the executor now (cancel what has not started)
         bar.close()
     return summary

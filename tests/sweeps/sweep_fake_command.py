@@ -35,6 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fail-snr-db", type=float, default=None, help="raise at this SNR")
     p.add_argument("--fail-once-flag", default=None, help="fail while this file does not exist")
     p.add_argument("--interrupt-snr-db", type=float, default=None, help="Ctrl-C at this SNR")
+    p.add_argument("--level", default="low", help="low or high, checked in run() only")
     p.add_argument("--log", default=None)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
@@ -48,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
     if args.fail_snr_db is not None and args.snr_db == args.fail_snr_db:
         if args.fail_once_flag is None or not os.path.exists(args.fail_once_flag):
             raise RuntimeError(f"planned failure at snr_db={args.snr_db}")
+    if args.level not in ("low", "high"):
+        raise ValueError(f"--level must be one of low, high; got {args.level!r}")
     if args.interrupt_snr_db is not None and args.snr_db == args.interrupt_snr_db:
         raise KeyboardInterrupt
     config = {"snr_db": args.snr_db, "mode": args.mode}

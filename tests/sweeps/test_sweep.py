@@ -189,6 +189,27 @@ def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_a_value_only_the_command_rejects_stops_the_sweep_with_its_message(tmp_path, capsys):
+    """argparse cannot see every bad value: the command's own exit 2 stops the sweep at once."""
+    spec = _spec(tmp_path, axes={"level": ["low", "loud", "high"]}, fixed={"snr_db": 1}, seeds=[0])
+    out = tmp_path / "r.jsonl"
+    with pytest.raises(
+        ValueError,
+        match=r"point \{'level': 'loud'\} seed 0: `osnerf fake` rejected its "
+        r"arguments \(osnerf fake: error: --level must be one of low, high; got 'loud'\)",
+    ):
+        run_sweep(spec, out, executor="serial", progress=False)
+    assert [r["point"] for r in read_results(out)] == [{"level": "low"}]  # kept; 'high' never ran
+    yml = _write_yaml(tmp_path / "s.yaml", spec.to_dict())
+    assert (
+        osnerf.cli.main(
+            ["sweep", str(yml), "--out", str(out), "--no-progress", "--executor", "serial"]
+        )
+        == 2
+    )
+    assert "rejected its arguments" in capsys.readouterr().err.strip().splitlines()[-1]
+
+
 # --- results file ---------------------------------------------------------------------------
 
 
