@@ -6,8 +6,9 @@ adds what the radio link needs around it:
 
 * each frame starts with a 16-bit frame number, BPSK, repeated ``header_repeat`` times,
   so frames can be lost or found out of order without mixing up images;
-* PAPR control (``phy.clip_papr``) and scaling so the clipped peak is exactly full scale:
-  mean power is ``-max_papr_db`` dBFS and the int8 DAC never clips;
+* PAPR control (``phy.clip_papr``) and one scale for all frames so the clip level is
+  exactly full scale: a frame of unit-power symbols has mean power ``-max_papr_db`` dBFS
+  and the int8 DAC never clips;
 * the transmit burst (frames separated by silent gaps) is sent while the receiver
   captures, on two threads, with the driver's clean end-of-burst;
 * per-frame reports (detected, SNR from the pilots, CFO) and SigMF files of the burst and
@@ -229,6 +230,13 @@ def build_burst(
     from phy import clip_papr
 
     reports, layout, parts = [], [], [np.zeros(cfg.gap_samples, np.complex64)]
+    # one scale for every frame: a frame of unit-power symbols has mean power p_nominal and
+    # is clipped at sqrt(PAPR * p_nominal), which becomes full scale (|x| = 1)
+    probe = np.exp(
+        2j * np.pi * (np.arange(cfg.header_symbols + cfg.symbols_per_frame) % 4 + 0.5) / 4
+    )
+    p_nominal = float(np.mean(np.abs(frames.build(probe.astype(np.complex64))) ** 2))
+    limit = math.sqrt(10 ** (cfg.max_papr_db / 10) * p_nominal)
     number = 0
     for b, block in enumerate(blocks):
         block = np.asarray(block, np.complex64).reshape(-1)
@@ -237,11 +245,9 @@ def build_burst(
             data = np.zeros(cfg.symbols_per_frame, np.complex64)
             data[: len(chunk)] = chunk
             iq = frames.build(np.concatenate([header_symbols(number, cfg.header_repeat), data]))
-            mean_p = float(np.mean(np.abs(iq) ** 2))
-            clipped = clip_papr(torch.as_tensor(iq)[None], cfg.max_papr_db)[0].numpy()
-            iq = clipped / math.sqrt(
-                10 ** (cfg.max_papr_db / 10) * mean_p
-            )  # the clip level is full scale
+            p_frame = float(np.mean(np.abs(iq) ** 2))
+            papr_db = max(0.0, 10 * math.log10(limit**2 / p_frame))  # the same clip level for all
+            iq = clip_papr(torch.as_tensor(iq)[None], papr_db)[0].numpy() / limit
             iq = (np.clip(iq.real, -1, 1) + 1j * np.clip(iq.imag, -1, 1)).astype(np.complex64)
             reports.append(FrameReport(number, b, num_samples=len(iq)))
             layout.append((b, offset, len(chunk)))
