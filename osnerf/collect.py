@@ -93,7 +93,9 @@ class Collection:
         images: [num_sent, height, width, 3] float32 masked images (objects over background).
         masks: [num_sent, height, width] float32 union of the demanded objects' masks.
         importance: [num_sent, height, width] float32 per-pixel demand weight
-            (max over objects of weight * mask): the encoder's feature routing map.
+            (max over objects of weight * mask).
+        object_masks: [num_sent, num_objects, height, width] float32, one mask per
+            demanded object (the encoder's feature routing input).
         candidates: indices of every view considered (the train split).
         reasons: view index -> why it was skipped (views not in ``indices``).
     """
@@ -104,6 +106,20 @@ class Collection:
     importance: np.ndarray
     candidates: np.ndarray
     reasons: dict[int, str] = field(default_factory=dict)
+    object_masks: np.ndarray | None = None
+
+    def subset(self, keep: np.ndarray) -> Collection:
+        """The selected views where ``keep`` [num_sent] bool is True."""
+        om = None if self.object_masks is None else self.object_masks[keep]
+        return Collection(
+            self.indices[keep],
+            self.images[keep],
+            self.masks[keep],
+            self.importance[keep],
+            self.candidates,
+            self.reasons,
+            om,
+        )
 
     @property
     def num_sent(self) -> int:
@@ -170,5 +186,11 @@ def collect(
     importance = (per_obj * w).max(0) / float(max(demand.weights))
     images = masked_images(views.images[idx], union, views.background)
     return Collection(
-        idx, images, union.astype(np.float32), importance.astype(np.float32), candidates, reasons
+        idx,
+        images,
+        union.astype(np.float32),
+        importance.astype(np.float32),
+        candidates,
+        reasons,
+        per_obj.transpose(1, 0, 2, 3).astype(np.float32),
     )

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from osnerf.collect import Collection, Demand, collect
+from osnerf.collect import Demand, collect
 from osnerf.scenes import (
     DEFAULT_SCENE,
     RenderConfig,
@@ -255,26 +255,49 @@ def _to_nhwc(images: torch.Tensor) -> np.ndarray:
     return images.detach().clamp(0, 1).permute(0, 2, 3, 1).cpu().numpy().astype(np.float32)
 
 
+def positions_to_mask(positions, height: int, width: int, block_px: int = 4) -> np.ndarray:
+    """[height, width] float32: 1 on the pixels of the sent feature positions (receiver side).
+
+    Args:
+        positions: [num_positions] indices, row-major on the ceil(h/4) x ceil(w/4) grid.
+    """
+    hf, wf = -(-height // block_px), -(-width // block_px)
+    grid = np.zeros(hf * wf, np.float32)
+    grid[np.asarray(positions, np.int64)] = 1.0
+    full = np.kron(grid.reshape(hf, wf), np.ones((block_px, block_px), np.float32))
+    return full[:height, :width]
+
+
 def transmit_jscc(
+    background,
     codec,
     rx_codec,
     images: np.ndarray,
-    masks,
-    importance,
+    routing,
     view_ids,
     links: ViewLinks,
     snr_enc: dict,
     cbrs: dict,
     generator: torch.Generator,
 ):
-    """Each view through the semantic codec and its link; returns (received, symbols, seconds)."""
-    out, symbols = [], []
+    """Each view through the semantic codec and its link.
+
+    Args:
+        routing: None (whole views) or (object masks [n, K, h, w], K demand weights): focus mode.
+    Returns:
+        (received [n, h, w, 3], symbols [n], seconds dict, receiver masks [n, h, w] or None,
+        side-information bits [n]).
+    """
+    out, symbols, rx_masks, side = [], [], [], []
     sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0}
+    h, w = images.shape[1:3]
     for k, v in enumerate(view_ids):
         x = _to_nchw(images[k : k + 1])
-        kw = {}
-        if masks is not None:
-            kw = {"mask": masks[k : k + 1], "demand_weights": importance[k : k + 1]}
+        kw = (
+            {}
+            if routing is None
+            else {"mask": routing[0][k : k + 1], "demand_weights": list(routing[1])}
+        )
         t = time.perf_counter()
         with torch.no_grad():
             enc = codec.encode(x, snr_enc[v], cbrs[v], **kw)
@@ -289,7 +312,15 @@ def transmit_jscc(
         sec["decode"] += time.perf_counter() - t
         out.append(_to_nhwc(img)[0])
         symbols.append(int(enc.symbols.shape[-1]))
-    return np.stack(out), np.asarray(symbols, np.int64), sec
+        pos = getattr(enc.meta, "positions", None)
+        side.append(int(enc.meta.side_info_bits()) if hasattr(enc.meta, "side_info_bits") else 0)
+        if routing is not None and pos is not None:
+            # the receiver knows which positions were sent: outside them it shows background
+            m = positions_to_mask(pos[0].cpu().numpy(), h, w)
+            rx_masks.append(m)
+            out[-1] = out[-1] * m[..., None] + background * (1.0 - m[..., None])
+    masks = np.stack(rx_masks) if rx_masks else None
+    return np.stack(out), np.asarray(symbols, np.int64), sec, masks, np.asarray(side, np.int64)
 
 
 def transmit_digital_views(
@@ -443,6 +474,8 @@ def train_and_score(folder: Path, views: SceneViews, demand: Demand, cfg: RunCon
 def view_metrics(received: np.ndarray, sent: np.ndarray, masks: np.ndarray | None) -> dict:
     """PSNR of the received views against what was sent (mean of per-view PSNR)."""
     mse = ((received - sent) ** 2).reshape(len(sent), -1).mean(1)
+    if np.all(mse == 0):  # nothing crossed a channel (gt)
+        return {"psnr_received": None, "psnr_received_object": None}
     out = {"psnr_received": float(np.mean(-10 * np.log10(np.maximum(mse, 1e-10))))}
     if masks is not None:
         m = masks > 0.5
@@ -529,15 +562,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
             "every view showing the demanded objects is in outage: nothing can be sent"
         )
     full_ids = [int(v) for v in candidates if int(v) not in links.outage]
-    keep = np.isin(col.indices, sent_ids)
-    col = Collection(
-        col.indices[keep],
-        col.images[keep],
-        col.masks[keep],
-        col.importance[keep],
-        col.candidates,
-        col.reasons,
-    )
+    col = col.subset(np.isin(col.indices, sent_ids))
 
     # rate: measured SNR per view -> CBR per view
     cached = cache.load("rate")
@@ -561,6 +586,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
     snr_enc = {v: float(np.clip(measured[v], *snr_range)) for v in full_ids}
     h, w = views.intrinsics.height, views.intrinsics.width
     routing = scu.feature_routing(col)
+    focus = dict(zip(sent_ids, scu.focus_cbr(col.masks, cbr_range, sent_ids)))
 
     schemes: dict[str, dict] = {}
     received_all: dict[str, np.ndarray] = {}
@@ -576,19 +602,33 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
             _log(f"{scheme}: sending {len(ids)} views over {cfg.channel} at {cfg.snr_db:g} dB")
             gen = torch.Generator().manual_seed(cfg.seed * 1000 + 17 * si + 3)
             info: dict = {"views": ids}
+            arrays: dict = {}
             if scheme == "gt":
-                rec, symbols, sec = (
-                    sent.copy(),
-                    np.zeros(len(ids), np.int64),
-                    {"encode": 0.0, "decode": 0.0},
-                )
-            elif scheme in ("jscc", "full"):
-                rec, symbols, sec = transmit_jscc(
+                rec, symbols = sent.copy(), np.zeros(len(ids), np.int64)
+                sec = {"encode": 0.0, "decode": 0.0}
+            elif scheme == "jscc":
+                rec, symbols, sec, rx_masks, side = transmit_jscc(
+                    views.background,
                     codec,
                     prep.rx_codec,
                     sent,
-                    routing[0] if object_routed else None,
-                    routing[1] if object_routed else None,
+                    routing,
+                    ids,
+                    links,
+                    snr_enc,
+                    focus,
+                    gen,
+                )
+                arrays["side_info_bits"] = side
+                if rx_masks is not None:
+                    arrays["rx_masks"] = rx_masks
+            elif scheme == "full":
+                rec, symbols, sec, _, _ = transmit_jscc(
+                    views.background,
+                    codec,
+                    prep.rx_codec,
+                    sent,
+                    None,
                     ids,
                     links,
                     snr_enc,
@@ -599,7 +639,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                 budgets = (
                     jscc_symbols
                     if jscc_symbols is not None
-                    else np.asarray([_num_symbols_for(cbrs[v], h, w) for v in ids])
+                    else np.asarray([_num_symbols_for(focus[v], h, w) for v in ids])
                 )
                 rec, sec, failed, dinfo = transmit_digital_views(
                     sent, ids, links, budgets, cfg, gen
@@ -607,9 +647,10 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                 symbols = np.asarray(budgets, np.int64)
                 info.update(failed_codewords=failed, per_view=dinfo)
             info["seconds"] = sec
-            tx = ({"received": rec, "symbols": symbols}, info)
+            tx = ({"received": rec, "symbols": symbols, **arrays}, info)
             cache.save(f"{scheme}_tx", *tx)
         rec, symbols = tx[0]["received"], tx[0]["symbols"]
+        train_masks = tx[0].get("rx_masks")  # what the receiver knows: the sent feature positions
         if scheme == "jscc":
             jscc_symbols = symbols
         received_all[scheme] = rec
@@ -629,7 +670,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                 views.intrinsics,
                 aabb,
                 views.background,
-                masks,
+                train_masks,
             )
             metrics, rgb, op = train_and_score(vf, views, demand, cfg, seed=cfg.seed * 1000 + si)
             nerf = ({"rgb": rgb, "opacity": op}, metrics)
@@ -654,6 +695,9 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
             "mask_iou": metrics["mask_iou"] if object_routed else None,
             "symbols_sent": n_sym,
             "views_sent": len(ids),
+            "side_info_bits": int(np.sum(tx[0]["side_info_bits"]))
+            if "side_info_bits" in tx[0]
+            else 0,
             "seconds": seconds,
             "processing_seconds": seconds["encode"]
             + seconds["decode"]
@@ -701,6 +745,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
             "link_snr_db": {str(v): links.snr_db[v] for v in full_ids},
             "measured_snr_db": {str(v): measured[v] for v in full_ids},
             "cbr": {str(v): float(cbrs[v]) for v in full_ids},
+            "cbr_on_demand": {str(v): float(focus[v]) for v in sent_ids},
         },
         "schemes": schemes,
         "comparisons": comparisons(schemes),

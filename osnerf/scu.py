@@ -97,17 +97,48 @@ class SemanticControlUnit:
             )
         self.log("knowledge_base", "agreed", sha256=transmitter_sha256)
 
-    def feature_routing(self, collection: Collection) -> tuple[torch.Tensor, torch.Tensor]:
-        """Encoder routing for the selected views: (mask [n, 1, h, w], importance [n, 1, h, w])."""
-        m = torch.from_numpy(collection.masks).float()[:, None]
-        imp = torch.from_numpy(collection.importance).float()[:, None]
+    def feature_routing(self, collection: Collection) -> tuple[torch.Tensor, tuple[float, ...]]:
+        """Encoder routing for the selected views: per-object masks [n, K, h, w] and the K
+        demand weights (the codec's focus mode keeps the feature positions they weigh most)."""
+        m = torch.from_numpy(collection.object_masks).float()
         self.log(
             "encoder",
-            "route features of the demanded objects",
+            "route features of the demanded objects (focus mode)",
             views=collection.indices.tolist(),
-            mean_mask_fraction=float(m.mean()),
+            weights=list(self.demand.weights),
+            mean_mask_fraction=float(collection.masks.mean()),
         )
-        return m, imp
+        return m, self.demand.weights
+
+    def focus_cbr(
+        self, masks: np.ndarray, cbr_range: tuple[float, float], views, block_px: int = 4
+    ) -> np.ndarray:
+        """CBR per on-demand view: every feature position (``block_px`` square) touching the
+        objects' mask, with all of the codec's channels, i.e. ``coverage * max_cbr``, clamped
+        to the codec's range (logged per view).
+
+        Args:
+            masks: [num_views, height, width] union masks of the demanded objects.
+        """
+        lo, hi = cbr_range
+        out = []
+        for v, m in zip(views, masks):
+            h, w = m.shape
+            hf, wf = -(-h // block_px), -(-w // block_px)
+            pad = np.zeros((hf * block_px, wf * block_px), bool)
+            pad[:h, :w] = m > 0.05
+            blocks = pad.reshape(hf, block_px, wf, block_px).any((1, 3))
+            cov = float(blocks.mean())
+            c = float(np.clip(cov * hi, lo, hi))
+            out.append(c)
+            self.log(
+                "rate",
+                f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the demand)",
+                view=int(v),
+                coverage=cov,
+                cbr=c,
+            )
+        return np.asarray(out, np.float64)
 
     def choose_cbr(
         self, measured_snr_db: np.ndarray, cbr_range: tuple[float, float], views

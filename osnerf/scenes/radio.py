@@ -85,33 +85,37 @@ def drone_channels(
     subcarrier_spacing_hz: float = 30e3,
     max_depth: int = 2,
 ) -> DroneChannels:
-    """Ray-trace each drone position to the ground station (phy.raytrace.RayTracer).
+    """Ray-trace each drone position to the ground station (``phy.raytrace.RayTracer``).
 
     Args:
+        folder, meta: a dataset folder and its transforms.json dict (radio scene, ground
+            station, carrier).
         positions_m: [num_positions, 3] transmitter (drone) positions, metres.
+    Returns:
+        :class:`DroneChannels` with the absolute (path-loss included) CFR per position.
     """
     import phy.raytrace as prt
 
     freqs = subcarrier_frequencies(num_subcarriers, subcarrier_spacing_hz)
     tracer = prt.RayTracer(
         radio_scene_path(folder, meta),
-        rx_position_m=tuple(meta["ground_station_m"]),
+        rx_position_m=tuple(float(x) for x in meta["ground_station_m"]),
         carrier_frequency_hz=float(meta["carrier_frequency_hz"]),
-        max_depth=max_depth,
+        config=prt.RayTracingConfig(max_depth=max_depth),
     )
-    h, outage = tracer.cfr(np.asarray(positions_m, np.float64), freqs)
-    h = np.asarray(h.detach().cpu() if hasattr(h, "detach") else h).astype(np.complex64)
-    outage = np.asarray(outage.detach().cpu() if hasattr(outage, "detach") else outage).astype(bool)
-    gain = np.mean(np.abs(h) ** 2, axis=1)
+    pos = np.asarray(positions_m, np.float64)
+    h, outage = tracer.cfr(pos, freqs)
+    h = np.asarray(h.detach().cpu()).astype(np.complex64)
+    outage = np.asarray(outage.detach().cpu()).astype(bool)
     with np.errstate(divide="ignore"):
-        gain_db = 10 * np.log10(gain)
-    stats = {}
-    try:
-        s = tracer.stats(np.asarray(positions_m, np.float64), freqs)
-        stats = {
-            k: np.asarray(v).tolist()
-            for k, v in (s.items() if isinstance(s, dict) else vars(s).items())
-        }
-    except Exception:  # noqa: BLE001 - stats are informative; the channel itself is what matters
-        stats = {}
+        gain_db = 10 * np.log10(np.mean(np.abs(h) ** 2, axis=1))
+    st = tracer.stats(pos)
+    stats = {
+        "path_gain_db": st.path_gain_db.tolist(),
+        "rms_delay_spread_s": st.rms_delay_spread_s.tolist(),
+        "k_factor_db": st.k_factor_db.tolist(),
+        "num_paths": st.num_paths.tolist(),
+        "los": st.los.tolist(),
+        "outage": st.outage.tolist(),
+    }
     return DroneChannels(h, outage, gain_db, stats, freqs)
