@@ -1,0 +1,263 @@
+"""The codec as transmitter and receiver use it: ``load_codec``, ``Codec.encode/decode``.
+
+Rate: keeping the first ``m`` of the model's importance-ordered complex channels gives
+CBR ``m/48`` (the encoder downsamples by 4: 48 real values per position). A requested CBR
+is served by the nearest such m; ``Encoded.meta.cbr`` is the CBR actually used.
+
+On-demand focus (paper section 3.2): with an object ``mask`` (and weights ``lambda_j`` over
+K demanded objects), a Grad-CAM-style heat map ranks the encoder's feature positions by
+how much they serve the demand, and only the top positions are sent, with all channels;
+their indices go to the receiver as side information (``meta.positions``). See
+:mod:`semcodec.focus`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+from torch import Tensor
+from torch.nn import functional as F
+
+from phy import power_normalize, validate_snr_db
+from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
+from semcodec.focus import demand_heatmap, select_positions
+from semcodec.model import JSCCModel, features_to_symbols, side_info, symbols_to_features
+
+DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
+MIN_SIDE_PX = 8
+
+
+@dataclass(frozen=True)
+class EncodedMeta:
+    """What the receiver needs besides the symbols (side information).
+
+    Attributes:
+        height, width: original image size in pixels.
+        num_channels: complex channels kept per sent position (m).
+        cbr: CBR actually used: num_symbols / (3 * height * width).
+        num_symbols: complex symbols per image.
+        codec_sha256: hash of the transmitter's codec (knowledge base identity).
+        positions: [batch, num_positions] int64 indices (row-major on the feature grid) of
+            the sent positions in focus mode, else None (every position sent).
+    """
+
+    height: int
+    width: int
+    num_channels: int
+    cbr: float
+    num_symbols: int
+    codec_sha256: str
+    positions: Tensor | None = field(default=None, compare=False)
+
+    def side_info_bits(self) -> int:
+        """Bits of side information per image for ``positions`` (a bitmap of the grid)."""
+        if self.positions is None:
+            return 0
+        return math.ceil(self.height / 4) * math.ceil(self.width / 4)
+
+
+@dataclass(frozen=True)
+class Encoded:
+    """Transmitter output: ``symbols`` [batch, num_symbols] complex64 (mean |x|^2 = 1 per image)."""
+
+    symbols: Tensor
+    meta: EncodedMeta
+
+
+def check_images(images, name: str = "images") -> Tensor:
+    """Raise ValueError unless ``images`` is [batch, 3, height, width] float in [0, 1]."""
+    if not isinstance(images, Tensor):
+        raise ValueError(
+            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got {type(images).__name__}"
+        )
+    if images.dim() != 4 or images.shape[1] != 3:
+        raise ValueError(
+            f"{name} must be [batch, 3, height, width] (RGB), got shape {tuple(images.shape)}"
+        )
+    if images.shape[2] < MIN_SIDE_PX or images.shape[3] < MIN_SIDE_PX:
+        raise ValueError(
+            f"{name} must be at least {MIN_SIDE_PX}x{MIN_SIDE_PX} px, got {tuple(images.shape[2:])}"
+        )
+    if not images.is_floating_point():
+        raise ValueError(f"{name} must be float32 in [0, 1], got dtype {images.dtype}")
+    if not torch.isfinite(images).all() or images.min() < 0 or images.max() > 1:
+        raise ValueError(f"{name} values must be finite and in [0, 1]")
+    return images.float()
+
+
+def _pad4(x: Tensor) -> Tensor:
+    """Replicate-pad height and width up to multiples of 4. [b, c, H, W] -> [b, c, H4, W4]."""
+    h, w = x.shape[-2:]
+    ph, pw = (-h) % 4, (-w) % 4
+    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
+
+
+class Codec:
+    """A loaded JSCC (encoder + decoder) with its model card and hash."""
+
+    def __init__(self, model: JSCCModel, card: dict, path: Path | None = None):
+        self.model = model.eval()
+        self.card = card
+        self.path = path
+        self.sha256: str = card["sha256"]
+
+    @property
+    def name(self) -> str:
+        return self.card.get("name", self.model.cfg.name)
+
+    @property
+    def cbr_range(self) -> tuple[float, float]:
+        """(smallest, largest) CBR: (1/48, num_complex_channels/48)."""
+        return self.model.cfg.cbr_range
+
+    @property
+    def snr_range_db(self) -> tuple[float, float]:
+        """SNR range (Es/N0, dB) the model was trained for."""
+        return (self.model.cfg.snr_min_db, self.model.cfg.snr_max_db)
+
+    def __repr__(self) -> str:
+        return f"Codec(name={self.name!r}, sha256={self.sha256[:12]}, cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
+
+    def channels_for_cbr(self, cbr: float) -> int:
+        """Kept complex channels m for a CBR (nearest multiple of 1/48); ValueError outside the range."""
+        lo, hi = self.cbr_range
+        try:
+            c = float(cbr)
+        except (TypeError, ValueError):
+            raise ValueError(f"cbr must be a number in [{lo:.4g}, {hi:.4g}], got {cbr!r}") from None
+        if not math.isfinite(c) or not lo * 0.999 <= c <= hi * 1.001:
+            raise ValueError(
+                f"cbr must be in the codec's range [1/48, {round(hi * 48)}/48] = [{lo:.4g}, {hi:.4g}], got {cbr!r}"
+            )
+        return int(
+            min(
+                max(round(c / self.model.cfg.cbr_per_channel), 1),
+                self.model.cfg.num_complex_channels,
+            )
+        )
+
+    def _snr(self, snr_db, batch: int) -> Tensor:
+        validate_snr_db(snr_db)
+        s = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
+        if s.numel() not in (1, batch):
+            raise ValueError(
+                f"snr_db must be a float or have {batch} (batch) values, got {s.numel()}"
+            )
+        return s.expand(batch) if s.numel() == 1 else s
+
+    def encode(
+        self, images: Tensor, snr_db, cbr: float, mask: Tensor | None = None, demand_weights=None
+    ) -> Encoded:
+        """Images -> unit-power channel symbols.
+
+        Args:
+            images: [batch, 3, height, width] float32 in [0, 1] (any size >= 8 px).
+            snr_db: float or [batch]: the SNR the transmitter expects (feeds the AF modules).
+            cbr: channel symbols per real source value, in ``cbr_range``.
+            mask: optional [batch, K, height, width] (or [batch, height, width]) masks of the K
+                demanded objects, values in [0, 1]: switches on focus mode.
+            demand_weights: optional K weights lambda_j (or [batch, K]); default equal.
+        Returns:
+            :class:`Encoded` with symbols [batch, num_symbols] complex64.
+        """
+        x = check_images(images)
+        b, _, h, w = x.shape
+        snr = self._snr(snr_db, b)
+        cfg = self.model.cfg
+        xp = _pad4(x)
+        hf, wf = xp.shape[2] // 4, xp.shape[3] // 4
+        if mask is None:
+            m = self.channels_for_cbr(cbr)
+            with torch.no_grad():
+                feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
+            sym = power_normalize(features_to_symbols(feat, m))
+            positions = None
+        else:
+            self.channels_for_cbr(cbr)  # range check
+            m = cfg.num_complex_channels
+            budget = max(int(round(float(cbr) * 3 * h * w)), m)
+            k = min(budget // m, hf * wf)
+            with torch.no_grad():
+                feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
+            heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
+            positions = select_positions(heat, k)  # [batch, k]
+            flat = feat.reshape(b, 2 * m, hf * wf)
+            sent = torch.gather(flat, 2, positions[:, None, :].expand(b, 2 * m, k))  # [b, 2m, k]
+            sym = power_normalize(features_to_symbols(sent[:, :, :, None], m))
+        meta = EncodedMeta(
+            height=h,
+            width=w,
+            num_channels=m,
+            cbr=sym.shape[1] / (3 * h * w),
+            num_symbols=int(sym.shape[1]),
+            codec_sha256=self.sha256,
+            positions=positions,
+        )
+        return Encoded(sym.to(torch.complex64), meta)
+
+    def decode(
+        self, x_hat: Tensor, meta: EncodedMeta, snr_db, expected_sha256: str | None = None
+    ) -> Tensor:
+        """Received symbols -> images.
+
+        Args:
+            x_hat: [batch, num_symbols] complex64, equalised received symbols.
+            meta: the transmitter's :class:`EncodedMeta`.
+            snr_db: float or [batch]: the receiver's SNR (estimate) in dB.
+            expected_sha256: the codec hash the transmitter announced (also checked against
+                ``meta.codec_sha256``).
+        Returns:
+            [batch, 3, height, width] float32 in [0, 1].
+        Raises:
+            KnowledgeBaseMismatch: the hashes differ.
+        """
+        for label, sha in (
+            ("expected_sha256", expected_sha256),
+            ("meta.codec_sha256", meta.codec_sha256),
+        ):
+            if sha is not None and sha != self.sha256:
+                raise KnowledgeBaseMismatch(
+                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
+                )
+        if not isinstance(x_hat, Tensor) or not x_hat.is_complex() or x_hat.dim() != 2:
+            raise ValueError(
+                f"x_hat must be [batch, num_symbols] complex64, got {getattr(x_hat, 'shape', type(x_hat))}"
+            )
+        if x_hat.shape[1] != meta.num_symbols:
+            raise ValueError(
+                f"x_hat must have {meta.num_symbols} symbols per image (meta), got {x_hat.shape[1]}"
+            )
+        b = x_hat.shape[0]
+        cfg = self.model.cfg
+        snr = self._snr(snr_db, b)
+        hf, wf = math.ceil(meta.height / 4), math.ceil(meta.width / 4)
+        m = meta.num_channels
+        x_hat = x_hat.to(torch.complex64)
+        with torch.no_grad():
+            if meta.positions is None:
+                z = symbols_to_features(x_hat, m, cfg.num_complex_channels, hf, wf)
+            else:
+                pos = meta.positions
+                k = pos.shape[1]
+                sent = symbols_to_features(x_hat, m, m, k, 1)[:, :, :, 0]  # [b, 2m, k]
+                z = torch.zeros(b, 2 * m, hf * wf)
+                z.scatter_(2, pos[:, None, :].expand(b, 2 * m, k), sent)
+                z = F.pad(
+                    z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (cfg.num_complex_channels - m))
+                )
+            y = self.model.decoder(z, side_info(snr, m, cfg.num_complex_channels, b))
+        return y[:, :, : meta.height, : meta.width].clamp(0, 1)
+
+
+def load_codec(path: str | os.PathLike | None = None) -> Codec:
+    """Load a codec checkpoint (None = the shipped default, offline).
+
+    Raises FileNotFoundError when missing and ValueError (one line) when corrupt.
+    """
+    p = DEFAULT_CHECKPOINT if path is None else Path(path)
+    model, card = load_checkpoint(p)
+    return Codec(model, card, p)

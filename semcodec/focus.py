@@ -1,0 +1,116 @@
+"""On-demand object focus (paper section 3.2): which feature positions serve the demand.
+
+The demand is K objects with masks ``mask_j`` and weights ``lambda_j``; the demand score
+is the weighted masked reconstruction quality
+
+    S(f) = - sum_pixels W * (decode(f) - x)^2 / sum_pixels W,   W = sum_j lambda_j mask_j,
+
+and the importance of feature position p is its Grad-CAM-style attribution
+``sum_c f_pc * dS/df_pc``, averaged along the path ``alpha * f`` (alpha in (0, 1], i.e.
+integrated gradients, so the attributions add up to S(f) - S(0)). Positions are ranked by
+it and only the top ones are sent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+from torch.nn import functional as F
+
+from semcodec.model import JSCCModel, side_info
+
+PATH_STEPS = (0.25, 0.5, 0.75, 1.0)
+
+
+def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int) -> Tensor:
+    """W = sum_j lambda_j mask_j / sum_j lambda_j: [batch, 1, height, width] float32 in [0, 1].
+
+    Args:
+        mask: [batch, K, height, width], [batch, height, width] or [batch, 1, height, width],
+            values in [0, 1] (tensor or numpy).
+        demand_weights: None (equal), K weights, or [batch, K] (or [batch] when K = 1).
+    """
+    m = torch.as_tensor(
+        np.asarray(mask) if not isinstance(mask, Tensor) else mask, dtype=torch.float32
+    )
+    if m.dim() == 3:
+        m = m[:, None]
+    if m.dim() != 4 or m.shape[0] != batch or tuple(m.shape[2:]) != (height, width):
+        raise ValueError(
+            f"mask must be [batch={batch}, K, {height}, {width}], got shape {tuple(m.shape)}"
+        )
+    if not torch.isfinite(m).all() or m.min() < 0 or m.max() > 1:
+        raise ValueError("mask values must be in [0, 1]")
+    k = m.shape[1]
+    if demand_weights is None:
+        lam = torch.ones(batch, k)
+    else:
+        lam = torch.as_tensor(np.asarray(demand_weights, dtype=np.float32)).reshape(-1)
+        if lam.numel() == k:
+            lam = lam.reshape(1, k).expand(batch, k)
+        elif lam.numel() == batch * k:
+            lam = lam.reshape(batch, k)
+        else:
+            raise ValueError(
+                f"demand_weights must have K={k} or batch*K={batch * k} values, got {lam.numel()}"
+            )
+        if not torch.isfinite(lam).all() or (lam < 0).any() or (lam.sum(dim=1) <= 0).any():
+            raise ValueError("demand_weights must be >= 0 with a positive sum per image")
+    w = (m * lam[:, :, None, None]).sum(dim=1, keepdim=True) / lam.sum(dim=1).reshape(
+        batch, 1, 1, 1
+    )
+    empty = w.flatten(1).sum(dim=1) <= 0
+    if empty.any():  # object not visible: fall back to the whole image
+        w[empty] = 1.0
+    return w
+
+
+def demand_heatmap(
+    model: JSCCModel,
+    xp: Tensor,
+    feat: Tensor,
+    snr_db: Tensor,
+    mask,
+    demand_weights,
+    size: tuple[int, int],
+) -> Tensor:
+    """Importance of each feature position for the demand.
+
+    Args:
+        xp: [batch, 3, H4, W4] padded images; feat: [batch, 2*C, H4/4, W4/4] encoder output.
+        snr_db: [batch]; size: (height, width) of the unpadded images.
+    Returns:
+        [batch, H4/4, W4/4] float32, larger = serves the demand more.
+    """
+    b, c2 = feat.shape[:2]
+    h, w = size
+    wmap = demand_weight_map(mask, demand_weights, b, h, w)
+    wmap = F.pad(wmap, (0, xp.shape[3] - w, 0, xp.shape[2] - h))
+    side = side_info(snr_db, c2 // 2, c2 // 2, b)
+    base = feat.detach()
+    grad_sum = torch.zeros_like(base)
+    with torch.enable_grad():
+        for alpha in PATH_STEPS:
+            f = (alpha * base).requires_grad_(True)
+            y = model.decoder(f, side)
+            score = -((wmap * (y - xp) ** 2).flatten(1).sum(1) / wmap.flatten(1).sum(1)).sum()
+            (g,) = torch.autograd.grad(score, f)
+            grad_sum += g
+    heat = (base * grad_sum / len(PATH_STEPS)).sum(dim=1).clamp_min(0)  # [batch, hf, wf]
+    # tie-break toward the object where attributions vanish
+    pooled = F.avg_pool2d(wmap, 4)[:, 0]
+    return (
+        heat
+        + 1e-6 * pooled * heat.flatten(1).amax(1).clamp_min(1e-12)[:, None, None]
+        + 1e-12 * pooled
+    )
+
+
+def select_positions(heat: Tensor, k: int) -> Tensor:
+    """Top-k positions of each heat map, sorted ascending: [batch, k] int64 (row-major indices)."""
+    b = heat.shape[0]
+    flat = heat.reshape(b, -1)
+    if not 1 <= k <= flat.shape[1]:
+        raise ValueError(f"k (positions to send) must be in [1, {flat.shape[1]}], got {k}")
+    return flat.topk(k, dim=1).indices.sort(dim=1).values
