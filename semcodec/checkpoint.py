@@ -62,12 +62,23 @@ def save_checkpoint(path: str | os.PathLike, model: JSCCModel, card: dict | None
     os.close(fd)
     try:
         save_file(state, tmp, metadata={CARD_KEY: json.dumps(full, sort_keys=True)})
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
     return sha
+
+
+def write_card_json(checkpoint_path: str | os.PathLike) -> Path:
+    """Write the checkpoint's model card beside it as ``<name>.card.json`` (for people and diffs)."""
+    checkpoint_path = Path(checkpoint_path)
+    with safe_open(str(checkpoint_path), framework="pt") as f:
+        card = json.loads((f.metadata() or {})[CARD_KEY])
+    out = checkpoint_path.with_name(checkpoint_path.name.replace(".safetensors", "") + ".card.json")
+    out.write_text(json.dumps(card, indent=2, sort_keys=True) + "\n")
+    return out
 
 
 def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
