@@ -173,6 +173,8 @@ class ViewLinks:
     snr_db: dict[int, float]
     outage: set[int] = field(default_factory=set)
     info: dict = field(default_factory=dict)
+    zf_links: dict[int, object] = field(default_factory=dict)
+    """The same channels with a zero-forcing equaliser (unbiased symbols for QAM LLRs)."""
 
 
 def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewLinks:
@@ -181,7 +183,9 @@ def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewL
 
     idx = [int(i) for i in indices]
     if cfg.channel in ("awgn", "rayleigh"):
-        link = phy.FlatLink(phy.make_channel(cfg.channel), csi="perfect", equalizer="mmse")
+        channel = phy.make_channel(cfg.channel)
+        link = phy.FlatLink(channel, csi="perfect", equalizer="mmse")
+        zf = phy.FlatLink(channel, csi="perfect", equalizer="zf")
         return ViewLinks(
             {i: link for i in idx},
             {i: float(cfg.snr_db) for i in idx},
@@ -190,17 +194,21 @@ def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewL
                 "csi": "perfect",
                 "equalizer": "mmse",
                 "fading": "block (one h per view)" if cfg.channel == "rayleigh" else None,
+                "digital_equalizer": "zf",
             },
+            zf_links={i: zf for i in idx},
         )
     ch = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
     gain = ch.path_gain_db
     ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
-    links, snrs, outage = {}, {}, set()
+    links, snrs, outage, zf_links = {}, {}, set(), {}
     for k, i in enumerate(idx):
         if ch.outage[k]:
             outage.add(i)
             continue
-        links[i] = phy.FlatLink(PerPositionChannel(ch.h[k]), csi="perfect", equalizer="mmse")
+        channel = PerPositionChannel(ch.h[k])
+        links[i] = phy.FlatLink(channel, csi="perfect", equalizer="mmse")
+        zf_links[i] = phy.FlatLink(channel, csi="perfect", equalizer="zf")
         snrs[i] = float(cfg.snr_db + gain[k] - ref)
     info = {
         "channel": "raytraced",
@@ -213,7 +221,7 @@ def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewL
         "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
         "stats": ch.stats,
     }
-    return ViewLinks(links, snrs, outage, info)
+    return ViewLinks(links, snrs, outage, info, zf_links)
 
 
 # ----------------------------------------------------------------------------- stages
@@ -339,7 +347,7 @@ def transmit_digital_views(
     for k, v in enumerate(view_ids):
         res = semcodec.transmit_digital(
             _to_nchw(images[k : k + 1]),
-            links.links[v],
+            links.zf_links.get(v, links.links[v]),
             links.snr_db[v],
             int(budgets[k]),
             mcs=cfg.mcs,

@@ -1,0 +1,161 @@
+"""`osnerf run` end to end on the tiny scene, its bad-input errors, the knowledge-base refusal
+and resuming from cached stages. The codec is whatever checkpoint exists: the shipped
+default if present, else an untrained registered architecture (the pipeline must not
+depend on the weights)."""
+
+import base64
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import semcodec
+from osnerf.cli import main
+
+SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--max-seconds", "2"]
+
+
+def _checkpoint(path, seed):
+    torch.manual_seed(seed)
+    model = semcodec.make_model(sorted(semcodec.MODELS)[0])
+    semcodec.save_checkpoint(path, model, {"name": f"untrained-{seed}"})
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def env(tmp_path_factory):
+    root = tmp_path_factory.mktemp("run")
+    default = semcodec.DEFAULT_CHECKPOINT
+    codec = str(default) if default.exists() else _checkpoint(root / "a.safetensors", 0)
+    other = _checkpoint(root / "b.safetensors", 1)
+    return {"root": root, "codec": codec, "other": other, "cache": str(root / "cache")}
+
+
+def _run(env, out, *extra):
+    return main(
+        [
+            "run",
+            "--scene",
+            "tiny",
+            "--codec",
+            env["codec"],
+            "--cache-dir",
+            env["cache"],
+            "--out",
+            str(out),
+            *SMALL,
+            *extra,
+        ]
+    )
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--scene", "atlantis"], "known scenes: firefighter"),
+        (["--demand", "crate,piano"], "known objects: crate, post, cable"),
+        (["--channel", "carrier-pigeon"], "channel must be one of awgn, rayleigh, raytraced"),
+        (["--schemes", "jscc,telepathy"], "schemes must be a subset"),
+        (["--snr-db", "55"], "outside the codec's range"),
+    ],
+)
+def test_bad_input_is_one_clear_line_and_no_report(env, tmp_path, capsys, args, message):
+    out = tmp_path / "bad"
+    assert (
+        main(
+            [
+                "run",
+                "--scene",
+                "tiny",
+                "--codec",
+                env["codec"],
+                "--cache-dir",
+                env["cache"],
+                "--out",
+                str(out),
+                *SMALL,
+                *args,
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1]
+    assert not (out / "report.json").exists()
+    assert not (out / "cache").exists() or not any((out / "cache").rglob("*.npz"))  # no heavy work
+
+
+def test_demand_no_camera_sees(env, tmp_path, capsys):
+    out = tmp_path / "hidden"
+    assert _run(env, out, "--demand", "cable") == 2
+    assert "no drone camera sees the demanded object(s) cable" in capsys.readouterr().err
+    assert not (out / "report.json").exists()
+
+
+def test_knowledge_base_mismatch_is_refused(env, tmp_path, capsys):
+    out = tmp_path / "kb"
+    assert _run(env, out, "--receiver-codec", env["other"]) == 2
+    assert "knowledge-base mismatch" in capsys.readouterr().err
+    assert not (out / "report.json").exists()
+
+
+def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
+    out = tmp_path / "tiny"
+    schemes = "jscc,digital,full,gt"
+    assert (
+        _run(env, out, "--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3")
+        == 0
+    )
+    report = json.loads((out / "report.json").read_text())
+    for key in (
+        "config",
+        "seed",
+        "git_commit",
+        "versions",
+        "schemes",
+        "scu_decisions",
+        "views",
+        "link",
+    ):
+        assert key in report
+    assert report["seed"] == 3 and report["config"]["scene"] == "tiny"
+    assert list(report["schemes"]) == schemes.split(",")
+    views = report["views"]
+    sent = set(views["sent_on_demand"])
+    assert sent and sent <= set(views["candidates"])
+    assert not sent & {int(k) for k in views["not_sent"]}  # skipped views were never sent
+    for name, s in report["schemes"].items():
+        assert 0 < s["psnr"] < 60 and -1 <= s["ssim"] <= 1, name
+        assert s["psnr_object"] is None or 0 < s["psnr_object"] < 60, name
+        assert set(s["seconds"]) >= {"encode", "air", "decode", "nerf"}
+        assert s["seconds"]["air"] == pytest.approx(s["symbols_sent"] / 1e6)
+    sch = report["schemes"]
+    assert sch["gt"]["symbols_sent"] == 0 and sch["gt"]["views_sent"] == len(sent)
+    assert sch["jscc"]["views_sent"] == len(sent) and sch["full"]["views_sent"] == len(
+        views["candidates"]
+    )
+    assert sch["jscc"]["symbols_sent"] < sch["full"]["symbols_sent"]
+    assert sch["digital"]["symbols_sent"] == sch["jscc"]["symbols_sent"]  # same budget per view
+    stages = {d["stage"] for d in report["scu_decisions"]}
+    assert {"collector", "knowledge_base", "rate", "encoder", "renderer"} <= stages
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 3
+    png = html.split("data:image/png;base64,")[1].split('"')[0]
+    assert base64.b64decode(png)[:8] == b"\x89PNG\r\n\x1a\n"
+    # the received views the on-demand NeRF trained on are exactly the sent ones
+    rx = json.loads((out / "received" / "jscc" / "transforms.json").read_text())
+    assert len(rx["frames"]) == len(sent)
+
+    # resume: the same command reuses every cached stage and reports the same numbers
+    caches = sorted((out / "cache").rglob("*.npz"))
+    stamps = [p.stat().st_mtime_ns for p in caches]
+    assert (
+        _run(env, out, "--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3")
+        == 0
+    )
+    again = json.loads((out / "report.json").read_text())
+    assert [p.stat().st_mtime_ns for p in caches] == stamps
+    for name in sch:
+        assert again["schemes"][name]["psnr"] == sch[name]["psnr"]
+        assert np.isclose(again["schemes"][name]["seconds"]["nerf"], sch[name]["seconds"]["nerf"])
