@@ -30,6 +30,7 @@ from phy.conventions import (  # noqa: E402
     snr_db_to_noise_var,
     validate_snr_db,
 )
+from phy.frame import FrameConfig, FrameResult, build_frame, find_frames, receive_frame  # noqa: E402
 from phy.link import FlatLink, LinkOutput, OFDMLink  # noqa: E402
 from phy.modulation import (  # noqa: E402
     MODULATIONS,
@@ -69,6 +70,8 @@ __all__ = [
     "Channel",
     "ChannelOutput",
     "FlatLink",
+    "FrameConfig",
+    "FrameResult",
     "LinkOutput",
     "MODULATIONS",
     "OFDMLink",
@@ -78,9 +81,11 @@ __all__ = [
     "TDLChannel",
     "ber_theory",
     "bits_per_symbol",
+    "build_frame",
     "constellation",
     "demap_hard",
     "extract_data",
+    "find_frames",
     "hard_decision",
     "interpolation_matrix",
     "ls_channel_estimate",
@@ -101,6 +106,7 @@ __all__ = [
     "parse_cbr",
     "post_equalization_snr",
     "power_normalize",
+    "receive_frame",
     "require_llvm",
     "snr_db_to_ebno_db",
     "snr_db_to_noise_var",

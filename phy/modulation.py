@@ -1,14 +1,16 @@
 """Gray-coded constellations (sionna.phy's), bit mapping and hard decisions.
 
-The points and their bit labels come from ``sionna.phy.mapping.Constellation`` (BPSK =
-2-PAM, QPSK/16-QAM/64-QAM as in 3GPP 38.211, unit average energy), so uncoded and coded
-chains use exactly the same mapping. Point ``i`` carries the bits of ``i`` MSB first.
+The points and their bit labels are those of ``sionna.phy.mapping.Constellation`` (BPSK =
+2-PAM, QPSK/16-QAM/64-QAM as in 3GPP 38.211, unit average energy; a test checks equality),
+so uncoded and coded chains use the same mapping. They are computed here so that mapping
+does not import sionna (about 3 s). Point ``i`` carries the bits of ``i`` MSB first.
 """
 
 from __future__ import annotations
 
 import functools
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -23,14 +25,26 @@ def bits_per_symbol(modulation: str) -> int:
         raise KeyError(f"unknown modulation {modulation!r}; known: {list(MODULATIONS)}") from None
 
 
+def _pam_gray(bits: np.ndarray) -> np.ndarray:
+    """3GPP 38.211 amplitude of Gray-labelled PAM: (1 - 2 b0) (2**(n-1) - pam(b1..)), [..., n] -> [...]."""
+    n = bits.shape[-1]
+    if n == 1:
+        return 1.0 - 2.0 * bits[..., 0]
+    return (1.0 - 2.0 * bits[..., 0]) * (2 ** (n - 1) - _pam_gray(bits[..., 1:]))
+
+
 @functools.cache
 def _points(modulation: str) -> Tensor:
-    from sionna.phy.mapping import Constellation  # slow import: only when needed
-
+    """sionna.phy.mapping.Constellation's points (equality checked in the tests), without
+    importing sionna: I from the even bits, Q from the odd bits, unit mean energy."""
     k = bits_per_symbol(modulation)
-    kind = "pam" if modulation == "bpsk" else "qam"
-    pts = Constellation(kind, k, precision="single", device="cpu").points
-    return pts.detach().to(torch.complex64).clone()
+    labels = (np.arange(2**k)[:, None] >> np.arange(k - 1, -1, -1)[None, :]) & 1  # [M, k] MSB first
+    if modulation == "bpsk":
+        pts = _pam_gray(labels).astype(np.complex128)
+    else:
+        pts = _pam_gray(labels[:, 0::2]) + 1j * _pam_gray(labels[:, 1::2])
+    pts = pts / np.sqrt(np.mean(np.abs(pts) ** 2))
+    return torch.tensor(pts, dtype=torch.complex64)
 
 
 def constellation(modulation: str) -> Tensor:

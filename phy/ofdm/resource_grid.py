@@ -28,7 +28,7 @@ class ResourceGrid:
     Attributes:
         fft_size: FFT size (number of subcarriers), in [8, 4096].
         cp_length: cyclic prefix in samples, in [0, fft_size].
-        num_ofdm_symbols: OFDM symbols per slot, in [1, 1000].
+        num_ofdm_symbols: OFDM symbols per slot, in [1, 100000].
         num_guard_carriers: (lower, upper) unused carriers at the band edges.
         dc_null: leave the DC carrier empty.
         pilot_ofdm_symbols: OFDM symbols (0-based) that carry pilots; must be non-empty
@@ -53,9 +53,9 @@ class ResourceGrid:
             raise ValueError(
                 f"cp_length must be an integer in [0, fft_size={self.fft_size}], got {self.cp_length!r}"
             )
-        if not isinstance(self.num_ofdm_symbols, int) or not 1 <= self.num_ofdm_symbols <= 1000:
+        if not isinstance(self.num_ofdm_symbols, int) or not 1 <= self.num_ofdm_symbols <= 100_000:
             raise ValueError(
-                f"num_ofdm_symbols must be an integer in [1, 1000], got {self.num_ofdm_symbols!r}"
+                f"num_ofdm_symbols must be an integer in [1, 100000], got {self.num_ofdm_symbols!r}"
             )
         g = tuple(self.num_guard_carriers)
         if (
@@ -99,7 +99,7 @@ class ResourceGrid:
         """Time-domain samples of one slot."""
         return self.num_ofdm_symbols * self.symbol_length
 
-    @property
+    @functools.cached_property
     def used_subcarriers(self) -> np.ndarray:
         """Centred indices of the carriers that carry pilots or data, ascending."""
         lo, hi = self.num_guard_carriers
@@ -108,7 +108,7 @@ class ResourceGrid:
             k = k[k != self.fft_size // 2]
         return k
 
-    @property
+    @functools.cached_property
     def pilot_subcarriers(self) -> np.ndarray:
         used = self.used_subcarriers
         idx = np.unique(
@@ -136,7 +136,17 @@ class ResourceGrid:
         m[:, self.used_subcarriers] = True
         return m & ~self.pilot_mask
 
-    @property
+    @functools.cached_property
+    def data_index(self) -> Tensor:
+        """[num_data_symbols] int64 positions of the data in the flattened grid (row-major)."""
+        return torch.nonzero(self.data_mask.reshape(-1)).squeeze(1)
+
+    @functools.cached_property
+    def pilot_index(self) -> Tensor:
+        """[num_pilots] int64 positions of the pilots in the flattened grid (row-major)."""
+        return torch.nonzero(self.pilot_mask.reshape(-1)).squeeze(1)
+
+    @functools.cached_property
     def num_data_symbols(self) -> int:
         """Data resource elements per slot."""
         used = self.used_subcarriers.size * self.num_ofdm_symbols
@@ -196,5 +206,7 @@ def extract_data(y: Tensor, grid: ResourceGrid) -> Tensor:
             f"y must be [batch, k * {grid.num_ofdm_symbols}, {grid.fft_size}], got {tuple(y.shape)}"
         )
     slots = t // grid.num_ofdm_symbols
-    y = y.reshape(b, slots, grid.num_ofdm_symbols, f)
-    return y[:, :, grid.data_mask.to(y.device)].reshape(b, slots * grid.num_data_symbols)
+    y = y.reshape(b, slots, grid.num_ofdm_symbols * f)
+    return y.index_select(-1, grid.data_index.to(y.device)).reshape(
+        b, slots * grid.num_data_symbols
+    )

@@ -59,6 +59,15 @@ def test_constellations_have_unit_energy_and_gray_labels(mod):
 
 
 @pytest.mark.parametrize("mod", MODS)
+def test_constellation_equals_sionnas(mod):
+    from sionna.phy.mapping import Constellation
+
+    kind = "pam" if mod == "bpsk" else "qam"
+    ref = Constellation(kind, bits_per_symbol(mod), precision="single", device="cpu").points
+    torch.testing.assert_close(constellation(mod), ref.to(torch.complex64), atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("mod", MODS)
 def test_map_then_demap_noiseless_is_identity(mod):
     bits = torch.randint(
         0, 2, (3, 60 * bits_per_symbol(mod)), generator=torch.Generator().manual_seed(0)
