@@ -4,8 +4,9 @@ The frame (preamble, pilots, OFDM, synchronisation, equalisation) is ``phy``'s
 (``phy.FrameConfig``, ``build_frame``, ``find_frames``, ``receive_frame``). This module
 adds what the radio link needs around it:
 
-* each frame starts with a 16-bit frame number, BPSK, repeated ``header_repeat`` times,
-  so frames can be lost or found out of order without mixing up images;
+* each frame starts with a header (12-bit frame number + 4-bit check, BPSK, the word
+  repeated ``header_repeat`` times), so frames can be lost or found out of order without
+  mixing up images, and a corrupted header drops its frame instead of misplacing it;
 * PAPR control (``phy.clip_papr``) and one scale for all frames so the clip level is
   exactly full scale: a frame of unit-power symbols has mean power ``-max_papr_db`` dBFS
   and the int8 DAC never clips;
@@ -28,6 +29,7 @@ from hil.errors import HilError
 from hil.sigmf_io import Annotation, write_sigmf
 
 HEADER_BITS = 16
+MAX_FRAMES = 4096  # 12-bit frame numbers (+ a 4-bit check)
 ERASED_NOISE_VAR = 1e3  # noise variance reported for symbols of lost frames (an erasure)
 
 
@@ -44,16 +46,21 @@ class OtaConfig:
             ``-max_papr_db`` dBFS so the clipped peak is full scale.
         gap_samples: silence before, between and after frames, samples.
         rx_margin_samples: extra samples captured after the burst.
+        detection_threshold: preamble (Schmidl-Cox) metric that counts as a frame, in
+            (0, 1). The metric of a clean preamble is about (snr / (1 + snr))^2: 0.25 at
+            0 dB, so the default 0.2 still finds frames there; false alarms are rejected by
+            phy's training-symbol checks and by the frame number.
         lna_gain_db, vga_gain_db, txvga_gain_db: radio gains (quantised by the driver).
     """
 
     sample_rate_hz: float = 4e6
     center_freq_hz: float = 2.45e9
     symbols_per_frame: int = 2048
-    header_repeat: int = 4
+    header_repeat: int = 8
     max_papr_db: float = 9.0
     gap_samples: int = 2000
     rx_margin_samples: int = 20000
+    detection_threshold: float = 0.2
     lna_gain_db: float = 16
     vga_gain_db: float = 24
     txvga_gain_db: float = 30
@@ -71,6 +78,10 @@ class OtaConfig:
             )
         if not 3.0 <= self.max_papr_db <= 20.0:
             raise ValueError(f"max_papr_db must be in [3, 20] dB, got {self.max_papr_db!r}")
+        if not 0 < self.detection_threshold < 1:
+            raise ValueError(
+                f"detection_threshold must be in (0, 1), got {self.detection_threshold!r}"
+            )
         if self.gap_samples < 0 or self.rx_margin_samples < 0:
             raise ValueError("gap_samples and rx_margin_samples must be >= 0")
 
@@ -84,24 +95,36 @@ class OtaConfig:
         return HEADER_BITS * self.header_repeat
 
 
+def _check_nibble(number: int) -> int:
+    return (number ^ (number >> 4) ^ (number >> 8) ^ 0x5) & 0xF
+
+
 def header_symbols(frame_number: int, repeat: int) -> np.ndarray:
-    """The frame number as BPSK (+1 for a 0 bit), LSB first, each bit ``repeat`` times.
+    """The frame header: 12-bit frame number + 4-bit check, BPSK (+1 for a 0 bit), LSB first.
+
+    The 16-bit word is sent ``repeat`` times in a row (not bit by bit), so the copies land on
+    different subcarriers and OFDM symbols and fade independently.
 
     Returns:
         [16 * repeat] complex64.
     """
-    if not 0 <= int(frame_number) < 2**HEADER_BITS:
-        raise ValueError(f"frame_number must be in [0, {2**HEADER_BITS - 1}], got {frame_number!r}")
-    bits = (int(frame_number) >> np.arange(HEADER_BITS)) & 1
-    return np.repeat(1.0 - 2.0 * bits, repeat).astype(np.complex64)
+    if not 0 <= int(frame_number) < MAX_FRAMES:
+        raise ValueError(f"frame_number must be in [0, {MAX_FRAMES - 1}], got {frame_number!r}")
+    word = int(frame_number) | (_check_nibble(int(frame_number)) << 12)
+    bits = (word >> np.arange(HEADER_BITS)) & 1
+    return np.tile(1.0 - 2.0 * bits, repeat).astype(np.complex64)
 
 
-def decode_header(x_hat: np.ndarray, repeat: int) -> int:
-    """Inverse of :func:`header_symbols` from equalised symbols (soft-combined repeats)."""
-    soft = (
-        np.real(np.asarray(x_hat)[: HEADER_BITS * repeat]).reshape(HEADER_BITS, repeat).sum(axis=1)
-    )
-    return int(np.sum((soft < 0).astype(np.int64) << np.arange(HEADER_BITS)))
+def decode_header(x_hat: np.ndarray, repeat: int, noise_var=None) -> int | None:
+    """Inverse of :func:`header_symbols`: soft-combines the copies (weighted by 1/noise_var);
+    None when the check nibble does not match (a corrupted header)."""
+    n = HEADER_BITS * repeat
+    x = np.real(np.asarray(x_hat)[:n]).astype(np.float64)
+    w = 1.0 if noise_var is None else 1.0 / np.maximum(np.asarray(noise_var, np.float64)[:n], 1e-6)
+    soft = (x * w).reshape(repeat, HEADER_BITS).sum(axis=0)
+    word = int(np.sum((soft < 0).astype(np.int64) << np.arange(HEADER_BITS)))
+    number = word & (MAX_FRAMES - 1)
+    return number if (word >> 12) == _check_nibble(number) else None
 
 
 def _np(x) -> np.ndarray:
@@ -114,10 +137,11 @@ class PhyFrames:
     """``phy``'s over-the-air frame (FrameConfig, build_frame, find_frames, receive_frame).
 
     Args:
-        frame_config: a ``phy.FrameConfig`` (None: phy's default for ``sample_rate_hz``).
+        frame_config: a ``phy.FrameConfig``; None builds one from ``frame_kwargs``
+            (e.g. ``sample_rate_hz``, ``detection_threshold``).
     """
 
-    def __init__(self, frame_config=None, sample_rate_hz: float | None = None):
+    def __init__(self, frame_config=None, **frame_kwargs):
         import phy
 
         missing = [
@@ -130,16 +154,7 @@ class PhyFrames:
                 f"phy's frame API is not in this checkout (missing phy.{', phy.'.join(missing)})"
             )
         self.phy = phy
-        if frame_config is None:
-            try:
-                frame_config = (
-                    phy.FrameConfig(sample_rate_hz=sample_rate_hz)
-                    if sample_rate_hz
-                    else phy.FrameConfig()
-                )
-            except TypeError:
-                frame_config = phy.FrameConfig()
-        self.cfg = frame_config
+        self.cfg = frame_config if frame_config is not None else phy.FrameConfig(**frame_kwargs)
 
     def build(self, symbols: np.ndarray) -> np.ndarray:
         import torch
@@ -241,6 +256,10 @@ def build_burst(
     for b, block in enumerate(blocks):
         block = np.asarray(block, np.complex64).reshape(-1)
         for offset in range(0, max(len(block), 1), cfg.symbols_per_frame):
+            if number >= MAX_FRAMES:
+                raise ValueError(
+                    f"blocks need more than {MAX_FRAMES} frames; send fewer or larger frames"
+                )
             chunk = block[offset : offset + cfg.symbols_per_frame]
             data = np.zeros(cfg.symbols_per_frame, np.complex64)
             data[: len(chunk)] = chunk
@@ -312,8 +331,8 @@ def receive_burst(
             continue
         sym = _np(res.symbols).reshape(-1).astype(np.complex64)
         nv = np.broadcast_to(_np(res.noise_var).astype(np.float32).reshape(-1), sym.shape)
-        number = decode_header(sym, cfg.header_repeat)
-        if number >= len(reports) or reports[number].detected:
+        number = decode_header(sym, cfg.header_repeat, nv)
+        if number is None or number >= len(reports) or reports[number].detected:
             continue  # a corrupted header or a duplicate detection
         rep = reports[number]
         rep.detected = True
@@ -340,7 +359,9 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
         :class:`BurstResult`.
     """
     cfg = cfg or OtaConfig()
-    frames = frames or PhyFrames(sample_rate_hz=cfg.sample_rate_hz)
+    frames = frames or PhyFrames(
+        sample_rate_hz=cfg.sample_rate_hz, detection_threshold=cfg.detection_threshold
+    )
     for dev in (tx, rx):
         _configure(dev, cfg)
     burst, reports, layout = build_burst(blocks, cfg, frames)

@@ -85,6 +85,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--max-papr-db", type=float, default=9.0, help="PAPR clip; mean power is -PAPR dBFS"
     )
     p.add_argument("--symbols-per-frame", type=int, default=2048, help="data symbols per frame")
+    p.add_argument(
+        "--detection-threshold",
+        type=float,
+        default=0.2,
+        help="preamble metric that counts as a frame, in (0, 1) (default 0.2: finds frames at 0 dB)",
+    )
 
 
 # ----------------------------------------------------------------------------- parsing
@@ -337,6 +343,7 @@ def run(args: argparse.Namespace) -> int:
         center_freq_hz=args.center_freq_hz,
         max_papr_db=args.max_papr_db,
         symbols_per_frame=args.symbols_per_frame,
+        detection_threshold=args.detection_threshold,
     )
     names, images = load_images(args.images, args.size, args.max_images)
     out = Path(args.out)

@@ -75,17 +75,23 @@ def pair(snr_db=20.0, seed=0):
     return cfg, tx, rx
 
 
-def test_header_round_trip_and_soft_combining():
+def test_header_round_trip_soft_combining_and_check():
     rng = np.random.default_rng(0)
-    for n in (0, 1, 777, 65535):
+    for n in (0, 1, 777, 4095):
         h = header_symbols(n, 4)
         assert h.shape == (64,) and decode_header(h, 4) == n
-        noisy = (
-            h + (rng.standard_normal(64) + 1j * rng.standard_normal(64)) * 0.5
-        )  # 3 dB, 4 repeats
+        noisy = h + (rng.standard_normal(64) + 1j * rng.standard_normal(64)) * 0.5  # 3 dB, 4 copies
         assert decode_header(noisy, 4) == n
+    h = header_symbols(5, 1)
+    h[0] = -h[0]  # one flipped bit: the check nibble catches it
+    assert decode_header(h, 1) is None
+    # weighting by 1/noise_var: a loud wrong copy on a faded carrier loses to two good ones
+    h3 = header_symbols(9, 3)
+    h3[:16] = -3 * h3[:16]
+    nv = np.r_[np.full(16, 100.0), np.full(32, 1.0)]
+    assert decode_header(h3, 3) != 9 and decode_header(h3, 3, nv) == 9
     with pytest.raises(ValueError, match="frame_number must be in"):
-        header_symbols(70000, 4)
+        header_symbols(4096, 4)
 
 
 def test_blocks_cross_the_emulated_air(tmp_path):
