@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from osnerf.scenes.city import build_munich
 from osnerf.scenes.compact import build_firefighter, build_tiny
 from osnerf.scenes.spec import SceneInfo
 
@@ -48,5 +49,18 @@ register(
         elevations_deg=(25.0, 45.0),
         fov_deg=45.0,
         min_radius_m=1.6,
+    )
+)
+register(
+    SceneInfo(
+        name="munich",
+        description="the Frauenkirche and its neighbours from sionna-rt's Munich, textured via planar UVs; "
+        "channels ray-traced in the full city",
+        objects=("frauenkirche", "neighbours"),
+        default_demand=("frauenkirche",),
+        build=build_munich,
+        elevations_deg=(25.0, 45.0),
+        fov_deg=40.0,
+        min_radius_m=150.0,
     )
 )

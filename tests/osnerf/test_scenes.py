@@ -31,7 +31,10 @@ def test_registry_lists_scenes_and_rejects_unknown():
         get_scene("atlantis")
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(n, marks=pytest.mark.slow) if n == "munich" else n for n in sorted(SCENES)],
+)
 def test_every_registered_scene_builds_its_objects(name):
     info = get_scene(name)
     geo = info.build()
