@@ -31,7 +31,7 @@ from hil.errors import (
     StreamError,
     UsbTimeoutError,
 )
-from hil.hackrf import HackRF, StreamStats, to_int8_iq
+from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
 from hil.ota import BurstResult, FrameReport, OtaConfig, PhyFrames, save_sigmf, send_blocks
@@ -69,6 +69,7 @@ __all__ = [
     "StreamStats",
     "UsbTimeoutError",
     "default_serial",
+    "find_hackrfs",
     "fractional_resample",
     "iq_imbalance",
     "loopback_pair",

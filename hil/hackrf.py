@@ -156,6 +156,23 @@ def to_int8_iq(samples: np.ndarray) -> np.ndarray:
     return np.clip(np.round(inter), -128, 127).astype(np.int8)
 
 
+def find_hackrfs(backend=None) -> list:
+    """Every HackRF-family board (pyusb ``Device`` objects) on ``backend`` (None: libusb).
+
+    Raises:
+        DeviceNotFoundError: no libusb backend could be loaded.
+    """
+    import usb.core
+
+    try:
+        found = usb.core.find(find_all=True, idVendor=p.VENDOR_ID, backend=backend)
+        return [d for d in found if d.idProduct in p.PRODUCT_IDS]
+    except usb.core.NoBackendError as e:
+        raise DeviceNotFoundError(
+            "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0, or pip install libusb-package)"
+        ) from e
+
+
 class HackRF:
     """A HackRF One (real or emulated) behind one property per knob.
 
@@ -228,13 +245,7 @@ class HackRF:
         import usb.core
         import usb.util
 
-        try:
-            found = list(usb.core.find(find_all=True, idVendor=p.VENDOR_ID, backend=backend))
-        except usb.core.NoBackendError as e:
-            raise DeviceNotFoundError(
-                "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0, or pip install libusb-package)"
-            ) from e
-        found = [d for d in found if d.idProduct in p.PRODUCT_IDS]
+        found = find_hackrfs(backend)
         chosen = None
         for dev in found:
             try:

@@ -33,18 +33,10 @@ def _info_lines(index: int, dev) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    import usb.core
-
-    from hil import DeviceNotFoundError, Emulator, HackRF, HilError, protocol
+    from hil import Emulator, HackRF, HilError, find_hackrfs
 
     backend = Emulator().backend if args.emulate else None
-    try:
-        found = list(usb.core.find(find_all=True, idVendor=protocol.VENDOR_ID, backend=backend))
-    except usb.core.NoBackendError as e:
-        raise DeviceNotFoundError(
-            "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0) or use --emulate"
-        ) from e
-    serials = [d.serial_number for d in found if d.idProduct in protocol.PRODUCT_IDS]
+    serials = [d.serial_number for d in find_hackrfs(backend)]
     if args.serial:
         serials = [s for s in serials if s.endswith(args.serial.lower())]
     print("osnerf hil info (pure pyusb, no libhackrf)")

@@ -223,12 +223,10 @@ def open_pair(args, ota_cfg):
 
 
 def _other_serial(tx_serial: str) -> str:
-    import usb.core
+    from hil import DeviceNotFoundError, find_hackrfs
 
-    from hil import DeviceNotFoundError, protocol
-
-    for d in usb.core.find(find_all=True, idVendor=protocol.VENDOR_ID):
-        if d.idProduct in protocol.PRODUCT_IDS and d.serial_number != tx_serial:
+    for d in find_hackrfs():
+        if d.serial_number != tx_serial:
             return d.serial_number
     raise DeviceNotFoundError(
         "--rx hackrf: only one HackRF found; two are needed (or pass hackrf:SERIAL)"
