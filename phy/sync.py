@@ -84,10 +84,11 @@ def correct_cfo(
     iq: np.ndarray, cfo_subcarriers: float, fft_size: int, start: int = 0
 ) -> np.ndarray:
     """Multiply by ``exp(-2j pi cfo (n - start) / fft_size)``: removes a CFO of ``cfo`` carriers."""
-    n = np.arange(len(iq)) - start
-    return (np.asarray(iq) * np.exp(-2j * np.pi * cfo_subcarriers * n / fft_size)).astype(
-        np.complex64
-    )
+    n = np.arange(len(iq), dtype=np.float64) - start
+    phase = np.mod(n * (-2 * np.pi * cfo_subcarriers / fft_size), 2 * np.pi).astype(np.float32)
+    rot = np.empty(len(iq), dtype=np.complex64)
+    rot.real, rot.imag = np.cos(phase), np.sin(phase)
+    return np.asarray(iq, dtype=np.complex64) * rot
 
 
 def integer_cfo(
