@@ -70,6 +70,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--image-codec", default="avif", help="digital baseline image codec: avif, jpeg, webp"
     )
     p.add_argument(
+        "--nerf-clock",
+        default="wall",
+        help="what --max-seconds counts: wall, or cpu (CPU s / threads; for shared machines)",
+    )
+    p.add_argument(
         "--cache-dir",
         default=None,
         help="rendered-scene cache (default $OSNERF_CACHE or ~/.cache/osnerf)",
@@ -97,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         receiver_codec=args.receiver_codec,
         mcs=args.mcs,
         image_codec=args.image_codec,
+        nerf_clock=args.nerf_clock,
     )
     out = Path(args.out)
     body, pictures = run_pipeline(
