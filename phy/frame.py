@@ -350,20 +350,31 @@ def receive_frame(
     Returns:
         :class:`FrameResult`; ``detected`` is False when no complete frame was found.
     """
-    r = _without_dc(_as_complex_1d(iq, "iq"))
+    raw = _as_complex_1d(iq, "iq")
     if not isinstance(num_symbols, int) or num_symbols < 1:
         raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
     if equalizer not in EQUALIZERS:
         raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
-    if not isinstance(search_from, int) or not 0 <= search_from < max(1, r.size):
-        raise ValueError(f"search_from must be an integer in [0, {r.size}), got {search_from!r}")
+    if not isinstance(search_from, int) or not 0 <= search_from < max(1, raw.size):
+        raise ValueError(f"search_from must be an integer in [0, {raw.size}), got {search_from!r}")
     grid = cfg.data_grid(num_symbols)
     length = cfg.num_samples(num_symbols)
-    for start, cfo in _acquire(r[search_from:], cfg):
+    for start, cfo in _acquire(_without_dc(raw[search_from:]), cfg):
         start += search_from
-        if start + length <= r.size:
+        if start + length <= raw.size:
+            r = raw - _dc_estimate(raw, start, length)
             return _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length)
     return _not_detected(num_symbols)
+
+
+def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
+    """The receiver's DC offset: the mean outside the frame when there are enough such
+    samples (the frame's own mean is not zero once a CFO moves carriers onto DC), else
+    the mean of everything."""
+    outside = r.size - length
+    if outside >= 256:
+        return complex((r[:start].sum() + r[start + length :].sum()) / outside)
+    return complex(r.mean())
 
 
 def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> FrameResult:
@@ -372,20 +383,22 @@ def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> Fra
     _, lts = _preamble(cfg)
     used = grid.used_subcarriers
     pad = cp + s  # room for windows that drift late
+    body = np.arange(3 + grid.num_ofdm_symbols) * s + cp  # [num_ofdm_symbols + 3]
+    no_shift = np.zeros(2, dtype=np.int64)
+
+    # fine CFO from the two long training symbols (preamble only), then one rotation of
+    # the whole frame, then the channel estimate (their average)
+    pre = sync.correct_cfo(r[start : start + cfg.preamble_length], cfo, n)
+    y1, y2 = _windows(pre, body[1:3], no_shift, cfg)
+    cfo += float(np.angle(np.sum(y2[used] * np.conj(y1[used])))) * n / (2 * np.pi * s)
     rc = np.concatenate(
         [sync.correct_cfo(r[start : start + length], cfo, n), np.zeros(pad, np.complex64)]
     )
-    body = np.arange(3 + grid.num_ofdm_symbols) * s + cp  # [num_ofdm_symbols + 3]
-
-    # fine CFO from the two long training symbols, then the channel and noise estimates
-    y1, y2 = _windows(rc, body[1:3], np.zeros(2, dtype=np.int64), cfg)
-    delta = float(np.angle(np.sum(y2[used] * np.conj(y1[used])))) * n / (2 * np.pi * s)
-    rc = sync.correct_cfo(rc, delta, n, start=body[1])
-    cfo += delta
-    y1, y2 = _windows(rc, body[1:3], np.zeros(2, dtype=np.int64), cfg)
+    y1, y2 = _windows(rc, body[1:3], no_shift, cfg)
     h = np.zeros(n, dtype=np.complex128)
     h[used] = (y1[used] + y2[used]) / (2 * lts[used])
-    noise_var = max(float(np.mean(np.abs(y1[used] - y2[used]) ** 2)) / 2, 1e-10)
+    # their difference sees the random noise only (distortions repeat in both copies)
+    lts_noise_var = max(float(np.mean(np.abs(y1[used] - y2[used]) ** 2)) / 2, 1e-10)
 
     # data symbols: pilots -> per-symbol timing drift (line fit) and common phase
     pk = grid.pilot_subcarriers
@@ -412,12 +425,17 @@ def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> Fra
     theta = np.angle(np.sum(z * np.conj(ramp[:, pk]), axis=1))
     h_all = h[None, :] * ramp * np.exp(1j * theta)[:, None]
 
+    # noise seen by the data: pilot residuals (random noise plus distortions that differ
+    # from symbol to symbol: quantisation, I/Q image, ICI), less the channel-estimate error
+    # they include, corrected for the one phase fitted per symbol
+    resid = float(np.mean(np.abs(y[:, pk] - h_all[:, pk] * pilots) ** 2)) / (1 - 1 / pk.size)
+    noise_var = max(lts_noise_var, resid - lts_noise_var / 2)
     x_hat, nv = equalize(
         torch.from_numpy(y.astype(np.complex64))[None],
         torch.from_numpy(h_all.astype(np.complex64))[None],
         noise_var,
         equalizer,
-        estimation_error_var=noise_var / 2,
+        estimation_error_var=lts_noise_var / 2,
     )
     symbols = extract_data(x_hat, grid)[0, :num_symbols].contiguous()
     nv = extract_data(nv, grid)[0, :num_symbols].contiguous()
