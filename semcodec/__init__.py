@@ -21,7 +21,8 @@ from semcodec.checkpoint import (
 )
 from semcodec.codec import DEFAULT_CHECKPOINT, Codec, Encoded, EncodedMeta, check_images, load_codec
 from semcodec.evaluation import SCHEMES
-from semcodec.focus import demand_heatmap, demand_weight_map, select_positions
+from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
+from semcodec.focus_eval import focus_gain, masked_psnr
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
 from semcodec.model import (
     MODELS,
@@ -53,7 +54,10 @@ __all__ = [
     "JSCCConfig",
     "JSCCModel",
     "KnowledgeBaseMismatch",
+    "attribution_box",
     "check_images",
+    "focus_gain",
+    "masked_psnr",
     "demand_heatmap",
     "demand_weight_map",
     "features_to_symbols",

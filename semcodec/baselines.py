@@ -25,7 +25,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from phy import noise_var_to_snr_db, power_normalize
+from phy import noise_var_to_snr_db
 from semcodec.codec import Codec, check_images
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_to_budget
 
@@ -326,12 +326,16 @@ def transmit_analog(
     if flat.shape[1] % 2:
         flat = F.pad(flat, (0, 1), value=float(flat.mean()))
     mean = flat.mean(dim=1, keepdim=True)
-    std = flat.std(dim=1, keepdim=True).clamp_min(1e-6)
-    s = (flat - mean) / std
-    sym = power_normalize(torch.view_as_complex(s.reshape(b, -1, 2).contiguous()))
+    std = flat.std(dim=1, keepdim=True, unbiased=False).clamp_min(1e-6)
+    s = (flat - mean) / std  # unit variance per real value
+    sym = torch.view_as_complex(
+        (s * math.sqrt(0.5)).reshape(b, -1, 2).contiguous()
+    )  # mean |x|^2 = 1
     with torch.no_grad():
         x_hat, nv = _run_link(link, sym, snr_db, generator)
-    est = x_hat / (1.0 + nv)  # LMMSE for a unit-variance source
+    est = (
+        x_hat / (1.0 + nv) * math.sqrt(2.0)
+    )  # LMMSE for a unit-power source, back to unit variance
     v = torch.view_as_real(est.to(torch.complex64)).reshape(b, -1)[:, : src[0].numel()] * std + mean
     rec = v.reshape(src.shape)
     if rec.shape[-2:] != (h, w):

@@ -24,11 +24,13 @@ from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
-from semcodec.focus import demand_heatmap, select_positions
+from semcodec.focus import attribution_box, demand_heatmap, select_positions
 from semcodec.model import JSCCModel, features_to_symbols, side_info, symbols_to_features
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
 MIN_SIDE_PX = 8
+FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
+FOCUS_REL_THRESHOLD = 0.05  # positions with >= 5 % of the peak attribution form the box
 
 
 @dataclass(frozen=True)
@@ -42,7 +44,10 @@ class EncodedMeta:
         num_symbols: complex symbols per image.
         codec_sha256: hash of the transmitter's codec (knowledge base identity).
         positions: [batch, num_positions] int64 indices (row-major on the feature grid) of
-            the sent positions in focus mode, else None (every position sent).
+            the sent positions when the focus budget is below one channel over the object's
+            box, else None.
+        crop: (top, left, height, width) in pixels of the box sent in focus mode (the
+            positions holding the demand's attribution), else None (whole image).
     """
 
     height: int
@@ -52,9 +57,12 @@ class EncodedMeta:
     num_symbols: int
     codec_sha256: str
     positions: Tensor | None = field(default=None, compare=False)
+    crop: tuple[int, int, int, int] | None = None
 
     def side_info_bits(self) -> int:
         """Bits of side information per image for ``positions`` (a bitmap of the grid)."""
+        if self.crop is not None:
+            return 4 * 16
         if self.positions is None:
             return 0
         return math.ceil(self.height / 4) * math.ceil(self.width / 4)
@@ -157,7 +165,8 @@ class Codec:
         Args:
             images: [batch, 3, height, width] float32 in [0, 1] (any size >= 8 px).
             snr_db: float or [batch]: the SNR the transmitter expects (feeds the AF modules).
-            cbr: channel symbols per real source value, in ``cbr_range``.
+            cbr: channel symbols per real source value, in ``cbr_range`` (in focus mode any
+                budget up to the largest CBR: fewer positions are sent).
             mask: optional [batch, K, height, width] (or [batch, height, width]) masks of the K
                 demanded objects, values in [0, 1]: switches on focus mode.
             demand_weights: optional K weights lambda_j (or [batch, K]); default equal.
@@ -175,19 +184,31 @@ class Codec:
             with torch.no_grad():
                 feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
             sym = power_normalize(features_to_symbols(feat, m))
-            positions = None
+            positions = crop = None
         else:
-            self.channels_for_cbr(cbr)  # range check
-            m = cfg.num_complex_channels
-            budget = max(int(round(float(cbr) * 3 * h * w)), m)
-            k = min(budget // m, hf * wf)
+            positions = crop = None
+            lo, hi = self.cbr_range
+            if not (isinstance(cbr, int | float) and 0 < float(cbr) <= hi * 1.001):
+                raise ValueError(f"cbr in focus mode must be in (0, {hi:.4g}], got {cbr!r}")
+            c = cfg.num_complex_channels
             with torch.no_grad():
-                feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
+                feat = self.model.encoder(xp, side_info(snr, c, c, b))
             heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
-            positions = select_positions(heat, k)  # [batch, k]
-            flat = feat.reshape(b, 2 * m, hf * wf)
-            sent = torch.gather(flat, 2, positions[:, None, :].expand(b, 2 * m, k))  # [b, 2m, k]
-            sym = power_normalize(features_to_symbols(sent[:, :, :, None], m))
+            top, left, rows, cols = attribution_box(heat, FOCUS_REL_THRESHOLD)  # feature-grid units
+            budget = max(int(round(float(cbr) * 3 * h * w)), 1)
+            m = min(c, budget // (rows * cols))
+            if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
+                crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
+                xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
+                with torch.no_grad():
+                    fc = self.model.encoder(xc, side_info(snr, m, c, b))
+                sym = power_normalize(features_to_symbols(fc, m))
+            else:  # budget below one channel over the box: the top positions, one channel each
+                m, k = 1, min(budget, hf * wf)
+                positions = select_positions(heat, k)  # [batch, k]
+                flat = feat[:, :2].reshape(b, 2, hf * wf)
+                sent = torch.gather(flat, 2, positions[:, None, :].expand(b, 2, k))  # [b, 2, k]
+                sym = power_normalize(features_to_symbols(sent[:, :, :, None], 1))
         meta = EncodedMeta(
             height=h,
             width=w,
@@ -196,6 +217,7 @@ class Codec:
             num_symbols=int(sym.shape[1]),
             codec_sha256=self.sha256,
             positions=positions,
+            crop=crop,
         )
         return Encoded(sym.to(torch.complex64), meta)
 
@@ -238,6 +260,13 @@ class Codec:
         m = meta.num_channels
         x_hat = x_hat.to(torch.complex64)
         with torch.no_grad():
+            if meta.crop is not None:
+                t, left, ch, cw = meta.crop
+                z = symbols_to_features(x_hat, m, cfg.num_complex_channels, ch // 4, cw // 4)
+                yc = self.model.decoder(z, side_info(snr, m, cfg.num_complex_channels, b))
+                y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
+                y[:, :, t : t + ch, left : left + cw] = yc
+                return y[:, :, : meta.height, : meta.width].clamp(0, 1)
             if meta.positions is None:
                 z = symbols_to_features(x_hat, m, cfg.num_complex_channels, hf, wf)
             else:

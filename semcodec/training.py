@@ -227,10 +227,9 @@ def train(
     val = None
     if val_dir is not None:
         vimgs = load_uint8_images(list_images(val_dir)[:8])
-        side = 256
-        val = torch.stack(
-            [im[:, :side, :side].float() / 255 for im in vimgs if min(im.shape[1:]) >= side]
-        )
+        if vimgs:
+            side = min(256, min(min(im.shape[1:]) for im in vimgs) // 4 * 4)
+            val = torch.stack([im[:, :side, :side].float() / 255 for im in vimgs])
 
     model = make_model(cfg.model)
     if init is not None:

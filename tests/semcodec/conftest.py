@@ -1,0 +1,34 @@
+"""Fixtures of the semcodec tests. The repository root goes first on sys.path so that
+``import semcodec`` is the package, not this folder (pytest's prepend import mode)."""
+
+import sys
+from pathlib import Path
+
+ROOT = str(Path(__file__).resolve().parents[2])
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+import pytest
+import torch
+
+from semcodec import load_codec, make_model, save_checkpoint
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _threads():
+    torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="session")
+def tiny_ckpt(tmp_path_factory):
+    """A randomly initialised small codec saved as a checkpoint (fast, deterministic)."""
+    torch.manual_seed(0)
+    model = make_model("adjscc_s4_w64")
+    path = tmp_path_factory.mktemp("ckpt") / "tiny.safetensors"
+    save_checkpoint(path, model, {"name": "tiny-test"})
+    return path
+
+
+@pytest.fixture(scope="session")
+def tiny_codec(tiny_ckpt):
+    return load_codec(tiny_ckpt)

@@ -1,0 +1,84 @@
+"""Baselines: budget bisection, ideal/analog limits, digital lost image = grey, registry."""
+
+import math
+
+import pytest
+import torch
+
+import phy
+from semcodec import (
+    IMAGE_CODECS,
+    LOST_IMAGE_VALUE,
+    SCHEMES,
+    encode_image,
+    encode_to_budget,
+    transmit_analog,
+    transmit_digital,
+    transmit_ideal,
+)
+from semcodec.evaluation import EvalContext, psnr
+
+
+def _img(seed=0, h=48, w=64):
+    g = torch.Generator().manual_seed(seed)
+    base = torch.rand(1, 3, h // 8, w // 8, generator=g)
+    return torch.nn.functional.interpolate(
+        base, size=(h, w), mode="bilinear", align_corners=False
+    ).clamp(0, 1)
+
+
+@pytest.mark.parametrize("codec", sorted(IMAGE_CODECS))
+def test_budget_bisection_is_maximal(codec):
+    x = _img()[0]
+    budget = 600
+    data, q = encode_to_budget(x, budget, codec)
+    assert data is not None and len(data) <= budget
+    hi = IMAGE_CODECS[codec][2]
+    if q < hi:  # the next quality would not fit
+        assert len(encode_image(x, codec, q + 1)) > budget
+    assert encode_to_budget(x, 10, codec) == (None, None)
+
+
+def test_ideal_budget_is_capacity():
+    x = _img()
+    n = 300
+    res = transmit_ideal(x, 10.0, n)
+    assert res.stats["budget_bits"] == math.floor(n * math.log2(11.0))
+    assert res.stats["bits"] <= res.stats["budget_bits"]
+
+
+def test_analog_is_exact_at_high_snr_and_noisy_at_low():
+    x = _img()
+    link = phy.FlatLink(phy.make_channel("awgn"))
+    g = torch.Generator().manual_seed(0)
+    assert psnr(transmit_analog(x, link, 50.0, generator=g).images, x) > 45
+    low = transmit_analog(x, link, 0.0, generator=g)
+    assert 5 < psnr(low.images, x) < 30
+
+
+def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
+    x = _img(1, 64, 64)
+    n = round(64 * 64 * 3 / 6)
+    link = phy.FlatLink(phy.make_channel("awgn"), equalizer="zf")
+    bad = transmit_digital(
+        x, link, -10.0, n, mcs="64qam-5/6", generator=torch.Generator().manual_seed(0)
+    )
+    assert bad.stats["lost_images"] == 1 and bad.stats["failed_codewords"] >= 1
+    assert torch.all(bad.images == LOST_IMAGE_VALUE)
+    good = transmit_digital(
+        x, link, 30.0, n, mcs="16qam-1/2", generator=torch.Generator().manual_seed(0)
+    )
+    assert good.stats["lost_images"] == 0 and good.stats["failed_codewords"] == 0
+    from phy.digital import payload_capacity_bits
+
+    data, _ = encode_to_budget(x[0], payload_capacity_bits(n, "16qam-1/2") // 8, "avif")
+    assert good.stats["bits"] == 8 * len(data) <= payload_capacity_bits(n, "16qam-1/2")
+    assert psnr(good.images, x) > 25
+
+
+def test_scheme_registry_runs_every_name(tiny_codec):
+    ctx = EvalContext(channel="awgn", codec=tiny_codec)
+    x = _img(2, 32, 32)
+    for name, fn in SCHEMES.items():
+        res = fn(ctx, x, 20.0, 1 / 6, torch.Generator().manual_seed(0))
+        assert res.images.shape == x.shape, name

@@ -1,0 +1,76 @@
+"""Power after normalisation is exactly 1 per image; the SNR the decoder sees is the one applied."""
+
+import math
+
+import pytest
+import torch
+
+import phy
+from semcodec import features_to_symbols
+from semcodec.channel_layers import channel_mask, masked_transmit
+
+
+def test_encoded_power_is_one_per_image(tiny_codec):
+    g = torch.Generator().manual_seed(1)
+    x = torch.rand(3, 3, 32, 48, generator=g)
+    x[1] *= 0.01  # a nearly black image must still get unit power
+    for cbr in (1 / 48, 1 / 16, 1 / 6):
+        enc = tiny_codec.encode(x, 5.0, cbr)
+        p = (enc.symbols.abs() ** 2).mean(dim=1)
+        assert enc.symbols.dtype == torch.complex64
+        torch.testing.assert_close(p, torch.ones(3), rtol=1e-5, atol=1e-5)
+
+
+def test_masked_normalisation_equals_phy_power_normalize():
+    """The per-image variable-rate normalisation used in training == phy.power_normalize of the kept symbols."""
+    g = torch.Generator().manual_seed(2)
+    feat = (
+        torch.randn(3, 16, 5, 7, generator=g) * torch.tensor([1.0, 3.0, 0.2])[:, None, None, None]
+    )
+    m = torch.tensor([1, 3, 8])
+    z, side = masked_transmit(feat, m, torch.full((3,), 60.0), "awgn", g, 8)
+    for i in range(3):
+        want = phy.power_normalize(features_to_symbols(feat[i : i + 1], int(m[i])))
+        got = features_to_symbols(z[i : i + 1], int(m[i]))
+        torch.testing.assert_close(got, want, atol=5e-3, rtol=0)  # noise at 60 dB: std 1e-3
+        assert torch.all(z[i, 2 * int(m[i]) :] == 0)
+    assert side[:, 1].tolist() == pytest.approx([1 / 8, 3 / 8, 1.0])
+
+
+@pytest.mark.parametrize("snr_db", [-3.0, 1.0, 10.0])
+def test_measured_snr_equals_applied(snr_db):
+    """Noise power per complex symbol measured after the training channel layer = 10**(-snr/10) (1 %)."""
+    g = torch.Generator().manual_seed(3)
+    feat = torch.randn(4, 16, 64, 64, generator=g)
+    m = torch.full((4,), 8)
+    ref, _ = masked_transmit(
+        feat, m, torch.full((4,), 200.0 / 4), "awgn", None, 8
+    )  # 50 dB: ~noise-free
+    z, side = masked_transmit(feat, m, torch.full((4,), snr_db), "awgn", g, 8)
+    n = 4 * 8 * 64 * 64  # complex symbols
+    noise_power = float(((z - ref) ** 2).sum()) / n  # per complex symbol (both real dims)
+    signal_power = float((ref**2).sum()) / n
+    want = 10 ** (-snr_db / 10)
+    assert signal_power == pytest.approx(1.0, rel=1e-3)
+    # 4 sigma of the variance estimate over 2n real samples: sqrt(2/(2n))
+    assert noise_power == pytest.approx(want, rel=4 * math.sqrt(1 / n) + 1e-3)
+    assert side[:, 0].tolist() == pytest.approx([snr_db / 10] * 4)
+
+
+def test_measured_snr_through_codec_and_phy_link(tiny_codec):
+    g = torch.Generator().manual_seed(4)
+    x = torch.rand(2, 3, 64, 64, generator=g)
+    enc = tiny_codec.encode(x, 4.0, 1 / 6)
+    link = phy.FlatLink(phy.make_channel("awgn"))
+    out = link(enc.symbols, 4.0, generator=g)
+    err = (out.x_hat - enc.symbols).abs() ** 2
+    n = err.numel()
+    assert float(err.mean()) == pytest.approx(10 ** (-0.4), rel=4 / math.sqrt(n))
+    measured_snr_db = 10 * math.log10(float((enc.symbols.abs() ** 2).mean()) / float(err.mean()))
+    assert measured_snr_db == pytest.approx(4.0, abs=4 * 4.343 / math.sqrt(n))
+
+
+def test_channel_mask_keeps_exactly_m():
+    mask = channel_mask(torch.tensor([1, 3, 8]), 8)[:, :, 0, 0]
+    assert mask.sum(dim=1).tolist() == [2.0, 6.0, 16.0]
+    assert mask[1].tolist() == [1.0] * 6 + [0.0] * 10
