@@ -8,10 +8,10 @@ ROOT = str(Path(__file__).resolve().parents[2])
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-import pytest
-import torch
+import pytest  # noqa: E402
+import torch  # noqa: E402
 
-from semcodec import load_codec, make_model, save_checkpoint
+from semcodec import load_codec, make_model, save_checkpoint  # noqa: E402
 
 
 @pytest.fixture(scope="session", autouse=True)
