@@ -81,6 +81,8 @@ def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         base = {k: v for k, v in (r.get("config") or {}).items() if not isinstance(v, dict | list)}
         base.update(r.get("point") or {})
         base["seed"] = r.get("seed")
+        if r.get("command"):
+            base["command"] = r["command"]
         m = r.get("metrics") or {}
         if isinstance(m.get("results"), list):
             rows += [{**base, **_flat(e)} for e in m["results"] if isinstance(e, dict)]
@@ -93,7 +95,26 @@ def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         for k in ("snr_db", "cbr"):
             if k in row:
                 row[k] = _number(row[k])
+        if "mcs" in row or "fixed_mcs" in row:
+            row["mcs"] = _mcs_of(row)
     return rows
+
+
+def _mcs_of(row: dict[str, Any]) -> str | None:
+    """The fixed MCS a row's scheme used, or None (not digital, or the envelope).
+
+    ``eval-codec``'s ``--mcs`` sets only its ``digital_fixed`` scheme (config ``fixed_mcs``);
+    ``run``'s ``--mcs`` sets its ``digital`` scheme (``envelope`` or a fixed MCS).
+    """
+    scheme = str(row.get("scheme", ""))
+    if not scheme.startswith("digital"):
+        return None
+    if "fixed" in scheme:
+        return row.get("mcs") or row.get("fixed_mcs")
+    if row.get("command") == "eval-codec":
+        return None
+    m = row.get("mcs")
+    return None if m in (None, "envelope") else str(m)
 
 
 def _flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -154,6 +175,8 @@ def _varying(rows: list[dict], keys: Iterable[str]) -> tuple[str, ...]:
 def _label(keys: tuple[str, ...], values: tuple) -> str:
     parts = []
     for k, v in zip(keys, values):
+        if v is None:
+            continue
         if k == "cbr" and _finite(v) and v > 0:
             parts.append(f"CBR 1/{1 / v:.3g}")
         elif k == "snr_db" and _finite(v):
@@ -374,7 +397,7 @@ def plot_digital_cliff(rows: list[dict]) -> Figure:
         raise ValueError("no rows of a digital scheme (scheme 'digital...')")
     fig = Figure(figsize=(6.8, 4.6), layout="constrained")
     ax = fig.add_subplot()
-    keys = ("scheme", "mcs") if any("mcs" in r for r in digital) else ("scheme",)
+    keys = ("scheme", "mcs") if any(r.get("mcs") for r in digital) else ("scheme",)
     envelope: dict[float, float] = {}
     for i, (values, group) in enumerate(_series(digital, keys).items()):
         xs, ys, _ = _mean_std(group, "snr_db", "psnr")

@@ -152,6 +152,56 @@ def test_digital_envelope_is_the_best_mcs_per_snr():
         plot_digital_cliff([{"scheme": "jscc", "snr_db": 0.0, "psnr": 1.0}])
 
 
+def test_fixed_mcs_curves_are_told_apart_and_the_envelope_is_not_labelled_with_one():
+    """eval-codec's --mcs sets only digital_fixed; its 'digital' (envelope) rows carry no MCS."""
+    records = []
+    for mcs, cliff_db in (("qpsk-1/2", 2), ("16qam-3/4", 8)):
+        for s in (0, 4, 8, 12):
+            fixed = 30.0 if s >= cliff_db else 10.0
+            records.append(
+                {
+                    "command": "eval-codec",
+                    "point": {"mcs": mcs, "snr_db": s},
+                    "seed": 0,
+                    "config": {"channel": "awgn", "fixed_mcs": mcs, "snr_db": [s]},
+                    "metrics": {
+                        "results": [
+                            {"scheme": "digital", "snr_db": s, "psnr": 20.0 + s},
+                            {
+                                "scheme": "digital_fixed",
+                                "snr_db": s,
+                                "psnr": fixed + (5 if mcs[0] == "1" else 0),
+                            },
+                            {"scheme": "jscc", "snr_db": s, "psnr": 25.0},
+                        ]
+                    },
+                }
+            )
+    rows = result_rows(records)
+    assert {r["mcs"] for r in rows if r["scheme"] == "digital_fixed"} == {"qpsk-1/2", "16qam-3/4"}
+    assert {r["mcs"] for r in rows if r["scheme"] != "digital_fixed"} == {None}
+    ax = plot_digital_cliff(rows).axes[0]
+    labels = sorted(ln.get_label() for ln in ax.get_lines())
+    assert labels == [
+        "digital",
+        "digital envelope (best per SNR)",
+        "digital_fixed, 16qam-3/4",
+        "digital_fixed, qpsk-1/2",
+        "jscc (reference)",
+    ]
+    _, y = _line(ax, "digital envelope")
+    np.testing.assert_allclose(y, [20.0, 30.0, 35.0, 35.0])  # max(digital, both fixed MCS)
+    ax = plot_quality_vs_snr(rows, "psnr", anchors=False).axes[0]
+    assert sorted(ln.get_label() for ln in ax.get_lines()) == [
+        "digital",
+        "digital_fixed, 16qam-3/4",
+        "digital_fixed, qpsk-1/2",
+        "jscc",
+    ]
+    _, y = _line(ax, "jscc")
+    np.testing.assert_allclose(y, 25.0)  # the jscc rows of both MCS points pooled
+
+
 def test_make_plots_writes_png_and_pdf_for_what_the_results_hold(tmp_path):
     records = [_eval_record(s, 0, 20.0 + s, 5.0 + 2 * s) for s in (1, 4, 7)]
     paths = make_plots(records, tmp_path / "figs")
