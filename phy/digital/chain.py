@@ -208,7 +208,7 @@ def decode_symbols(
 
     Args:
         x_hat: [num_symbols] complex64 (or [1, num_symbols]) equalised symbols, the whole
-            block that :func:`encode_bytes` emitted.
+            block that :func:`encode_bytes` emitted; unbiased (ZF-like) for 16/64-QAM.
         noise_var: float, or [num_symbols] float32 effective noise variance per symbol
             (what a link's ``LinkOutput.noise_var`` holds).
         mcs: the scheme the transmitter used.
@@ -281,7 +281,9 @@ def transmit_bytes(
         mcs: name in :data:`MCS_TABLE` or an :class:`MCS`.
         link: ``link(x [1, num_symbols] complex64, snr_db, generator) -> LinkOutput`` with
             ``x_hat`` [1, num_symbols] complex64 and ``noise_var`` [1, num_symbols] float32
-            (e.g. ``phy.FlatLink``, ``phy.OFDMLink``).
+            (e.g. ``phy.FlatLink``, ``phy.OFDMLink``). For 16/64-QAM give the link a ZF
+            equaliser: an MMSE output is scaled towards 0 by ``|h|^2 / (|h|^2 + N0)`` and the
+            demapper assumes the unscaled constellation (QPSK LLRs come out exact either way).
         snr_db: Es/N0 per complex symbol in dB, passed to the link.
         generator: torch.Generator for the link's noise and fading.
         num_symbols: block length (default the fewest that hold the payload).

@@ -97,7 +97,7 @@ def test_round_trip_byte_exact_at_high_snr(mcs):
     assert res.extra["mean_iterations"] <= 4  # CRC early stopping works at high SNR
 
 
-def test_round_trip_over_rayleigh_block_fading_with_perfect_csi():
+def test_round_trip_over_fast_rayleigh_fading_with_perfect_csi():
     payload = _payload(1500, seed=2)
     link = phy.FlatLink(phy.make_channel("rayleigh_fast"), csi="perfect")
     res = transmit_bytes(

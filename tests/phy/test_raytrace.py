@@ -128,13 +128,22 @@ def test_channel_absolute_gain_keeps_path_loss(tracer):
     torch.testing.assert_close(ch.h.abs().pow(2).mean(dim=1), expected, rtol=1e-4, atol=0)
 
 
+def test_registered_as_a_phy_channel(tracer):
+    ch = phy.make_channel("raytraced", tracer=tracer, tx_positions_m=POSITIONS[:1], fft_size=16)
+    assert isinstance(ch, phy.Channel) and ch.h.shape == (1, 16)
+
+
 def test_digital_baseline_over_ray_traced_link(tracer):
     from phy.digital import transmit_bytes
 
     ch = RayTracedChannel(tx_positions_m=[POSITIONS[0]], tracer=tracer)
     payload = bytes(range(200))
     res = transmit_bytes(
-        payload, "16qam-1/2", phy.FlatLink(ch), 20.0, torch.Generator().manual_seed(0)
+        payload,
+        "16qam-1/2",
+        phy.FlatLink(ch, equalizer="zf"),
+        20.0,
+        torch.Generator().manual_seed(0),
     )
     assert res.ok and res.payload == payload
 
