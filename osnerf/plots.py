@@ -422,9 +422,17 @@ def plot_digital_cliff(rows: list[dict]) -> Figure:
                 ax.axvspan(xs[k], xs[k + 1], color=f"C{i % 10}", alpha=0.08)
     ex = sorted(envelope)
     ax.plot(ex, [envelope[x] for x in ex], "k-", lw=2.2, label="digital envelope (best per SNR)")
-    for values, group in _series([r for r in rows if not _is_digital(r)], ("scheme",)).items():
+    others = _series([r for r in rows if not _is_digital(r)], ("scheme",))
+    for j, (values, group) in enumerate(others.items()):
         xs, ys, _ = _mean_std(group, "snr_db", "psnr")
-        ax.plot(xs, ys, "--", lw=1, color="0.5", label=f"{values[0]} (reference)")
+        ax.plot(
+            xs,
+            ys,
+            ("--", ":", "-.")[j % 3],
+            lw=1.2,
+            color=f"C{(9 - j) % 10}",
+            label=f"{values[0]} (reference)",
+        )
     ax.set_xlabel("SNR Es/N0 [dB]")
     ax.set_ylabel("PSNR [dB] (mean per image)")
     ax.grid(True, alpha=0.3)
