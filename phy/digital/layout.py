@@ -116,10 +116,13 @@ def min_num_symbols(num_bytes: int, mcs: str | MCS) -> int:
         raise ValueError(f"num_bytes must be an integer >= 1, got {num_bytes!r}")
     m = get_mcs(mcs)
     bits = 8 * num_bytes
-    # capacity(s) <= s * bits_per_symbol * code_rate - 24, so start at that lower bound and
-    # step up (capacity is not monotone across a change in the number of codewords).
+    # Every codeword has at most MAX_CODED_BITS coded bits, so at least c_min codewords
+    # (each with its CRC) are needed, and capacity(s) <= s * bits_per_symbol * code_rate
+    # - 24 * c_min: start at that lower bound and step up (capacity is not monotone across
+    # a change in the number of codewords, so no bisection).
     per_symbol = m.bits_per_symbol * m.code_rate
-    s = max(1, math.ceil((bits + CRC_BITS) / per_symbol))
+    c_min = -(-bits // (math.floor(MAX_CODED_BITS * m.code_rate) - CRC_BITS))
+    s = max(1, math.ceil((bits + CRC_BITS * c_min) / per_symbol))
     while codeword_layout(s, m).capacity_bits < bits:
         s += 1
     return s
