@@ -55,21 +55,22 @@ def _check_positive(name: str, value, low: float, high: float) -> float:
 class _TR38901Channel(Channel):
     """Shared frequency-domain application; subclasses build the sionna model."""
 
+    MODELS: tuple[str, ...] = ()
+
     def __init__(
         self,
-        model: str,
-        delay_spread_s: float,
-        carrier_frequency_hz: float,
-        subcarrier_spacing_hz: float,
-        fft_size: int,
-        cp_length: int,
-        min_speed_m_s: float,
-        max_speed_m_s: float | None,
-        models: tuple[str, ...],
+        model: str = "A",
+        delay_spread_s: float = 100e-9,
+        carrier_frequency_hz: float = 3.5e9,
+        subcarrier_spacing_hz: float = 15e3,
+        fft_size: int = 64,
+        cp_length: int = 16,
+        min_speed_m_s: float = 0.0,
+        max_speed_m_s: float | None = None,
     ):
         super().__init__()
-        if model not in models:
-            raise ValueError(f"model must be one of {list(models)}, got {model!r}")
+        if model not in self.MODELS:
+            raise ValueError(f"model must be one of {list(self.MODELS)}, got {model!r}")
         self.model = model
         self.delay_spread_s = _check_positive("delay_spread_s", delay_spread_s, 1e-9, 1e-5)
         self.carrier_frequency_hz = _check_positive(
@@ -96,14 +97,17 @@ class _TR38901Channel(Channel):
     def _build(self):  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def _model(self):
+        if self._sionna_model is None:
+            self._sionna_model = self._build()
+        return self._sionna_model
+
     def frequency_response(self, batch: int, num_ofdm_symbols: int, generator=None) -> Tensor:
         """[batch, num_ofdm_symbols, fft_size] complex64 channel per resource element, E|H|^2 = 1."""
         from sionna.phy.channel import cir_to_ofdm_channel, subcarrier_frequencies
 
-        if self._sionna_model is None:
-            self._sionna_model = self._build()
         with sionna_generator(generator):
-            a, tau = self._sionna_model(batch, num_ofdm_symbols, 1.0 / self.ofdm_symbol_duration_s)
+            a, tau = self._model()(batch, num_ofdm_symbols, 1.0 / self.ofdm_symbol_duration_s)
         freqs = subcarrier_frequencies(
             self.fft_size, self.subcarrier_spacing_hz, precision="single", device="cpu"
         )
@@ -158,28 +162,7 @@ class TDLChannel(_TR38901Channel):
         min_speed_m_s, max_speed_m_s: terminal speed range (Doppler); equal by default.
     """
 
-    def __init__(
-        self,
-        model: str = "A",
-        delay_spread_s: float = 100e-9,
-        carrier_frequency_hz: float = 3.5e9,
-        subcarrier_spacing_hz: float = 15e3,
-        fft_size: int = 64,
-        cp_length: int = 16,
-        min_speed_m_s: float = 0.0,
-        max_speed_m_s: float | None = None,
-    ):
-        super().__init__(
-            model,
-            delay_spread_s,
-            carrier_frequency_hz,
-            subcarrier_spacing_hz,
-            fft_size,
-            cp_length,
-            min_speed_m_s,
-            max_speed_m_s,
-            TDL_MODELS,
-        )
+    MODELS = TDL_MODELS
 
     def _build(self):
         from sionna.phy.channel.tr38901 import TDL
@@ -194,34 +177,19 @@ class TDLChannel(_TR38901Channel):
             device="cpu",
         )
 
+    @property
+    def power_delay_profile(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(delays_s [num_paths], mean_powers [num_paths]) of the scaled 3GPP profile."""
+        m = self._model()
+        return m.delays.detach().float().cpu(), m.mean_powers.detach().float().cpu()
+
 
 class CDLChannel(_TR38901Channel):
     """3GPP CDL-A..E between single omnidirectional vertically polarised antennas (uplink:
     drone = UT transmits to the ground station = BS). Same arguments as :class:`TDLChannel`.
     """
 
-    def __init__(
-        self,
-        model: str = "A",
-        delay_spread_s: float = 100e-9,
-        carrier_frequency_hz: float = 3.5e9,
-        subcarrier_spacing_hz: float = 15e3,
-        fft_size: int = 64,
-        cp_length: int = 16,
-        min_speed_m_s: float = 0.0,
-        max_speed_m_s: float | None = None,
-    ):
-        super().__init__(
-            model,
-            delay_spread_s,
-            carrier_frequency_hz,
-            subcarrier_spacing_hz,
-            fft_size,
-            cp_length,
-            min_speed_m_s,
-            max_speed_m_s,
-            CDL_MODELS,
-        )
+    MODELS = CDL_MODELS
 
     def _build(self):
         from sionna.phy.channel.tr38901 import CDL, Antenna

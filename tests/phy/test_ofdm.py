@@ -162,6 +162,24 @@ def test_tr38901_channels_unit_power_reproducible_and_frequency_selective(name):
     assert (p[:, 0].std(dim=-1) / p[:, 0].mean(dim=-1)).mean() > 0.05
 
 
+def test_tdl_frequency_correlation_is_the_fourier_transform_of_its_profile():
+    """E[H(f + df) conj(H(f))] = sum_l p_l exp(-2j pi df tau_l) / sum_l p_l (Rayleigh taps)."""
+    ch = phy.TDLChannel("A", delay_spread_s=300e-9, subcarrier_spacing_hz=15e3, fft_size=64)
+    h = ch(torch.ones(200, 1, 64, dtype=torch.complex64), 30.0, generator=G().manual_seed(4)).h[
+        :, 0
+    ]
+    delays, powers = ch.power_delay_profile
+    for lag in (2, 8):
+        df = lag * 15e3
+        theory = (powers * torch.exp(-2j * math.pi * df * delays)).sum() / powers.sum()
+        measured = (h[:, lag:] * h[:, :-lag].conj()).mean() / h.abs().pow(2).mean()
+        assert abs(measured - theory) < 0.05, (
+            lag,
+            measured,
+            theory,
+        )  # a sign error gives 0.1, 0.39
+
+
 def test_tdl_through_ofdm_link_with_ls_estimation():
     g = phy.ResourceGrid(pilot_subcarrier_spacing=2)
     ch = phy.TDLChannel("C", delay_spread_s=100e-9, fft_size=g.fft_size, cp_length=g.cp_length)
