@@ -6,6 +6,9 @@ Each training channel is a name in :data:`TRAIN_CHANNELS`:
   the post-equalisation SNR ``|h|^2 * snr``.
 * ``rayleigh_nocsi``: block Rayleigh fading, no CSI: the decoder sees ``y = h x + n`` and the
   nominal SNR.
+* ``ofdm_rayleigh_ls`` / ``ofdm_tdl_ls``: ``phy.OFDMLink`` on the default ``phy.ResourceGrid``
+  (pilots, LS estimate + linear interpolation, MMSE) over block Rayleigh fading or 3GPP
+  TDL-A (100 ns); the decoder is told the SNR the link's effective noise variance implies.
 """
 
 from __future__ import annotations
@@ -20,7 +23,20 @@ TRAIN_CHANNELS: dict[str, tuple[str, str]] = {
     "awgn": ("awgn", "none"),
     "rayleigh": ("rayleigh", "perfect"),
     "rayleigh_nocsi": ("rayleigh", "none"),
+    "ofdm_rayleigh_ls": ("rayleigh", "ofdm"),
+    "ofdm_tdl_ls": ("tdl", "ofdm"),
 }
+_LINKS: dict[str, torch.nn.Module] = {}
+
+
+def _ofdm_link(name: str):
+    """The OFDM link of a training channel (built once)."""
+    if name not in _LINKS:
+        import phy
+
+        kwargs = {"model": "A", "delay_spread_s": 100e-9} if name == "tdl" else {}
+        _LINKS[name] = phy.OFDMLink(phy.ResourceGrid(), make_channel(name, **kwargs), csi="ls")
+    return _LINKS[name]
 
 
 def channel_mask(m: Tensor, num_complex_channels: int) -> Tensor:
@@ -64,6 +80,12 @@ def masked_transmit(
     kept = kept * torch.rsqrt(power + 1e-12)
     pairs = kept.reshape(b, c2 // 2, 2, h, w).permute(0, 1, 3, 4, 2).contiguous()  # [b, C, h, w, 2]
     x = torch.view_as_complex(pairs).reshape(b, -1)  # [batch, C*h*w] complex64
+    if csi == "ofdm":
+        lo = _ofdm_link(name)(x, snr_db, generator=generator)
+        nv = lo.noise_var.reshape(b, -1).mean(dim=1).clamp(1e-6, 1e3)
+        snr_rx = noise_var_to_snr_db(nv).clamp(-30.0, 60.0)
+        z = torch.view_as_real(lo.x_hat.reshape(b, c2 // 2, h, w)).permute(0, 1, 4, 2, 3)
+        return z.reshape(b, c2, h, w) * mask, side_info(snr_rx, m, num_complex_channels, b)
     out = make_channel(name)(x, snr_db, generator=generator)
     snr_rx = snr_db
     if out.h is not None and csi == "perfect":

@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--channel",
         default=d.channel,
-        help=f"training channel: awgn, rayleigh, rayleigh_nocsi (default: {d.channel})",
+        help=f"training channel: awgn, rayleigh, rayleigh_nocsi, ofdm_rayleigh_ls, ofdm_tdl_ls (default: {d.channel})",
     )
     p.add_argument(
         "--max-minutes", type=float, default=d.max_minutes, help="training time budget in minutes"

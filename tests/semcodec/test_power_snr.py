@@ -74,3 +74,14 @@ def test_channel_mask_keeps_exactly_m():
     mask = channel_mask(torch.tensor([1, 3, 8]), 8)[:, :, 0, 0]
     assert mask.sum(dim=1).tolist() == [2.0, 6.0, 16.0]
     assert mask[1].tolist() == [1.0] * 6 + [0.0] * 10
+
+
+@pytest.mark.parametrize("channel", ["rayleigh", "rayleigh_nocsi", "ofdm_rayleigh_ls"])
+def test_training_channels_are_differentiable(channel):
+    g = torch.Generator().manual_seed(5)
+    feat = torch.randn(2, 16, 4, 4, generator=g, requires_grad=True)
+    z, side = masked_transmit(feat, torch.tensor([2, 8]), torch.tensor([5.0, 15.0]), channel, g, 8)
+    assert z.shape == feat.shape and torch.all(z[0, 4:] == 0)
+    z.sum().backward()
+    assert feat.grad is not None and torch.isfinite(feat.grad).all()
+    assert torch.all(torch.isfinite(side))
