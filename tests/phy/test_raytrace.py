@@ -46,6 +46,29 @@ def test_free_space_path_gain_is_friis():
     )
 
 
+def test_two_ray_metal_plate_delays_powers_and_stats():
+    """LoS + one specular bounce off sionna's 1 m metal plate (z = 0), antennas 1 m above it
+    and 0.6 m apart: delays, powers and stats against the two-ray geometry."""
+    tr = RayTracer(
+        "simple_reflector", (-0.3, 0.0, 1.0), FC, RayTracingConfig(max_depth=1, refraction=False)
+    )
+    c = tr.cir([[0.3, 0.0, 1.0]])
+    assert c.valid.sum() == 2 and c.los.all()
+    d1, d2 = 0.6, math.hypot(0.6, 2.0)
+    delta = (d2 - d1) / C
+    np.testing.assert_allclose(np.sort(c.tau_s[0]), [0.0, delta], rtol=1e-4, atol=1e-13)
+    p = np.abs(c.a[0][np.argsort(c.tau_s[0])]) ** 2  # [LoS, reflected]
+    friis = (C / (4 * math.pi * FC * np.array([d1, d2]))) ** 2
+    assert abs(p[0] / friis[0] - 1) < 1e-3
+    assert 0.98 < p[1] / friis[1] <= 1.0  # |reflection coefficient|^2 of metal
+    s = tr.stats([[0.3, 0.0, 1.0]])
+    np.testing.assert_allclose(s.k_factor, [p[0] / p[1]], rtol=1e-4)
+    np.testing.assert_allclose(
+        s.rms_delay_spread_s, [math.sqrt(p[0] * p[1]) / p.sum() * delta], rtol=1e-3
+    )
+    np.testing.assert_allclose(s.path_gain_db, [10 * math.log10(p.sum())], atol=1e-4)
+
+
 def test_cir_to_cfr_matches_sionna_paths_cfr(tracer):
     import mitsuba as mi
     import sionna.rt as srt
