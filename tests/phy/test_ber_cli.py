@@ -40,6 +40,12 @@ def test_ber_writes_the_contracted_json_and_plot(tmp_path):
     assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_negative_snr_lists_parse(tmp_path):
+    out = tmp_path / "neg.json"
+    assert main(["ber", "--snr-db", "-10,-2.5", "--num-bits", "2000", "--out", str(out)]) == 0
+    assert [r["snr_db"] for r in json.loads(out.read_text())["results"]] == [-10.0, -2.5]
+
+
 def test_same_seed_same_result(tmp_path):
     args = [
         "ber",
