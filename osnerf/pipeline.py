@@ -43,7 +43,7 @@ from osnerf.scu import RatePolicy, SemanticControlUnit, measure_snr_db
 SCHEMES = ("jscc", "digital", "full", "gt")
 CHANNELS = ("awgn", "rayleigh", "raytraced")
 OBJECT_ROUTED = {"jscc": True, "digital": True, "full": False, "gt": True}
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -281,6 +281,32 @@ def positions_to_mask(positions, height: int, width: int, block_px: int = 4) -> 
     return full[:height, :width]
 
 
+def combine_repetitions(
+    x_hat: torch.Tensor, noise_var: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Maximum-ratio combining of repeated zero-forcing outputs of the same block.
+
+    ZF outputs are unbiased, ``x_hat_r = x + n_r`` with per-symbol variance ``noise_var_r``,
+    so the combination weighted by ``1 / noise_var_r`` is MRC: the effective SNR per symbol
+    is the sum of the copies' SNRs (``sum_r |h_r|^2 / s`` on block fading).
+
+    Args:
+        x_hat: [repetitions, num_symbols] complex64; noise_var: [repetitions, num_symbols].
+    Returns:
+        (x [1, num_symbols] complex64, noise_var [1, num_symbols] float32).
+    """
+    wgt = 1.0 / noise_var.clamp_min(1e-12)
+    x = (x_hat * wgt).sum(0, keepdim=True) / wgt.sum(0, keepdim=True)
+    return x.to(torch.complex64), (1.0 / wgt.sum(0, keepdim=True)).to(torch.float32)
+
+
+def received_snr_db(noise_var: torch.Tensor, snr_range_db) -> float:
+    """The receiver's SNR for the decoder: ``1 / mean(noise_var)`` of unbiased (ZF/MRC)
+    symbols, in dB, clamped to the codec's range."""
+    snr = -10.0 * math.log10(max(float(noise_var.mean()), 1e-12))
+    return float(np.clip(snr, *snr_range_db))
+
+
 def transmit_jscc(
     background,
     codec,
@@ -291,19 +317,25 @@ def transmit_jscc(
     links: ViewLinks,
     snr_enc: dict,
     cbrs: dict,
+    repetitions: dict,
     generator: torch.Generator,
 ):
-    """Each view through the semantic codec and its link.
+    """Each view through the semantic codec and its link (zero-forcing with perfect CSI).
+
+    The block is sent ``repetitions[v]`` times (independent fades on a block-fading link),
+    combined by MRC, and decoded with the receiver's own SNR (from the combined noise
+    variance): on block fading this is exactly an AWGN channel at the instantaneous SNR.
 
     Args:
         routing: None (whole views) or (object masks [n, K, h, w], K demand weights): focus mode.
     Returns:
-        (received [n, h, w, 3], symbols [n], seconds dict, receiver masks [n, h, w] or None,
-        side-information bits [n]).
+        (received [n, h, w, 3], symbols [n] (all repetitions), seconds dict, receiver masks
+        [n, h, w] or None, side-information bits [n], receiver SNR dB [n]).
     """
-    out, symbols, rx_masks, side = [], [], [], []
+    out, symbols, rx_masks, side, rx_snr = [], [], [], [], []
     sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0, "encode_cpu": 0.0, "decode_cpu": 0.0}
     h, w = images.shape[1:3]
+    snr_range = tuple(float(x) for x in rx_codec.snr_range_db)
     for k, v in enumerate(view_ids):
         x = _to_nchw(images[k : k + 1])
         kw = (
@@ -317,16 +349,21 @@ def transmit_jscc(
         sec["encode"] += time.perf_counter() - t
         sec["encode_cpu"] += time.process_time() - c
         t = time.perf_counter()
+        r = int(repetitions.get(v, 1))
+        link = links.zf_links.get(v, links.links[v])
         with torch.no_grad():
-            lo = links.links[v](enc.symbols, links.snr_db[v], generator=generator)
+            lo = link(enc.symbols.expand(r, -1).contiguous(), links.snr_db[v], generator=generator)
+            x_hat, nv = combine_repetitions(lo.x_hat, lo.noise_var)
         sec["channel"] += time.perf_counter() - t
+        snr_rx = received_snr_db(nv, snr_range)
         t, c = time.perf_counter(), time.process_time()
         with torch.no_grad():
-            img = rx_codec.decode(lo.x_hat, enc.meta, snr_enc[v], expected_sha256=codec.sha256)
+            img = rx_codec.decode(x_hat, enc.meta, snr_rx, expected_sha256=codec.sha256)
         sec["decode"] += time.perf_counter() - t
         sec["decode_cpu"] += time.process_time() - c
         out.append(_to_nhwc(img)[0])
-        symbols.append(int(enc.symbols.shape[-1]))
+        symbols.append(r * int(enc.symbols.shape[-1]))
+        rx_snr.append(snr_rx)
         pos = getattr(enc.meta, "positions", None)
         side.append(int(enc.meta.side_info_bits()) if hasattr(enc.meta, "side_info_bits") else 0)
         if routing is not None and pos is not None:
@@ -335,7 +372,14 @@ def transmit_jscc(
             rx_masks.append(m)
             out[-1] = out[-1] * m[..., None] + background * (1.0 - m[..., None])
     masks = np.stack(rx_masks) if rx_masks else None
-    return np.stack(out), np.asarray(symbols, np.int64), sec, masks, np.asarray(side, np.int64)
+    return (
+        np.stack(out),
+        np.asarray(symbols, np.int64),
+        sec,
+        masks,
+        np.asarray(side, np.int64),
+        np.asarray(rx_snr),
+    )
 
 
 def transmit_digital_views(
@@ -605,6 +649,9 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
     h, w = views.intrinsics.height, views.intrinsics.width
     routing = scu.feature_routing(col)
     focus = dict(zip(sent_ids, scu.focus_cbr(col.masks, cbr_range, sent_ids)))
+    reps = dict(
+        zip(full_ids, scu.choose_repetitions(np.asarray([measured[v] for v in full_ids]), full_ids))
+    )
 
     schemes: dict[str, dict] = {}
     received_all: dict[str, np.ndarray] = {}
@@ -625,7 +672,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                 rec, symbols = sent.copy(), np.zeros(len(ids), np.int64)
                 sec = {"encode": 0.0, "decode": 0.0}
             elif scheme == "jscc":
-                rec, symbols, sec, rx_masks, side = transmit_jscc(
+                rec, symbols, sec, rx_masks, side, rx_snr = transmit_jscc(
                     views.background,
                     codec,
                     prep.rx_codec,
@@ -635,13 +682,15 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                     links,
                     snr_enc,
                     focus,
+                    reps,
                     gen,
                 )
                 arrays["side_info_bits"] = side
+                arrays["rx_snr_db"] = rx_snr
                 if rx_masks is not None:
                     arrays["rx_masks"] = rx_masks
             elif scheme == "full":
-                rec, symbols, sec, _, _ = transmit_jscc(
+                rec, symbols, sec, _, _, rx_snr = transmit_jscc(
                     views.background,
                     codec,
                     prep.rx_codec,
@@ -651,8 +700,10 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                     links,
                     snr_enc,
                     cbrs,
+                    reps,
                     gen,
                 )
+                arrays["rx_snr_db"] = rx_snr
             else:  # digital: same views and symbol budget per view as jscc
                 budgets = (
                     jscc_symbols
@@ -767,6 +818,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
             "measured_snr_db": {str(v): measured[v] for v in full_ids},
             "cbr": {str(v): float(cbrs[v]) for v in full_ids},
             "cbr_on_demand": {str(v): float(focus[v]) for v in sent_ids},
+            "repetitions": {str(v): int(reps[v]) for v in full_ids},
         },
         "schemes": schemes,
         "comparisons": comparisons(schemes),

@@ -28,10 +28,13 @@ class RatePolicy:
     Attributes:
         thresholds_db: ascending band edges, dB.
         cbrs: one CBR per band (len(thresholds_db) + 1), each in (0, 1].
+        repeat_below_db: below it a block is sent twice and the copies MRC-combined.
     """
 
     thresholds_db: tuple[float, ...] = (0.0, 5.0, 10.0)
     cbrs: tuple[float, ...] = (1 / 8, 1 / 12, 1 / 16, 1 / 24)
+    repeat_below_db: float = 3.0
+    """Below this measured SNR every block is sent twice (diversity over independent fades)."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:
@@ -139,6 +142,21 @@ class SemanticControlUnit:
                 cbr=c,
             )
         return np.asarray(out, np.float64)
+
+    def choose_repetitions(self, measured_snr_db: np.ndarray, views) -> np.ndarray:
+        """Copies of each view's block: 2 below ``rate_policy.repeat_below_db``, else 1 (logged)."""
+        out = []
+        for v, snr in zip(views, measured_snr_db):
+            r = 2 if float(snr) < self.rate_policy.repeat_below_db else 1
+            out.append(r)
+            if r > 1:
+                self.log(
+                    "rate",
+                    f"view {int(v)}: send twice (measured {float(snr):.1f} dB)",
+                    view=int(v),
+                    repetitions=r,
+                )
+        return np.asarray(out, np.int64)
 
     def choose_cbr(
         self, measured_snr_db: np.ndarray, cbr_range: tuple[float, float], views
