@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,6 +47,8 @@ class OtaConfig:
             ``-max_papr_db`` dBFS so the clipped peak is full scale.
         gap_samples: silence before, between and after frames, samples.
         rx_margin_samples: extra samples captured after the burst.
+        rx_lead_s: the transmitter starts this long after the receiver streams, s (the
+            capture is longer by as many samples).
         detection_threshold: preamble (Schmidl-Cox) metric that counts as a frame, in
             (0, 1). The metric of a clean preamble is about (snr / (1 + snr))^2: 0.25 at
             0 dB, so the default 0.2 still finds frames there; false alarms are rejected by
@@ -60,6 +63,7 @@ class OtaConfig:
     max_papr_db: float = 9.0
     gap_samples: int = 2000
     rx_margin_samples: int = 20000
+    rx_lead_s: float = 0.02
     detection_threshold: float = 0.2
     lna_gain_db: float = 16
     vga_gain_db: float = 24
@@ -82,6 +86,8 @@ class OtaConfig:
             raise ValueError(
                 f"detection_threshold must be in (0, 1), got {self.detection_threshold!r}"
             )
+        if not 0 <= self.rx_lead_s <= 1:
+            raise ValueError(f"rx_lead_s must be in [0, 1] s, got {self.rx_lead_s!r}")
         if self.gap_samples < 0 or self.rx_margin_samples < 0:
             raise ValueError("gap_samples and rx_margin_samples must be >= 0")
 
@@ -283,8 +289,13 @@ def _configure(dev, cfg: OtaConfig) -> None:
     dev.txvga_gain_db = cfg.txvga_gain_db
 
 
-def transmit_and_capture(tx, rx, burst: np.ndarray, num_rx_samples: int) -> np.ndarray:
+def transmit_and_capture(
+    tx, rx, burst: np.ndarray, num_rx_samples: int, lead_s: float = 0.0
+) -> np.ndarray:
     """Capture ``num_rx_samples`` on ``rx`` (own thread) while ``tx`` sends ``burst``.
+
+    The transmitter starts ``lead_s`` after the receiver is streaming (on emulated boards
+    the virtual clock makes this irrelevant: both start at virtual time 0).
 
     Returns:
         [num_rx_samples] complex64. Errors of either side are raised here.
@@ -299,6 +310,10 @@ def transmit_and_capture(tx, rx, burst: np.ndarray, num_rx_samples: int) -> np.n
 
     thread = threading.Thread(target=receive, name="ota-rx", daemon=True)
     thread.start()
+    deadline = time.monotonic() + 5.0  # real radios: let the receiver stream before TX starts
+    while not getattr(rx, "receiving", True) and thread.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.001)
+    time.sleep(lead_s)
     try:
         tx.tx(burst)
     finally:
@@ -365,7 +380,10 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
     for dev in (tx, rx):
         _configure(dev, cfg)
     burst, reports, layout = build_burst(blocks, cfg, frames)
-    capture = transmit_and_capture(tx, rx, burst, len(burst) + cfg.rx_margin_samples)
+    lead = int(cfg.rx_lead_s * cfg.sample_rate_hz)
+    capture = transmit_and_capture(
+        tx, rx, burst, len(burst) + lead + cfg.rx_margin_samples, lead_s=cfg.rx_lead_s
+    )
     sizes = [len(np.asarray(b).reshape(-1)) for b in blocks]
     received = receive_burst(capture, reports, layout, sizes, cfg, frames)
     return BurstResult(received, reports, burst, capture)
