@@ -5,10 +5,13 @@ what to send, pushes it through the link under each scheme, trains a radiance fi
 scheme on what arrived and scores it on held-out views against ground-truth renders:
 
 * ``jscc``: on-demand: only views showing the demanded objects, masked to them, through the
-  semantic codec (CBR per view from the measured SNR).
+  semantic codec in focus mode (the feature positions touching the objects, all channels);
+  below 3 dB measured SNR every block is sent twice and MRC-combined. Zero-forcing with
+  perfect CSI and the receiver's own SNR make block fading exactly AWGN per block.
 * ``digital``: the same views and the same symbol budget per view, through an image codec
   + 5G LDPC + QAM (semcodec.transmit_digital).
-* ``full``: every drone view, whole, through the semantic codec (no on-demand selection).
+* ``full``: every drone view, whole, through the semantic codec (no on-demand selection), CBR
+  per view from the measured SNR (RatePolicy), same repetition rule.
 * ``gt``: the on-demand views undistorted (nothing crosses the channel): the ceiling.
 
 Stages are cached under ``RUN_DIR/cache/<config hash>/`` so an interrupted run resumes.
@@ -53,7 +56,7 @@ class RunConfig:
     Attributes:
         scene: built-in scene name (``osnerf scenes`` lists them).
         demand: ``OBJECT[:WEIGHT][,OBJECT...]``; None = the scene's default demand.
-        channel: "awgn", "rayleigh" (block fading, perfect CSI, MMSE) or "raytraced"
+        channel: "awgn", "rayleigh" (block fading, one h per view and copy, perfect CSI) or "raytraced"
             (each drone position's ray-traced channel to the ground station).
         snr_db: Es/N0 in dB (for "raytraced": at the median drone position; each position
             gets its path-gain difference on top).
