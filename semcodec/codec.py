@@ -188,7 +188,11 @@ class Codec:
         else:
             positions = crop = None
             lo, hi = self.cbr_range
-            if not (isinstance(cbr, int | float) and 0 < float(cbr) <= hi * 1.001):
+            try:
+                cbr = float(cbr)
+            except (TypeError, ValueError):
+                raise ValueError(f"cbr must be a number in (0, {hi:.4g}], got {cbr!r}") from None
+            if not 0 < cbr <= hi * 1.001:
                 raise ValueError(f"cbr in focus mode must be in (0, {hi:.4g}], got {cbr!r}")
             c = cfg.num_complex_channels
             with torch.no_grad():
