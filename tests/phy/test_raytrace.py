@@ -156,18 +156,25 @@ def test_registered_as_a_phy_channel(tracer):
     assert isinstance(ch, phy.Channel) and ch.h.shape == (1, 16)
 
 
-def test_digital_baseline_over_ray_traced_link(tracer):
+def test_digital_baseline_over_ray_traced_links(tracer):
+    """Bytes through the ray-traced CFR: flat (perfect CSI) and OFDM with LS pilots."""
     from phy.digital import transmit_bytes
 
-    ch = RayTracedChannel(tx_positions_m=[POSITIONS[0]], tracer=tracer)
     payload = bytes(range(200))
-    res = transmit_bytes(
-        payload,
-        "16qam-1/2",
-        phy.FlatLink(ch, equalizer="zf"),
-        20.0,
-        torch.Generator().manual_seed(0),
+    flat = phy.FlatLink(
+        RayTracedChannel(tx_positions_m=[POSITIONS[0]], tracer=tracer), equalizer="zf"
     )
+    res = transmit_bytes(payload, "16qam-1/2", flat, 20.0, torch.Generator().manual_seed(0))
+    assert res.ok and res.payload == payload
+    grid = phy.ResourceGrid(fft_size=64, subcarrier_spacing_hz=240e3)  # 15 MHz wide
+    ch = RayTracedChannel(
+        tx_positions_m=[POSITIONS[1]],
+        tracer=tracer,
+        subcarrier_frequencies_hz=grid.subcarrier_frequencies_hz,
+    )
+    assert ch.stats.num_paths[0] > 1  # frequency-selective
+    ofdm = phy.OFDMLink(grid, ch, csi="ls", equalizer="zf")
+    res = transmit_bytes(payload, "qpsk-1/2", ofdm, 15.0, torch.Generator().manual_seed(1))
     assert res.ok and res.payload == payload
 
 
