@@ -62,24 +62,7 @@ def _run(env, out, *extra):
 )
 def test_bad_input_is_one_clear_line_and_no_report(env, tmp_path, capsys, args, message):
     out = tmp_path / "bad"
-    assert (
-        main(
-            [
-                "run",
-                "--scene",
-                "tiny",
-                "--codec",
-                env["codec"],
-                "--cache-dir",
-                env["cache"],
-                "--out",
-                str(out),
-                *SMALL,
-                *args,
-            ]
-        )
-        == 2
-    )
+    assert _run(env, out, *args) == 2  # a later --scene/--channel/... overrides the default
     err = capsys.readouterr().err.strip().splitlines()
     assert message in err[-1]
     assert not (out / "report.json").exists()
