@@ -49,6 +49,9 @@ class FrameConfig:
         rms_amplitude: RMS of the transmitted IQ, full scale 1.0, in (0, 0.7]; peaks
             above 1.0 are clipped.
         detection_threshold: Schmidl-Cox metric that triggers a detection, in (0, 1).
+            Candidates are then confirmed by the two long training symbols (each present,
+            and repeating): with the default 0.2 every frame is found at 0 dB SNR per
+            sample with multipath, none in 10^6 samples of noise (tests/phy).
         max_cfo_subcarriers: largest |CFO| searched, in subcarrier spacings, in [1, fft_size / 4].
         timing_backoff: samples the FFT window starts inside the prefix, in [0, cp_length);
             ``None`` = ``cp_length // 4``. The receiver tolerates a delay spread up to
@@ -62,7 +65,7 @@ class FrameConfig:
     pilot_subcarrier_spacing: int = 4
     sample_rate_hz: float = 4e6
     rms_amplitude: float = 0.25
-    detection_threshold: float = 0.35
+    detection_threshold: float = 0.2
     max_cfo_subcarriers: float = 8.0
     timing_backoff: int | None = None
 
@@ -283,12 +286,15 @@ def _acquire(r: np.ndarray, cfg: FrameConfig) -> list[tuple[int, float]]:
             continue
         seg = sync.correct_cfo(r[seg_start : hi + n + s], cfo, n, start=0)
         corr = sync.cross_correlation(seg, lts_t, 0, hi - lo)
-        if corr.size == 0 or corr.max() < 0.25:
+        if corr.size == 0 or corr.max() < 0.2:
             continue  # a false alarm: no long training symbol where it should be
         lts1_fine = seg_start + sync.first_path(corr, 0.5, lookback=cp)
         a, b = r[lts1_fine : lts1_fine + n], r[lts1_fine + s : lts1_fine + s + n]
-        if abs(np.vdot(a, b)) < 0.4 * np.linalg.norm(a) * np.linalg.norm(b):
+        if abs(np.vdot(a, b)) < 0.3 * np.linalg.norm(a) * np.linalg.norm(b):
             continue  # the two long training symbols must repeat (whatever the channel)
+        k2 = lts1_fine + s - seg_start
+        if sync.cross_correlation(seg, lts_t, k2, k2 + 1).max(initial=0.0) < 0.2:
+            continue  # and the second one must be there too
         start = lts1_fine - n - 2 * cp
         if start >= 0 and (not found or start - found[-1][0] > s):
             found.append((int(start), float(cfo)))

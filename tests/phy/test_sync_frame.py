@@ -142,6 +142,22 @@ def test_find_frames_in_a_capture_with_several():
     assert second.start_index == starts[1]
 
 
+def test_detection_at_0_db_with_multipath_and_no_false_alarms_in_noise():
+    """Stated: every frame found at 0 dB (per sample) over TAPS; none in 10^6 noise samples."""
+    t = phy.build_frame(_qpsk(500), CFG)
+    for seed in range(8):
+        lead = 400 + 37 * seed
+        res = phy.receive_frame(
+            impair(t, 0.0, cfo=-2.6, taps=TAPS, lead=lead, tail=200, seed=seed), CFG, 500
+        )
+        assert res.detected and res.start_index == lead and abs(res.cfo_subcarriers + 2.6) < 0.05
+    rng = np.random.default_rng(7)
+    noise = (rng.standard_normal(1_000_000) + 1j * rng.standard_normal(1_000_000)).astype(
+        np.complex64
+    )
+    assert phy.find_frames(noise, CFG) == []
+
+
 def test_noise_only_and_truncated_frames_are_not_detected():
     rng = np.random.default_rng(0)
     noise = (0.1 * (rng.standard_normal(50_000) + 1j * rng.standard_normal(50_000))).astype(
