@@ -151,11 +151,12 @@ def _kodak_table(out_dir: Path, sha256: str) -> dict:
     gap = {f"{s:g}": round(j[s] - a, 2) for s, a in ANCHOR_DEEP_JSCC.items()}
     return {
         "num_images": n,
-        "checkpoint": doc["checkpoint"],
+        "checkpoint": {"sha256": sha256},
         "table": table,
         "checks": checks,
         "gap_to_deep_jscc_anchor_db": gap,
-        "baselines_reused_from": reuse if prior else None,
+        "reused_from": reuse if prior else None,
+        "reused_schemes": sorted(done),
     }
 
 
