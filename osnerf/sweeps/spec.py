@@ -273,7 +273,8 @@ def expand(spec: SweepSpec) -> list[Point]:
     for name, value in spec.fixed.items():
         fixed_argv += _args_for(name, value, opts[_norm(name)])
     names = list(spec.axes)
-    points = []
+    points: list[Point] = []
+    seen: dict[str, Point] = {}  # parsed options -> point
     for combo in itertools.product(*(spec.axes[n] for n in names)):
         argv = list(fixed_argv)
         for name, value in zip(names, combo):
@@ -282,14 +283,21 @@ def expand(spec: SweepSpec) -> list[Point]:
             full = argv + (["--seed", str(seed)] if seed is not None else [])
             check = full + (["--out", "__sweep_check__"] if "out" in opts else [])
             try:
-                parser.parse_args(check)
+                parsed = repr(sorted(vars(parser.parse_args(check)).items()))
             except _ParseError as e:
                 values = dict(zip(names, combo))
                 raise ValueError(
                     f"point {values} of the spec is not a valid `osnerf {spec.command}` "
                     f"command line: {e}"
                 ) from None
-            points.append(Point(values=dict(zip(names, combo)), seed=seed, argv=tuple(full)))
+            point = Point(values=dict(zip(names, combo)), seed=seed, argv=tuple(full))
+            if parsed in seen:  # e.g. 0 and 0.0 on a float option
+                raise ValueError(
+                    f"points {seen[parsed].values} and {point.values} (seed {seed}) parse to the "
+                    "same command line: remove the repeated axis value"
+                )
+            seen[parsed] = point
+            points.append(point)
     if not points:
         raise ValueError("empty sweep: the spec expands to no points")
     return points

@@ -151,6 +151,10 @@ def test_yaml_and_toml_specs_read_the_same(tmp_path):
             r"'verbose' is a flag: .* true or false",
         ),
         ({"axes": {"snr_db": [0]}, "seeds": [1.5]}, r"'seeds' must hold integers"),
+        (
+            {"axes": {"snr_db": [0, 5, 0.0]}},
+            r"points \{'snr_db': 0\} and \{'snr_db': 0.0\} .* parse to the same command line",
+        ),
     ],
 )
 def test_bad_specs_fail_before_anything_runs(tmp_path, over, match):
