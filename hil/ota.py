@@ -253,9 +253,9 @@ def build_burst(
     reports, layout, parts = [], [], [np.zeros(cfg.gap_samples, np.complex64)]
     # one scale for every frame: a frame of unit-power symbols has mean power p_nominal and
     # is clipped at sqrt(PAPR * p_nominal), which becomes full scale (|x| = 1)
-    probe = np.exp(
-        2j * np.pi * (np.arange(cfg.header_symbols + cfg.symbols_per_frame) % 4 + 0.5) / 4
-    )
+    # random (not periodic: a periodic probe is impulsive in time and gets clipped) QPSK
+    quadrants = np.random.default_rng(0).integers(0, 4, cfg.header_symbols + cfg.symbols_per_frame)
+    probe = np.exp(2j * np.pi * (quadrants + 0.5) / 4)
     p_nominal = float(np.mean(np.abs(frames.build(probe.astype(np.complex64))) ** 2))
     limit = math.sqrt(10 ** (cfg.max_papr_db / 10) * p_nominal)
     number = 0
