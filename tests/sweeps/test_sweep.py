@@ -83,6 +83,13 @@ def _check_complete(out: Path, spec) -> list[dict]:
     return records
 
 
+def _metrics_by_point(path: Path) -> dict:
+    return {
+        (json.dumps(r["point"], sort_keys=True), r["seed"]): r["metrics"]
+        for r in read_results(path)
+    }
+
+
 # --- spec -----------------------------------------------------------------------------------
 
 
@@ -408,13 +415,7 @@ def test_the_local_pool_gives_the_serial_results(tmp_path):
     run_sweep(spec, serial, executor="serial", progress=False)
     run_sweep(spec, local, executor="local", workers=2, progress=False)
 
-    def by_point(path):
-        return {
-            (json.dumps(r["point"], sort_keys=True), r["seed"]): r["metrics"]
-            for r in read_results(path)
-        }
-
-    assert by_point(serial) == by_point(local)
+    assert _metrics_by_point(serial) == _metrics_by_point(local)
     _check_complete(local, spec)
 
 
@@ -433,13 +434,7 @@ def test_a_local_ray_instance_gives_the_local_results(tmp_path):
     )
     assert not ray.is_initialized()  # the sweep shut down the instance it started
 
-    def by_point(path):
-        return {
-            (json.dumps(r["point"], sort_keys=True), r["seed"]): r["metrics"]
-            for r in read_results(path)
-        }
-
-    assert by_point(local) == by_point(on_ray)
+    assert _metrics_by_point(local) == _metrics_by_point(on_ray)
     _check_complete(on_ray, spec)
     pids = {line.split()[3] for line in (tmp_path / "calls.log").read_text().splitlines()}
     assert os.getpid() not in {int(p) for p in pids}  # the points ran in worker processes
