@@ -265,9 +265,6 @@ def run_sweep(
         ValueError: during the run, a point's command rejected its arguments (exit 2); the
             points finished before are kept.
     """
-    from osnerf.cli import COMMANDS
-    from osnerf.provenance import git_commit
-
     run_executor = get_executor(executor)
     points = expand(spec)
     if "out" not in command_options(command_parser(spec.command)):
@@ -281,6 +278,57 @@ def run_sweep(
     rule = metric_rule(spec.command)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
+    with _exclusive(out):
+        return _run_points(
+            spec,
+            points,
+            out,
+            rule,
+            executor,
+            run_executor,
+            workers,
+            cpus,
+            progress,
+            ray_address,
+            ray_runtime_env,
+            keep,
+        )
+
+
+@contextlib.contextmanager
+def _exclusive(out: Path):
+    """Hold ``<out>.lock`` (flock) while a sweep writes ``out``: two sweeps on one file refuse."""
+    import fcntl
+
+    lock = out.with_name(out.name + ".lock")
+    with open(lock, "w") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(
+                f"--out {str(out)!r}: another sweep is writing it (lock {lock.name} is held); "
+                "wait for it or use another --out"
+            ) from None
+        yield  # closing the file releases the lock
+
+
+def _run_points(
+    spec,
+    points,
+    out,
+    rule,
+    executor,
+    run_executor,
+    workers,
+    cpus,
+    progress,
+    ray_address,
+    ray_runtime_env,
+    keep,
+) -> SweepSummary:
+    from osnerf.cli import COMMANDS
+    from osnerf.provenance import git_commit
+
     done = {point_key(r["point"], r.get("seed")) for r in open_results(out, spec.sha256)}
     todo: list[Point] = [p for p in points if p.key not in done]
     summary = SweepSummary(total=len(points), skipped=len(points) - len(todo))

@@ -236,6 +236,21 @@ def test_results_of_another_spec_are_refused(tmp_path, capsys):
     assert out.read_bytes() == before
 
 
+def test_two_sweeps_on_one_results_file_refuse(tmp_path):
+    import fcntl
+
+    out = tmp_path / "r.jsonl"
+    with open(tmp_path / "r.jsonl.lock", "w") as held:  # another sweep holds the lock
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(ValueError, match=r"another sweep is writing it"):
+            run_sweep(_spec(tmp_path), out, executor="serial", progress=False)
+    assert not out.exists()
+    summary = run_sweep(
+        _spec(tmp_path, axes={"snr_db": [0]}), out, executor="serial", progress=False
+    )
+    assert summary.finished == 2  # the lock is free again
+
+
 def test_a_torn_last_line_is_cut_and_the_sweep_completes(tmp_path):
     spec = _spec(tmp_path)
     out = tmp_path / "r.jsonl"
