@@ -284,6 +284,21 @@ def positions_to_mask(positions, height: int, width: int, block_px: int = 4) -> 
     return full[:height, :width]
 
 
+def receiver_mask(meta, height: int, width: int) -> np.ndarray | None:
+    """[height, width] float32: the pixels the focus-mode side information says were sent
+    (``meta.crop`` box, or ``meta.positions`` on the 4x4 feature grid); None = whole image."""
+    crop = getattr(meta, "crop", None)
+    if crop is not None:
+        top, left, rows, cols = (int(v) for v in crop)
+        m = np.zeros((height, width), np.float32)
+        m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
+        return m
+    pos = getattr(meta, "positions", None)
+    if pos is not None:
+        return positions_to_mask(pos[0].cpu().numpy(), height, width)
+    return None
+
+
 def combine_repetitions(
     x_hat: torch.Tensor, noise_var: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -367,11 +382,10 @@ def transmit_jscc(
         out.append(_to_nhwc(img)[0])
         symbols.append(r * int(enc.symbols.shape[-1]))
         rx_snr.append(snr_rx)
-        pos = getattr(enc.meta, "positions", None)
         side.append(int(enc.meta.side_info_bits()) if hasattr(enc.meta, "side_info_bits") else 0)
-        if routing is not None and pos is not None:
-            # the receiver knows which positions were sent: outside them it shows background
-            m = positions_to_mask(pos[0].cpu().numpy(), h, w)
+        m = receiver_mask(enc.meta, h, w) if routing is not None else None
+        if m is not None:
+            # the receiver knows what was sent (box or positions): elsewhere it shows background
             rx_masks.append(m)
             out[-1] = out[-1] * m[..., None] + background * (1.0 - m[..., None])
     masks = np.stack(rx_masks) if rx_masks else None
