@@ -309,7 +309,16 @@ def _draw_snr_anchors(ax, rows, data_dir):
     for j, (pts, color, label) in enumerate(curves):
         pts = [(x, y) for x, y in pts if lo <= x <= hi]
         if pts:
-            ax.plot(*zip(*pts), linestyle=styles[j % 4], color=color, lw=1, label=label)
+            marker = "xv^sd+"[j % 6] if len(pts) <= 12 else None  # the published points
+            ax.plot(
+                *zip(*pts),
+                linestyle=styles[j % 4],
+                marker=marker,
+                ms=4,
+                color=color,
+                lw=1,
+                label=label,
+            )
 
 
 def _capacity_anchor(

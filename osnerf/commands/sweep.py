@@ -68,4 +68,5 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
+    print(f"osnerf sweep: plot with `osnerf plot {args.out} --out DIR`", file=sys.stderr)
     return 0
