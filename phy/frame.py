@@ -173,7 +173,10 @@ class FrameResult:
         start_index: first sample of the frame in the given stream (-1 when not detected).
         cfo_hz: estimated carrier-frequency offset; ``cfo_subcarriers`` the same in carriers.
         sco_ppm: estimated sampling-clock offset (positive: the frame arrives stretched).
-        snr_db_estimate: mean |H|^2 / noise variance on the used carriers, dB.
+        snr_db_estimate: mean |H|^2 / N0 on the used carriers in dB, N0 from the difference
+            of the two long training symbols: the SNR of random noise alone.
+        effective_snr_db: the same with the noise the data saw (pilot residuals: noise plus
+            quantisation, I/Q image, ISI/ICI); what ``noise_var`` is based on.
         detected: whether a complete frame was found.
     """
 
@@ -185,6 +188,7 @@ class FrameResult:
     sco_ppm: float
     snr_db_estimate: float
     detected: bool
+    effective_snr_db: float = float("nan")
 
 
 @functools.cache
@@ -445,7 +449,7 @@ def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> Fra
     )
     symbols = extract_data(x_hat, grid)[0, :num_symbols].contiguous()
     nv = extract_data(nv, grid)[0, :num_symbols].contiguous()
-    snr = float(np.mean(np.abs(h[used]) ** 2)) / noise_var
+    signal = float(np.mean(np.abs(h[used]) ** 2))
     return FrameResult(
         symbols=symbols,
         noise_var=nv,
@@ -453,6 +457,7 @@ def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> Fra
         cfo_hz=cfo * cfg.subcarrier_spacing_hz,
         cfo_subcarriers=float(cfo),
         sco_ppm=float(b / s * 1e6),
-        snr_db_estimate=10 * math.log10(snr),
+        snr_db_estimate=10 * math.log10(signal / lts_noise_var),
+        effective_snr_db=10 * math.log10(signal / noise_var),
         detected=True,
     )

@@ -62,3 +62,7 @@ def test_frame_through_emulated_radios(snr_db, ppm, multipath, max_ser):
     assert ser <= max_ser
     err = np.abs(res.symbols.numpy() - x) ** 2
     assert err.mean() == pytest.approx(res.noise_var.mean().item(), rel=0.35)
+    # thermal SNR per used carrier = snr_db + 10 log10(64 / 52); the I/Q image (about
+    # -28 dB here) lowers the effective SNR below it, and only that one
+    assert res.snr_db_estimate == pytest.approx(snr_db + 10 * math.log10(64 / 52), abs=1.5)
+    assert res.effective_snr_db < res.snr_db_estimate
