@@ -87,11 +87,11 @@ def run(out_dir: Path) -> dict:
             "ours_mean_iterations": round(res.extra["mean_iterations"], 2),
             "ours_s": round(ours_s, 3),
             "ours_cpu_s": round(ours_cpu, 3),
-            "ours_mbit_per_s": round(ours_mbps, 3),
+            "ours_mbit_per_s": float(f"{ours_mbps:.4g}"),
             "direct_sionna_bler": bler_direct,
             "direct_sionna_s": round(direct_s, 3),
             "direct_sionna_cpu_s": round(direct_cpu, 3),
-            "direct_sionna_mbit_per_s": round(direct_mbps, 3),
+            "direct_sionna_mbit_per_s": float(f"{direct_mbps:.4g}"),
             "ratio_ours_over_direct": round(ours_mbps / direct_mbps, 2),
         }
         print(row)
