@@ -34,16 +34,15 @@ def schmidl_cox_metric(iq: np.ndarray, half_length: int):
     Returns:
         (M [num_samples - 2L + 1] float64, P [num_samples - 2L + 1] complex128).
     """
-    r = np.asarray(iq, dtype=np.complex128)
+    r = np.asarray(iq, dtype=np.complex64)
     L = int(half_length)
     if r.size < 2 * L:
         return np.zeros(0), np.zeros(0, dtype=np.complex128)
     c = np.conj(r[:-L]) * r[L:]
-    p = sliding_sum(c, L)
-    e = np.abs(r) ** 2
-    e1 = sliding_sum(e[:-L], L)
-    e2 = sliding_sum(e[L:], L)
-    m = np.abs(p) ** 2 / np.maximum(e1 * e2, 1e-30)
+    p = sliding_sum(c.astype(np.complex128), L)  # float64 sums: no drift over long captures
+    e = sliding_sum((r.real**2 + r.imag**2).astype(np.float64), L)  # energy of each L-window
+    e1, e2 = e[: p.size], e[L : L + p.size]
+    m = (p.real**2 + p.imag**2) / np.maximum(e1 * e2, 1e-30)
     return m, p
 
 
