@@ -2,6 +2,13 @@
 
 Imports nothing else of osnerf. See ``phy.conventions`` for power and SNR definitions.
 sionna is imported lazily (only by the blocks that need it), so ``import phy`` is cheap.
+
+* channels (``phy.CHANNELS``, ``phy.make_channel``): ``channel(x, snr_db, generator) -> ChannelOutput``
+* links (``FlatLink``, ``OFDMLink``): ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``
+* OFDM (``phy.ofdm``): ``ResourceGrid``, (de)modulation, LS estimation, ZF/MMSE equalisation
+* over the air (``phy.frame``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``
+* theory (``phy.theory``, ``phy.modulation``): uncoded BER/SER closed forms, Gray constellations
+* ``phy.digital`` (CRC + 5G LDPC + QAM) and ``phy.raytrace`` (sionna-rt channels) are subpackages.
 """
 
 from phy._llvm import configure_llvm, require_llvm

@@ -74,3 +74,19 @@ def test_bad_link_arguments():
         phy.FlatLink(phy.AWGN(), equalizer="ml")
     with pytest.raises(ValueError, match=r"\[batch, num_symbols\]"):
         phy.FlatLink(phy.AWGN())(torch.ones(1, 2, 3, dtype=torch.complex64), 0.0)
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_links_run_on_cuda_with_a_cuda_generator():
+    dev = "cuda"
+    g = torch.Generator(device=dev).manual_seed(0)
+    x = phy.power_normalize(torch.randn(4, 1000, dtype=torch.complex64, device=dev, generator=g))
+    for link in (
+        phy.FlatLink(phy.RicianFading(mode="fast")),
+        phy.OFDMLink(phy.ResourceGrid(), phy.RayleighFading("block"), csi="ls"),
+    ):
+        out = link(x, 10.0, generator=g)
+        assert out.x_hat.device.type == dev and out.noise_var.device.type == dev
+        mse = (out.x_hat - x).abs().pow(2).mean().item()
+        assert mse == pytest.approx(out.noise_var.mean().item(), rel=0.15)
