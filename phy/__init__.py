@@ -6,7 +6,7 @@ sionna is imported lazily (only by the blocks that need it), so ``import phy`` i
 * channels (``phy.CHANNELS``, ``phy.make_channel``): ``channel(x, snr_db, generator) -> ChannelOutput``
 * links (``FlatLink``, ``OFDMLink``): ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``
 * OFDM (``phy.ofdm``): ``ResourceGrid``, (de)modulation, LS estimation, ZF/MMSE equalisation
-* over the air (``phy.frame``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``
+* over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``
 * theory (``phy.theory``, ``phy.modulation``): uncoded BER/SER closed forms, Gray constellations
 * ``phy.digital`` (CRC + 5G LDPC + QAM) and ``phy.raytrace`` (sionna-rt channels) are subpackages.
 """
@@ -37,7 +37,7 @@ from phy.conventions import (  # noqa: E402
     snr_db_to_noise_var,
     validate_snr_db,
 )
-from phy.frame import FrameConfig, FrameResult, build_frame, find_frames, receive_frame  # noqa: E402
+from phy.frame import FrameConfig, build_frame  # noqa: E402
 from phy.link import FlatLink, LinkOutput, OFDMLink  # noqa: E402
 from phy.modulation import (  # noqa: E402
     MODULATIONS,
@@ -58,6 +58,7 @@ from phy.ofdm import (  # noqa: E402
     ofdm_modulate,
     post_equalization_snr,
 )
+from phy.receiver import FrameResult, find_frames, receive_frame  # noqa: E402
 from phy.theory import ber_theory, ser_theory  # noqa: E402
 
 
