@@ -149,8 +149,10 @@ def orbit_path(
     center: Tensor | None = None,
     start_azimuth_deg: float = 0.0,
     arc_deg: float = 360.0,
+    up: Tensor | None = None,
 ) -> Tensor:
-    """Camera poses on a horizontal circle around ``center`` (z up), all looking at it.
+    """Camera poses on a circle around ``center`` in the plane normal to ``up`` (default +z),
+    raised by ``elevation_deg``, all looking at the centre. With up = +z, azimuth 0 is +x.
 
     Returns:
         [num_views, 4, 4] float32.
@@ -160,12 +162,16 @@ def orbit_path(
     if not radius_m > 0:
         raise ValueError(f"radius_m must be > 0, got {radius_m}")
     center = torch.zeros(3) if center is None else center.float()
+    up = torch.tensor([0.0, 0.0, 1.0]) if up is None else F.normalize(up.float(), dim=0)
+    seed = torch.tensor([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else torch.tensor([0.0, 1.0, 0.0])
+    e1 = F.normalize(seed - (seed @ up) * up, dim=0)
+    e2 = torch.linalg.cross(up, e1)
     elev = math.radians(elevation_deg)
     poses = []
     for i in range(num_views):
         az = math.radians(start_azimuth_deg + arc_deg * i / num_views)
-        eye = center + radius_m * torch.tensor(
-            [math.cos(elev) * math.cos(az), math.cos(elev) * math.sin(az), math.sin(elev)]
+        eye = center + radius_m * (
+            math.cos(elev) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(elev) * up
         )
-        poses.append(look_at(eye, center))
+        poses.append(look_at(eye, center, up))
     return torch.stack(poses)

@@ -110,7 +110,12 @@ def build_field(spec: dict, aabb: Tensor) -> nn.Module:
     """Rebuild an empty field from its spec (``{"field": "grid", "resolution": ...}``)."""
     kind = spec.get("field")
     if kind == "grid":
-        return GridField(aabb, resolution=spec["resolution"], step_m=spec["step_m"])
+        return GridField(
+            aabb,
+            resolution=spec["resolution"],
+            alpha_init=spec.get("alpha_init", 1e-2),
+            step_m=spec["step_m"],
+        )
     if kind == "mlp":
         return MLPField(aabb, width=spec["width"], depth=spec["depth"])
     raise KeyError(f"unknown field {kind!r}; known: ['grid', 'mlp']")

@@ -42,7 +42,7 @@ class TrainConfig:
     """Ray-marching step in voxels of the current stage (grid field), > 0."""
     batch_rays: int = 4096
     """Rays per optimiser step (grid field; the first stage uses half), >= 1."""
-    lr: float = 0.1
+    lr: float = 0.2
     """Adam learning rate on the grids (decays exponentially to lr_final_ratio * lr)."""
     lr_final_ratio: float = 0.1
     """Learning rate at the end of the budget relative to the start, in (0, 1]."""
@@ -50,6 +50,11 @@ class TrainConfig:
     """Weight of the density total-variation term in the last stage (>= 0)."""
     occupancy_every_steps: int = 50
     """Steps between occupancy-grid updates, >= 1."""
+    occupancy_warmup_steps: int = 100
+    """Steps before the first occupancy update (all cells live until then), >= 0."""
+    alpha_init: float = 1e-2
+    """Initial alpha of every grid sample at the first stage's step (DVGO), in (0, 1).
+    Smaller values leave less fog in unseen space but grow surfaces more slowly."""
     occupancy_threshold: float = 1e-3
     """Alpha below which a cell is empty, in (0, 1)."""
     mlp_width: int = 128
@@ -97,6 +102,12 @@ class TrainConfig:
             raise ValueError(f"lr_final_ratio must be in (0, 1], got {self.lr_final_ratio}")
         if self.tv_weight < 0:
             raise ValueError(f"tv_weight must be >= 0, got {self.tv_weight}")
+        if self.occupancy_warmup_steps < 0:
+            raise ValueError(
+                f"occupancy_warmup_steps must be >= 0, got {self.occupancy_warmup_steps}"
+            )
+        if not 0 < self.alpha_init < 1:
+            raise ValueError(f"alpha_init must be in (0, 1), got {self.alpha_init}")
         if not 0 < self.occupancy_threshold < 1:
             raise ValueError(
                 f"occupancy_threshold must be in (0, 1), got {self.occupancy_threshold}"
@@ -170,9 +181,14 @@ def train(
         stage = 0
         res = config.grid_resolutions[0]
         step_m = config.step_voxels * _voxel_m(aabb, res)
-        field_ = GridField(aabb, resolution=res, step_m=step_m)
+        field_ = GridField(aabb, resolution=res, alpha_init=config.alpha_init, step_m=step_m)
         occupancy = OccupancyGrid.for_grid_field(field_)
-        spec = {"field": "grid", "resolution": res, "step_m": step_m}
+        spec = {
+            "field": "grid",
+            "resolution": res,
+            "step_m": step_m,
+            "alpha_init": config.alpha_init,
+        }
         lr, batch = config.lr, max(1, config.batch_rays // 2)
     else:
         step_m = config.mlp_step_voxels * (aabb[1] - aabb[0]).max().item() / 96
@@ -180,6 +196,13 @@ def train(
         occupancy = OccupancyGrid(aabb, (64, 64, 64))
         spec = {"field": "mlp", "width": config.mlp_width, "depth": config.mlp_depth}
         lr, batch = config.mlp_lr, config.mlp_batch_rays
+    centre = aabb.mean(0)
+    spec["camera"] = {  # for default camera paths when rendering later
+        "intrinsics": dataset.intrinsics.as_dict(),
+        "center": centre.tolist(),
+        "radius_m": (dataset.poses[:, :3, 3] - centre).norm(dim=-1).mean().item(),
+        "up": torch.nn.functional.normalize(dataset.poses[:, :3, 1].mean(0), dim=0).tolist(),
+    }
     model = RadianceField(field_, occupancy, step_m, background, spec)
 
     def make_optimizer():
@@ -222,6 +245,7 @@ def train(
             next_eval += config.eval_every_seconds
         t0 = now()
         frac = progress_fraction()
+        upsampled = False
         if (
             config.field == "grid"
             and stage + 1 < len(config.grid_resolutions)
@@ -234,11 +258,12 @@ def train(
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays
             optimizer = make_optimizer()
+            upsampled = True
         current_lr = lr * config.lr_final_ratio ** min(frac, 1.0)
         for g in optimizer.param_groups:
             g["lr"] = current_lr
-        if step % config.occupancy_every_steps == 0 or (
-            config.field == "grid" and step < 50 and step % 10 == 0
+        if step >= config.occupancy_warmup_steps and (
+            step % config.occupancy_every_steps == 0 or upsampled
         ):
             vd = model.field.vertex_density().detach() if config.field == "grid" else None
             model.occupancy.update(

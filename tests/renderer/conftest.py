@@ -1,4 +1,4 @@
-"""A synthetic analytic scene: a sphere coloured by its normal, seen by orbiting cameras.
+"""Fixtures of the renderer tests: the analytic sphere dataset (see sphere_scene.py).
 
 pytest's default (prepend) import mode puts ``tests/`` on sys.path, where ``tests/renderer``
 (no ``__init__.py``) would shadow the real ``renderer`` as a namespace package; the
@@ -6,7 +6,6 @@ repository root goes first instead (``pythonpath = ["."]`` in pytest's ini optio
 do the same).
 """
 
-import math
 import sys
 from pathlib import Path
 
@@ -16,71 +15,22 @@ if ROOT not in sys.path:
 if "renderer" in sys.modules and getattr(sys.modules["renderer"], "__file__", None) is None:
     del sys.modules["renderer"]  # a namespace package picked up from tests/
 
-import cv2  # noqa: E402
-import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-import torch  # noqa: E402
-
-from renderer import Intrinsics, camera_rays, orbit_path, write_transforms  # noqa: E402
-
-RADIUS_M = 0.5
-SIZE = 32
-CAMERA_DISTANCE_M = 2.5
-
-
-def sphere_views(poses: torch.Tensor, intrinsics: Intrinsics, background=(1.0, 1.0, 1.0)):
-    """Exact renders of the sphere |x| = RADIUS_M with colour 0.5 + 0.5 n (n: outward normal).
-
-    Returns (rgb [n, h, w, 3], alpha [n, h, w], depth [n, h, w] distance along the ray,
-    inf where missed).
-    """
-    o, d = camera_rays(poses, intrinsics)
-    b = (o * d).sum(-1)
-    c = (o * o).sum(-1) - RADIUS_M**2
-    disc = b * b - c
-    hit = disc > 0
-    t = -b - torch.sqrt(disc.clamp_min(0))
-    p = o + t[..., None] * d
-    n = p / RADIUS_M
-    colour = 0.5 + 0.5 * n
-    bg = torch.tensor(background)
-    rgb = torch.where(hit[..., None], colour, bg)
-    depth = torch.where(hit, t, torch.full_like(t, math.inf))
-    return rgb, hit.float(), depth
-
-
-def sphere_cameras(num_views: int, elevation_deg: float, start_deg: float = 0.0):
-    return orbit_path(num_views, CAMERA_DISTANCE_M, elevation_deg, start_azimuth_deg=start_deg)
-
-
-def write_sphere_dataset(root: Path) -> Path:
-    """transforms_train.json (24 views, RGBA, extension-less paths) and transforms_test.json (4)."""
-    root.mkdir(parents=True, exist_ok=True)
-    fx = 0.5 * SIZE / math.tan(0.5 * 0.9)
-    intr = Intrinsics(fx, fx, SIZE / 2, SIZE / 2, SIZE, SIZE)
-    splits = {
-        "train": torch.cat([sphere_cameras(12, 20.0), sphere_cameras(12, -25.0, 15.0)]),
-        "test": sphere_cameras(4, 5.0, 40.0),
-    }
-    for split, poses in splits.items():
-        rgb, alpha, _ = sphere_views(poses, intr, background=(0.0, 0.0, 0.0))
-        (root / split).mkdir(exist_ok=True)
-        paths = []
-        for i in range(poses.shape[0]):
-            rgba = torch.cat([rgb[i], alpha[i][..., None]], -1).numpy()
-            img = (rgba * 255 + 0.5).astype(np.uint8)[..., [2, 1, 0, 3]]
-            cv2.imwrite(str(root / split / f"r_{i}.png"), img)
-            paths.append(f"./{split}/r_{i}")
-        write_transforms(
-            root / f"transforms_{split}.json",
-            poses,
-            intr,
-            paths,
-            aabb=torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]),
-        )
-    return root
+from sphere_scene import write_sphere_dataset  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def sphere_dataset(tmp_path_factory) -> Path:
     return write_sphere_dataset(tmp_path_factory.mktemp("sphere"))
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """One intra-op thread: on a shared, oversubscribed machine two OpenMP threads wait
+    on each other and run many times slower. Restored afterwards."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -1,0 +1,161 @@
+"""Renderer benchmark on lego at 100x100 (2 CPU threads).
+
+* grid field: PSNR-vs-time curve on held-out test views within a 120 s budget;
+* vanilla NeRF MLP on the same budget, sampler and renderer;
+* the time each needs to reach the MLP's best PSNR (goal: grid >= 10x faster);
+* the lightweight renderer along a camera path: time per view and PSNR against
+  full-resolution volume rendering of the same field (goal: >= 5x faster, <= 1 dB loss).
+
+The machine is shared: the budget clock is ``cpu`` (process CPU seconds / 2 threads, the
+wall time the same work takes on two idle cores; optimistic for single-threaded Python
+parts) unless OSNERF_BENCH_CLOCK=wall. Wall seconds and the load average are recorded
+beside it. Environment: OSNERF_BENCH_SECONDS (default 120), OSNERF_LIGHTWEIGHT_SECONDS
+(default 60), OSNERF_LIGHTWEIGHT_SEQUENCES (default 24), OSNERF_BENCH_THREADS (default 2; on an oversubscribed machine 1 thread is
+many times faster because OpenMP threads wait on each other).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import torch
+
+from osnerf.paths import shared_data_dir
+from renderer import (
+    LightweightConfig,
+    TrainConfig,
+    evaluate,
+    image_metrics,
+    load_dataset,
+    orbit_path,
+    render_views,
+    train,
+    train_lightweight,
+)
+
+
+def _time_to_reach(curve: list[dict], target: float, key: str = "seconds") -> float | None:
+    """First time the curve reaches ``target`` PSNR (linear interpolation between points)."""
+    prev = None
+    for p in curve:
+        if p["psnr"] >= target:
+            if prev is None:
+                return p[key]
+            frac = (target - prev["psnr"]) / max(p["psnr"] - prev["psnr"], 1e-9)
+            return prev[key] + frac * (p[key] - prev[key])
+        prev = p
+    return None
+
+
+def _plot(curves: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    for name, curve in curves.items():
+        ax.plot([p["seconds"] for p in curve], [p["psnr"] for p in curve], marker=".", label=name)
+    ax.set_xlabel("training seconds")
+    ax.set_ylabel("test PSNR (dB), lego 100x100")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def run(out_dir: Path) -> dict:
+    threads = int(os.environ.get("OSNERF_BENCH_THREADS", "2"))
+    torch.set_num_threads(threads)
+    clock = os.environ.get("OSNERF_BENCH_CLOCK", "cpu")
+    budget = float(os.environ.get("OSNERF_BENCH_SECONDS", "120"))
+    lw_seconds = float(os.environ.get("OSNERF_LIGHTWEIGHT_SECONDS", "60"))
+    root = shared_data_dir() / "nerf_synthetic" / "lego"
+    train_set = load_dataset(root, "train", 100)
+    test_set = load_dataset(root, "test", 100, aabb=train_set.aabb).subset(range(0, 200, 8))
+    results: dict = {
+        "dataset": "nerf_synthetic/lego",
+        "resolution": 100,
+        "num_train_views": train_set.num_views,
+        "num_test_views": test_set.num_views,
+        "curve_views": 10,
+        "clock": clock,
+        "budget_seconds": budget,
+        "loadavg_start": os.getloadavg(),
+        "threads": torch.get_num_threads(),
+    }
+    curves = {}
+    for name, interval in (("grid", budget / 20), ("mlp", budget / 6)):
+        cfg = TrainConfig(field=name, max_seconds=budget, clock=clock, eval_every_seconds=interval)
+        w0, c0 = time.perf_counter(), time.process_time()
+        res = train(train_set, cfg, torch.Generator().manual_seed(0), eval_dataset=test_set)
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        final = evaluate(res.model, test_set)
+        curves[name] = res.curve
+        results[name] = {
+            "config": cfg.as_dict(),
+            "steps": res.steps,
+            "train_seconds": res.seconds,
+            "wall_seconds_incl_eval": wall,
+            "cpu_seconds_incl_eval": cpu,
+            "test_psnr": final["psnr"],
+            "test_ssim": final["ssim"],
+            "render_seconds_per_view": final["seconds_per_view"],
+            "occupancy_fraction": res.model.occupancy.fraction_occupied,
+            "curve": res.curve,
+            "loadavg_after": os.getloadavg(),
+        }
+        if name == "grid":
+            grid_model = res.model
+    mlp_best = max(p["psnr"] for p in curves["mlp"])
+    t_mlp = _time_to_reach(curves["mlp"], mlp_best)
+    t_grid = _time_to_reach(curves["grid"], mlp_best)
+    results["mlp_best_psnr"] = mlp_best
+    results["seconds_to_mlp_best"] = {"grid": t_grid, "mlp": t_mlp}
+    results["grid_speedup_to_mlp_best"] = (t_mlp / t_grid) if t_grid and t_mlp else None
+    results["grid_goal_26db_met"] = results["grid"]["test_psnr"] >= 26.0
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _plot(curves, out_dir / "renderer_curve.png")
+
+    # lightweight renderer along an orbit of 3-degree steps
+    lw_cfg = LightweightConfig(
+        downsample=4, buffer_frames=2, train_seconds=lw_seconds, num_sequences=24
+    )
+    lw, stats = train_lightweight(grid_model, train_set, lw_cfg, torch.Generator().manual_seed(0))
+    radius = (train_set.poses[:, :3, 3] - train_set.aabb.mean(0)).norm(dim=-1).mean().item()
+    path = orbit_path(
+        30, radius, 30.0, train_set.aabb.mean(0), start_azimuth_deg=20.0, arc_deg=90.0
+    )
+    intr = train_set.intrinsics
+    render_views(grid_model, path[:2], intr)  # warm-up
+    t0 = time.perf_counter()
+    full = render_views(grid_model, path, intr)["rgb"]
+    full_spv = (time.perf_counter() - t0) / path.shape[0]
+    lw.render_path(path[:2], intr)  # warm-up
+    out = lw.render_path(path, intr)
+    lowres = render_views(grid_model, path, intr, intr.height // 4, intr.width // 4)["rgb"]
+    bilinear = torch.nn.functional.interpolate(
+        lowres.permute(0, 3, 1, 2),
+        size=(intr.height, intr.width),
+        mode="bilinear",
+        align_corners=False,
+    ).permute(0, 2, 3, 1)
+    psnr_lw = image_metrics(out["rgb"], full)["psnr"]
+    results["lightweight"] = {
+        "config": lw_cfg.as_dict(),
+        "train_stats": stats,
+        "path": "orbit, 30 views, 3 deg apart, 100x100, elevation 30 deg",
+        "full_seconds_per_view": full_spv,
+        "lightweight_seconds_per_view": out["seconds_per_view"],
+        "speedup": full_spv / out["seconds_per_view"],
+        "psnr_vs_full_render": psnr_lw,
+        "psnr_bilinear_upsampling_vs_full_render": image_metrics(bilinear.clamp(0, 1), full)[
+            "psnr"
+        ],
+        "note": "PSNRs compare with the same field's full-resolution volume rendering, not ground truth",
+    }
+    results["loadavg_end"] = os.getloadavg()
+    return results

@@ -1,0 +1,167 @@
+"""`osnerf render`: render a camera path from a trained field to PNGs and an MP4 or GIF.
+
+The path is an orbit around the scene centre (radius, up axis and intrinsics default to
+the training cameras') or the ``frames[].transform_matrix`` of a JSON file (``--path``).
+Writes ``OUT/frames/NNN.png``, ``OUT/path.mp4`` or ``OUT/path.gif`` (OpenCV), and
+``OUT/render.json`` (config, timing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from osnerf.cli import UsageError
+
+VIDEOS = ("mp4", "gif", "none")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--run",
+        required=True,
+        help="run folder of `osnerf train-nerf` (with model.pt), or a model .pt file",
+    )
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--num-views", type=int, default=60, help="views on the orbit (default 60)")
+    p.add_argument(
+        "--resolution",
+        type=int,
+        default=None,
+        help="image width in pixels (default: training width)",
+    )
+    p.add_argument(
+        "--elevation-deg",
+        type=float,
+        default=30.0,
+        help="orbit elevation above the horizon (default 30)",
+    )
+    p.add_argument(
+        "--radius-m",
+        type=float,
+        default=None,
+        help="orbit radius (default: mean training camera distance)",
+    )
+    p.add_argument("--arc-deg", type=float, default=360.0, help="orbit arc (default 360)")
+    p.add_argument(
+        "--path",
+        default=None,
+        help="JSON with frames[].transform_matrix to render instead of an orbit",
+    )
+    p.add_argument(
+        "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
+    )
+    p.add_argument("--fps", type=float, default=24.0, help="video frame rate (default 24)")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+
+
+def _path_poses(path: Path):
+    import torch
+
+    if not path.is_file():
+        raise FileNotFoundError(f"--path {path}: file not found")
+    try:
+        frames = json.loads(path.read_text())["frames"]
+        poses = torch.tensor([f["transform_matrix"] for f in frames], dtype=torch.float32)
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"--path {path}: needs frames[].transform_matrix (4x4 each)") from e
+    if (
+        poses.ndim != 3
+        or poses.shape[1:] != (4, 4)
+        or not torch.isfinite(poses).all()
+        or len(poses) == 0
+    ):
+        raise ValueError(f"--path {path}: frames[].transform_matrix must be finite 4x4 matrices")
+    return poses
+
+
+def run(args: argparse.Namespace) -> int:
+    import cv2
+    import torch
+
+    from osnerf.provenance import result_header, write_json_atomic
+    from renderer import Intrinsics, load_model, orbit_path, render_views, to_uint8
+
+    if args.video not in VIDEOS:
+        raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
+    if args.num_views < 1:
+        raise UsageError(f"--num-views must be >= 1, got {args.num_views}")
+    if args.resolution is not None and args.resolution < 8:
+        raise UsageError(f"--resolution must be >= 8 pixels, got {args.resolution}")
+    if args.radius_m is not None and not args.radius_m > 0:
+        raise UsageError(f"--radius-m must be > 0, got {args.radius_m}")
+    if not args.fps > 0:
+        raise UsageError(f"--fps must be > 0, got {args.fps}")
+    run_path = Path(args.run)
+    model_path = run_path / "model.pt" if run_path.is_dir() else run_path
+    if not model_path.is_file():
+        raise FileNotFoundError(
+            f"--run {run_path}: no model.pt (train one with `osnerf train-nerf`)"
+        )
+    torch.set_num_threads(max(1, args.threads))
+    model = load_model(model_path)
+    cam = model.spec.get("camera", {})
+    k = cam.get(
+        "intrinsics", {"fl_x": 100.0, "fl_y": 100.0, "cx": 50.0, "cy": 50.0, "w": 100, "h": 100}
+    )
+    intr = Intrinsics(k["fl_x"], k["fl_y"], k["cx"], k["cy"], int(k["h"]), int(k["w"]))
+    if args.resolution is not None:
+        intr = intr.resized(
+            max(1, round(intr.height * args.resolution / intr.width)), args.resolution
+        )
+    if args.path is not None:
+        poses = _path_poses(Path(args.path))
+    else:
+        center = torch.tensor(cam.get("center", model.aabb.mean(0).tolist()))
+        radius = args.radius_m or cam.get("radius_m", 4.0)
+        up = torch.tensor(cam.get("up", [0.0, 0.0, 1.0]))
+        poses = orbit_path(
+            args.num_views, radius, args.elevation_deg, center, 0.0, args.arc_deg, up
+        )
+
+    out_dir = Path(args.out)
+    (out_dir / "frames").mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    frames = []
+    for i, pose in enumerate(poses):
+        rgb = render_views(model, pose[None], intr)["rgb"][0]
+        frame = to_uint8(rgb)[..., ::-1]  # BGR for OpenCV
+        cv2.imwrite(str(out_dir / "frames" / f"{i:03d}.png"), frame)
+        frames.append(frame)
+    seconds = time.perf_counter() - t0
+    video = None
+    if args.video == "mp4":
+        video = out_dir / "path.mp4"
+        writer = cv2.VideoWriter(
+            str(video), cv2.VideoWriter_fourcc(*"mp4v"), args.fps, (intr.width, intr.height)
+        )
+        for f in frames:
+            writer.write(f)
+        writer.release()
+    elif args.video == "gif":
+        video = out_dir / "path.gif"
+        anim = cv2.Animation()
+        anim.frames = frames
+        anim.durations = [int(round(1000 / args.fps))] * len(frames)
+        if not cv2.imwriteanimation(str(video), anim):
+            raise RuntimeError(f"OpenCV could not write {video}")
+    cfg = {k: v for k, v in vars(args).items() if k != "func"}
+    record = result_header(cfg, None)
+    record.update(
+        {
+            "num_views": len(frames),
+            "width": intr.width,
+            "height": intr.height,
+            "seconds_per_view": seconds / max(len(frames), 1),
+            "video": None if video is None else video.name,
+        }
+    )
+    write_json_atomic(out_dir / "render.json", record)
+    print(
+        f"render: {len(frames)} views, {seconds / max(len(frames), 1):.3f} s/view -> {out_dir}",
+        file=sys.stderr,
+    )
+    return 0
