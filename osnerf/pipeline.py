@@ -798,7 +798,16 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                 for k, v in metrics.items()
                 if k not in ("psnr", "psnr_object", "ssim", "mask_iou")
             },
-            **({"failed_codewords": tx[1].get("failed_codewords")} if scheme == "digital" else {}),
+            **(
+                {
+                    "failed_codewords": tx[1].get("failed_codewords"),
+                    "lost_images": int(
+                        sum(d.get("lost_images", 0) for d in tx[1].get("per_view", []))
+                    ),
+                }
+                if scheme == "digital"
+                else {}
+            ),
             "training_bounds": "demanded objects" if object_routed else "whole scene",
         }
         _log(f"{scheme}: psnr_object {schemes[scheme]['psnr_object']}, symbols {n_sym}")
