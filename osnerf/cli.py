@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
@@ -29,8 +30,20 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+# argparse takes "-10,-5" for an option unless it looks like a negative number: let
+# comma-separated lists of numbers through too ("--snr-db -10,-5,0").
+_NEGATIVE_LIST = re.compile(r"^-\d*\.?\d+([eE][-+]?\d+)?(,[-+]?\d*\.?\d+([eE][-+]?\d+)?)*$")
+
+
 class UsageError(ValueError):
     """Bad arguments or input: exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (``osnerf ber: error: argument --channel: ...``)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def available_commands() -> dict[str, tuple[str, str]]:
@@ -41,11 +54,13 @@ def available_commands() -> dict[str, tuple[str, str]]:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="osnerf", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = _Parser(prog="osnerf", description=__doc__.splitlines()[0])
+    parser._negative_number_matcher = _NEGATIVE_LIST
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name, (module, help_text) in available_commands().items():
         p = sub.add_parser(name, help=help_text, description=help_text)
+        p._negative_number_matcher = _NEGATIVE_LIST
         if command is None or name == command:
             importlib.import_module(module).add_arguments(p)
     return parser

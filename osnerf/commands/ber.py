@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 import sys
 import time
 
@@ -23,21 +22,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from phy.modulation import MODULATIONS
 
     p.add_argument(
-        "--channel", default="awgn", help=f"one of {', '.join(CHANNEL_CHOICES)} (default awgn)"
+        "--channel",
+        default="awgn",
+        choices=CHANNEL_CHOICES,
+        help=f"one of {', '.join(CHANNEL_CHOICES)} (default awgn)",
     )
     p.add_argument(
-        "--modulation", default="qpsk", help=f"one of {', '.join(MODULATIONS)} (default qpsk)"
+        "--modulation",
+        default="qpsk",
+        choices=tuple(MODULATIONS),
+        help=f"one of {', '.join(MODULATIONS)} (default qpsk)",
     )
     p.add_argument(
         "--snr-db",
         default="0,5,10",
         help="comma-separated Es/N0 values in dB, e.g. -10,-5,0 (default 0,5,10)",
     )
-    # let "--snr-db -10,-5" through: argparse takes only plain negative numbers as values
-    if hasattr(p, "_negative_number_matcher"):
-        p._negative_number_matcher = re.compile(
-            r"^-\d*\.?\d+([eE][-+]?\d+)?(,[-+]?\d*\.?\d+([eE][-+]?\d+)?)*$"
-        )
     p.add_argument("--num-bits", default="1000000", help="bits per SNR point (default 1000000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the torch.Generator (default 0)")
     p.add_argument("--out", required=True, help="result JSON path")

@@ -70,8 +70,12 @@ def test_same_seed_same_result(tmp_path):
 @pytest.mark.parametrize(
     "flag, value, match",
     [
-        ("--channel", "rician", "--channel must be one of awgn, rayleigh"),
-        ("--modulation", "8psk", "--modulation must be one of bpsk, qpsk, 16qam, 64qam"),
+        ("--channel", "rician", "--channel: invalid choice: 'rician' (choose from 'awgn', 'rayleigh')"),
+        (
+            "--modulation",
+            "8psk",
+            "--modulation: invalid choice: '8psk' (choose from 'bpsk', 'qpsk', '16qam', '64qam')",
+        ),
         ("--snr-db", "0,100", "--snr-db values must be in"),
         ("--snr-db", "zero", "--snr-db must be comma-separated numbers"),
         ("--num-bits", "-5", "--num-bits must be in"),
