@@ -50,7 +50,7 @@ class TrainConfig:
     """Weight of the density total-variation term in the last stage (>= 0)."""
     occupancy_every_steps: int = 50
     """Steps between occupancy-grid updates, >= 1."""
-    occupancy_warmup_steps: int = 100
+    occupancy_warmup_steps: int = 20
     """Steps before the first occupancy update (all cells live until then), >= 0."""
     alpha_init: float = 1e-2
     """Initial alpha of every grid sample at the first stage's step (DVGO), in (0, 1).
