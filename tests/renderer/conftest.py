@@ -1,19 +1,9 @@
-"""Fixtures of the renderer tests: the analytic sphere dataset (see sphere_scene.py).
-
-pytest's default (prepend) import mode puts ``tests/`` on sys.path, where ``tests/renderer``
-(no ``__init__.py``) would shadow the real ``renderer`` as a namespace package; the
-repository root goes first instead (``pythonpath = ["."]`` in pytest's ini options would
-do the same).
-"""
+"""Fixtures of the renderer tests: the analytic sphere dataset (see sphere_scene.py)."""
 
 import sys
 from pathlib import Path
 
-ROOT = str(Path(__file__).resolve().parents[2])
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
-if "renderer" in sys.modules and getattr(sys.modules["renderer"], "__file__", None) is None:
-    del sys.modules["renderer"]  # a namespace package picked up from tests/
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # sphere_scene, beside this file
 
 import pytest  # noqa: E402
 from sphere_scene import write_sphere_dataset  # noqa: E402

@@ -1,17 +1,9 @@
-"""Fixtures of the semcodec tests. The repository root goes first on sys.path so that
-``import semcodec`` is the package, not this folder (pytest's prepend import mode)."""
+"""Fixtures of the semcodec tests."""
 
-import sys
-from pathlib import Path
+import pytest
+import torch
 
-ROOT = str(Path(__file__).resolve().parents[2])
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
-
-import pytest  # noqa: E402
-import torch  # noqa: E402
-
-from semcodec import load_codec, make_model, save_checkpoint  # noqa: E402
+from semcodec import load_codec, make_model, save_checkpoint
 
 
 @pytest.fixture(scope="session", autouse=True)
