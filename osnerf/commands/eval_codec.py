@@ -20,7 +20,14 @@ import numpy as np
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", required=True, help="folder of PNG/JPEG images")
-    p.add_argument("--channel", default="awgn", help="awgn or rayleigh (block fading, perfect CSI)")
+    from semcodec.evaluation import EVAL_CHANNELS
+
+    p.add_argument(
+        "--channel",
+        default="awgn",
+        choices=EVAL_CHANNELS,
+        help="awgn or rayleigh (block fading, perfect CSI)",
+    )
     p.add_argument("--snr-db", default="1,4,7,10,13", help="comma-separated Es/N0 values in dB")
     p.add_argument(
         "--cbr", default="1/16", help="channel bandwidth ratio, e.g. 1/16 (JSCC: 1/48..1/6)"

@@ -31,7 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="OBJECT[:WEIGHT][,OBJECT...] (default: the scene's default demand)",
     )
     p.add_argument(
-        "--channel", default="rayleigh", help=f"one of {', '.join(CHANNELS)} (default rayleigh)"
+        "--channel",
+        default="rayleigh",
+        choices=CHANNELS,
+        help=f"one of {', '.join(CHANNELS)} (default rayleigh)",
     )
     p.add_argument("--snr-db", type=float, default=0.0, help="Es/N0 in dB (default 0)")
     p.add_argument(

@@ -55,7 +55,7 @@ def _run(env, out, *extra):
     [
         (["--scene", "atlantis"], "known scenes: firefighter"),
         (["--demand", "crate,piano"], "known objects: crate, post, cable"),
-        (["--channel", "carrier-pigeon"], "channel must be one of awgn, rayleigh, raytraced"),
+        (["--channel", "carrier-pigeon"], "invalid choice: 'carrier-pigeon'"),
         (["--schemes", "jscc,telepathy"], "schemes must be a subset"),
         (["--snr-db", "55"], "outside the codec's range"),
     ],
