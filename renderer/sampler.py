@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from renderer.cameras import intersect_aabb
+from renderer.cameras import Intrinsics, intersect_aabb, project_points
 
 
 class OccupancyGrid(nn.Module):
@@ -34,6 +34,8 @@ class OccupancyGrid(nn.Module):
         self.register_buffer("aabb", torch.as_tensor(aabb, dtype=torch.float32).clone())
         nx, ny, nz = cells
         self.register_buffer("occupied", torch.ones(nz, ny, nx, dtype=torch.bool))  # [z, y, x]
+        # cells known to be empty from the views (visual hull): never occupied again
+        self.register_buffer("free", torch.zeros(nz, ny, nx, dtype=torch.bool))  # [z, y, x]
 
     @classmethod
     def for_grid_field(cls, field) -> OccupancyGrid:
@@ -96,8 +98,80 @@ class OccupancyGrid(nn.Module):
         alpha = -torch.expm1(-cell_max * step_m)
         occ = (alpha > threshold).float()
         occ = F.max_pool3d(occ[None, None], kernel_size=3, stride=1, padding=1)[0, 0]
-        self.occupied = occ > 0
+        self.occupied = (occ > 0) & ~self.free
         return self.fraction_occupied
+
+    @torch.no_grad()
+    def carve(
+        self,
+        poses: Tensor,
+        intrinsics: Intrinsics,
+        masks: Tensor,
+        threshold: float = 0.02,
+        max_radius_px: int = 8,
+    ) -> float:
+        """Mark empty every cell that some view sees entirely against the background
+        (space carving: the visual hull of the masks).
+
+        A cell is carved by a view when its bounding sphere lies in front of the camera,
+        its whole image footprint lies inside the image, and the mask, max-pooled over a
+        square that contains the footprint, stays below ``threshold`` there. Cells whose
+        footprint would need a square wider than ``2 * max_radius_px + 1`` (cameras very
+        close) are left alone. Conservative: a cell holding any surface that some view
+        shows with mask >= ``threshold`` is never carved.
+
+        Args:
+            poses: [num_views, 4, 4] camera-to-world.
+            intrinsics: of ``masks``.
+            masks: [num_views, height, width] float in [0, 1] (1 = object).
+        Returns:
+            the fraction of cells now known to be empty.
+        """
+        nx, ny, nz = self.cells
+        centres = self._lattice(0.5).reshape(-1, 3)  # [cells, 3]
+        size = (self.aabb[1] - self.aabb[0]) / torch.tensor([nx, ny, nz], dtype=torch.float32)
+        radius_m = 0.5 * size.norm().item()  # half the cell diagonal
+        focal = max(intrinsics.fx, intrinsics.fy)
+        h, w = intrinsics.height, intrinsics.width
+        # background-only maps, one per dilation radius r = 1..max_radius_px
+        soft = masks.float()[:, None]  # [views, 1, h, w]
+        dilated = torch.stack(
+            [
+                F.max_pool2d(soft, kernel_size=2 * r + 1, stride=1, padding=r)[:, 0] < threshold
+                for r in range(1, max_radius_px + 1)
+            ],
+            dim=1,
+        ).reshape(masks.shape[0], -1)  # [views, radii * h * w]
+        free = self.free.reshape(-1).clone()
+        for k in range(poses.shape[0]):
+            todo = (~free).nonzero()[:, 0]
+            if todo.numel() == 0:
+                break
+            uv, z = project_points(centres[todo], poses[k], intrinsics)
+            u, v = uv[:, 0], uv[:, 1]
+            # off-axis footprints stretch by up to 1 / cos^2 of the angle to the axis
+            stretch = 1.0 + ((u - intrinsics.cx) / intrinsics.fx) ** 2
+            stretch = stretch + ((v - intrinsics.cy) / intrinsics.fy) ** 2
+            rho = focal * radius_m * stretch / (z - radius_m).clamp_min(1e-6)
+            r = torch.ceil(rho) + 1.0
+            ok = (
+                (z > radius_m)
+                & (r <= max_radius_px)
+                & (u - r >= 0)
+                & (u + r <= w)
+                & (v - r >= 0)
+                & (v + r <= h)
+            )
+            if not ok.any():
+                continue
+            ui = u[ok].floor().long().clamp(0, w - 1)
+            vi = v[ok].floor().long().clamp(0, h - 1)
+            ri = r[ok].long() - 1
+            bg = dilated[k][(ri * h + vi) * w + ui]
+            free[todo[ok][bg]] = True
+        self.free = free.reshape(self.free.shape)
+        self.occupied &= ~self.free
+        return self.free.float().mean().item()
 
     def query(self, points: Tensor) -> Tensor:
         """Whether each point lies in an occupied cell: points [n, 3] -> [n] bool

@@ -57,6 +57,10 @@ class TrainConfig:
     Smaller values leave less fog in unseen space but grow surfaces more slowly."""
     occupancy_threshold: float = 1e-3
     """Alpha below which a cell is empty, in (0, 1)."""
+    carve: bool = True
+    """When the dataset has masks, mark empty every cell some view sees against the
+    background (the visual hull) at each coarse-to-fine stage: no fog in space the views
+    show empty, so each step samples only near the object."""
     mlp_width: int = 128
     """Hidden width of the vanilla NeRF MLP."""
     mlp_depth: int = 4
@@ -140,6 +144,11 @@ def _targets(dataset: Dataset, use_masks: bool) -> torch.Tensor:
         m = dataset.masks[..., None]
         images = images * m + bg * (1 - m)
     return images.reshape(-1, 3)
+
+
+def _carve(occupancy: OccupancyGrid, dataset: Dataset, config: TrainConfig) -> None:
+    if config.carve and config.use_masks and dataset.masks is not None:
+        occupancy.carve(dataset.poses, dataset.intrinsics, dataset.masks)
 
 
 def _curve_subset(eval_dataset: Dataset, n: int) -> Dataset:
@@ -246,6 +255,8 @@ def train(
         t0 = now()
         frac = progress_fraction()
         upsampled = False
+        if step == 0:  # inside the timed step: carving counts against the budget
+            _carve(model.occupancy, dataset, config)
         if (
             config.field == "grid"
             and stage + 1 < len(config.grid_resolutions)
@@ -255,6 +266,7 @@ def train(
             res = config.grid_resolutions[stage]
             model.field.upsample(res)
             model.occupancy = OccupancyGrid.for_grid_field(model.field)
+            _carve(model.occupancy, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays
             optimizer = make_optimizer()

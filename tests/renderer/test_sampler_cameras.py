@@ -109,3 +109,49 @@ def test_reprojection_of_a_plane_shifts_by_the_parallax():
     # an occluder: the previous frame saw something nearer -> invalid
     w2, v2 = reproject(ramp, depth0 * 0.5, pose0, depth1, pose1, intr)
     assert v2.sum() == 0 and w2.abs().sum() == 0
+
+
+def test_carving_keeps_every_cell_the_object_touches_and_empties_the_rest():
+    # exact silhouettes of a sphere of radius 0.4 at (0.1, -0.2, 0.05), seen from 20 views
+    centre, radius = torch.tensor([0.1, -0.2, 0.05]), 0.4
+    poses = torch.cat(
+        [
+            torch.stack([look_at(torch.tensor(e), torch.zeros(3)) for e in eyes])
+            for eyes in [
+                [
+                    [
+                        3.0 * math.cos(a) * math.cos(el),
+                        3.0 * math.sin(a) * math.cos(el),
+                        3.0 * math.sin(el),
+                    ]
+                    for a in torch.linspace(0, 2 * math.pi, 11)[:-1].tolist()
+                ]
+                for el in (0.35, -0.4)
+            ]
+        ]
+    )
+    intr = Intrinsics(40.0, 40.0, 24.0, 24.0, 48, 48)
+    o, d = camera_rays(poses, intr)
+    oc = o - centre
+    b = (oc * d).sum(-1)
+    hit = b * b - ((oc * oc).sum(-1) - radius**2) > 0
+    masks = hit.float()  # [views, h, w]
+
+    occ = OccupancyGrid(AABB, (20, 20, 20))
+    frac_free = occ.carve(poses, intr, masks)
+    # cells whose box comes within the radius of the centre hold part of the sphere
+    lo = occ._lattice(0.0)[:-1, :-1, :-1]
+    hi = occ._lattice(0.0)[1:, 1:, 1:]
+    nearest = torch.maximum(torch.minimum(centre, hi), lo)  # closest point of each cell box
+    touches = (nearest - centre).norm(dim=-1) <= radius
+    assert touches.sum() > 50
+    assert not occ.free[touches].any(), "a cell holding the sphere was carved"
+    assert occ.occupied[touches].all()
+    # far from the sphere almost everything the cameras see is carved
+    far = (occ._lattice(0.5) - centre).norm(dim=-1) > radius + 0.35
+    assert occ.free[far].float().mean() > 0.8
+    assert 0.5 < frac_free < 1.0
+    # updates from a (foggy) density field never bring carved cells back
+    occ.update(lambda p: torch.full((p.shape[0],), 5.0), 0.05)
+    assert not (occ.occupied & occ.free).any()
+    assert occ.occupied[touches].all()
