@@ -35,6 +35,13 @@ class RatePolicy:
     cbrs: tuple[float, ...] = (1 / 8, 1 / 12, 1 / 16, 1 / 24)
     repeat_below_db: float = 3.0
     """Below this measured SNR every block is sent twice (diversity over independent fades)."""
+    max_object_oversampling: int = 2
+    """Largest factor s by which the demanded objects are upsampled before encoding (s^2 times
+    the feature positions, so s^2 times the symbols), >= 1."""
+    object_budget_fraction: float = 2 / 3
+    """On-demand views may cost at most this fraction of what sending every view whole
+    would cost at the same SNR (the full-scene budget); the symbols saved by not sending
+    the background are spent on the objects through oversampling. In (0, 1]."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:
@@ -45,6 +52,14 @@ class RatePolicy:
             raise ValueError(f"thresholds_db must be ascending, got {self.thresholds_db}")
         if any(not 0 < c <= 1 for c in self.cbrs):
             raise ValueError(f"cbrs must be in (0, 1], got {self.cbrs}")
+        if self.max_object_oversampling < 1:
+            raise ValueError(
+                f"max_object_oversampling must be >= 1, got {self.max_object_oversampling}"
+            )
+        if not 0 < self.object_budget_fraction <= 1:
+            raise ValueError(
+                f"object_budget_fraction must be in (0, 1], got {self.object_budget_fraction}"
+            )
 
     def cbr_for(self, snr_db: float) -> float:
         """The CBR of the band ``snr_db`` falls in."""
@@ -114,7 +129,12 @@ class SemanticControlUnit:
         return m, self.demand.weights
 
     def focus_cbr(
-        self, masks: np.ndarray, cbr_range: tuple[float, float], views, block_px: int = 4
+        self,
+        masks: np.ndarray,
+        cbr_range: tuple[float, float],
+        views,
+        block_px: int = 4,
+        oversampling: int = 1,
     ) -> np.ndarray:
         """CBR per on-demand view: every feature position (``block_px`` square) touching the
         objects' mask, with all of the codec's channels, i.e. ``coverage * max_cbr``, clamped
@@ -122,26 +142,60 @@ class SemanticControlUnit:
 
         Args:
             masks: [num_views, height, width] union masks of the demanded objects.
+            oversampling: the views are encoded upsampled by this factor (the CBR refers to
+                the upsampled image).
         """
-        lo, hi = cbr_range
         out = []
-        for v, m in zip(views, masks):
-            h, w = m.shape
-            hf, wf = -(-h // block_px), -(-w // block_px)
-            pad = np.zeros((hf * block_px, wf * block_px), bool)
-            pad[:h, :w] = m > 0.05
-            blocks = pad.reshape(hf, block_px, wf, block_px).any((1, 3))
-            cov = float(blocks.mean())
-            c = float(np.clip(cov * hi, lo, hi))
+        for v, cov in zip(views, focus_coverage(masks, block_px, oversampling)):
+            c = float(np.clip(cov * cbr_range[1], *cbr_range))
             out.append(c)
             self.log(
                 "rate",
                 f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the demand)",
                 view=int(v),
-                coverage=cov,
+                coverage=float(cov),
                 cbr=c,
+                oversampling=int(oversampling),
             )
         return np.asarray(out, np.float64)
+
+    def choose_oversampling(
+        self,
+        masks: np.ndarray,
+        cbr_range: tuple[float, float],
+        repetitions: np.ndarray,
+        full_scene_symbols: int,
+        block_px: int = 4,
+    ) -> int:
+        """The largest object oversampling s <= ``rate_policy.max_object_oversampling`` whose
+        on-demand symbols (focus CBR at s, times the repetitions) stay within
+        ``rate_policy.object_budget_fraction`` of the full-scene budget (logged).
+
+        Args:
+            masks: [num_views, height, width] union masks of the on-demand views.
+            repetitions: [num_views] copies of each on-demand view.
+            full_scene_symbols: what sending every candidate view whole would cost.
+        """
+        h, w = masks.shape[1:]
+        budget = self.rate_policy.object_budget_fraction * full_scene_symbols
+        tried = {}
+        for s in range(self.rate_policy.max_object_oversampling, 0, -1):
+            cov = focus_coverage(masks, block_px, s)
+            cbr = np.clip(cov * cbr_range[1], *cbr_range)
+            n = int(np.sum(np.round(cbr * (s * h) * (s * w) * 3) * np.asarray(repetitions)))
+            tried[s] = n
+            if n <= budget or s == 1:
+                break
+        self.log(
+            "rate",
+            f"objects encoded at {s}x their captured resolution: {tried[s]} symbols, "
+            f"{tried[s] / max(full_scene_symbols, 1):.0%} of the full-scene budget "
+            f"(limit {self.rate_policy.object_budget_fraction:.0%})",
+            oversampling=s,
+            symbols_by_oversampling={str(k): v for k, v in sorted(tried.items())},
+            full_scene_symbols=int(full_scene_symbols),
+        )
+        return s
 
     def choose_repetitions(self, measured_snr_db: np.ndarray, views) -> np.ndarray:
         """Copies of each view's block: 2 below ``rate_policy.repeat_below_db``, else 1 (logged)."""
@@ -180,6 +234,42 @@ class SemanticControlUnit:
             aabb=np.asarray(aabb).tolist(),
             bounds="demanded objects" if object_routed else "whole scene",
         )
+
+
+def focus_blocks(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+    """The codec's feature positions (``block_px`` squares of the image upsampled by
+    ``oversampling``) that touch the objects' mask (> 0.05).
+
+    Args:
+        masks: [num_views, height, width] in [0, 1].
+    Returns:
+        [num_views, ceil(s*height/block_px), ceil(s*width/block_px)] bool.
+    """
+    m = np.asarray(masks) > 0.05
+    if oversampling > 1:
+        m = m.repeat(oversampling, axis=1).repeat(oversampling, axis=2)
+    n, h, w = m.shape
+    hf, wf = -(-h // block_px), -(-w // block_px)
+    pad = np.zeros((n, hf * block_px, wf * block_px), bool)
+    pad[:, :h, :w] = m
+    return pad.reshape(n, hf, block_px, wf, block_px).any((2, 4))
+
+
+def focus_coverage(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+    """Fraction of the feature positions of :func:`focus_blocks` that touch the objects,
+    per view: [num_views] float64 in [0, 1]."""
+    return focus_blocks(masks, block_px, oversampling).mean((1, 2)).astype(np.float64)
+
+
+def focus_pixel_masks(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+    """[num_views, height, width] float32: 1 on the pixels that the feature positions of
+    :func:`focus_blocks` cover (at the captured resolution)."""
+    n, h, w = np.asarray(masks).shape
+    b = focus_blocks(masks, block_px, oversampling)
+    px = b.repeat(block_px, axis=1).repeat(block_px, axis=2)[
+        :, : oversampling * h, : oversampling * w
+    ]
+    return px.reshape(n, h, oversampling, w, oversampling).any((2, 4)).astype(np.float32)
 
 
 def measure_snr_db(

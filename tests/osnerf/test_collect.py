@@ -9,7 +9,14 @@ import torch
 import phy
 from osnerf.collect import CollectorConfig, Demand, collect, masked_images
 from osnerf.scenes import Intrinsics, SceneViews
-from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit, measure_snr_db
+from osnerf.scu import (
+    KnowledgeBaseError,
+    RatePolicy,
+    SemanticControlUnit,
+    focus_coverage,
+    focus_pixel_masks,
+    measure_snr_db,
+)
 
 
 def synthetic_views(visible_hydrant, visible_tree, n_test=2, size=8):
@@ -108,6 +115,42 @@ def test_rate_policy_bands_and_clamp():
     assert [d["view"] for d in scu.decisions] == [4, 9]
     with pytest.raises(ValueError, match="cbrs must have"):
         RatePolicy(thresholds_db=(0.0,), cbrs=(0.1,))
+
+
+def test_focus_positions_at_each_oversampling():
+    m = np.zeros((1, 8, 8), np.float32)
+    m[0, 1, 1] = 1.0  # one pixel: 1 of the 2 x 2 feature positions
+    assert focus_coverage(m)[0] == pytest.approx(1 / 4)
+    # upsampled twice it covers pixels 2..3 of 16: still one position, now of 4 x 4
+    assert focus_coverage(m, oversampling=2)[0] == pytest.approx(1 / 16)
+    m[0, 5, 6] = 0.04  # below the 0.05 mask threshold: not a demand
+    assert focus_coverage(m)[0] == pytest.approx(1 / 4)
+    px = focus_pixel_masks(m)
+    assert px.sum() == 16 and px[0, :4, :4].all()
+    px2 = focus_pixel_masks(m, oversampling=2)  # 4 x 4 block of the 16 px image = 2 x 2 here
+    assert px2.sum() == 4 and px2[0, :2, :2].all()
+
+
+def test_oversampling_spends_the_saved_symbols_within_the_budget():
+    """An 8 x 8 pixel object in 16 x 16 views: 4 of 16 positions at 1x, 16 of 64 at 2x,
+    so cbr 1/6 * 1/4 both times; symbols = cbr * (s h)(s w) * 3 * repetitions."""
+    m = np.zeros((3, 16, 16), np.float32)
+    m[:, 4:12, 4:12] = 1.0
+    reps = np.array([2, 1, 1])
+    at1 = sum(round(1 / 24 * 16 * 16 * 3) * r for r in reps)  # 32 symbols per copy
+    at2 = sum(round(1 / 24 * 32 * 32 * 3) * r for r in reps)  # 128 per copy
+    assert (at1, at2) == (128, 512)
+    scu = SemanticControlUnit(Demand.parse("hydrant"))  # limit: 2/3 of the full scene
+    assert scu.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=768) == 2
+    assert scu.decisions[-1]["symbols_by_oversampling"] == {"2": 512}
+    assert scu.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=767) == 1
+    assert scu.decisions[-1]["symbols_by_oversampling"] == {"1": 128, "2": 512}
+    one = SemanticControlUnit(
+        Demand.parse("hydrant"), rate_policy=RatePolicy(max_object_oversampling=1)
+    )
+    assert one.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=10**6) == 1
+    with pytest.raises(ValueError, match="object_budget_fraction must be in"):
+        RatePolicy(object_budget_fraction=1.5)
 
 
 @pytest.mark.parametrize("snr_db", [0.0, 10.0])
