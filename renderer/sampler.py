@@ -102,6 +102,28 @@ class OccupancyGrid(nn.Module):
         return self.fraction_occupied
 
     @torch.no_grad()
+    def inherit_free(self, coarser: OccupancyGrid) -> float:
+        """Mark empty the cells of this grid that lie in space ``coarser`` knows is empty:
+        a cell is free when the coarser cell holding its centre and that cell's 26
+        neighbours are all free (exact for any cell no larger than the coarser ones).
+
+        Returns:
+            the fraction of cells now known to be empty.
+        """
+        known = F.max_pool3d((~coarser.free).float()[None, None], 3, stride=1, padding=1)[0, 0]
+        cx, cy, cz = coarser.cells
+        size = torch.tensor([cx, cy, cz], dtype=torch.float32)
+        rel = (self._lattice(0.5).reshape(-1, 3) - coarser.aabb[0]) * (
+            size / (coarser.aabb[1] - coarser.aabb[0])
+        )
+        inside = (rel.amin(dim=-1) >= 0) & ((rel - size).amax(dim=-1) < 0)
+        cell = torch.minimum(rel.clamp_min(0.0), size - 1).floor_().long()
+        free = inside & (known[cell[:, 2], cell[:, 1], cell[:, 0]] == 0)
+        self.free |= free.reshape(self.free.shape)
+        self.occupied &= ~self.free
+        return self.free.float().mean().item()
+
+    @torch.no_grad()
     def carve(
         self,
         poses: Tensor,
@@ -133,6 +155,11 @@ class OccupancyGrid(nn.Module):
         radius_m = 0.5 * size.norm().item()  # half the cell diagonal
         focal = max(intrinsics.fx, intrinsics.fy)
         h, w = intrinsics.height, intrinsics.width
+        # footprint radius (px) = rho_m / depth; off-axis footprints stretch by up to
+        # 1 / cos^2 of the angle to the axis, largest in the image corners
+        corner = max(abs(intrinsics.cx), abs(w - intrinsics.cx)) / intrinsics.fx
+        corner2 = max(abs(intrinsics.cy), abs(h - intrinsics.cy)) / intrinsics.fy
+        rho_m = focal * radius_m * (1.0 + corner**2 + corner2**2)
         # background-only maps, one per dilation radius r = 1..max_radius_px
         soft = masks.float()[:, None]  # [views, 1, h, w]
         dilated = torch.stack(
@@ -149,11 +176,7 @@ class OccupancyGrid(nn.Module):
                 break
             uv, z = project_points(centres[todo], poses[k], intrinsics)
             u, v = uv[:, 0], uv[:, 1]
-            # off-axis footprints stretch by up to 1 / cos^2 of the angle to the axis
-            stretch = 1.0 + ((u - intrinsics.cx) / intrinsics.fx) ** 2
-            stretch = stretch + ((v - intrinsics.cy) / intrinsics.fy) ** 2
-            rho = focal * radius_m * stretch / (z - radius_m).clamp_min(1e-6)
-            r = torch.ceil(rho) + 1.0
+            r = torch.ceil(rho_m / (z - radius_m).clamp_min(1e-6)) + 1.0
             ok = (
                 (z > radius_m)
                 & (r <= max_radius_px)

@@ -265,7 +265,9 @@ def train(
             stage += 1
             res = config.grid_resolutions[stage]
             model.field.upsample(res)
+            coarser = model.occupancy
             model.occupancy = OccupancyGrid.for_grid_field(model.field)
+            model.occupancy.inherit_free(coarser)
             _carve(model.occupancy, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays

@@ -151,7 +151,33 @@ def test_carving_keeps_every_cell_the_object_touches_and_empties_the_rest():
     far = (occ._lattice(0.5) - centre).norm(dim=-1) > radius + 0.35
     assert occ.free[far].float().mean() > 0.8
     assert 0.5 < frac_free < 1.0
+    # a finer grid inherits the free space without carving again, and never more
+    fine = OccupancyGrid(AABB, (33, 33, 33))
+    assert fine.inherit_free(occ) > 0.3
+    flo, fhi = fine._lattice(0.0)[:-1, :-1, :-1], fine._lattice(0.0)[1:, 1:, 1:]
+    fine_touches = (torch.maximum(torch.minimum(centre, fhi), flo) - centre).norm(dim=-1) <= radius
+    assert fine.occupied[fine_touches].all()
+    fine_far = (fine._lattice(0.5) - centre).norm(dim=-1) > radius + 0.5
+    assert fine.free[fine_far].float().mean() > 0.6
     # updates from a (foggy) density field never bring carved cells back
     occ.update(lambda p: torch.full((p.shape[0],), 5.0), 0.05)
     assert not (occ.occupied & occ.free).any()
     assert occ.occupied[touches].all()
+
+
+def test_a_finer_grid_inherits_exactly_the_free_space_of_a_coarser_one():
+    coarse = OccupancyGrid(AABB, (4, 4, 4))  # cells of 0.5 m
+    coarse.free[:] = True
+    coarse.free[1, 2, 1] = False  # x in [-0.5, 0], y in [0, 0.5], z in [-0.5, 0]
+    fine = OccupancyGrid(AABB, (7, 7, 7))  # not aligned with the coarse cells
+    fine.inherit_free(coarse)
+    lo, hi = fine._lattice(0.0)[:-1, :-1, :-1], fine._lattice(0.0)[1:, 1:, 1:]
+    box_lo, box_hi = torch.tensor([-0.5, 0.0, -0.5]), torch.tensor([0.0, 0.5, 0.0])
+    overlaps = ((lo < box_hi) & (hi > box_lo)).all(dim=-1)
+    assert overlaps.sum() >= 8
+    assert not fine.free[overlaps].any(), "a cell overlapping occupied space was freed"
+    assert fine.occupied[overlaps].all()
+    # cells two fine cells away from the occupied box are freed
+    gap = 2 * 2.0 / 7
+    far = ((lo > box_hi + gap) | (hi < box_lo - gap)).any(dim=-1)
+    assert fine.free[far].all()
