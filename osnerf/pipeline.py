@@ -45,7 +45,8 @@ from osnerf.scenes import (
 from osnerf.scu import RatePolicy, SemanticControlUnit, focus_pixel_masks, measure_snr_db
 
 SCHEMES = ("jscc", "digital", "full", "gt")
-CHANNELS = ("awgn", "rayleigh", "raytraced")
+CHANNELS = ("awgn", "rayleigh", "raytraced", "ota")
+OTA_DEVICES = ("emulated", "hackrf")
 OBJECT_ROUTED = {"jscc": True, "digital": True, "full": False, "gt": True}
 CACHE_VERSION = 3
 
@@ -57,8 +58,10 @@ class RunConfig:
     Attributes:
         scene: built-in scene name (``osnerf scenes`` lists them).
         demand: ``OBJECT[:WEIGHT][,OBJECT...]``; None = the scene's default demand.
-        channel: "awgn", "rayleigh" (block fading, one h per view and copy, perfect CSI) or "raytraced"
-            (each drone position's ray-traced channel to the ground station).
+        channel: "awgn", "rayleigh" (block fading, one h per view and copy, perfect CSI),
+            "raytraced" (each drone position's ray-traced channel to the ground station) or
+            "ota" (over the air between two HackRFs in ``phy``'s OFDM frames: emulated
+            boards 20 ppm apart with multipath at ``snr_db``, or real ones; see ``ota_device``).
         snr_db: Es/N0 in dB (for "raytraced": at the median drone position; each position
             gets its path-gain difference on top).
         schemes: subset of ("jscc", "digital", "full", "gt").
@@ -74,6 +77,9 @@ class RunConfig:
         render_spp: Mitsuba samples per pixel.
         nerf_clock: what ``max_seconds`` counts: "wall" or "cpu" (CPU seconds / threads: the
             wall time on idle cores; for a shared machine).
+        ota_device: for channel "ota": "emulated" (two emulated HackRFs through ``hil``'s
+            USB backend) or "hackrf" (two real boards on USB; ``snr_db`` is then only a
+            label: the air decides).
     """
 
     scene: str = DEFAULT_SCENE
@@ -93,6 +99,7 @@ class RunConfig:
     image_codec: str = "avif"
     render_spp: int = 32
     nerf_clock: str = "wall"
+    ota_device: str = "emulated"
 
     def __post_init__(self):
         get_scene(self.scene)
@@ -107,6 +114,10 @@ class RunConfig:
             raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
         if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
             raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
+        if self.ota_device not in OTA_DEVICES:
+            raise ValueError(
+                f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
+            )
         if self.nerf_clock not in ("wall", "cpu"):
             raise ValueError(f"nerf_clock must be 'wall' or 'cpu', got {self.nerf_clock!r}")
         if not self.symbol_rate_hz > 0:
@@ -184,6 +195,15 @@ class ViewLinks:
     info: dict = field(default_factory=dict)
     zf_links: dict[int, object] = field(default_factory=dict)
     """The same channels with a zero-forcing equaliser (unbiased symbols for QAM LLRs)."""
+    ota: object | None = None
+    """The over-the-air link (channel "ota"): holds the radios and counts frames."""
+
+    def close(self) -> None:
+        if self.ota is not None:
+            self.info.update(
+                frames_sent=int(self.ota.frames_sent), frames_lost=int(self.ota.frames_lost)
+            )
+            self.ota.close()
 
 
 def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewLinks:
@@ -191,6 +211,41 @@ def build_links(cfg: RunConfig, views: SceneViews, indices: np.ndarray) -> ViewL
     import phy
 
     idx = [int(i) for i in indices]
+    if cfg.channel == "ota":
+        from hil import OtaConfig
+        from osnerf.ota_link import (
+            DEFAULT_DELAY_S,
+            DEFAULT_MULTIPATH,
+            DEFAULT_PPM,
+            OtaLink,
+            open_radios,
+        )
+
+        ota_cfg = OtaConfig()
+        tx, rx, emu = open_radios(cfg.ota_device, cfg.snr_db, ota_cfg, seed=cfg.seed)
+        link = OtaLink(tx, rx, float(cfg.snr_db), ota_cfg, emu)
+        info = {
+            "channel": "ota",
+            "device": cfg.ota_device,
+            "frames": "phy OFDM frames (Schmidl-Cox preamble, LS pilots), hil PAPR control, int8",
+            "sample_rate_hz": ota_cfg.sample_rate_hz,
+            "center_freq_hz": ota_cfg.center_freq_hz,
+            "symbols_per_frame": ota_cfg.symbols_per_frame,
+        }
+        if emu is not None:
+            info.update(
+                ppm=list(DEFAULT_PPM),
+                multipath=[[d, str(g)] for d, g in DEFAULT_MULTIPATH],
+                delay_s=DEFAULT_DELAY_S,
+                air_snr_db=float(cfg.snr_db),
+            )
+        return ViewLinks(
+            {i: link for i in idx},
+            {i: float(cfg.snr_db) for i in idx},
+            info=info,
+            zf_links={i: link for i in idx},
+            ota=link,
+        )
     if cfg.channel in ("awgn", "rayleigh"):
         channel = phy.make_channel(cfg.channel)
         link = phy.FlatLink(channel, csi="perfect", equalizer="mmse")
@@ -664,258 +719,266 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
     )
     candidates = col.candidates
     links = build_links(cfg, views, candidates)
-    if links.outage:
-        scu.log("link", "views in outage are not sent", views=sorted(links.outage))
-    sent_ids = [int(v) for v in col.indices if int(v) not in links.outage]
-    if not sent_ids:
-        raise ValueError(
-            "every view showing the demanded objects is in outage: nothing can be sent"
-        )
-    full_ids = [int(v) for v in candidates if int(v) not in links.outage]
-    col = col.subset(np.isin(col.indices, sent_ids))
+    try:
+        if links.outage:
+            scu.log("link", "views in outage are not sent", views=sorted(links.outage))
+        sent_ids = [int(v) for v in col.indices if int(v) not in links.outage]
+        if not sent_ids:
+            raise ValueError(
+                "every view showing the demanded objects is in outage: nothing can be sent"
+            )
+        full_ids = [int(v) for v in candidates if int(v) not in links.outage]
+        col = col.subset(np.isin(col.indices, sent_ids))
 
-    # rate: measured SNR per view -> CBR per view
-    cached = cache.load("rate")
-    if cached is None:
-        gen = torch.Generator().manual_seed(cfg.seed * 7 + 1)
-        measured = np.asarray(
-            [measure_snr_db([links.links[v]], [links.snr_db[v]], gen)[0] for v in full_ids]
+        # rate: measured SNR per view -> CBR per view
+        cached = cache.load("rate")
+        if cached is None:
+            gen = torch.Generator().manual_seed(cfg.seed * 7 + 1)
+            measured = np.asarray(
+                [measure_snr_db([links.links[v]], [links.snr_db[v]], gen)[0] for v in full_ids]
+            )
+            cached = ({"views": np.asarray(full_ids), "measured_snr_db": measured}, {})
+            cache.save("rate", *cached)
+        measured = dict(zip(cached[0]["views"].tolist(), cached[0]["measured_snr_db"].tolist()))
+        codec = prep.codec
+        cbr_range = tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6)
+        snr_range = tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0)
+        cbrs = dict(
+            zip(
+                full_ids,
+                scu.choose_cbr(np.asarray([measured[v] for v in full_ids]), cbr_range, full_ids),
+            )
         )
-        cached = ({"views": np.asarray(full_ids), "measured_snr_db": measured}, {})
-        cache.save("rate", *cached)
-    measured = dict(zip(cached[0]["views"].tolist(), cached[0]["measured_snr_db"].tolist()))
-    codec = prep.codec
-    cbr_range = tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6)
-    snr_range = tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0)
-    cbrs = dict(
-        zip(
-            full_ids,
-            scu.choose_cbr(np.asarray([measured[v] for v in full_ids]), cbr_range, full_ids),
+        snr_enc = {v: float(np.clip(measured[v], *snr_range)) for v in full_ids}
+        h, w = views.intrinsics.height, views.intrinsics.width
+        routing = scu.feature_routing(col)
+        reps = dict(
+            zip(
+                full_ids,
+                scu.choose_repetitions(np.asarray([measured[v] for v in full_ids]), full_ids),
+            )
         )
-    )
-    snr_enc = {v: float(np.clip(measured[v], *snr_range)) for v in full_ids}
-    h, w = views.intrinsics.height, views.intrinsics.width
-    routing = scu.feature_routing(col)
-    reps = dict(
-        zip(full_ids, scu.choose_repetitions(np.asarray([measured[v] for v in full_ids]), full_ids))
-    )
-    full_scene_symbols = sum(_num_symbols_for(cbrs[v], h, w) * int(reps[v]) for v in full_ids)
-    oversampling = scu.choose_oversampling(
-        col.masks, cbr_range, np.asarray([reps[v] for v in sent_ids]), full_scene_symbols
-    )
-    focus = dict(
-        zip(sent_ids, scu.focus_cbr(col.masks, cbr_range, sent_ids, oversampling=oversampling))
-    )
+        full_scene_symbols = sum(_num_symbols_for(cbrs[v], h, w) * int(reps[v]) for v in full_ids)
+        oversampling = scu.choose_oversampling(
+            col.masks, cbr_range, np.asarray([reps[v] for v in sent_ids]), full_scene_symbols
+        )
+        focus = dict(
+            zip(sent_ids, scu.focus_cbr(col.masks, cbr_range, sent_ids, oversampling=oversampling))
+        )
 
-    schemes: dict[str, dict] = {}
-    received_all: dict[str, np.ndarray] = {}
-    renders: dict[str, np.ndarray] = {}
-    jscc_symbols = None
-    for si, scheme in enumerate(cfg.schemes):
-        object_routed = OBJECT_ROUTED[scheme]
-        ids = sent_ids if object_routed else full_ids
-        sent = col.images if object_routed else views.images[ids]
-        masks = col.masks if object_routed else None
-        tx = cache.load(f"{scheme}_tx")
-        if tx is None:
-            _log(f"{scheme}: sending {len(ids)} views over {cfg.channel} at {cfg.snr_db:g} dB")
-            gen = torch.Generator().manual_seed(cfg.seed * 1000 + 17 * si + 3)
-            info: dict = {"views": ids}
-            arrays: dict = {}
-            if scheme == "gt":
-                rec, symbols = sent.copy(), np.zeros(len(ids), np.int64)
-                sec = {"encode": 0.0, "decode": 0.0}
-                # what jscc's receiver would know over a perfect channel: the sent positions
-                arrays["rx_masks"] = focus_pixel_masks(col.masks, oversampling=oversampling)
-            elif scheme == "jscc":
-                rec, symbols, sec, rx_masks, side, rx_snr = transmit_jscc(
-                    views.background,
-                    codec,
-                    prep.rx_codec,
-                    sent,
-                    routing,
-                    ids,
-                    links,
-                    snr_enc,
-                    focus,
-                    reps,
-                    gen,
-                    oversampling=oversampling,
-                )
-                arrays["side_info_bits"] = side
-                arrays["rx_snr_db"] = rx_snr
-                if rx_masks is not None:
-                    arrays["rx_masks"] = rx_masks
-            elif scheme == "full":
-                rec, symbols, sec, _, _, rx_snr = transmit_jscc(
-                    views.background,
-                    codec,
-                    prep.rx_codec,
-                    sent,
-                    None,
-                    ids,
-                    links,
-                    snr_enc,
-                    cbrs,
-                    reps,
-                    gen,
-                )
-                arrays["rx_snr_db"] = rx_snr
-            else:  # digital: same views and symbol budget per view as jscc
-                budgets = (
-                    jscc_symbols
-                    if jscc_symbols is not None
-                    else np.asarray(
-                        [
-                            _num_symbols_for(focus[v], oversampling * h, oversampling * w)
-                            * int(reps[v])
-                            for v in ids
-                        ]
+        schemes: dict[str, dict] = {}
+        received_all: dict[str, np.ndarray] = {}
+        renders: dict[str, np.ndarray] = {}
+        jscc_symbols = None
+        for si, scheme in enumerate(cfg.schemes):
+            object_routed = OBJECT_ROUTED[scheme]
+            ids = sent_ids if object_routed else full_ids
+            sent = col.images if object_routed else views.images[ids]
+            masks = col.masks if object_routed else None
+            tx = cache.load(f"{scheme}_tx")
+            if tx is None:
+                _log(f"{scheme}: sending {len(ids)} views over {cfg.channel} at {cfg.snr_db:g} dB")
+                gen = torch.Generator().manual_seed(cfg.seed * 1000 + 17 * si + 3)
+                info: dict = {"views": ids}
+                arrays: dict = {}
+                if scheme == "gt":
+                    rec, symbols = sent.copy(), np.zeros(len(ids), np.int64)
+                    sec = {"encode": 0.0, "decode": 0.0}
+                    # what jscc's receiver would know over a perfect channel: the sent positions
+                    arrays["rx_masks"] = focus_pixel_masks(col.masks, oversampling=oversampling)
+                elif scheme == "jscc":
+                    rec, symbols, sec, rx_masks, side, rx_snr = transmit_jscc(
+                        views.background,
+                        codec,
+                        prep.rx_codec,
+                        sent,
+                        routing,
+                        ids,
+                        links,
+                        snr_enc,
+                        focus,
+                        reps,
+                        gen,
+                        oversampling=oversampling,
                     )
+                    arrays["side_info_bits"] = side
+                    arrays["rx_snr_db"] = rx_snr
+                    if rx_masks is not None:
+                        arrays["rx_masks"] = rx_masks
+                elif scheme == "full":
+                    rec, symbols, sec, _, _, rx_snr = transmit_jscc(
+                        views.background,
+                        codec,
+                        prep.rx_codec,
+                        sent,
+                        None,
+                        ids,
+                        links,
+                        snr_enc,
+                        cbrs,
+                        reps,
+                        gen,
+                    )
+                    arrays["rx_snr_db"] = rx_snr
+                else:  # digital: same views and symbol budget per view as jscc
+                    budgets = (
+                        jscc_symbols
+                        if jscc_symbols is not None
+                        else np.asarray(
+                            [
+                                _num_symbols_for(focus[v], oversampling * h, oversampling * w)
+                                * int(reps[v])
+                                for v in ids
+                            ]
+                        )
+                    )
+                    rec, sec, failed, dinfo = transmit_digital_views(
+                        sent, ids, links, budgets, cfg, gen
+                    )
+                    symbols = np.asarray(budgets, np.int64)
+                    info.update(failed_codewords=failed, per_view=dinfo)
+                info["seconds"] = sec
+                tx = ({"received": rec, "symbols": symbols, **arrays}, info)
+                cache.save(f"{scheme}_tx", *tx)
+            rec, symbols = tx[0]["received"], tx[0]["symbols"]
+            train_masks = tx[0].get(
+                "rx_masks"
+            )  # what the receiver knows: the sent feature positions
+            if scheme == "jscc":
+                jscc_symbols = symbols
+            received_all[scheme] = rec
+            if object_routed:
+                b = np.stack([np.asarray(views.meta["object_aabb"][o]) for o in demand.objects])
+                aabb = padded_aabb(np.stack([b[:, 0].min(0), b[:, 1].max(0)]))
+            else:
+                aabb = np.asarray(views.meta["aabb"])
+            scu.route_to_renderer(scheme, len(ids), aabb, object_routed)
+            nerf = cache.load(f"{scheme}_nerf")
+            if nerf is None:
+                _log(f"{scheme}: training the radiance field ({cfg.max_seconds:g} s)")
+                vf = write_views_folder(
+                    Path(out_dir) / "received" / scheme,
+                    rec,
+                    views.poses[ids],
+                    views.intrinsics,
+                    aabb,
+                    views.background,
+                    train_masks,
                 )
-                rec, sec, failed, dinfo = transmit_digital_views(
-                    sent, ids, links, budgets, cfg, gen
+                metrics, rgb, op = train_and_score(
+                    vf, views, demand, cfg, seed=cfg.seed * 1000 + si, object_routed=object_routed
                 )
-                symbols = np.asarray(budgets, np.int64)
-                info.update(failed_codewords=failed, per_view=dinfo)
-            info["seconds"] = sec
-            tx = ({"received": rec, "symbols": symbols, **arrays}, info)
-            cache.save(f"{scheme}_tx", *tx)
-        rec, symbols = tx[0]["received"], tx[0]["symbols"]
-        train_masks = tx[0].get("rx_masks")  # what the receiver knows: the sent feature positions
-        if scheme == "jscc":
-            jscc_symbols = symbols
-        received_all[scheme] = rec
-        if object_routed:
-            b = np.stack([np.asarray(views.meta["object_aabb"][o]) for o in demand.objects])
-            aabb = padded_aabb(np.stack([b[:, 0].min(0), b[:, 1].max(0)]))
-        else:
-            aabb = np.asarray(views.meta["aabb"])
-        scu.route_to_renderer(scheme, len(ids), aabb, object_routed)
-        nerf = cache.load(f"{scheme}_nerf")
-        if nerf is None:
-            _log(f"{scheme}: training the radiance field ({cfg.max_seconds:g} s)")
-            vf = write_views_folder(
-                Path(out_dir) / "received" / scheme,
-                rec,
-                views.poses[ids],
-                views.intrinsics,
-                aabb,
-                views.background,
-                train_masks,
-            )
-            metrics, rgb, op = train_and_score(
-                vf, views, demand, cfg, seed=cfg.seed * 1000 + si, object_routed=object_routed
-            )
-            nerf = ({"rgb": rgb, "opacity": op}, metrics)
-            cache.save(f"{scheme}_nerf", *nerf)
-        metrics = dict(nerf[1])
-        renders[scheme] = nerf[0]["rgb"]
-        sec = tx[1]["seconds"]
-        n_sym = int(np.sum(symbols))
-        air = n_sym / cfg.symbol_rate_hz
-        seconds = {
-            "encode": float(sec.get("encode", 0.0)),
-            "air": air,
-            "decode": float(sec.get("decode", 0.0)),
-            "nerf": float(metrics.pop("nerf_seconds")),
-        }
-        for k in ("encode_cpu", "decode_cpu"):
-            if k in sec:
-                seconds[k] = float(sec[k])
-        if "encode_decode_channel" in sec:
-            seconds["codec_and_ldpc"] = float(sec["encode_decode_channel"])
-        schemes[scheme] = {
-            "psnr": metrics["psnr"],
-            "psnr_object": metrics["psnr_object"],
-            "ssim": metrics["ssim"],
-            "mask_iou": metrics["mask_iou"] if object_routed else None,
-            "symbols_sent": n_sym,
-            "views_sent": len(ids),
-            "side_info_bits": int(np.sum(tx[0]["side_info_bits"]))
-            if "side_info_bits" in tx[0]
-            else 0,
-            "seconds": seconds,
-            "processing_seconds": seconds["encode"]
-            + seconds["decode"]
-            + seconds["nerf"]
-            + seconds.get("codec_and_ldpc", 0.0),
-            **view_metrics(rec, sent, masks),
-            **{
-                k: v
-                for k, v in metrics.items()
-                if k not in ("psnr", "psnr_object", "ssim", "mask_iou")
-            },
-            **(
-                {
-                    "failed_codewords": tx[1].get("failed_codewords"),
-                    "lost_images": int(
-                        sum(d.get("lost_images", 0) for d in tx[1].get("per_view", []))
-                    ),
-                }
-                if scheme == "digital"
-                else {}
-            ),
-            "training_bounds": "demanded objects" if object_routed else "whole scene",
-        }
-        _log(f"{scheme}: psnr_object {schemes[scheme]['psnr_object']}, symbols {n_sym}")
+                nerf = ({"rgb": rgb, "opacity": op}, metrics)
+                cache.save(f"{scheme}_nerf", *nerf)
+            metrics = dict(nerf[1])
+            renders[scheme] = nerf[0]["rgb"]
+            sec = tx[1]["seconds"]
+            n_sym = int(np.sum(symbols))
+            air = n_sym / cfg.symbol_rate_hz
+            seconds = {
+                "encode": float(sec.get("encode", 0.0)),
+                "air": air,
+                "decode": float(sec.get("decode", 0.0)),
+                "nerf": float(metrics.pop("nerf_seconds")),
+            }
+            for k in ("encode_cpu", "decode_cpu"):
+                if k in sec:
+                    seconds[k] = float(sec[k])
+            if "encode_decode_channel" in sec:
+                seconds["codec_and_ldpc"] = float(sec["encode_decode_channel"])
+            schemes[scheme] = {
+                "psnr": metrics["psnr"],
+                "psnr_object": metrics["psnr_object"],
+                "ssim": metrics["ssim"],
+                "mask_iou": metrics["mask_iou"] if object_routed else None,
+                "symbols_sent": n_sym,
+                "views_sent": len(ids),
+                "side_info_bits": int(np.sum(tx[0]["side_info_bits"]))
+                if "side_info_bits" in tx[0]
+                else 0,
+                "seconds": seconds,
+                "processing_seconds": seconds["encode"]
+                + seconds["decode"]
+                + seconds["nerf"]
+                + seconds.get("codec_and_ldpc", 0.0),
+                **view_metrics(rec, sent, masks),
+                **{
+                    k: v
+                    for k, v in metrics.items()
+                    if k not in ("psnr", "psnr_object", "ssim", "mask_iou")
+                },
+                **(
+                    {
+                        "failed_codewords": tx[1].get("failed_codewords"),
+                        "lost_images": int(
+                            sum(d.get("lost_images", 0) for d in tx[1].get("per_view", []))
+                        ),
+                    }
+                    if scheme == "digital"
+                    else {}
+                ),
+                "training_bounds": "demanded objects" if object_routed else "whole scene",
+            }
+            _log(f"{scheme}: psnr_object {schemes[scheme]['psnr_object']}, symbols {n_sym}")
 
-    test = views.indices("test")
-    report = {
-        "scene": {
-            "name": cfg.scene,
-            "folder": str(folder),
-            "objects": list(views.objects),
-            "num_train_views": int(len(candidates)),
-            "num_test_views": int(len(test)),
-            "resolution_px": [h, w],
-            "render_seconds": views.meta.get("render_seconds"),
-            "ground_station_m": views.meta["ground_station_m"],
-        },
-        "demand": {"objects": list(demand.objects), "weights": list(demand.weights)},
-        "link": links.info,
-        "snr_db": cfg.snr_db,
-        "symbol_rate_hz": cfg.symbol_rate_hz,
-        "codec": None
-        if codec is None
-        else {
-            "sha256": codec.sha256,
-            "cbr_range": list(cbr_range),
-            "snr_range_db": list(snr_range),
-        },
-        "views": {
-            "candidates": [int(v) for v in candidates],
-            "sent_on_demand": sent_ids,
-            "not_sent": {str(k): v for k, v in sorted(col.reasons.items())},
-            "outage": sorted(links.outage),
-            "link_snr_db": {str(v): links.snr_db[v] for v in full_ids},
-            "measured_snr_db": {str(v): measured[v] for v in full_ids},
-            "cbr": {str(v): float(cbrs[v]) for v in full_ids},
-            "cbr_on_demand": {str(v): float(focus[v]) for v in sent_ids},
-            "repetitions": {str(v): int(reps[v]) for v in full_ids},
-            "object_oversampling": int(oversampling),
-            "full_scene_symbols": int(full_scene_symbols),
-        },
-        "schemes": schemes,
-        "comparisons": comparisons(schemes),
-        "scu_decisions": scu.decisions,
-        "metric_notes": "psnr/ssim: mean over held-out views of per-view values on the whole view "
-        "(object-routed schemes: against the demanded objects on the background colour, since "
-        "they never send the rest of the scene); psnr_object: "
-        "PSNR over the demanded objects' visible pixels (mask > 0.5) of held-out views showing them; "
-        "mask_iou: rendered opacity > 0.5 vs the objects' mask (object-routed schemes only); "
-        "air = symbols_sent / symbol_rate_hz; seconds.nerf follows --nerf-clock (wall or CPU/threads); "
-        "encode_cpu/decode_cpu are process CPU seconds; gt sends nothing (undistorted on-demand views).",
-        "seconds_total": time.perf_counter() - t_run,
-        "scene_seconds": scene_seconds,
-    }
-    pictures = {
-        "gt": views.images[test],
-        "gt_masks": np.stack([views.masks[o][test] for o in demand.objects]).max(0),
-        "received": received_all,
-        "renders": renders,
-    }
-    return report, pictures
+        test = views.indices("test")
+        report = {
+            "scene": {
+                "name": cfg.scene,
+                "folder": str(folder),
+                "objects": list(views.objects),
+                "num_train_views": int(len(candidates)),
+                "num_test_views": int(len(test)),
+                "resolution_px": [h, w],
+                "render_seconds": views.meta.get("render_seconds"),
+                "ground_station_m": views.meta["ground_station_m"],
+            },
+            "demand": {"objects": list(demand.objects), "weights": list(demand.weights)},
+            "link": links.info,
+            "snr_db": cfg.snr_db,
+            "symbol_rate_hz": cfg.symbol_rate_hz,
+            "codec": None
+            if codec is None
+            else {
+                "sha256": codec.sha256,
+                "cbr_range": list(cbr_range),
+                "snr_range_db": list(snr_range),
+            },
+            "views": {
+                "candidates": [int(v) for v in candidates],
+                "sent_on_demand": sent_ids,
+                "not_sent": {str(k): v for k, v in sorted(col.reasons.items())},
+                "outage": sorted(links.outage),
+                "link_snr_db": {str(v): links.snr_db[v] for v in full_ids},
+                "measured_snr_db": {str(v): measured[v] for v in full_ids},
+                "cbr": {str(v): float(cbrs[v]) for v in full_ids},
+                "cbr_on_demand": {str(v): float(focus[v]) for v in sent_ids},
+                "repetitions": {str(v): int(reps[v]) for v in full_ids},
+                "object_oversampling": int(oversampling),
+                "full_scene_symbols": int(full_scene_symbols),
+            },
+            "schemes": schemes,
+            "comparisons": comparisons(schemes),
+            "scu_decisions": scu.decisions,
+            "metric_notes": "psnr/ssim: mean over held-out views of per-view values on the whole view "
+            "(object-routed schemes: against the demanded objects on the background colour, since "
+            "they never send the rest of the scene); psnr_object: "
+            "PSNR over the demanded objects' visible pixels (mask > 0.5) of held-out views showing them; "
+            "mask_iou: rendered opacity > 0.5 vs the objects' mask (object-routed schemes only); "
+            "air = symbols_sent / symbol_rate_hz; seconds.nerf follows --nerf-clock (wall or CPU/threads); "
+            "encode_cpu/decode_cpu are process CPU seconds; gt sends nothing (undistorted on-demand views).",
+            "seconds_total": time.perf_counter() - t_run,
+            "scene_seconds": scene_seconds,
+        }
+        pictures = {
+            "gt": views.images[test],
+            "gt_masks": np.stack([views.masks[o][test] for o in demand.objects]).max(0),
+            "received": received_all,
+            "renders": renders,
+        }
+        return report, pictures
+    finally:
+        links.close()
 
 
 def comparisons(schemes: dict) -> dict:

@@ -19,10 +19,29 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.cli import main
 
     if importlib.util.find_spec("osnerf.commands.run") is not None:
-        return main(["run", "--channel", "rayleigh", "--snr-db", "0", "--seed", "0", "--out", args.out])
+        return main(
+            ["run", "--channel", "rayleigh", "--snr-db", "0", "--seed", "0", "--out", args.out]
+        )
     out = f"{args.out}/ber.json"
-    rc = main(["ber", "--channel", "awgn", "--modulation", "qpsk", "--snr-db", "0,2,4,6,8,10",
-               "--num-bits", "200000", "--seed", "0", "--out", out, "--plot", f"{args.out}/ber.png"])
+    rc = main(
+        [
+            "ber",
+            "--channel",
+            "awgn",
+            "--modulation",
+            "qpsk",
+            "--snr-db",
+            "0,2,4,6,8,10",
+            "--num-bits",
+            "200000",
+            "--seed",
+            "0",
+            "--out",
+            out,
+            "--plot",
+            f"{args.out}/ber.png",
+        ]
+    )
     if rc == 0:
         print(f"results: {out}", file=sys.stderr)
     return rc

@@ -185,7 +185,7 @@ def decode_image_bytes(data: bytes, shape) -> np.ndarray | None:
 # ----------------------------------------------------------------------------- devices
 def open_pair(args, ota_cfg):
     """(tx, rx, emulator or None, description) for the --tx/--rx kinds."""
-    from hil import AirChannel, Emulator, HackRF, open_loopback
+    from hil import HackRF
 
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
@@ -197,21 +197,17 @@ def open_pair(args, ota_cfg):
             raise _usage(
                 "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
             )
-        channel = AirChannel(
-            snr_db=args.snr_db,
-            reference_power_dbfs=ota_cfg.tx_power_dbfs,
-            reference_txvga_db=ota_cfg.txvga_gain_db,
-            reference_rx_gain_db=ota_cfg.lna_gain_db + ota_cfg.vga_gain_db,
-            delay_s=args.delay_us * 1e-6,
+        from osnerf.ota_link import open_radios
+
+        return open_radios(
+            "emulated",
+            args.snr_db,
+            ota_cfg,
+            seed=args.seed,
+            ppm=parse_ppm(args.ppm),
             multipath=parse_multipath(args.multipath),
-        )
-        emu = Emulator(channel, ppm=parse_ppm(args.ppm), seed=args.seed, wait_for_bursts=1)
-        if tx_kind == "loopback":
-            return open_loopback(emu.radios[0]), open_loopback(emu.radios[1]), emu
-        return (
-            HackRF.open(emu.serials[0], backend=emu.backend),
-            HackRF.open(emu.serials[1], backend=emu.backend),
-            emu,
+            delay_s=args.delay_us * 1e-6,
+            loopback=tx_kind == "loopback",
         )
     tx = HackRF.open(tx_serial)
     try:

@@ -1,6 +1,6 @@
 """`osnerf run`: the end-to-end pipeline: scene -> collector -> link -> NeRF -> report.
 
-    osnerf run --scene NAME --demand OBJECT[,OBJECT...] --channel {awgn,rayleigh,raytraced}
+    osnerf run --scene NAME --demand OBJECT[,OBJECT...] --channel {awgn,rayleigh,raytraced,ota}
                --snr-db 0 --schemes jscc,digital,full,gt --seed 0 --out RUN_DIR [--max-seconds N]
 
 Writes RUN_DIR/report.json, report.html, grid.png, received.png and plots. Without --scene
@@ -17,7 +17,7 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from osnerf.pipeline import CHANNELS, SCHEMES
+    from osnerf.pipeline import CHANNELS, OTA_DEVICES, SCHEMES
     from osnerf.scenes import DEFAULT_SCENE
 
     p.add_argument(
@@ -73,6 +73,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--image-codec", default="avif", help="digital baseline image codec: avif, jpeg, webp"
     )
     p.add_argument(
+        "--ota-device",
+        default="emulated",
+        choices=OTA_DEVICES,
+        help="--channel ota: two emulated HackRFs (default) or two real ones on USB",
+    )
+    p.add_argument(
         "--nerf-clock",
         default="wall",
         help="what --max-seconds counts: wall, or cpu (CPU s / threads; for shared machines)",
@@ -106,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         mcs=args.mcs,
         image_codec=args.image_codec,
         nerf_clock=args.nerf_clock,
+        ota_device=args.ota_device,
     )
     out = Path(args.out)
     body, pictures = run_pipeline(
