@@ -130,7 +130,8 @@ class TrainResult:
     seconds: float
     """Training wall-clock seconds (without curve evaluations)."""
     curve: list[dict]
-    """[{"seconds", "step", "psnr"}] on the evaluation views, when an eval set was given."""
+    """[{"seconds", "step", "psnr"[, "masked_psnr"]}] on the evaluation views, when an eval
+    set was given ("masked_psnr" when it has masks)."""
 
 
 def _voxel_m(aabb: torch.Tensor, resolution: int) -> float:
@@ -244,8 +245,11 @@ def train(
     def record_curve():
         model.eval()
         out = render_views(model, curve_set.poses, curve_set.intrinsics)
-        m = image_metrics(out["rgb"], curve_set.images)
-        curve.append({"seconds": round(train_seconds, 3), "step": step, "psnr": m["psnr"]})
+        m = image_metrics(out["rgb"], curve_set.images, curve_set.masks)
+        point = {"seconds": round(train_seconds, 3), "step": step, "psnr": m["psnr"]}
+        if "masked_psnr" in m:
+            point["masked_psnr"] = m["masked_psnr"]
+        curve.append(point)
         model.train()
 
     while progress_fraction() < 1.0:

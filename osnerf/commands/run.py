@@ -73,6 +73,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--image-codec", default="avif", help="digital baseline image codec: avif, jpeg, webp"
     )
     p.add_argument(
+        "--nerf-steps",
+        type=int,
+        default=None,
+        help="cap on NeRF steps per scheme (with a large --max-seconds: equal steps for all)",
+    )
+    p.add_argument(
         "--ota-device",
         default="emulated",
         choices=OTA_DEVICES,
@@ -113,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         image_codec=args.image_codec,
         nerf_clock=args.nerf_clock,
         ota_device=args.ota_device,
+        nerf_steps=args.nerf_steps,
     )
     out = Path(args.out)
     body, pictures = run_pipeline(

@@ -58,6 +58,7 @@ def _run(env, out, *extra):
         (["--channel", "carrier-pigeon"], "invalid choice: 'carrier-pigeon'"),
         (["--schemes", "jscc,telepathy"], "schemes must be a subset"),
         (["--snr-db", "55"], "outside the codec's range"),
+        (["--nerf-steps", "0"], "nerf_steps must be an integer >= 1"),
     ],
 )
 def test_bad_input_is_one_clear_line_and_no_report(env, tmp_path, capsys, args, message):
@@ -113,7 +114,23 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         assert s["psnr_object"] is None or 0 < s["psnr_object"] < 60, name
         assert set(s["seconds"]) >= {"encode", "air", "decode", "nerf"}
         assert s["seconds"]["air"] == pytest.approx(s["symbols_sent"] / 1e6)
+        # the PSNR-vs-time curve on the held-out views: from step 0 to the end of the budget
+        curve = s["nerf_curve"]
+        assert curve[0]["step"] == 0 and curve[-1]["step"] == s["nerf_steps"]
+        assert [c["seconds"] for c in curve] == sorted(c["seconds"] for c in curve)
+        assert curve[-1]["seconds"] == pytest.approx(s["seconds"]["nerf"], abs=1e-3)
+        assert curve[-1]["psnr"] == pytest.approx(s["psnr"], abs=1e-3)
     sch = report["schemes"]
+    comp = report["comparisons"]
+    assert comp["symbols_jscc_over_full"] == pytest.approx(
+        sch["jscc"]["symbols_sent"] / sch["full"]["symbols_sent"]
+    )
+    at = comp["jscc_processing_seconds_to_full_psnr_object"]
+    if at is not None:  # reached full's object PSNR: encode + decode + NeRF seconds so far
+        assert at <= sch["jscc"]["processing_seconds"] + 1e-6
+        assert comp["processing_jscc_over_full_at_equal_psnr_object"] == pytest.approx(
+            at / sch["full"]["processing_seconds"]
+        )
     assert sch["gt"]["symbols_sent"] == 0 and sch["gt"]["views_sent"] == len(sent)
     assert sch["jscc"]["views_sent"] == len(sent) and sch["full"]["views_sent"] == len(
         views["candidates"]
