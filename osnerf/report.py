@@ -169,7 +169,8 @@ def render_html(report: dict, images: dict[str, bytes]) -> str:
         f"<th>{k}</th>" for k in ["scheme", *keys, "encode s", "air s", "decode s", "nerf s"]
     )
     comp = "".join(
-        f"<li>{html.escape(k)}: {v:.3f}</li>" for k, v in report.get("comparisons", {}).items()
+        f"<li>{html.escape(k)}: {'n/a' if v is None else f'{v:.3f}'}</li>"
+        for k, v in report.get("comparisons", {}).items()
     )
     dec = "".join(
         f"<li><b>{html.escape(d['stage'])}</b>: {html.escape(d['decision'])}</li>"
