@@ -90,6 +90,23 @@ class GridField(nn.Module):
             new = F.interpolate(g.data, size=(nz, ny, nx), mode="trilinear", align_corners=True)
             setattr(self, name, nn.Parameter(new))
 
+    @torch.no_grad()
+    def resample(self, aabb: Tensor, resolution: int) -> None:
+        """Move the grids onto a new box ``aabb`` [2, 3] with ``resolution`` vertices on its
+        longest axis: trilinear reads of the current field at the new vertices (the border
+        value outside the current box). Cropping to a smaller box keeps the field exactly
+        at the new vertices."""
+        aabb = torch.as_tensor(aabb, dtype=torch.float32)
+        nx, ny, nz = grid_resolution(aabb, resolution)
+        axes = [torch.linspace(aabb[0, a], aabb[1, a], n) for a, n in enumerate((nx, ny, nz))]
+        z, y, x = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        points = torch.stack([x, y, z], dim=-1).reshape(-1, 3)  # [nz * ny * nx, 3]
+        for name in ("density_grid", "color_grid"):
+            g = getattr(self, name)
+            new = self._sample(g.data, points).t().reshape(1, g.shape[1], nz, ny, nx)
+            setattr(self, name, nn.Parameter(new.contiguous()))
+        self.aabb.copy_(aabb)
+
     def total_variation(self) -> Tensor:
         """Mean squared difference of neighbouring density-grid values (a scalar)."""
         g = self.density_grid

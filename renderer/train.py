@@ -61,6 +61,11 @@ class TrainConfig:
     """When the dataset has masks, mark empty every cell some view sees against the
     background (the visual hull) at each coarse-to-fine stage: no fog in space the views
     show empty, so each step samples only near the object."""
+    crop: bool = True
+    """Grid field: at the first step (after carving) and at each stage change, shrink the
+    grids to the box around the occupied cells (2 cells of margin) at the stage's voxel
+    size. Nothing outside that box can be occupied, and every step's cost in the dense
+    parts (gradients, Adam, total variation) scales with the grids' size."""
     mlp_width: int = 128
     """Hidden width of the vanilla NeRF MLP."""
     mlp_depth: int = 4
@@ -144,6 +149,11 @@ def _targets(dataset: Dataset, use_masks: bool) -> torch.Tensor:
         m = dataset.masks[..., None]
         images = images * m + bg * (1 - m)
     return images.reshape(-1, 3)
+
+
+def _crop_resolution(box: torch.Tensor, aabb: torch.Tensor, resolution: int) -> int:
+    """Vertices on ``box``'s longest axis for the voxel size of ``resolution`` over ``aabb``."""
+    return max(2, int(round((box[1] - box[0]).max().item() / _voxel_m(aabb, resolution))) + 1)
 
 
 def _carve(occupancy: OccupancyGrid, dataset: Dataset, config: TrainConfig) -> None:
@@ -257,6 +267,12 @@ def train(
         upsampled = False
         if step == 0:  # inside the timed step: carving counts against the budget
             _carve(model.occupancy, dataset, config)
+            if config.field == "grid" and config.crop:
+                box = model.occupancy.occupied_box()
+                model.field.resample(box, _crop_resolution(box, aabb, res))
+                model.occupancy = OccupancyGrid.for_grid_field(model.field)
+                _carve(model.occupancy, dataset, config)
+                optimizer = make_optimizer()
         if (
             config.field == "grid"
             and stage + 1 < len(config.grid_resolutions)
@@ -264,7 +280,8 @@ def train(
         ):
             stage += 1
             res = config.grid_resolutions[stage]
-            model.field.upsample(res)
+            box = model.occupancy.occupied_box() if config.crop else model.aabb
+            model.field.resample(box, _crop_resolution(box, aabb, res))
             model.occupancy = OccupancyGrid.for_grid_field(model.field)
             _carve(model.occupancy, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
@@ -310,7 +327,7 @@ def train(
     if bar is not None:
         bar.close()
     if config.field == "grid":
-        model.spec["resolution"] = config.grid_resolutions[stage]
+        model.spec["resolution"] = max(model.field.resolution)
     model.eval()
     if curve_set is not None:
         record_curve()
