@@ -31,6 +31,31 @@ def grid_resolution(aabb: Tensor, resolution: int) -> tuple[int, int, int]:
     return tuple(max(2, int(round(e / voxel)) + 1) for e in extent.tolist())
 
 
+def sh_basis(directions: Tensor, degree: int) -> Tensor:
+    """Real spherical harmonics up to ``degree`` (<= 2) with Y_0 replaced by 1.
+
+    Args:
+        directions: [num_points, 3] unit vectors (x, y, z).
+    Returns:
+        [num_points, (degree + 1)^2]: 1, then -c1 y, c1 z, -c1 x (c1 = 0.4886), then the
+        five degree-2 terms (Plenoxels' ordering and constants).
+    """
+    x, y, z = directions.unbind(-1)
+    out = [torch.ones_like(x)]
+    if degree >= 1:
+        c1 = 0.4886025119029199
+        out += [-c1 * y, c1 * z, -c1 * x]
+    if degree >= 2:
+        out += [
+            1.0925484305920792 * x * y,
+            -1.0925484305920792 * y * z,
+            0.31539156525252005 * (2.0 * z * z - x * x - y * y),
+            -1.0925484305920792 * x * z,
+            0.5462742152960396 * (x * x - y * y),
+        ]
+    return torch.stack(out, dim=-1)
+
+
 class GridField(nn.Module):
     """Dense voxel grids over ``aabb`` with DVGO post-activation.
 
@@ -75,11 +100,38 @@ class GridField(nn.Module):
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
         return F.softplus(self.density_grid[0, 0] + self.density_bias)
 
+    @property
+    def sh_degree(self) -> int:
+        """Spherical-harmonics degree of the colour (0: diffuse; 3 * (degree + 1)^2 channels)."""
+        return int(round(math.sqrt(self.color_grid.shape[1] // 3))) - 1
+
+    @torch.no_grad()
+    def set_sh_degree(self, degree: int) -> None:
+        """Make the colour view-dependent up to SH ``degree`` (0, 1 or 2); new coefficients
+        start at zero, so the field renders exactly as before."""
+        if degree not in (0, 1, 2):
+            raise ValueError(f"degree must be 0, 1 or 2, got {degree}")
+        g = self.color_grid.data.reshape(3, -1, *self.color_grid.shape[2:])  # [3, K, z, y, x]
+        k = (degree + 1) ** 2
+        new = g.new_zeros(3, k, *g.shape[2:])
+        n = min(k, g.shape[1])
+        new[:, :n] = g[:, :n]
+        self.color_grid = nn.Parameter(new.reshape(1, 3 * k, *g.shape[2:]))
+
     def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3]."""
+        """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3] seen along
+        unit ``directions`` [num_points, 3] (ignored by a diffuse field; None: the DC term).
+
+        rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
+        :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         sigma = self.density(points)
-        rgb = torch.sigmoid(self._sample(self.color_grid, points))
-        return sigma, rgb
+        coef = self._sample(self.color_grid, points)  # [num_points, 3 * K]
+        k = coef.shape[1] // 3
+        if k == 1 or directions is None:
+            return sigma, torch.sigmoid(coef[:, ::k])
+        basis = sh_basis(directions, self.sh_degree)  # [num_points, K]
+        logits = (coef.reshape(-1, 3, k) * basis[:, None, :]).sum(-1)  # [num_points, 3]
+        return sigma, torch.sigmoid(logits)
 
     @torch.no_grad()
     def upsample(self, resolution: int) -> None:

@@ -66,6 +66,13 @@ class TrainConfig:
     grids to the box around the occupied cells (2 cells of margin) at the stage's voxel
     size. Nothing outside that box can be occupied, and every step's cost in the dense
     parts (gradients, Adam, total variation) scales with the grids' size."""
+    sh_degree: int = 1
+    """Grid field: spherical-harmonics degree of the colour (0 diffuse, 1 or 2
+    view-dependent), added at stage ``sh_stage``. lego 100 px, 120 s, 1 thread: 0 ->
+    26.6 dB, 1 -> 27.6 dB, 2 -> 27.5 dB (more channels, fewer steps)."""
+    sh_stage: int = -1
+    """Coarse-to-fine stage (index into grid_resolutions; negative counts from the end)
+    from which the colour is view-dependent."""
     mlp_width: int = 128
     """Hidden width of the vanilla NeRF MLP."""
     mlp_depth: int = 4
@@ -111,6 +118,13 @@ class TrainConfig:
             raise ValueError(f"lr_final_ratio must be in (0, 1], got {self.lr_final_ratio}")
         if self.tv_weight < 0:
             raise ValueError(f"tv_weight must be >= 0, got {self.tv_weight}")
+        if self.sh_degree not in (0, 1, 2):
+            raise ValueError(f"sh_degree must be 0, 1 or 2, got {self.sh_degree}")
+        if not -len(self.grid_resolutions) <= self.sh_stage < len(self.grid_resolutions):
+            raise ValueError(
+                f"sh_stage must index grid_resolutions (from {-len(self.grid_resolutions)} "
+                f"to {len(self.grid_resolutions) - 1}), got {self.sh_stage}"
+            )
         if self.occupancy_warmup_steps < 0:
             raise ValueError(
                 f"occupancy_warmup_steps must be >= 0, got {self.occupancy_warmup_steps}"
@@ -227,6 +241,9 @@ def train(
     def make_optimizer():
         return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99))
 
+    sh_stage = config.sh_stage % len(config.grid_resolutions)
+    if config.field == "grid" and sh_stage == 0:
+        model.field.set_sh_degree(config.sh_degree)
     optimizer = make_optimizer()
     threads = torch.get_num_threads()
 
@@ -286,6 +303,8 @@ def train(
             _carve(model.occupancy, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays
+            if stage == sh_stage:
+                model.field.set_sh_degree(config.sh_degree)
             optimizer = make_optimizer()
             upsampled = True
         current_lr = lr * config.lr_final_ratio ** min(frac, 1.0)

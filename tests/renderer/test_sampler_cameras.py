@@ -155,3 +155,33 @@ def test_carving_keeps_every_cell_the_object_touches_and_empties_the_rest():
     occ.update(lambda p: torch.full((p.shape[0],), 5.0), 0.05)
     assert not (occ.occupied & occ.free).any()
     assert occ.occupied[touches].all()
+
+
+def test_sh_basis_is_orthonormal_on_the_sphere():
+    from renderer.fields import sh_basis
+
+    g = torch.Generator().manual_seed(0)
+    d = torch.nn.functional.normalize(torch.randn(400_000, 3, generator=g), dim=-1)
+    y = sh_basis(d, 2)
+    y[:, 0] = 0.5 / math.sqrt(math.pi)  # the true Y_0 (the field uses 1 so DC is a logit)
+    gram = 4 * math.pi * (y.T @ y) / d.shape[0]  # Monte-Carlo integral over the sphere
+    assert torch.allclose(gram, torch.eye(9), atol=0.02)
+
+
+def test_adding_view_dependence_keeps_the_field_and_then_depends_on_direction():
+    g = torch.Generator().manual_seed(0)
+    field = GridField(AABB, resolution=8, step_m=0.05)
+    with torch.no_grad():
+        field.color_grid.normal_(generator=g)
+    pts = torch.rand(100, 3, generator=g) * 2 - 1
+    dirs = torch.nn.functional.normalize(torch.randn(100, 3, generator=g), dim=-1)
+    _, before = field(pts, dirs)
+    field.set_sh_degree(1)
+    assert field.sh_degree == 1 and field.color_grid.shape[1] == 12
+    _, after = field(pts, dirs)
+    assert torch.equal(before, after)
+    with torch.no_grad():
+        field.color_grid[:, 1:4] = 1.0  # red's degree-1 coefficients (channels are [3, K])
+    _, a = field(pts, dirs)
+    _, b = field(pts, -dirs)
+    assert (a[:, 0] - b[:, 0]).abs().max() > 0.05 and torch.equal(a[:, 1:], b[:, 1:])
