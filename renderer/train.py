@@ -239,7 +239,8 @@ def train(
     model = RadianceField(field_, occupancy, step_m, background, spec)
 
     def make_optimizer():
-        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99))
+        # fused: one pass over each grid per step instead of several (30 -> 12 ms at 8M values)
+        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99), fused=True)
 
     sh_stage = config.sh_stage % len(config.grid_resolutions)
     if config.field == "grid" and sh_stage == 0:
