@@ -56,6 +56,46 @@ def sh_basis(directions: Tensor, degree: int) -> Tensor:
     return torch.stack(out, dim=-1)
 
 
+def resample_grid(grid: Tensor, aabb: Tensor, new_aabb: Tensor, resolution: int) -> Tensor:
+    """Trilinear reads of a vertex grid over ``aabb`` at the vertices of a grid over
+    ``new_aabb`` with ``resolution`` vertices on its longest axis (the border value outside
+    ``aabb``). Cropping to a smaller box keeps the field exactly at the new vertices.
+
+    Args:
+        grid: [1, channels, z, y, x] float32; aabb, new_aabb: [2, 3].
+    Returns:
+        [1, channels, z', y', x'] float32, contiguous.
+    """
+    new_aabb = torch.as_tensor(new_aabb, dtype=torch.float32)
+    nx, ny, nz = grid_resolution(new_aabb, resolution)
+    axes = [torch.linspace(new_aabb[0, a], new_aabb[1, a], n) for a, n in enumerate((nx, ny, nz))]
+    z, y, x = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    coords = _normalize(torch.stack([x, y, z], dim=-1), aabb)  # [z', y', x', 3]
+    out = F.grid_sample(
+        grid, coords[None], mode="bilinear", align_corners=True, padding_mode="border"
+    )
+    return out.contiguous()
+
+
+def expand_sh(grid: Tensor, degree: int) -> Tensor:
+    """A colour grid with SH coefficients up to ``degree`` (0, 1 or 2): the existing ones
+    kept, new ones zero (higher ones dropped when lowering the degree).
+
+    Args:
+        grid: [1, 3 * K, z, y, x] float32, channels ordered [3, K] (colour, coefficient).
+    Returns:
+        [1, 3 * (degree + 1)^2, z, y, x] float32.
+    """
+    if degree not in (0, 1, 2):
+        raise ValueError(f"degree must be 0, 1 or 2, got {degree}")
+    g = grid.reshape(3, -1, *grid.shape[2:])  # [3, K, z, y, x]
+    k = (degree + 1) ** 2
+    new = g.new_zeros(3, k, *g.shape[2:])
+    n = min(k, g.shape[1])
+    new[:, :n] = g[:, :n]
+    return new.reshape(1, 3 * k, *g.shape[2:])
+
+
 class GridField(nn.Module):
     """Dense voxel grids over ``aabb`` with DVGO post-activation.
 
@@ -109,14 +149,7 @@ class GridField(nn.Module):
     def set_sh_degree(self, degree: int) -> None:
         """Make the colour view-dependent up to SH ``degree`` (0, 1 or 2); new coefficients
         start at zero, so the field renders exactly as before."""
-        if degree not in (0, 1, 2):
-            raise ValueError(f"degree must be 0, 1 or 2, got {degree}")
-        g = self.color_grid.data.reshape(3, -1, *self.color_grid.shape[2:])  # [3, K, z, y, x]
-        k = (degree + 1) ** 2
-        new = g.new_zeros(3, k, *g.shape[2:])
-        n = min(k, g.shape[1])
-        new[:, :n] = g[:, :n]
-        self.color_grid = nn.Parameter(new.reshape(1, 3 * k, *g.shape[2:]))
+        self.color_grid = nn.Parameter(expand_sh(self.color_grid.data, degree))
 
     def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
         """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3] seen along
@@ -145,18 +178,11 @@ class GridField(nn.Module):
     @torch.no_grad()
     def resample(self, aabb: Tensor, resolution: int) -> None:
         """Move the grids onto a new box ``aabb`` [2, 3] with ``resolution`` vertices on its
-        longest axis: trilinear reads of the current field at the new vertices (the border
-        value outside the current box). Cropping to a smaller box keeps the field exactly
-        at the new vertices."""
+        longest axis (:func:`resample_grid`)."""
         aabb = torch.as_tensor(aabb, dtype=torch.float32)
-        nx, ny, nz = grid_resolution(aabb, resolution)
-        axes = [torch.linspace(aabb[0, a], aabb[1, a], n) for a, n in enumerate((nx, ny, nz))]
-        z, y, x = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-        points = torch.stack([x, y, z], dim=-1).reshape(-1, 3)  # [nz * ny * nx, 3]
         for name in ("density_grid", "color_grid"):
-            g = getattr(self, name)
-            new = self._sample(g.data, points).t().reshape(1, g.shape[1], nz, ny, nx)
-            setattr(self, name, nn.Parameter(new.contiguous()))
+            new = resample_grid(getattr(self, name).data, self.aabb, aabb, resolution)
+            setattr(self, name, nn.Parameter(new))
         self.aabb.copy_(aabb)
 
     def total_variation(self) -> Tensor:
