@@ -1,9 +1,10 @@
 """Radiance fields: what the network predicts at a point (density and colour).
 
-* :class:`GridField`: dense density (1 channel) and colour (3 channels) voxel grids read
-  with trilinear ``grid_sample`` over the scene box, DVGO-style post-activation
-  (``sigma = softplus(grid + bias)``, ``rgb = sigmoid(grid)``, diffuse), upsampled
-  coarse-to-fine by :meth:`GridField.upsample`.
+* :class:`GridField`: dense density (1 channel) and colour (3 * (degree + 1)^2 channels:
+  spherical-harmonics coefficients, degree 0 = diffuse) voxel grids read with trilinear
+  ``grid_sample`` over the scene box, DVGO-style post-activation (``sigma =
+  softplus(grid + bias)``, ``rgb = sigmoid(sum_k c_k Y_k(d))``), moved coarse-to-fine
+  onto finer and smaller boxes by :meth:`GridField.resample`.
 * :class:`MLPField`: the vanilla NeRF: positional encoding + MLP, view-dependent colour.
 
 Both map points ``[num_points, 3]`` (and unit directions) to ``(sigma [num_points],

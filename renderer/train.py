@@ -195,7 +195,8 @@ def train(
     Each step draws ``batch_rays`` random pixels of all training views, marches them
     through the occupancy grid, renders with eq. 4 and minimises the MSE to the pixels.
     Grid field: coarse-to-fine (``grid_resolutions`` at ``stage_starts`` of the budget,
-    grids trilinearly upsampled, Adam reset), occupancy recomputed every
+    grids trilinearly resampled onto the box around the occupied cells, Adam reset;
+    SH colour from ``sh_stage``), occupancy recomputed every
     ``occupancy_every_steps`` from the exact per-cell maxima of the density grid.
 
     Returns:
