@@ -28,7 +28,8 @@ Training and rendering
 Lightweight renderer (§3.3)
     ``train_lightweight(model, dataset, LightweightConfig(...)) -> (LightweightRenderer, stats)``;
     ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view"}``;
-    :func:`reproject` warps a previous frame into the current view by depth.
+    :func:`reproject` warps a previous frame into the current view by depth;
+    :func:`surface_points` and :func:`splat_depth` carry a frame's depth into another view.
 
 Metrics
     :func:`psnr`, :func:`ssim` (scikit-image, data_range=1.0), :func:`masked_psnr`,
@@ -56,7 +57,7 @@ from renderer.lightweight import (
 )
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
-from renderer.reprojection import reproject, rotate_pose_about
+from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
 from renderer.volume import (
@@ -106,6 +107,8 @@ __all__ = [
     "render_views",
     "render_weights",
     "reproject",
+    "splat_depth",
+    "surface_points",
     "rotate_pose_about",
     "sample_along_rays",
     "save_model",

@@ -1,9 +1,10 @@
 """Radiance fields: what the network predicts at a point (density and colour).
 
-* :class:`GridField`: dense density (1 channel) and colour (3 channels) voxel grids read
-  with trilinear ``grid_sample`` over the scene box, DVGO-style post-activation
-  (``sigma = softplus(grid + bias)``, ``rgb = sigmoid(grid)``, diffuse), upsampled
-  coarse-to-fine by :meth:`GridField.upsample`.
+* :class:`GridField`: dense density (1 channel) and colour (3 * (degree + 1)^2 channels:
+  spherical-harmonics coefficients, degree 0 = diffuse) voxel grids read with trilinear
+  ``grid_sample`` over the scene box, DVGO-style post-activation (``sigma =
+  softplus(grid + bias)``, ``rgb = sigmoid(sum_k c_k Y_k(d))``), moved coarse-to-fine
+  onto finer and smaller boxes by :meth:`GridField.resample`.
 * :class:`MLPField`: the vanilla NeRF: positional encoding + MLP, view-dependent colour.
 
 Both map points ``[num_points, 3]`` (and unit directions) to ``(sigma [num_points],
@@ -29,6 +30,71 @@ def grid_resolution(aabb: Tensor, resolution: int) -> tuple[int, int, int]:
     extent = aabb[1] - aabb[0]
     voxel = extent.max().item() / (resolution - 1)
     return tuple(max(2, int(round(e / voxel)) + 1) for e in extent.tolist())
+
+
+def sh_basis(directions: Tensor, degree: int) -> Tensor:
+    """Real spherical harmonics up to ``degree`` (<= 2) with Y_0 replaced by 1.
+
+    Args:
+        directions: [num_points, 3] unit vectors (x, y, z).
+    Returns:
+        [num_points, (degree + 1)^2]: 1, then -c1 y, c1 z, -c1 x (c1 = 0.4886), then the
+        five degree-2 terms (Plenoxels' ordering and constants).
+    """
+    x, y, z = directions.unbind(-1)
+    out = [torch.ones_like(x)]
+    if degree >= 1:
+        c1 = 0.4886025119029199
+        out += [-c1 * y, c1 * z, -c1 * x]
+    if degree >= 2:
+        out += [
+            1.0925484305920792 * x * y,
+            -1.0925484305920792 * y * z,
+            0.31539156525252005 * (2.0 * z * z - x * x - y * y),
+            -1.0925484305920792 * x * z,
+            0.5462742152960396 * (x * x - y * y),
+        ]
+    return torch.stack(out, dim=-1)
+
+
+def resample_grid(grid: Tensor, aabb: Tensor, new_aabb: Tensor, resolution: int) -> Tensor:
+    """Trilinear reads of a vertex grid over ``aabb`` at the vertices of a grid over
+    ``new_aabb`` with ``resolution`` vertices on its longest axis (the border value outside
+    ``aabb``). Cropping to a smaller box keeps the field exactly at the new vertices.
+
+    Args:
+        grid: [1, channels, z, y, x] float32; aabb, new_aabb: [2, 3].
+    Returns:
+        [1, channels, z', y', x'] float32, contiguous.
+    """
+    new_aabb = torch.as_tensor(new_aabb, dtype=torch.float32)
+    nx, ny, nz = grid_resolution(new_aabb, resolution)
+    axes = [torch.linspace(new_aabb[0, a], new_aabb[1, a], n) for a, n in enumerate((nx, ny, nz))]
+    z, y, x = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    coords = _normalize(torch.stack([x, y, z], dim=-1), aabb)  # [z', y', x', 3]
+    out = F.grid_sample(
+        grid, coords[None], mode="bilinear", align_corners=True, padding_mode="border"
+    )
+    return out.contiguous()
+
+
+def expand_sh(grid: Tensor, degree: int) -> Tensor:
+    """A colour grid with SH coefficients up to ``degree`` (0, 1 or 2): the existing ones
+    kept, new ones zero (higher ones dropped when lowering the degree).
+
+    Args:
+        grid: [1, 3 * K, z, y, x] float32, channels ordered [3, K] (colour, coefficient).
+    Returns:
+        [1, 3 * (degree + 1)^2, z, y, x] float32.
+    """
+    if degree not in (0, 1, 2):
+        raise ValueError(f"degree must be 0, 1 or 2, got {degree}")
+    g = grid.reshape(3, -1, *grid.shape[2:])  # [3, K, z, y, x]
+    k = (degree + 1) ** 2
+    new = g.new_zeros(3, k, *g.shape[2:])
+    n = min(k, g.shape[1])
+    new[:, :n] = g[:, :n]
+    return new.reshape(1, 3 * k, *g.shape[2:])
 
 
 class GridField(nn.Module):
@@ -75,11 +141,31 @@ class GridField(nn.Module):
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
         return F.softplus(self.density_grid[0, 0] + self.density_bias)
 
+    @property
+    def sh_degree(self) -> int:
+        """Spherical-harmonics degree of the colour (0: diffuse; 3 * (degree + 1)^2 channels)."""
+        return int(round(math.sqrt(self.color_grid.shape[1] // 3))) - 1
+
+    @torch.no_grad()
+    def set_sh_degree(self, degree: int) -> None:
+        """Make the colour view-dependent up to SH ``degree`` (0, 1 or 2); new coefficients
+        start at zero, so the field renders exactly as before."""
+        self.color_grid = nn.Parameter(expand_sh(self.color_grid.data, degree))
+
     def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3]."""
+        """(sigma [num_points], rgb [num_points, 3]) at points [num_points, 3] seen along
+        unit ``directions`` [num_points, 3] (ignored by a diffuse field; None: the DC term).
+
+        rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
+        :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         sigma = self.density(points)
-        rgb = torch.sigmoid(self._sample(self.color_grid, points))
-        return sigma, rgb
+        coef = self._sample(self.color_grid, points)  # [num_points, 3 * K]
+        k = coef.shape[1] // 3
+        if k == 1 or directions is None:
+            return sigma, torch.sigmoid(coef[:, ::k])
+        basis = sh_basis(directions, self.sh_degree)  # [num_points, K]
+        logits = (coef.reshape(-1, 3, k) * basis[:, None, :]).sum(-1)  # [num_points, 3]
+        return sigma, torch.sigmoid(logits)
 
     @torch.no_grad()
     def upsample(self, resolution: int) -> None:
@@ -89,6 +175,16 @@ class GridField(nn.Module):
             g = getattr(self, name)
             new = F.interpolate(g.data, size=(nz, ny, nx), mode="trilinear", align_corners=True)
             setattr(self, name, nn.Parameter(new))
+
+    @torch.no_grad()
+    def resample(self, aabb: Tensor, resolution: int) -> None:
+        """Move the grids onto a new box ``aabb`` [2, 3] with ``resolution`` vertices on its
+        longest axis (:func:`resample_grid`)."""
+        aabb = torch.as_tensor(aabb, dtype=torch.float32)
+        for name in ("density_grid", "color_grid"):
+            new = resample_grid(getattr(self, name).data, self.aabb, aabb, resolution)
+            setattr(self, name, nn.Parameter(new))
+        self.aabb.copy_(aabb)
 
     def total_variation(self) -> Tensor:
         """Mean squared difference of neighbouring density-grid values (a scalar)."""

@@ -44,11 +44,13 @@ class RadianceField(nn.Module):
         perturb: bool = False,
         generator: torch.Generator | None = None,
         chunk: int = 16384,
+        step_m: float | None = None,
     ) -> dict[str, Tensor]:
         """Volume-render rays.
 
         Args:
             origins, directions: [num_rays, 3] float32 (unit directions).
+            step_m: marching step (m); default the model's own.
         Returns:
             dict: ``rgb`` [num_rays, 3], ``opacity`` [num_rays], ``depth`` [num_rays]
             (expected depth sum w t, m), ``num_samples`` (int, samples evaluated).
@@ -57,7 +59,9 @@ class RadianceField(nn.Module):
         total = 0
         for i in range(0, max(origins.shape[0], 1), chunk):
             o, d = origins[i : i + chunk], directions[i : i + chunk]
-            s = sample_along_rays(o, d, self.aabb, self.step_m, self.occupancy, perturb, generator)
+            s = sample_along_rays(
+                o, d, self.aabb, step_m or self.step_m, self.occupancy, perturb, generator
+            )
             sigma, rgb = self.field(s.positions, s.directions)
             outs.append(
                 packed_render(sigma, rgb, s.t, s.deltas, s.ray_indices, o.shape[0], self.background)
@@ -75,12 +79,14 @@ def render_views(
     intrinsics: Intrinsics,
     height: int | None = None,
     width: int | None = None,
+    step_m: float | None = None,
 ) -> dict[str, Tensor]:
     """Render whole views.
 
     Args:
         poses: [num_views, 4, 4] camera-to-world.
         intrinsics: the camera; resized to ``height`` x ``width`` when given.
+        step_m: marching step (m); default the model's own.
     Returns:
         dict: ``rgb`` [num_views, height, width, 3] float32 in [0, 1], ``depth``
         [num_views, height, width] (distance along the ray to the visible surface, m; the
@@ -93,7 +99,7 @@ def render_views(
     for pose in poses:
         o, d = camera_rays(pose[None], intrinsics)
         o, d = o.reshape(-1, 3), d.reshape(-1, 3)
-        out = model.render_rays(o, d)
+        out = model.render_rays(o, d, step_m=step_m)
         _, t_far = intersect_aabb(o, d, model.aabb)
         far = float(t_far.max().clamp_min(0.0))
         rgbs.append(out["rgb"].clamp(0, 1).reshape(h, w, 3))

@@ -55,6 +55,48 @@ def reproject(
     return warped * valid, valid
 
 
+def surface_points(
+    depth: Tensor, opacity: Tensor, pose: Tensor, intrinsics: Intrinsics, min_opacity: float = 0.5
+) -> Tensor:
+    """World points of a frame's visible surface: ``o + depth * d`` at every pixel whose
+    opacity is at least ``min_opacity``.
+
+    Args:
+        depth, opacity: [height, width] float32 (distance along the rays, m; [0, 1]).
+        pose: [4, 4] camera-to-world.
+    Returns:
+        [num_points, 3] float32.
+    """
+    o, d = camera_rays(pose[None], intrinsics)
+    keep = (opacity >= min_opacity).reshape(-1)
+    return (o[0] + depth[..., None] * d[0]).reshape(-1, 3)[keep]
+
+
+def splat_depth(points: Tensor, pose: Tensor, intrinsics: Intrinsics) -> Tensor:
+    """Forward-project surface points (e.g. :func:`surface_points` of a previous frame)
+    into a camera and keep the nearest per pixel (a z-buffer): the depth wherever the
+    points land. One-pixel cracks (where the surface is magnified) are filled with the
+    nearest of their 3 x 3 neighbours.
+
+    Args:
+        points: [num_points, 3] float32 world points.
+        pose: [4, 4] camera-to-world.
+    Returns:
+        [height, width] float32 distance from the camera centre (m, as the depth of
+        :func:`camera_rays`' unit rays); inf where no point landed.
+    """
+    h, w = intrinsics.height, intrinsics.width
+    uv, z = project_points(points, pose, intrinsics)
+    u, v = uv[:, 0].floor(), uv[:, 1].floor()
+    ok = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    dist = (points[ok] - pose[:3, 3].float()).norm(dim=-1)
+    flat = (v[ok] * w + u[ok]).long()
+    out = torch.full((h * w,), float("inf")).scatter_reduce(0, flat, dist, reduce="amin")
+    out = out.reshape(h, w)
+    filled = -F.max_pool2d(-out[None, None], 3, stride=1, padding=1)[0, 0]
+    return torch.where(torch.isinf(out), filled, out)
+
+
 def rotate_pose_about(pose: Tensor, center: Tensor, axis: Tensor, angle_rad: float) -> Tensor:
     """Rotate a camera pose rigidly about the line through ``center`` along ``axis``.
 

@@ -196,6 +196,19 @@ class OccupancyGrid(nn.Module):
         self.occupied &= ~self.free
         return self.free.float().mean().item()
 
+    def occupied_box(self, margin_cells: int = 2) -> Tensor:
+        """The box around the occupied cells, ``margin_cells`` wider on every side and
+        clipped to ``aabb``: [2, 3] (the whole ``aabb`` when nothing is occupied)."""
+        idx = self.occupied.nonzero()  # [n, 3] (z, y, x)
+        if idx.numel() == 0:
+            return self.aabb.clone()
+        nx, ny, nz = self.cells
+        size = (self.aabb[1] - self.aabb[0]) / torch.tensor([nx, ny, nz], dtype=torch.float32)
+        lo = idx.amin(0).flip(0).float() - margin_cells  # [3] (x, y, z) in cells
+        hi = idx.amax(0).flip(0).float() + 1 + margin_cells
+        box = torch.stack([self.aabb[0] + lo * size, self.aabb[0] + hi * size])
+        return torch.stack([box[0].maximum(self.aabb[0]), box[1].minimum(self.aabb[1])])
+
     def query(self, points: Tensor) -> Tensor:
         """Whether each point lies in an occupied cell: points [n, 3] -> [n] bool
         (False outside the box)."""
@@ -252,8 +265,14 @@ def sample_along_rays(
     t_near, t_far = intersect_aabb(origins, directions, aabb)
     t_near = t_near.clamp_min(near_m)
     span = (t_far - t_near).clamp_min(0.0)
-    num_steps = int(torch.ceil(span.max() / step_m).item()) if num_rays else 0
-    if num_steps == 0:
+    if perturb:
+        u = torch.rand(num_rays, 1, generator=generator)[:, 0]
+    else:
+        u = torch.full((num_rays,), 0.5)
+    # only the samples inside the box, generated packed: ray i has ceil(span_i / step - u_i)
+    counts = torch.ceil(span / step_m - u).clamp_min(0.0).long()  # [num_rays]
+    total = int(counts.sum().item()) if num_rays else 0
+    if total == 0:
         empty = origins.new_zeros(0)
         return RaySamples(
             origins.new_zeros(0, 3),
@@ -262,17 +281,13 @@ def sample_along_rays(
             empty,
             torch.zeros(0, dtype=torch.long),
         )
-    if perturb:
-        u = torch.rand(num_rays, 1, generator=generator)
-    else:
-        u = torch.full((num_rays, 1), 0.5)
-    t = (
-        t_near[:, None] + (torch.arange(num_steps, dtype=torch.float32) + u) * step_m
-    )  # [num_rays, num_steps]
-    pos = origins[:, None, :] + t[..., None] * directions[:, None, :]  # [num_rays, num_steps, 3]
-    live = t < t_far[:, None]
+    ray_idx = torch.repeat_interleave(torch.arange(num_rays), counts)  # [total]
+    first = torch.cumsum(counts, 0) - counts  # [num_rays] index of each ray's first sample
+    k = torch.arange(total) - first[ray_idx]  # [total] step number along its ray
+    t = t_near[ray_idx] + (k.float() + u[ray_idx]) * step_m  # [total]
+    pos = origins[ray_idx] + t[:, None] * directions[ray_idx]  # [total, 3]
+    live = t < t_far[ray_idx]
     if occupancy is not None:
-        live &= occupancy.query(pos.reshape(-1, 3)).reshape(num_rays, num_steps)
-    ray_idx = live.nonzero()[:, 0]
-    t, pos = t[live], pos[live]
+        live &= occupancy.query(pos)
+    ray_idx, t, pos = ray_idx[live], t[live], pos[live]
     return RaySamples(pos, directions[ray_idx], t, torch.full_like(t, step_m), ray_idx)

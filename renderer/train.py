@@ -46,8 +46,10 @@ class TrainConfig:
     """Adam learning rate on the grids (decays exponentially to lr_final_ratio * lr)."""
     lr_final_ratio: float = 0.1
     """Learning rate at the end of the budget relative to the start, in (0, 1]."""
-    tv_weight: float = 1e-4
-    """Weight of the density total-variation term in the last stage (>= 0)."""
+    tv_weight: float = 0.0
+    """Weight of the density total-variation term in the last stage (>= 0). Off by
+    default: lego 100 px, 120 s, 1 thread: 1e-3 -> 26.5 dB, 1e-4 -> 27.7-27.8, 0 ->
+    27.9-28.0; 16 noisy (sigma 0.05) 80 px views, 60 s: 1e-4 -> 23.52, 0 -> 23.56."""
     occupancy_every_steps: int = 50
     """Steps between occupancy-grid updates, >= 1."""
     occupancy_warmup_steps: int = 20
@@ -61,6 +63,18 @@ class TrainConfig:
     """When the dataset has masks, mark empty every cell some view sees against the
     background (the visual hull) at each coarse-to-fine stage: no fog in space the views
     show empty, so each step samples only near the object."""
+    crop: bool = True
+    """Grid field: at the first step (after carving) and at each stage change, shrink the
+    grids to the box around the occupied cells (2 cells of margin) at the stage's voxel
+    size. Nothing outside that box can be occupied, and every step's cost in the dense
+    parts (gradients, Adam, total variation) scales with the grids' size."""
+    sh_degree: int = 1
+    """Grid field: spherical-harmonics degree of the colour (0 diffuse, 1 or 2
+    view-dependent), added at stage ``sh_stage``. lego 100 px, 120 s, 1 thread: 0 ->
+    26.6 dB, 1 -> 27.6 dB, 2 -> 27.5 dB (more channels, fewer steps)."""
+    sh_stage: int = -1
+    """Coarse-to-fine stage (index into grid_resolutions; negative counts from the end)
+    from which the colour is view-dependent."""
     mlp_width: int = 128
     """Hidden width of the vanilla NeRF MLP."""
     mlp_depth: int = 4
@@ -106,6 +120,13 @@ class TrainConfig:
             raise ValueError(f"lr_final_ratio must be in (0, 1], got {self.lr_final_ratio}")
         if self.tv_weight < 0:
             raise ValueError(f"tv_weight must be >= 0, got {self.tv_weight}")
+        if self.sh_degree not in (0, 1, 2):
+            raise ValueError(f"sh_degree must be 0, 1 or 2, got {self.sh_degree}")
+        if not -len(self.grid_resolutions) <= self.sh_stage < len(self.grid_resolutions):
+            raise ValueError(
+                f"sh_stage must index grid_resolutions (from {-len(self.grid_resolutions)} "
+                f"to {len(self.grid_resolutions) - 1}), got {self.sh_stage}"
+            )
         if self.occupancy_warmup_steps < 0:
             raise ValueError(
                 f"occupancy_warmup_steps must be >= 0, got {self.occupancy_warmup_steps}"
@@ -147,6 +168,11 @@ def _targets(dataset: Dataset, use_masks: bool) -> torch.Tensor:
     return images.reshape(-1, 3)
 
 
+def _crop_resolution(box: torch.Tensor, aabb: torch.Tensor, resolution: int) -> int:
+    """Vertices on ``box``'s longest axis for the voxel size of ``resolution`` over ``aabb``."""
+    return max(2, int(round((box[1] - box[0]).max().item() / _voxel_m(aabb, resolution))) + 1)
+
+
 def _carve(occupancy: OccupancyGrid, dataset: Dataset, config: TrainConfig) -> None:
     if config.carve and config.use_masks and dataset.masks is not None:
         occupancy.carve(dataset.poses, dataset.intrinsics, dataset.masks)
@@ -170,7 +196,8 @@ def train(
     Each step draws ``batch_rays`` random pixels of all training views, marches them
     through the occupancy grid, renders with eq. 4 and minimises the MSE to the pixels.
     Grid field: coarse-to-fine (``grid_resolutions`` at ``stage_starts`` of the budget,
-    grids trilinearly upsampled, Adam reset), occupancy recomputed every
+    grids trilinearly resampled onto the box around the occupied cells, Adam reset;
+    SH colour from ``sh_stage``), occupancy recomputed every
     ``occupancy_every_steps`` from the exact per-cell maxima of the density grid.
 
     Returns:
@@ -216,8 +243,12 @@ def train(
     model = RadianceField(field_, occupancy, step_m, background, spec)
 
     def make_optimizer():
-        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99))
+        # fused: one pass over each grid per step instead of several (30 -> 12 ms at 8M values)
+        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99), fused=True)
 
+    sh_stage = config.sh_stage % len(config.grid_resolutions)
+    if config.field == "grid" and sh_stage == 0:
+        model.field.set_sh_degree(config.sh_degree)
     optimizer = make_optimizer()
     threads = torch.get_num_threads()
 
@@ -261,6 +292,14 @@ def train(
         upsampled = False
         if step == 0:  # inside the timed step: carving counts against the budget
             _carve(model.occupancy, dataset, config)
+            if config.field == "grid" and config.crop:
+                coarser = model.occupancy
+                box = coarser.occupied_box()
+                model.field.resample(box, _crop_resolution(box, aabb, res))
+                model.occupancy = OccupancyGrid.for_grid_field(model.field)
+                model.occupancy.inherit_free(coarser)
+                _carve(model.occupancy, dataset, config)
+                optimizer = make_optimizer()
         if (
             config.field == "grid"
             and stage + 1 < len(config.grid_resolutions)
@@ -268,13 +307,16 @@ def train(
         ):
             stage += 1
             res = config.grid_resolutions[stage]
-            model.field.upsample(res)
             coarser = model.occupancy
+            box = coarser.occupied_box() if config.crop else model.aabb
+            model.field.resample(box, _crop_resolution(box, aabb, res))
             model.occupancy = OccupancyGrid.for_grid_field(model.field)
             model.occupancy.inherit_free(coarser)
             _carve(model.occupancy, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays
+            if stage == sh_stage:
+                model.field.set_sh_degree(config.sh_degree)
             optimizer = make_optimizer()
             upsampled = True
         current_lr = lr * config.lr_final_ratio ** min(frac, 1.0)
@@ -316,7 +358,7 @@ def train(
     if bar is not None:
         bar.close()
     if config.field == "grid":
-        model.spec["resolution"] = config.grid_resolutions[stage]
+        model.spec["resolution"] = max(model.field.resolution)
     model.eval()
     if curve_set is not None:
         record_curve()
