@@ -68,7 +68,7 @@ def open_radios(
             ]
             if not others:
                 raise DeviceNotFoundError(
-                    "over the air needs two HackRFs (TX and RX); only one was found"
+                    "only one HackRF found: over the air needs two (TX and RX; osnerf ota: --rx hackrf:SERIAL)"
                 )
             rx_serial = others[0]
         rx = HackRF.open(rx_serial)

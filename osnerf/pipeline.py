@@ -814,40 +814,27 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None) -
                     sec = {"encode": 0.0, "decode": 0.0}
                     # what jscc's receiver would know over a perfect channel: the sent positions
                     arrays["rx_masks"] = focus_pixel_masks(col.masks, oversampling=oversampling)
-                elif scheme == "jscc":
+                elif scheme in ("jscc", "full"):  # on demand (focus mode) or whole views
+                    on_demand = scheme == "jscc"
                     rec, symbols, sec, rx_masks, side, rx_snr = transmit_jscc(
                         views.background,
                         codec,
                         prep.rx_codec,
                         sent,
-                        routing,
+                        routing if on_demand else None,
                         ids,
                         links,
                         snr_enc,
-                        focus,
+                        focus if on_demand else cbrs,
                         reps,
                         gen,
-                        oversampling=oversampling,
+                        oversampling=oversampling if on_demand else 1,
                     )
-                    arrays["side_info_bits"] = side
                     arrays["rx_snr_db"] = rx_snr
+                    if on_demand:
+                        arrays["side_info_bits"] = side
                     if rx_masks is not None:
                         arrays["rx_masks"] = rx_masks
-                elif scheme == "full":
-                    rec, symbols, sec, _, _, rx_snr = transmit_jscc(
-                        views.background,
-                        codec,
-                        prep.rx_codec,
-                        sent,
-                        None,
-                        ids,
-                        links,
-                        snr_enc,
-                        cbrs,
-                        reps,
-                        gen,
-                    )
-                    arrays["rx_snr_db"] = rx_snr
                 else:  # digital: same views and symbol budget per view as jscc
                     budgets = (
                         jscc_symbols

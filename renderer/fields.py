@@ -168,15 +168,6 @@ class GridField(nn.Module):
         return sigma, torch.sigmoid(logits)
 
     @torch.no_grad()
-    def upsample(self, resolution: int) -> None:
-        """Trilinearly resample both grids to ``resolution`` vertices on the longest axis."""
-        nx, ny, nz = grid_resolution(self.aabb, resolution)
-        for name in ("density_grid", "color_grid"):
-            g = getattr(self, name)
-            new = F.interpolate(g.data, size=(nz, ny, nx), mode="trilinear", align_corners=True)
-            setattr(self, name, nn.Parameter(new))
-
-    @torch.no_grad()
     def resample(self, aabb: Tensor, resolution: int) -> None:
         """Move the grids onto a new box ``aabb`` [2, 3] with ``resolution`` vertices on its
         longest axis (:func:`resample_grid`)."""

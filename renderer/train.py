@@ -178,6 +178,20 @@ def _carve(occupancy: OccupancyGrid, dataset: Dataset, config: TrainConfig) -> N
         occupancy.carve(dataset.poses, dataset.intrinsics, dataset.masks)
 
 
+def _move_grids(
+    model: RadianceField, resolution: int, aabb: torch.Tensor, dataset: Dataset, config: TrainConfig
+) -> None:
+    """Resample the grid field at ``resolution`` (voxel size over ``aabb``) onto the box
+    around the occupied cells (``config.crop``) or the whole box, with a new occupancy grid
+    that keeps the free space already known and is carved again."""
+    coarser = model.occupancy
+    box = coarser.occupied_box() if config.crop else model.aabb
+    model.field.resample(box, _crop_resolution(box, aabb, resolution))
+    model.occupancy = OccupancyGrid.for_grid_field(model.field)
+    model.occupancy.inherit_free(coarser)
+    _carve(model.occupancy, dataset, config)
+
+
 def _curve_subset(eval_dataset: Dataset, n: int) -> Dataset:
     idx = (
         torch.linspace(0, eval_dataset.num_views - 1, min(n, eval_dataset.num_views)).round().long()
@@ -293,12 +307,7 @@ def train(
         if step == 0:  # inside the timed step: carving counts against the budget
             _carve(model.occupancy, dataset, config)
             if config.field == "grid" and config.crop:
-                coarser = model.occupancy
-                box = coarser.occupied_box()
-                model.field.resample(box, _crop_resolution(box, aabb, res))
-                model.occupancy = OccupancyGrid.for_grid_field(model.field)
-                model.occupancy.inherit_free(coarser)
-                _carve(model.occupancy, dataset, config)
+                _move_grids(model, res, aabb, dataset, config)
                 optimizer = make_optimizer()
         if (
             config.field == "grid"
@@ -307,12 +316,7 @@ def train(
         ):
             stage += 1
             res = config.grid_resolutions[stage]
-            coarser = model.occupancy
-            box = coarser.occupied_box() if config.crop else model.aabb
-            model.field.resample(box, _crop_resolution(box, aabb, res))
-            model.occupancy = OccupancyGrid.for_grid_field(model.field)
-            model.occupancy.inherit_free(coarser)
-            _carve(model.occupancy, dataset, config)
+            _move_grids(model, res, aabb, dataset, config)
             model.step_m = config.step_voxels * _voxel_m(aabb, res)
             batch = config.batch_rays
             if stage == sh_stage:

@@ -37,7 +37,10 @@ def test_package_imports_only_what_it_may(package):
             top = name.split(".")[0]
             if top in OURS and top != package and top not in ALLOWED[package]:
                 bad.append(f"{path.relative_to(ROOT)}:{lineno} imports {name}")
-    assert not bad, f"{package} may import only {sorted(ALLOWED[package]) or 'nothing of ours'}:\n" + "\n".join(bad)
+    assert not bad, (
+        f"{package} may import only {sorted(ALLOWED[package]) or 'nothing of ours'}:\n"
+        + "\n".join(bad)
+    )
 
 
 @pytest.mark.parametrize("folder", PUBLIC_ONLY)
@@ -47,7 +50,9 @@ def test_tests_and_benchmarks_use_public_names(folder):
     for path in sorted((ROOT / folder).rglob("*.py")):
         for lineno, name in _imports(path):
             parts = name.split(".")
-            if parts[0] in OURS and any(p.startswith("_") and not p.startswith("__") for p in parts[1:]):
+            if parts[0] in OURS and any(
+                p.startswith("_") and not p.startswith("__") for p in parts[1:]
+            ):
                 bad.append(f"{path.relative_to(ROOT)}:{lineno} imports private {name}")
     assert not bad, "\n".join(bad)
 

@@ -184,48 +184,29 @@ def decode_image_bytes(data: bytes, shape) -> np.ndarray | None:
 
 # ----------------------------------------------------------------------------- devices
 def open_pair(args, ota_cfg):
-    """(tx, rx, emulator or None, description) for the --tx/--rx kinds."""
-    from hil import HackRF
+    """(tx, rx, emulator or None) for the --tx/--rx kinds."""
+    from osnerf.ota_link import open_radios
 
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
     simulated = {"emulated", "loopback"}
     if (tx_kind in simulated) != (rx_kind in simulated):
         raise _usage("--tx and --rx must both be simulated (emulated/loopback) or both hackrf")
-    if tx_kind in simulated:
-        if tx_kind != rx_kind:
-            raise _usage(
-                "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
-            )
-        from osnerf.ota_link import open_radios
-
-        return open_radios(
-            "emulated",
-            args.snr_db,
-            ota_cfg,
-            seed=args.seed,
-            ppm=parse_ppm(args.ppm),
-            multipath=parse_multipath(args.multipath),
-            delay_s=args.delay_us * 1e-6,
-            loopback=tx_kind == "loopback",
+    if tx_kind not in simulated:
+        return open_radios("hackrf", args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
+    if tx_kind != rx_kind:
+        raise _usage(
+            "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
         )
-    tx = HackRF.open(tx_serial)
-    try:
-        rx = HackRF.open(rx_serial) if rx_serial else HackRF.open(_other_serial(tx.serial_number))
-    except BaseException:
-        tx.close()
-        raise
-    return tx, rx, None
-
-
-def _other_serial(tx_serial: str) -> str:
-    from hil import DeviceNotFoundError, find_hackrfs
-
-    for d in find_hackrfs():
-        if d.serial_number != tx_serial:
-            return d.serial_number
-    raise DeviceNotFoundError(
-        "--rx hackrf: only one HackRF found; two are needed (or pass hackrf:SERIAL)"
+    return open_radios(
+        "emulated",
+        args.snr_db,
+        ota_cfg,
+        seed=args.seed,
+        ppm=parse_ppm(args.ppm),
+        multipath=parse_multipath(args.multipath),
+        delay_s=args.delay_us * 1e-6,
+        loopback=tx_kind == "loopback",
     )
 
 

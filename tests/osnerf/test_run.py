@@ -126,12 +126,23 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     assert comp["symbols_jscc_over_full"] == pytest.approx(
         sch["jscc"]["symbols_sent"] / sch["full"]["symbols_sent"]
     )
+    # time to full's object PSNR: jscc's encode + decode + NeRF seconds at the first curve
+    # point that reaches it, None when none does
+    target = sch["full"]["psnr_object"]
+    reached = [
+        c
+        for c in sch["jscc"]["nerf_curve"]
+        if c["psnr_object"] is not None and c["psnr_object"] >= target
+    ]
     at = comp["jscc_processing_seconds_to_full_psnr_object"]
-    if at is not None:  # reached full's object PSNR: encode + decode + NeRF seconds so far
+    ratio = comp["processing_jscc_over_full_at_equal_psnr_object"]
+    if reached:
+        sec = sch["jscc"]["seconds"]
+        assert at == pytest.approx(reached[0]["seconds"] + sec["encode"] + sec["decode"])
         assert at <= sch["jscc"]["processing_seconds"] + 1e-6
-        assert comp["processing_jscc_over_full_at_equal_psnr_object"] == pytest.approx(
-            at / sch["full"]["processing_seconds"]
-        )
+        assert ratio == pytest.approx(at / sch["full"]["processing_seconds"])
+    else:
+        assert at is None and ratio is None
     assert sch["gt"]["symbols_sent"] == 0 and sch["gt"]["views_sent"] == len(sent)
     assert sch["jscc"]["views_sent"] == len(sent) and sch["full"]["views_sent"] == len(
         views["candidates"]

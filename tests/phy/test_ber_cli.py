@@ -70,7 +70,11 @@ def test_same_seed_same_result(tmp_path):
 @pytest.mark.parametrize(
     "flag, value, match",
     [
-        ("--channel", "rician", "--channel: invalid choice: 'rician' (choose from 'awgn', 'rayleigh')"),
+        (
+            "--channel",
+            "rician",
+            "--channel: invalid choice: 'rician' (choose from 'awgn', 'rayleigh')",
+        ),
         (
             "--modulation",
             "8psk",
