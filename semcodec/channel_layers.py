@@ -1,14 +1,19 @@
-"""Channels inside training: masked features -> phy channel -> receiver features.
+"""Channels inside training: masked features -> phy link -> what the decoder sees.
 
-Each training channel is a name in :data:`TRAIN_CHANNELS`:
+Each training channel is a name in :data:`TRAIN_CHANNELS` -> (phy channel, receiver):
 * ``awgn``: phy's AWGN.
-* ``rayleigh``: block Rayleigh fading with perfect CSI, MMSE-equalised; the decoder is told
-  the post-equalisation SNR ``|h|^2 * snr``.
-* ``rayleigh_nocsi``: block Rayleigh fading, no CSI: the decoder sees ``y = h x + n`` and the
-  nominal SNR.
+* ``rayleigh`` / ``rayleigh_fast``: block (one h per image) or fast (one h per symbol)
+  Rayleigh fading, receiver with perfect CSI.
+* ``rayleigh_nocsi``: block Rayleigh fading, no CSI: the decoder sees ``y = h x + n``.
 * ``ofdm_rayleigh_ls`` / ``ofdm_tdl_ls``: ``phy.OFDMLink`` on the default ``phy.ResourceGrid``
-  (pilots, LS estimate + linear interpolation, MMSE) over block Rayleigh fading or 3GPP
-  TDL-A (100 ns); the decoder is told the SNR the link's effective noise variance implies.
+  (pilots, LS estimate + linear interpolation) over block Rayleigh fading or 3GPP TDL-A
+  (100 ns).
+
+Every receiver equalises to *unbiased* estimates with their per-symbol effective noise
+variance (zero-forcing for one tap, the unbiased LMMSE), and :func:`semcodec.model.lmmse_input`
+turns them into what the decoder sees: the LMMSE estimate and the reliability
+``1 / (1 + noise_var)`` of each symbol. A comma-separated list of names trains on a mixture
+(one channel drawn per step).
 """
 
 from __future__ import annotations
@@ -16,27 +21,42 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from phy import make_channel, noise_var_to_snr_db
-from semcodec.model import side_info
+from phy import make_channel
+from semcodec.model import lmmse_input, side_info
 
 TRAIN_CHANNELS: dict[str, tuple[str, str]] = {
     "awgn": ("awgn", "none"),
     "rayleigh": ("rayleigh", "perfect"),
+    "rayleigh_fast": ("rayleigh_fast", "perfect"),
     "rayleigh_nocsi": ("rayleigh", "none"),
     "ofdm_rayleigh_ls": ("rayleigh", "ofdm"),
     "ofdm_tdl_ls": ("tdl", "ofdm"),
 }
-_LINKS: dict[str, torch.nn.Module] = {}
+_LINKS: dict[tuple[str, str], torch.nn.Module] = {}
 
 
-def _ofdm_link(name: str):
-    """The OFDM link of a training channel (built once)."""
-    if name not in _LINKS:
+def parse_train_channels(spec: str) -> list[str]:
+    """``"awgn,rayleigh_fast"`` -> names; KeyError naming the known ones for an unknown name."""
+    names = [n.strip() for n in str(spec).split(",")]
+    for n in names:
+        if n not in TRAIN_CHANNELS:
+            raise KeyError(f"unknown training channel {n!r}; known: {sorted(TRAIN_CHANNELS)}")
+    return names
+
+
+def _link(channel: str) -> torch.nn.Module:
+    """The phy link (channel + unbiased one-tap receiver) of a training channel, built once."""
+    name, csi = TRAIN_CHANNELS[channel]
+    if (name, csi) not in _LINKS:
         import phy
 
-        kwargs = {"model": "A", "delay_spread_s": 100e-9} if name == "tdl" else {}
-        _LINKS[name] = phy.OFDMLink(phy.ResourceGrid(), make_channel(name, **kwargs), csi="ls")
-    return _LINKS[name]
+        if csi == "ofdm":
+            kwargs = {"model": "A", "delay_spread_s": 100e-9} if name == "tdl" else {}
+            link = phy.OFDMLink(phy.ResourceGrid(), make_channel(name, **kwargs), "ls", "zf")
+        else:
+            link = phy.FlatLink(make_channel(name), csi=csi, equalizer="zf")
+        _LINKS[(name, csi)] = link
+    return _LINKS[(name, csi)]
 
 
 def channel_mask(m: Tensor, num_complex_channels: int) -> Tensor:
@@ -52,26 +72,23 @@ def masked_transmit(
     channel: str,
     generator: torch.Generator | None,
     num_complex_channels: int,
-) -> tuple[Tensor, Tensor]:
+) -> tuple[Tensor, Tensor, Tensor]:
     """Keep the first m[i] complex channels of image i, normalise its power to 1, send, receive.
 
     Equivalent to ``power_normalize(features_to_symbols(feat, m))`` per image followed by the
-    channel, but with a different m per image in one batch (dropped planes are zero and stay zero).
+    link, but with a different m per image in one batch (dropped planes are zero and stay zero).
 
     Args:
         feat: [batch, 2*C, h, w] float32 encoder output.
         m: [batch] int64 kept complex channels.
         snr_db: [batch] float32 Es/N0 per complex symbol.
     Returns:
-        (received features [batch, 2*C, h, w] float32 with dropped planes zero,
-         side information [batch, 2] for the decoder's AF modules).
+        (LMMSE features [batch, 2*C, h, w] float32 with dropped planes zero,
+         side information [batch, 2] for the AF modules (nominal SNR, rate),
+         reliability [batch, C, h, w] float32 in [0, 1], zero on dropped channels).
     """
-    try:
-        name, csi = TRAIN_CHANNELS[channel]
-    except KeyError:
-        raise KeyError(
-            f"unknown training channel {channel!r}; known: {sorted(TRAIN_CHANNELS)}"
-        ) from None
+    if channel not in TRAIN_CHANNELS:
+        raise KeyError(f"unknown training channel {channel!r}; known: {sorted(TRAIN_CHANNELS)}")
     b, c2, h, w = feat.shape
     mask = channel_mask(m.to(torch.long), num_complex_channels)
     kept = feat * mask
@@ -80,19 +97,8 @@ def masked_transmit(
     kept = kept * torch.rsqrt(power + 1e-12)
     pairs = kept.reshape(b, c2 // 2, 2, h, w).permute(0, 1, 3, 4, 2).contiguous()  # [b, C, h, w, 2]
     x = torch.view_as_complex(pairs).reshape(b, -1)  # [batch, C*h*w] complex64
-    if csi == "ofdm":
-        lo = _ofdm_link(name)(x, snr_db, generator=generator)
-        nv = lo.noise_var.reshape(b, -1).mean(dim=1).clamp(1e-6, 1e3)
-        snr_rx = noise_var_to_snr_db(nv).clamp(-30.0, 60.0)
-        z = torch.view_as_real(lo.x_hat.reshape(b, c2 // 2, h, w)).permute(0, 1, 4, 2, 3)
-        return z.reshape(b, c2, h, w) * mask, side_info(snr_rx, m, num_complex_channels, b)
-    out = make_channel(name)(x, snr_db, generator=generator)
-    snr_rx = snr_db
-    if out.h is not None and csi == "perfect":
-        y = out.equalized("mmse")
-        gain = (out.h.abs() ** 2).reshape(b, -1)[:, 0]
-        snr_rx = noise_var_to_snr_db(out.noise_var / gain.clamp_min(1e-6)).clamp(-30.0, 60.0)
-    else:
-        y = out.y
-    z = torch.view_as_real(y.reshape(b, c2 // 2, h, w)).permute(0, 1, 4, 2, 3).reshape(b, c2, h, w)
-    return z * mask, side_info(snr_rx, m, num_complex_channels, b)
+    out = _link(channel)(x, snr_db, generator=generator)
+    z, rel = lmmse_input(out.x_hat, out.noise_var)
+    z = torch.view_as_real(z.reshape(b, c2 // 2, h, w)).permute(0, 1, 4, 2, 3).reshape(b, c2, h, w)
+    rel = rel.reshape(b, c2 // 2, h, w) * mask[:, ::2]
+    return z * mask, side_info(snr_db, m, num_complex_channels, b), rel

@@ -30,7 +30,10 @@ class KnowledgeBaseMismatch(ValueError):
 def weights_sha256(state: dict[str, torch.Tensor], cfg: JSCCConfig) -> str:
     """sha256 hex of the architecture and the weights (names, dtypes, shapes, bytes)."""
     h = hashlib.sha256()
-    h.update(json.dumps(cfg.to_dict(), sort_keys=True).encode())
+    arch = cfg.to_dict()
+    if not arch["decoder_reliability"]:  # version 1 architectures hash as they always did
+        del arch["decoder_reliability"]
+    h.update(json.dumps(arch, sort_keys=True).encode())
     for name in sorted(state):
         t = state[name].detach().cpu().contiguous()
         h.update(f"{name}|{t.dtype}|{tuple(t.shape)}|".encode())

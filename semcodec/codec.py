@@ -25,7 +25,14 @@ from torch.nn import functional as F
 from phy import power_normalize, validate_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
 from semcodec.focus import attribution_box, demand_heatmap, select_positions
-from semcodec.model import JSCCModel, features_to_symbols, side_info, symbols_to_features
+from semcodec.model import (
+    JSCCModel,
+    features_to_symbols,
+    lmmse_input,
+    reliability_to_features,
+    side_info,
+    symbols_to_features,
+)
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
 MIN_SIDE_PX = 8
@@ -226,14 +233,27 @@ class Codec:
         return Encoded(sym.to(torch.complex64), meta)
 
     def decode(
-        self, x_hat: Tensor, meta: EncodedMeta, snr_db, expected_sha256: str | None = None
+        self,
+        x_hat: Tensor,
+        meta: EncodedMeta,
+        snr_db,
+        expected_sha256: str | None = None,
+        noise_var=None,
     ) -> Tensor:
         """Received symbols -> images.
 
+        The equaliser convention (stated once, :func:`semcodec.model.lmmse_input`): ``x_hat``
+        are *unbiased* estimates ``x + e`` (zero-forcing for one tap, sionna's LMMSE) and
+        ``noise_var`` the effective variance of ``e`` per symbol, as ``phy`` links with
+        ``equalizer="zf"`` return them. The decoder sees the LMMSE estimates and, for
+        knowledge-base version 2 models, each symbol's reliability.
+
         Args:
-            x_hat: [batch, num_symbols] complex64, equalised received symbols.
+            x_hat: [batch, num_symbols] complex64, unbiased equalised symbols.
             meta: the transmitter's :class:`EncodedMeta`.
-            snr_db: float or [batch]: the receiver's SNR (estimate) in dB.
+            snr_db: float or [batch]: the receiver's (average) SNR estimate in dB.
+            noise_var: None (AWGN: ``10**(-snr_db/10)`` for every symbol), [batch] or
+                [batch, num_symbols] effective noise variance per symbol.
             expected_sha256: the codec hash the transmitter announced (also checked against
                 ``meta.codec_sha256``).
         Returns:
@@ -262,27 +282,40 @@ class Codec:
         snr = self._snr(snr_db, b)
         hf, wf = math.ceil(meta.height / 4), math.ceil(meta.width / 4)
         m = meta.num_channels
-        x_hat = x_hat.to(torch.complex64)
+        c = cfg.num_complex_channels
+        nv = 10.0 ** (-snr / 10.0) if noise_var is None else noise_var
+        if noise_var is None and not cfg.decoder_reliability:
+            nv = 0.0  # version 1 was trained on AWGN symbols as received
+        try:
+            x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)
+        except RuntimeError:
+            raise ValueError(
+                f"noise_var must be a float, [batch] or [batch, num_symbols] = [{b}, {meta.num_symbols}]"
+            ) from None
+        side = side_info(snr, m, c, b)
         with torch.no_grad():
             if meta.crop is not None:
                 t, left, ch, cw = meta.crop
-                z = symbols_to_features(x_hat, m, cfg.num_complex_channels, ch // 4, cw // 4)
-                yc = self.model.decoder(z, side_info(snr, m, cfg.num_complex_channels, b))
+                z = symbols_to_features(x_hat, m, c, ch // 4, cw // 4)
+                r = reliability_to_features(rel, m, c, ch // 4, cw // 4)
+                yc = self.model.decoder(z, side, r)
                 y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
                 y[:, :, t : t + ch, left : left + cw] = yc
                 return y[:, :, : meta.height, : meta.width].clamp(0, 1)
             if meta.positions is None:
-                z = symbols_to_features(x_hat, m, cfg.num_complex_channels, hf, wf)
+                z = symbols_to_features(x_hat, m, c, hf, wf)
+                r = reliability_to_features(rel, m, c, hf, wf)
             else:
                 pos = meta.positions
                 k = pos.shape[1]
                 sent = symbols_to_features(x_hat, m, m, k, 1)[:, :, :, 0]  # [b, 2m, k]
                 z = torch.zeros(b, 2 * m, hf * wf)
                 z.scatter_(2, pos[:, None, :].expand(b, 2 * m, k), sent)
-                z = F.pad(
-                    z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (cfg.num_complex_channels - m))
-                )
-            y = self.model.decoder(z, side_info(snr, m, cfg.num_complex_channels, b))
+                z = F.pad(z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (c - m)))
+                r = torch.zeros(b, m, hf * wf)
+                r.scatter_(2, pos[:, None, :].expand(b, m, k), rel.reshape(b, m, k))
+                r = F.pad(r.reshape(b, m, hf, wf), (0, 0, 0, 0, 0, c - m))
+            y = self.model.decoder(z, side, r)
         return y[:, :, : meta.height, : meta.width].clamp(0, 1)
 
 

@@ -20,7 +20,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from semcodec.model import JSCCModel, side_info
+from semcodec.model import JSCCModel, awgn_reliability, side_info
 
 PATH_STEPS = (0.25, 0.5, 0.75, 1.0)
 
@@ -95,7 +95,8 @@ def demand_heatmap(
     with torch.enable_grad():
         for alpha in PATH_STEPS:
             f = (alpha * base).requires_grad_(True)
-            y = model.decoder(f, side)
+            rel = awgn_reliability(snr_db, (b, c2 // 2, *f.shape[2:]))
+            y = model.decoder(f, side, rel)
             score = -((wmap * (y - xp) ** 2).flatten(1).sum(1) / wmap.flatten(1).sum(1)).sum()
             (g,) = torch.autograd.grad(score, f)
             grad_sum += g

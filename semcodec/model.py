@@ -33,6 +33,9 @@ class JSCCConfig:
         num_complex_channels: complex symbols per 4x4 pixel block at full rate (CBR = m/48).
         af_hidden: hidden units of each AF module's MLP.
         snr_min_db, snr_max_db: SNR range the model is trained for (Es/N0 per complex symbol).
+        decoder_reliability: the decoder also sees each received symbol's reliability
+            ``1 / (1 + noise_var_eff)`` (knowledge-base version 2); without it (version 1) it
+            sees the LMMSE estimates and one scalar SNR only.
     """
 
     name: str = "adjscc_s4_w96"
@@ -42,6 +45,7 @@ class JSCCConfig:
     af_hidden: int = 32
     snr_min_db: float = -5.0
     snr_max_db: float = 20.0
+    decoder_reliability: bool = False
 
     def __post_init__(self):
         if not 8 <= self.width <= 512:
@@ -135,12 +139,15 @@ class Encoder(nn.Module):
 
 
 class Decoder(nn.Module):
-    """Real features [batch, 2*C, H/4, W/4] -> image [batch, 3, H, W] in [0, 1]."""
+    """LMMSE features [batch, 2*C, H/4, W/4] (+ reliability [batch, C, H/4, W/4] when
+    ``cfg.decoder_reliability``) -> image [batch, 3, H, W] in [0, 1]."""
 
     def __init__(self, cfg: JSCCConfig):
         super().__init__()
         w = cfg.width
-        self.inp = nn.Conv2d(2 * cfg.num_complex_channels, w, 3, padding=1)
+        c = cfg.num_complex_channels
+        self.reliability = cfg.decoder_reliability
+        self.inp = nn.Conv2d(3 * c if self.reliability else 2 * c, w, 3, padding=1)
         self.gdn0, self.act0 = GDN(w, inverse=True), nn.PReLU(w)
         self.af = AFModule(w, cfg.af_hidden)
         self.res = nn.ModuleList(
@@ -150,7 +157,11 @@ class Decoder(nn.Module):
         self.gdn1, self.act1 = GDN(w, inverse=True), nn.PReLU(w)
         self.up2 = nn.ConvTranspose2d(w, 3, 5, stride=2, padding=2, output_padding=1)
 
-    def forward(self, z: Tensor, side: Tensor) -> Tensor:
+    def forward(self, z: Tensor, side: Tensor, reliability: Tensor | None = None) -> Tensor:
+        if self.reliability:
+            if reliability is None:
+                raise ValueError("this decoder needs the per-symbol reliability [batch, C, h, w]")
+            z = torch.cat([z, reliability], dim=1)
         x = self.af(self.act0(self.gdn0(self.inp(z))), side)
         for unit in self.res:
             x = unit(x, side)
@@ -192,6 +203,46 @@ def symbols_to_features(sym: Tensor, m: int, num_complex_channels: int, h: int, 
     return F.pad(real, (0, 0, 0, 0, 0, 2 * (num_complex_channels - m)))
 
 
+def lmmse_input(x_hat: Tensor, noise_var) -> tuple[Tensor, Tensor]:
+    """The decoder's view of received symbols (the one equaliser convention of the codec).
+
+    Receivers hand the codec *unbiased* estimates ``x_hat = x + e`` with the effective noise
+    variance ``noise_var = E|e|^2`` of each symbol (sionna's LMMSE convention; for one tap
+    this is ``y / h`` with ``noise_var / |h|^2``). Channel symbols have unit mean power, so
+    the linear MMSE estimate is ``x_hat / (1 + noise_var)``; the decoder sees that (bounded
+    in deep fades) and the reliability ``1 / (1 + noise_var)`` in (0, 1].
+
+    Args:
+        x_hat: [batch, num_symbols] complex64 unbiased estimates.
+        noise_var: float, [batch] or [batch, num_symbols]: effective noise variance per symbol.
+    Returns:
+        (LMMSE estimates [batch, num_symbols] complex64, reliability [batch, num_symbols] float32).
+    """
+    nv = torch.as_tensor(noise_var, dtype=torch.float32)
+    if nv.dim() == 1 and x_hat.dim() == 2:
+        nv = nv[:, None]
+    nv = torch.nan_to_num(nv, nan=1e6, posinf=1e6).clamp(0.0, 1e6)
+    w = torch.broadcast_to(1.0 / (1.0 + nv), x_hat.shape).contiguous()
+    z = x_hat * w
+    z = torch.where(torch.isfinite(z), z, torch.zeros_like(z))
+    return z.to(torch.complex64), w
+
+
+def reliability_to_features(
+    w: Tensor, m: int, num_complex_channels: int, h: int, wd: int
+) -> Tensor:
+    """Per-symbol reliability [batch, m*h*wd] -> [batch, num_complex_channels, h, wd] (dropped: 0)."""
+    b = w.shape[0]
+    return F.pad(w.reshape(b, m, h, wd).float(), (0, 0, 0, 0, 0, num_complex_channels - m))
+
+
+def awgn_reliability(snr_db, shape: tuple[int, int, int, int]) -> Tensor:
+    """[batch, C, h, w] reliability ``1 / (1 + 10**(-snr_db/10))`` of an AWGN link (snr_db float or [batch])."""
+    snr = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
+    w = 1.0 / (1.0 + 10.0 ** (-snr / 10.0))
+    return torch.broadcast_to(w.reshape(-1, 1, 1, 1), shape).contiguous()
+
+
 def side_info(snr_db: Tensor, m: Tensor | int, num_complex_channels: int, batch: int) -> Tensor:
     """[batch, 2] float32 = (snr_db / 10, m / num_complex_channels), what the AF modules see."""
     snr = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
@@ -212,6 +263,13 @@ class JSCCModel(nn.Module):
 
 
 MODELS: dict[str, Callable[[], JSCCConfig]] = {
+    "adjscc_s4_w96_rel": lambda: JSCCConfig(
+        name="adjscc_s4_w96_rel",
+        width=96,
+        num_res_blocks=2,
+        snr_min_db=-10.0,
+        decoder_reliability=True,
+    ),
     "adjscc_s4_w96": lambda: JSCCConfig(name="adjscc_s4_w96", width=96, num_res_blocks=2),
     "adjscc_s4_w64": lambda: JSCCConfig(name="adjscc_s4_w64", width=64, num_res_blocks=1),
     "adjscc_s4_w128": lambda: JSCCConfig(name="adjscc_s4_w128", width=128, num_res_blocks=2),

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from PIL import Image
 
-from semcodec.channel_layers import TRAIN_CHANNELS, masked_transmit
+from semcodec.channel_layers import masked_transmit, parse_train_channels
 from semcodec.checkpoint import load_checkpoint, save_checkpoint
 from semcodec.model import JSCCModel, make_model, side_info
 
@@ -32,7 +32,8 @@ class TrainConfig:
 
     Attributes:
         model: architecture name in ``semcodec.MODELS``.
-        channel: training channel in ``semcodec.TRAIN_CHANNELS``.
+        channel: training channel in ``semcodec.TRAIN_CHANNELS``, or a comma-separated
+            mixture of them (one drawn uniformly per step).
         crop_px: side of the square random crops.
         batch_size: crops per step.
         lr: peak Adam learning rate.
@@ -97,10 +98,7 @@ class TrainConfig:
         for name, ok, allowed in checks:
             if not ok:
                 raise ValueError(f"{name} must be {allowed}, got {getattr(self, name)!r}")
-        if self.channel not in TRAIN_CHANNELS:
-            raise KeyError(
-                f"unknown training channel {self.channel!r}; known: {sorted(TRAIN_CHANNELS)}"
-            )
+        parse_train_channels(self.channel)
 
 
 def list_images(folder: str | Path) -> list[Path]:
@@ -174,8 +172,8 @@ def forward_train(
     c = model.cfg.num_complex_channels
     side = side_info(snr_db, m, c, x.shape[0])
     feat = model.encoder(x, side)
-    z, side_rx = masked_transmit(feat, m, snr_db, channel, generator, c)
-    return model.decoder(z, side_rx)
+    z, side_rx, rel = masked_transmit(feat, m, snr_db, channel, generator, c)
+    return model.decoder(z, side_rx, rel)
 
 
 @torch.no_grad()
@@ -187,17 +185,50 @@ def validate(
     m: int = 3,
     seed: int = 1234,
 ) -> dict:
-    """Mean PSNR on fixed images at a few SNRs (fixed noise seed)."""
+    """Mean PSNR on fixed images at a few SNRs (fixed noise seed), per training channel."""
     model.eval()
-    g = torch.Generator().manual_seed(seed)
     out = {}
-    for s in snrs_db:
-        b = images.shape[0]
-        y = forward_train(model, images, torch.full((b,), s), torch.full((b,), m), channel, g)
-        mse = ((y - images) ** 2).mean(dim=(1, 2, 3))
-        out[f"psnr_{s:g}db"] = float((-10 * torch.log10(mse)).mean())
+    names = parse_train_channels(channel)
+    for ch in names:
+        g = torch.Generator().manual_seed(seed)
+        for s in snrs_db:
+            b = images.shape[0]
+            y = forward_train(model, images, torch.full((b,), s), torch.full((b,), m), ch, g)
+            mse = ((y - images) ** 2).mean(dim=(1, 2, 3))
+            key = f"psnr_{s:g}db" if len(names) == 1 else f"{ch}_psnr_{s:g}db"
+            out[key] = float((-10 * torch.log10(mse)).mean())
     model.train()
     return out
+
+
+def load_compatible(model: JSCCModel, init: JSCCModel) -> None:
+    """Start ``model`` from ``init``'s weights where the architectures differ only in the
+    decoder's reliability input (v1 -> v2): the extra input planes start at zero, so the new
+    model first decodes exactly as ``init`` does on LMMSE estimates.
+
+    Raises ValueError naming both architectures when anything else differs.
+    """
+    a, b = model.cfg, init.cfg
+    same = dataclasses.replace(
+        b,
+        name=a.name,
+        snr_min_db=a.snr_min_db,
+        snr_max_db=a.snr_max_db,
+        decoder_reliability=a.decoder_reliability,
+    )
+    if same != a:
+        raise ValueError(f"init checkpoint architecture {b.name} does not fit model {a.name}")
+    state = init.state_dict()
+    own = model.state_dict()
+    for k, v in own.items():
+        src = state[k]
+        if src.shape == v.shape:
+            own[k] = src.clone()
+        else:  # the decoder's input conv: copy the shared input planes, zero the new ones
+            new = torch.zeros_like(v)
+            new[:, : src.shape[1]] = src
+            own[k] = new
+    model.load_state_dict(own)
 
 
 def train(
@@ -234,11 +265,7 @@ def train(
     model = make_model(cfg.model)
     if init is not None:
         init_model = load_checkpoint(init)[0]
-        if init_model.cfg != model.cfg:
-            raise ValueError(
-                f"init checkpoint architecture {init_model.cfg.name} != model {cfg.model}"
-            )
-        model.load_state_dict(init_model.state_dict())
+        load_compatible(model, init_model)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     rng = np.random.default_rng(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -295,6 +322,7 @@ def train(
     last_save = last_eval = elapsed
     acc_loss, acc_psnr, acc_n = 0.0, 0.0, 0
     c = make_model(cfg.model).cfg.num_complex_channels
+    channels = parse_train_channels(cfg.channel)
     model.train()
     while elapsed < budget:
         t0 = time.perf_counter()
@@ -309,8 +337,9 @@ def train(
             rng.uniform(cfg.focus_snr_min_db, cfg.focus_snr_max_db, b),
         )
         m = np.where(rng.random(b) < cfg.p_focus_m, min(cfg.focus_m, c), rng.integers(1, c + 1, b))
+        channel = channels[int(rng.integers(len(channels)))] if len(channels) > 1 else channels[0]
         y = forward_train(
-            model, x, torch.tensor(snr, dtype=torch.float32), torch.tensor(m), cfg.channel, gen
+            model, x, torch.tensor(snr, dtype=torch.float32), torch.tensor(m), channel, gen
         )
         mse_per = ((y - x) ** 2).mean(dim=(1, 2, 3))
         loss = mse_per.mean()

@@ -30,11 +30,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--out", required=True, help="output folder (checkpoints, log.jsonl, summary.json)"
     )
     p.add_argument("--model", default=d.model, help=f"architecture (default: {d.model})")
+    from semcodec.channel_layers import TRAIN_CHANNELS
+
     p.add_argument(
         "--channel",
         default=d.channel,
-        help=f"training channel: awgn, rayleigh, rayleigh_nocsi, ofdm_rayleigh_ls, ofdm_tdl_ls (default: {d.channel})",
+        help=f"training channel, or a comma-separated mixture drawn per step: {', '.join(TRAIN_CHANNELS)} (default: {d.channel})",
     )
+    for name in (
+        "snr_min_db",
+        "snr_max_db",
+        "focus_snr_min_db",
+        "focus_snr_max_db",
+        "p_wide_snr",
+        "p_focus_m",
+        "decay_fraction",
+    ):
+        p.add_argument(
+            "--" + name.replace("_", "-"),
+            type=float,
+            default=getattr(d, name),
+            help=f"TrainConfig.{name} (default: {getattr(d, name)})",
+        )
     p.add_argument(
         "--max-minutes", type=float, default=d.max_minutes, help="training time budget in minutes"
     )
@@ -82,6 +99,13 @@ def run(args: argparse.Namespace) -> int:
         eval_every_s=args.eval_every_s,
         seed=args.seed,
         num_threads=args.threads,
+        snr_min_db=args.snr_min_db,
+        snr_max_db=args.snr_max_db,
+        focus_snr_min_db=args.focus_snr_min_db,
+        focus_snr_max_db=args.focus_snr_max_db,
+        p_wide_snr=args.p_wide_snr,
+        p_focus_m=args.p_focus_m,
+        decay_fraction=args.decay_fraction,
     )
     bsds = shared_data_dir() / "bsds500"
     data = [Path(d) for d in (args.data or [bsds / "train", bsds / "val"])]

@@ -16,7 +16,8 @@ def test_registry_builds_every_name(name):
     side = side_info(torch.tensor([0.0, 10.0]), 3, cfg.num_complex_channels, 2)
     with torch.no_grad():
         feat = model.encoder(x, side)
-        y = model.decoder(feat, side)
+        rel = torch.ones(2, cfg.num_complex_channels, 4, 6)
+        y = model.decoder(feat, side, rel)
     assert feat.shape == (2, 2 * cfg.num_complex_channels, 4, 6)
     assert y.shape == x.shape and float(y.min()) >= 0 and float(y.max()) <= 1
 

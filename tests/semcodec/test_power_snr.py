@@ -28,7 +28,7 @@ def test_masked_normalisation_equals_phy_power_normalize():
         torch.randn(3, 16, 5, 7, generator=g) * torch.tensor([1.0, 3.0, 0.2])[:, None, None, None]
     )
     m = torch.tensor([1, 3, 8])
-    z, side = masked_transmit(feat, m, torch.full((3,), 60.0), "awgn", g, 8)
+    z, side, _ = masked_transmit(feat, m, torch.full((3,), 60.0), "awgn", g, 8)
     for i in range(3):
         want = phy.power_normalize(features_to_symbols(feat[i : i + 1], int(m[i])))
         got = features_to_symbols(z[i : i + 1], int(m[i]))
@@ -39,18 +39,22 @@ def test_masked_normalisation_equals_phy_power_normalize():
 
 @pytest.mark.parametrize("snr_db", [-3.0, 1.0, 10.0])
 def test_measured_snr_equals_applied(snr_db):
-    """Noise power per complex symbol measured after the training channel layer = 10**(-snr/10) (1 %)."""
+    """Noise power per complex symbol of the unbiased symbols behind the decoder's LMMSE input
+    = 10**(-snr/10) (1 %), and the reliability is 1 / (1 + noise_var) exactly."""
     g = torch.Generator().manual_seed(3)
     feat = torch.randn(4, 16, 64, 64, generator=g)
     m = torch.full((4,), 8)
-    ref, _ = masked_transmit(
+    ref, _, rel_ref = masked_transmit(
         feat, m, torch.full((4,), 200.0 / 4), "awgn", None, 8
     )  # 50 dB: ~noise-free
-    z, side = masked_transmit(feat, m, torch.full((4,), snr_db), "awgn", g, 8)
+    z, side, rel = masked_transmit(feat, m, torch.full((4,), snr_db), "awgn", g, 8)
+    want = 10 ** (-snr_db / 10)
+    torch.testing.assert_close(rel, torch.full_like(rel, 1 / (1 + want)))
+    ref = ref / rel_ref.repeat_interleave(2, dim=1)  # LMMSE -> unbiased
+    z = z / rel.repeat_interleave(2, dim=1)
     n = 4 * 8 * 64 * 64  # complex symbols
     noise_power = float(((z - ref) ** 2).sum()) / n  # per complex symbol (both real dims)
     signal_power = float((ref**2).sum()) / n
-    want = 10 ** (-snr_db / 10)
     assert signal_power == pytest.approx(1.0, rel=1e-3)
     # 4 sigma of the variance estimate over 2n real samples: sqrt(2/(2n))
     assert noise_power == pytest.approx(want, rel=4 * math.sqrt(1 / n) + 1e-3)
@@ -76,12 +80,36 @@ def test_channel_mask_keeps_exactly_m():
     assert mask[1].tolist() == [1.0] * 6 + [0.0] * 10
 
 
-@pytest.mark.parametrize("channel", ["rayleigh", "rayleigh_nocsi", "ofdm_rayleigh_ls"])
+@pytest.mark.parametrize(
+    "channel", ["rayleigh", "rayleigh_fast", "rayleigh_nocsi", "ofdm_rayleigh_ls"]
+)
 def test_training_channels_are_differentiable(channel):
     g = torch.Generator().manual_seed(5)
     feat = torch.randn(2, 16, 4, 4, generator=g, requires_grad=True)
-    z, side = masked_transmit(feat, torch.tensor([2, 8]), torch.tensor([5.0, 15.0]), channel, g, 8)
+    z, side, rel = masked_transmit(
+        feat, torch.tensor([2, 8]), torch.tensor([5.0, 15.0]), channel, g, 8
+    )
     assert z.shape == feat.shape and torch.all(z[0, 4:] == 0)
+    assert rel.shape == (2, 8, 4, 4) and torch.all(rel[0, 2:] == 0)
+    assert float(rel.min()) >= 0 and float(rel.max()) <= 1
     z.sum().backward()
     assert feat.grad is not None and torch.isfinite(feat.grad).all()
     assert torch.all(torch.isfinite(side))
+
+
+def test_fast_fading_reliability_follows_each_fade():
+    """Rayleigh fast with perfect CSI: reliability = |h|^2 snr / (1 + |h|^2 snr) per symbol, so
+    its mean over many symbols matches E[g/(g + nv)] for g ~ Exp(1) (closed form via E1)."""
+    from scipy.special import exp1
+
+    g = torch.Generator().manual_seed(6)
+    feat = torch.randn(2, 16, 32, 32, generator=g)
+    snr_db = 4.0
+    _, _, rel = masked_transmit(
+        feat, torch.tensor([8, 8]), torch.full((2,), snr_db), "rayleigh_fast", g, 8
+    )
+    nv = 10 ** (-snr_db / 10)
+    # w = g/(g + nv) with unit-power symbols; E[nv/(g+nv)] = nv e^{nv} E1(nv)
+    want = 1 - nv * math.exp(nv) * exp1(nv)
+    assert float(rel.mean()) == pytest.approx(want, abs=0.01)
+    assert float(rel.std()) > 0.1  # one reliability per symbol, not per image
