@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import Tensor
 from torch.nn import functional as F
@@ -327,3 +328,33 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
     p = DEFAULT_CHECKPOINT if path is None else Path(path)
     model, card = load_checkpoint(p)
     return Codec(model, card, p)
+
+
+BLOCK_PX = 4
+"""Pixels per feature position along each axis (the encoder downsamples by 4)."""
+
+
+def positions_to_mask(positions, height: int, width: int) -> np.ndarray:
+    """[height, width] float32: 1 on the pixels of the sent feature positions.
+
+    Args:
+        positions: [num_positions] indices, row-major on the ceil(h/4) x ceil(w/4) grid.
+    """
+    hf, wf = -(-height // BLOCK_PX), -(-width // BLOCK_PX)
+    grid = np.zeros(hf * wf, np.float32)
+    grid[np.asarray(positions, np.int64)] = 1.0
+    full = np.kron(grid.reshape(hf, wf), np.ones((BLOCK_PX, BLOCK_PX), np.float32))
+    return full[:height, :width]
+
+
+def receiver_mask(meta: EncodedMeta, height: int, width: int) -> np.ndarray | None:
+    """[height, width] float32: the pixels the focus-mode side information says were sent
+    (``meta.crop`` box, or ``meta.positions`` of the first image); None = whole image."""
+    if meta.crop is not None:
+        top, left, rows, cols = (int(v) for v in meta.crop)
+        m = np.zeros((height, width), np.float32)
+        m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
+        return m
+    if meta.positions is not None:
+        return positions_to_mask(meta.positions[0].cpu().numpy(), height, width)
+    return None
