@@ -88,9 +88,11 @@ class Scheme:
         bound: None, or what the scheme bounds ("ceiling: nothing crosses the channel");
             bounds are labelled as such in help and reports.
         help: one line for ``--help`` and reports.
+        headline: the scheme the report's comparisons are about (the others are its baselines).
     """
 
     name: ClassVar[str] = ""
+    headline: ClassVar[bool] = False
     object_routed: ClassVar[bool] = True
     needs_codec: ClassVar[bool] = False
     bound: ClassVar[str | None] = None
@@ -263,6 +265,7 @@ class OnDemandJSCC(Scheme):
 
     object_routed = True
     needs_codec = True
+    headline = True
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
     def transmit(self, ctx, plans, images, generator):

@@ -293,7 +293,7 @@ def run_pipeline(
         },
         views=views_summary(plan, col),
         schemes=results,
-        comparisons=comparisons(results),
+        comparisons=comparisons(results, prep.schemes),
         scu_decisions=prep.scu.decisions,
         metric_notes=METRIC_NOTES,
         seconds_total=time.perf_counter() - t_run,
@@ -327,22 +327,26 @@ def views_summary(plan: RunPlan, col: Collection) -> dict:
     }
 
 
-def comparisons(schemes: dict[str, SchemeReport]) -> dict:
-    """The headline numbers: jscc vs the gt ceiling, digital and full; the paper's
-    processing-time claim at equal object PSNR."""
+def comparisons(results: dict[str, SchemeReport], schemes: dict[str, Scheme]) -> dict:
+    """The headline numbers: the headline scheme (jscc) minus every other scheme in object
+    PSNR; against the first whole-view scheme (full) its symbols, processing time and the
+    paper's claim (processing time to the same object PSNR)."""
     out = {}
-    j = schemes.get("jscc")
+    subject = next((n for n, s in schemes.items() if s.headline), None)
+    j = results.get(subject)
     if j is None or j.psnr_object is None:
         return out
-    for other in ("gt", "digital", "full"):
-        o = schemes.get(other)
-        if o is not None and o.psnr_object is not None:
-            out[f"jscc_minus_{other}_psnr_object_db"] = j.psnr_object - o.psnr_object
-    f = schemes.get("full")
-    if f is not None and f.symbols_sent:
-        out["symbols_jscc_over_full"] = j.symbols_sent / f.symbols_sent
-    if f is not None and j.processing_seconds and f.processing_seconds:
-        out["processing_jscc_over_full"] = j.processing_seconds / f.processing_seconds
+    for other, o in results.items():
+        if other != subject and o.psnr_object is not None:
+            out[f"{subject}_minus_{other}_psnr_object_db"] = j.psnr_object - o.psnr_object
+    whole = next((n for n, s in schemes.items() if not s.object_routed), None)
+    f = results.get(whole)
+    if f is None:
+        return out
+    if f.symbols_sent:
+        out[f"symbols_{subject}_over_{whole}"] = j.symbols_sent / f.symbols_sent
+    if j.processing_seconds and f.processing_seconds:
+        out[f"processing_{subject}_over_{whole}"] = j.processing_seconds / f.processing_seconds
         if f.psnr_object is not None and j.nerf_curve:
             reached = [
                 c
@@ -354,8 +358,8 @@ def comparisons(schemes: dict[str, SchemeReport]) -> dict:
                 if reached
                 else None
             )
-            out["jscc_processing_seconds_to_full_psnr_object"] = at
-            out["processing_jscc_over_full_at_equal_psnr_object"] = (
+            out[f"{subject}_processing_seconds_to_{whole}_psnr_object"] = at
+            out[f"processing_{subject}_over_{whole}_at_equal_psnr_object"] = (
                 None if at is None else at / f.processing_seconds
             )
     return out

@@ -8,28 +8,10 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
-import semcodec
 from osnerf.cli import main
 
 SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--max-seconds", "2"]
-
-
-def _checkpoint(path, seed):
-    torch.manual_seed(seed)
-    model = semcodec.make_model(sorted(semcodec.MODELS)[0])
-    semcodec.save_checkpoint(path, model, {"name": f"untrained-{seed}"})
-    return str(path)
-
-
-@pytest.fixture(scope="module")
-def env(tmp_path_factory):
-    root = tmp_path_factory.mktemp("run")
-    default = semcodec.DEFAULT_CHECKPOINT
-    codec = str(default) if default.exists() else _checkpoint(root / "a.safetensors", 0)
-    other = _checkpoint(root / "b.safetensors", 1)
-    return {"root": root, "codec": codec, "other": other, "cache": str(root / "cache")}
 
 
 def _run(env, out, *extra):
