@@ -269,7 +269,7 @@ class OnDemandJSCC(Scheme):
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
     def transmit(self, ctx, plans, images, generator):
-        return _jscc_views(ctx, plans, images, generator, on_demand=True)
+        return _jscc_views(ctx, plans, images, generator, on_demand=self.object_routed)
 
 
 @register("digital")
@@ -342,16 +342,13 @@ class Analog(Scheme):
 
 
 @register("full")
-class FullScene(Scheme):
+class FullScene(OnDemandJSCC):
     """Every candidate view, whole, through the semantic codec (no on-demand selection), CBR
     per view from its measured SNR."""
 
     object_routed = False
-    needs_codec = True
+    headline = False
     help = "every drone view whole through the semantic codec (no on-demand selection)"
-
-    def transmit(self, ctx, plans, images, generator):
-        return _jscc_views(ctx, plans, images, generator, on_demand=False)
 
 
 @register("gt")
