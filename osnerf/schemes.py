@@ -228,8 +228,10 @@ def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> T
         sec["channel"] += time.perf_counter() - t
         snr_rx = received_snr_db(nv, snr_range)
         t, c = time.perf_counter(), time.process_time()
-        with torch.no_grad():
-            img = rx.decode(x_hat, enc.meta, snr_rx, expected_sha256=codec.sha256, noise_var=nv)
+        with torch.no_grad():  # the receiver's average SNR; the per-symbol noise in nv
+            img = rx.decode(
+                x_hat, enc.meta, p.encoder_snr_db, expected_sha256=codec.sha256, noise_var=nv
+            )
             if s_up > 1:
                 img = F.avg_pool2d(img, s_up)
         sec["decode"] += time.perf_counter() - t

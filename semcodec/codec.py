@@ -252,7 +252,8 @@ class Codec:
         Args:
             x_hat: [batch, num_symbols] complex64, unbiased equalised symbols.
             meta: the transmitter's :class:`EncodedMeta`.
-            snr_db: float or [batch]: the receiver's (average) SNR estimate in dB.
+            snr_db: float or [batch]: the receiver's average SNR estimate in dB (what the AF
+                modules see; version-1 models given ``noise_var`` see the SNR it implies).
             noise_var: None (AWGN: ``10**(-snr_db/10)`` for every symbol), [batch] or
                 [batch, num_symbols] effective noise variance per symbol.
             expected_sha256: the codec hash the transmitter announced (also checked against
@@ -285,8 +286,13 @@ class Codec:
         m = meta.num_channels
         c = cfg.num_complex_channels
         nv = 10.0 ** (-snr / 10.0) if noise_var is None else noise_var
-        if noise_var is None and not cfg.decoder_reliability:
-            nv = 0.0  # version 1 was trained on AWGN symbols as received
+        if not cfg.decoder_reliability:
+            # version 1 was trained on AWGN symbols as received, told their SNR: give it the
+            # unbiased symbols and the SNR their mean noise variance implies
+            if noise_var is not None:
+                mean_nv = torch.as_tensor(noise_var, dtype=torch.float32).reshape(b, -1).mean(1)
+                snr = (-10.0 * torch.log10(mean_nv.clamp_min(1e-12))).clamp(*self.snr_range_db)
+            nv = 0.0
         try:
             x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)
         except RuntimeError:
