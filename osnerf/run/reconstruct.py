@@ -59,7 +59,7 @@ def lpips_mean(pred: np.ndarray, ref: np.ndarray) -> float | None:
         return None
     try:
         return float(np.mean(np.asarray(fn(pred, ref), np.float64)))
-    except FileNotFoundError:
+    except (FileNotFoundError, ValueError):  # weights not set up, or views under 31 px
         return None
 
 
