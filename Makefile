@@ -55,7 +55,7 @@ demo: setup
 	$(VENV)/bin/osnerf demo
 
 test: setup
-	$(VENV)/bin/pytest -q $(PYTEST_ARGS)
+	OSNERF_REQUIRE_LPIPS=1 $(VENV)/bin/pytest -q $(PYTEST_ARGS)
 
 bench: setup
 	$(PY) -m benchmarks
