@@ -28,6 +28,7 @@ from hil.medium import Medium
 _STRINGS = {1: "Great Scott Gadgets", 2: "HackRF One", 3: "Transceiver"}
 _STALE_VALUE = 100  # the stale first buffer holds this int8 value in every byte
 _M0_IDLE, _M0_RX, _M0_TX_RUN = 0, 2, 4
+PPM_RANGE = (-200.0, 200.0)  # crystal error of an emulated board, parts per million
 
 
 def _stall(what: str) -> usb.core.USBError:
@@ -67,8 +68,9 @@ class RadioSpec:
     def __post_init__(self):
         if len(self.serial) != 32 or any(c not in "0123456789abcdef" for c in self.serial):
             raise ValueError(f"serial must be 32 lowercase hex characters, got {self.serial!r}")
-        if not -200 <= self.ppm <= 200:
-            raise ValueError(f"ppm must be in [-200, 200], got {self.ppm!r}")
+        lo, hi = PPM_RANGE
+        if not lo <= self.ppm <= hi:
+            raise ValueError(f"ppm must be in [{lo:g}, {hi:g}], got {self.ppm!r}")
 
 
 FAULT_NAMES = ("stall", "rx-timeout", "unplug", "overrun")

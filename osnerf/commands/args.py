@@ -150,3 +150,15 @@ def distinct_outputs(**paths) -> None:
         if key in seen:
             raise UsageError(f"{seen[key]} and {flag} are the same file {str(path)!r}")
         seen[key] = flag
+
+
+def flag_error(e: ValueError) -> UsageError:
+    """A config's ``ValueError("max_papr_db must be ...")`` as the flag's: ``--max-papr-db must ...``.
+
+    For configs whose field names are the commands' option names (units included).
+    """
+    msg = str(e)
+    name, sep, rest = msg.partition(" ")
+    if sep and name.isidentifier() and name.islower():
+        msg = f"--{name.replace('_', '-')} {rest}"
+    return UsageError(msg)
