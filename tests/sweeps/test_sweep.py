@@ -341,6 +341,19 @@ def test_cli_reports_failed_points_with_exit_1(tmp_path, capsys):
     assert len(read_results(out)) == 1
 
 
+def _sweep_process(yml: Path, out: Path, *extra: str, stderr=subprocess.DEVNULL):
+    """`osnerf sweep YML --out OUT --no-progress EXTRA...` with the fake command, in a new process."""
+    argv = ["sweep", str(yml), "--out", str(out), "--no-progress", *extra]
+    driver = (
+        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
+        f"sys.exit(osnerf.cli.main({argv!r}))"
+    )
+    env = dict(
+        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
+    )
+    return subprocess.Popen([sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=stderr)
+
+
 def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     spec_d = {
         "command": "fake",
@@ -350,17 +363,7 @@ def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     }
     yml = _write_yaml(tmp_path / "s.yaml", spec_d)
     out = tmp_path / "r.jsonl"
-    driver = (
-        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
-        f"sys.exit(osnerf.cli.main(['sweep', {str(yml)!r}, '--out', {str(out)!r}, "
-        "'--executor', 'serial', '--no-progress']))"
-    )
-    env = dict(
-        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
-    )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=subprocess.PIPE
-    )
+    proc = _sweep_process(yml, out, "--executor", "serial", stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if out.exists() and len(out.read_bytes().splitlines()) >= 2:
@@ -421,17 +424,7 @@ def test_a_pool_sweep_killed_with_sigkill_takes_its_workers_along(tmp_path):
     }
     yml = _write_yaml(tmp_path / "s.yaml", spec_d)
     out = tmp_path / "r.jsonl"
-    driver = (
-        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
-        f"sys.exit(osnerf.cli.main(['sweep', {str(yml)!r}, '--out', {str(out)!r}, "
-        "'--executor', 'local', '--workers', '2', '--no-progress']))"
-    )
-    env = dict(
-        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
-    )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=subprocess.DEVNULL
-    )
+    proc = _sweep_process(yml, out, "--executor", "local", "--workers", "2")
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:  # both workers are inside a point
         if log.exists() and len(log.read_text().splitlines()) >= 2:
