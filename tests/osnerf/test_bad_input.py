@@ -14,21 +14,27 @@ def _one_line(capsys) -> str:
     return err
 
 
-@pytest.fixture
-def no_ber_work(monkeypatch):
-    import osnerf.commands.ber as ber
+@pytest.fixture(autouse=True)
+def no_heavy_work(monkeypatch):
+    """Every command's work refuses to start: a check that comes too late fails the test
+    (exit 1) instead of running a pipeline, a training or a 14 GB allocation."""
+    import osnerf.commands.ber
+    import osnerf.pipeline
+    import semcodec.training
 
-    def simulate(*a, **k):
-        raise AssertionError("simulated before the output paths were checked")
+    def refuse(*a, **k):
+        raise AssertionError("the work started before the input was checked")
 
-    monkeypatch.setattr(ber, "simulate", simulate)
+    monkeypatch.setattr(osnerf.commands.ber, "simulate", refuse)
+    monkeypatch.setattr(osnerf.pipeline, "run_pipeline", refuse)
+    monkeypatch.setattr(semcodec.training, "train", refuse)
 
 
 def _ber(*extra) -> int:
     return main(["ber", "--snr-db", "0", "--num-bits", "10000", *extra])
 
 
-def test_ber_out_and_plot_naming_one_file_is_refused(tmp_path, capsys, no_ber_work):
+def test_ber_out_and_plot_naming_one_file_is_refused(tmp_path, capsys):
     """#16: the plot was overwritten by the JSON, with "wrote" and exit 0."""
     same = tmp_path / "same.png"
     assert _ber("--out", str(same), "--plot", str(same)) == 2
@@ -36,7 +42,7 @@ def test_ber_out_and_plot_naming_one_file_is_refused(tmp_path, capsys, no_ber_wo
     assert list(tmp_path.iterdir()) == []
 
 
-def test_ber_output_paths_are_checked_before_computing(tmp_path, capsys, no_ber_work):
+def test_ber_output_paths_are_checked_before_computing(tmp_path, capsys):
     """#16: --out a folder computed, then failed; --plot under a file computed, then wrote
     nothing."""
     assert _ber("--out", str(tmp_path)) == 2
@@ -88,17 +94,12 @@ def test_run_refuses_bad_flags_before_any_stage(tmp_path, capsys, extra, match):
     assert not out.exists()
 
 
-def test_run_names_a_corrupt_cached_stage_and_how_to_clear_it(tmp_path, capsys, monkeypatch):
+def test_run_names_a_corrupt_cached_stage_and_how_to_clear_it(tmp_path, capsys):
     """#16: a truncated cache .npz printed "BadZipFile" with no path and no hint."""
     import numpy as np
 
-    import osnerf.pipeline
     from osnerf.commands.run import run_config
 
-    def no_work(*a, **k):
-        raise AssertionError("the pipeline ran on a corrupt cache")
-
-    monkeypatch.setattr(osnerf.pipeline, "run_pipeline", no_work)
     out = tmp_path / "run"
     argv = ["run", "--out", str(out), "--resolution", "32"]
     folder = out / "cache" / run_config(build_parser("run").parse_args(argv)).key()

@@ -184,10 +184,16 @@ def test_dataset_with_an_all_zero_pose_names_the_frame(sphere_dataset, tmp_path,
     ],
 )
 def test_train_nerf_refuses_bad_values_at_parse_time(
-    sphere_dataset, tmp_path, capsys, extra, match
+    sphere_dataset, tmp_path, capsys, monkeypatch, extra, match
 ):
     """#16: --resolution had no upper bound (30000 tried to allocate 14.4 GB); --threads 0
     and --seed -1 were accepted silently."""
+    import renderer
+
+    def refuse(*a, **k):  # a late check fails the test instead of allocating gigabytes
+        raise AssertionError("loaded the dataset before checking the arguments")
+
+    monkeypatch.setattr(renderer, "load_dataset", refuse)
     argv = ["train-nerf", "--data", str(sphere_dataset), "--out", str(tmp_path / "o"), *extra]
     assert main(argv) == 2
     assert match in _one_line(capsys)
