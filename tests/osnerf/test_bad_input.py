@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import pytest
 
+import semcodec.training
 from osnerf.cli import build_parser, main
+
+REAL_TRAIN = semcodec.training.train
 
 
 def _one_line(capsys) -> str:
@@ -125,8 +128,12 @@ def test_train_codec_names_a_corrupt_resume_state_and_no_resume(tmp_path, capsys
     assert "last_state.pt: cannot resume from it" in err and "--no-resume" in err
 
 
-def test_train_codec_corrupt_image_is_bad_input(tmp_path, capsys):
+def test_train_codec_corrupt_image_is_bad_input(tmp_path, capsys, monkeypatch):
     """#16: a corrupt image exited 1 in train-codec (2 in eval-codec)."""
+    import semcodec.training
+
+    monkeypatch.setattr(semcodec.training, "train", REAL_TRAIN)  # it reads the images
+    monkeypatch.setattr(semcodec.training, "make_model", None)  # but never gets further
     data = tmp_path / "data"
     data.mkdir()
     (data / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
