@@ -7,7 +7,7 @@ May import ``phy`` only. Public names::
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
-    OtaConfig, send_blocks, save_sigmf   over-the-air bursts in phy's frames
+    OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
     HilError and subclasses
 """
 
@@ -34,7 +34,15 @@ from hil.errors import (
 from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
-from hil.ota import BurstResult, FrameReport, OtaConfig, PhyFrames, save_sigmf, send_blocks
+from hil.ota import (
+    BurstResult,
+    FrameReport,
+    OtaConfig,
+    PhyFrames,
+    save_partial_capture,
+    save_sigmf,
+    send_blocks,
+)
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 
@@ -44,6 +52,7 @@ __all__ = [
     "FrameReport",
     "OtaConfig",
     "PhyFrames",
+    "save_partial_capture",
     "save_sigmf",
     "send_blocks",
     "Annotation",

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from osnerf.commands import args as checks
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", required=True, help="folder of PNG/JPEG images")
@@ -29,7 +31,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=EVAL_CHANNELS,
         help="awgn or rayleigh (block fading, perfect CSI)",
     )
-    p.add_argument("--snr-db", default="1,4,7,10,13", help="comma-separated Es/N0 values in dB")
+    p.add_argument(
+        "--snr-db",
+        default="1,4,7,10,13",
+        type=checks.snr_db_list,
+        help="comma-separated Es/N0 values in dB",
+    )
     p.add_argument(
         "--cbr", default="1/16", help="channel bandwidth ratio, e.g. 1/16 (JSCC: 1/48..1/6)"
     )
@@ -39,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="comma-separated: jscc, digital, digital_fixed, ideal, analog, digital_webp, digital_jpeg, ideal_webp, ideal_jpeg",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of channel noise and fading")
+    p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
     p.add_argument("--checkpoint", default=None, help="codec checkpoint (default: the shipped one)")
@@ -53,24 +60,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--threads",
-        type=int,
+        type=checks.threads,
         default=1,
         help="torch CPU threads (default 1: the machine is shared)",
     )
-
-
-def _parse_snrs(text: str) -> list[float]:
-    from phy import validate_snr_db
-
-    try:
-        vals = [float(s) for s in str(text).split(",") if s.strip()]
-    except ValueError:
-        raise ValueError(f"--snr-db must be comma-separated numbers in dB, got {text!r}") from None
-    if not vals:
-        raise ValueError("--snr-db must list at least one value")
-    for v in vals:
-        validate_snr_db(v, "--snr-db")
-    return vals
 
 
 def run(args: argparse.Namespace) -> int:
@@ -91,11 +84,15 @@ def run(args: argparse.Namespace) -> int:
         ssim,
     )
 
-    torch.set_num_threads(max(1, args.threads))
+    out = checks.output_file(args.out, "--out")
+    if args.plot:
+        checks.output_file(args.plot, "--plot")
+    checks.distinct_outputs(out=args.out, plot=args.plot)
+    torch.set_num_threads(args.threads)
     if args.channel not in EVAL_CHANNELS:
         raise ValueError(f"--channel must be one of {list(EVAL_CHANNELS)}, got {args.channel!r}")
     schemes = parse_schemes(args.schemes)
-    snrs = _parse_snrs(args.snr_db)
+    snrs = list(args.snr_db)
     try:
         cbr = parse_cbr(args.cbr)
     except ValueError as e:
@@ -127,9 +124,6 @@ def run(args: argparse.Namespace) -> int:
         if args.max_images < 1:
             raise ValueError(f"--max-images must be >= 1, got {args.max_images}")
         names, images = names[: args.max_images], images[: args.max_images]
-    out = Path(args.out)
-    if out.is_dir():
-        raise ValueError(f"--out {out} is a folder; give a file path")
     score_lpips = not args.no_lpips and all(
         min(img.shape[-2:]) >= LPIPS_MIN_SIDE_PX for img in images
     )

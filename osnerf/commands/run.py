@@ -15,12 +15,17 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
+from osnerf.cli import UsageError
+from osnerf.commands import args as checks
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import RUN_CHANNELS
     from osnerf.scenes import DEFAULT_SCENE
     from osnerf.schemes import DEFAULT_SCHEMES, load_entry_points, parse_schemes
+    from phy.digital import MCS_TABLE
+    from semcodec import IMAGE_CODECS
 
     schemes = load_entry_points()
 
@@ -41,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="phy's channels (flat ones with perfect CSI; tdl/cdl over OFDM with LS "
         "estimates; raytraced per drone position) or ota (default rayleigh: block fading)",
     )
-    p.add_argument("--snr-db", type=float, default=0.0, help="Es/N0 in dB (default 0)")
+    p.add_argument("--snr-db", type=checks.snr_db, default=0.0, help="Es/N0 in dB (default 0)")
     p.add_argument(
         "--schemes",
         type=parse_schemes,
@@ -50,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         + "; ".join(f"{n}: {c.help}" for n, c in schemes.items())
         + f" (default {','.join(DEFAULT_SCHEMES)})",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=checks.seed, default=0)
     p.add_argument("--out", required=True, help="RUN_DIR: report and stage cache")
     p.add_argument(
         "--max-seconds",
@@ -59,7 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="NeRF training seconds per scheme (default 60)",
     )
     p.add_argument(
-        "--resolution", type=int, default=80, help="drone image size in pixels (default 80)"
+        "--resolution",
+        type=checks.resolution,
+        default=80,
+        help="drone image size in pixels, 16..512 (default 80)",
     )
     p.add_argument("--views", type=int, default=24, help="drone views captured (default 24)")
     p.add_argument(
@@ -75,10 +83,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--receiver-codec", default=None, help="receiver's checkpoint (default: the same)"
     )
     p.add_argument(
-        "--mcs", default="envelope", help="digital baseline MCS: envelope or a phy.digital name"
+        "--mcs",
+        default="envelope",
+        choices=("envelope", *MCS_TABLE),
+        metavar="MCS",
+        help=f"digital baseline MCS: envelope or one of {', '.join(MCS_TABLE)} (default envelope)",
     )
     p.add_argument(
-        "--image-codec", default="avif", help="digital baseline image codec: avif, jpeg, webp"
+        "--image-codec",
+        default="avif",
+        choices=tuple(IMAGE_CODECS),
+        help=f"digital baseline image codec: {', '.join(IMAGE_CODECS)} (default avif)",
     )
     p.add_argument(
         "--nerf-steps",
@@ -104,17 +119,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
-    from osnerf.report import write_report
-    from osnerf.run import RunConfig, run_pipeline
+def check_stage_cache(folder: Path) -> None:
+    """Refuse a run folder whose cached stages are unreadable, before any work.
 
-    schemes = tuple(args.schemes)
-    cfg = RunConfig(
+    Raises:
+        UsageError: naming the corrupt file and saying how to clear it.
+    """
+    import zipfile
+
+    for npz in sorted(folder.glob("*.npz")) if folder.is_dir() else ():
+        try:
+            with zipfile.ZipFile(npz) as z:
+                bad = z.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError) as e:
+            bad = f"{type(e).__name__}: {e}"
+        if bad is not None:
+            raise UsageError(
+                f"--out: cached stage {npz} is corrupt or truncated ({bad}); delete it "
+                f"(or the folder {folder}) and run again to recompute it"
+            )
+
+
+def run_config(args: argparse.Namespace):
+    """The ``osnerf.run.RunConfig`` of parsed arguments (validates them)."""
+    from osnerf.run import RunConfig
+
+    return RunConfig(
         scene=args.scene,
         demand=args.demand,
         channel=args.channel,
         snr_db=args.snr_db,
-        schemes=schemes,
+        schemes=tuple(args.schemes),
         seed=args.seed,
         max_seconds=args.max_seconds,
         resolution_px=args.resolution,
@@ -129,7 +164,17 @@ def run(args: argparse.Namespace) -> int:
         ota_device=args.ota_device,
         nerf_steps=args.nerf_steps,
     )
-    out = Path(args.out)
+
+
+def run(args: argparse.Namespace) -> int:
+    from osnerf.report import write_report
+    from osnerf.run import run_pipeline
+
+    cfg = run_config(args)
+    out = checks.output_dir(args.out, "--out")
+    if args.cache_dir:
+        checks.output_dir(args.cache_dir, "--cache-dir")
+    check_stage_cache(out / "cache" / cfg.key())
     report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
     )

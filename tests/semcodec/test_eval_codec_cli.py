@@ -79,7 +79,7 @@ def test_bad_input_one_line_errors(image_dir, tmp_path, capsys):
     d.mkdir()
     (d / "x.png").write_bytes(b"not an image")
     _bad(tmp_path, images=d)
-    assert "cannot read x.png" in capsys.readouterr().err
+    assert "x.png: not a readable image" in capsys.readouterr().err
     g = tmp_path / "grey"
     g.mkdir()
     Image.fromarray(np.zeros((32, 32), np.uint8)).save(g / "g.png")
