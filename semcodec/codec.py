@@ -286,12 +286,19 @@ class Codec:
         m = meta.num_channels
         c = cfg.num_complex_channels
         nv = 10.0 ** (-snr / 10.0) if noise_var is None else noise_var
+        if not cfg.decoder_reliability and noise_var is not None:
+            # version 1 was trained on AWGN symbols as received, told their SNR. Give it the
+            # effective SNR of the block (from the mean reliability, robust to deep fades:
+            # exactly 1/noise_var when it is uniform) and every symbol scaled to look like
+            # AWGN at that SNR: relative LMMSE (1 + nv_eff) / (1 + nv_i), 1 where nv_i = nv_eff.
+            nv_i = torch.as_tensor(noise_var, dtype=torch.float32)
+            nv_i = (nv_i.reshape(-1, 1) if nv_i.dim() <= 1 else nv_i).expand(b, -1).clamp(0.0, 1e6)
+            w = 1.0 / (1.0 + nv_i)
+            nv_eff = 1.0 / w.reshape(w.shape[0], -1).mean(1, keepdim=True) - 1.0
+            snr = (-10.0 * torch.log10(nv_eff[:, 0].clamp_min(1e-12))).clamp(*self.snr_range_db)
+            snr = snr.expand(b) if snr.numel() == 1 else snr
+            x_hat = x_hat * ((1.0 + nv_eff) * w).to(torch.complex64)
         if not cfg.decoder_reliability:
-            # version 1 was trained on AWGN symbols as received, told their SNR: give it the
-            # unbiased symbols and the SNR their mean noise variance implies
-            if noise_var is not None:
-                mean_nv = torch.as_tensor(noise_var, dtype=torch.float32).reshape(b, -1).mean(1)
-                snr = (-10.0 * torch.log10(mean_nv.clamp_min(1e-12))).clamp(*self.snr_range_db)
             nv = 0.0
         try:
             x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)

@@ -113,3 +113,25 @@ def test_fast_fading_reliability_follows_each_fade():
     want = 1 - nv * math.exp(nv) * exp1(nv)
     assert float(rel.mean()) == pytest.approx(want, abs=0.01)
     assert float(rel.std()) > 0.1  # one reliability per symbol, not per image
+
+
+def test_version1_decoder_sees_awgn_like_symbols(tiny_codec):
+    """A version-1 decoder given per-symbol noise variances: uniform nv is exactly the AWGN
+    decode at SNR 1/nv (nothing rescaled); non-uniform nv gets the effective SNR from the mean
+    reliability and relative-LMMSE scaling (1 + nv_eff) / (1 + nv_i)."""
+    g = torch.Generator().manual_seed(7)
+    x = torch.rand(2, 3, 32, 32, generator=g)
+    enc = tiny_codec.encode(x, 5.0, 1 / 16)
+    y = enc.symbols + 0.3 * torch.randn(enc.symbols.shape, generator=g, dtype=torch.complex64)
+    nv = torch.full(enc.symbols.shape, 0.25)
+    a = tiny_codec.decode(y, enc.meta, 0.0, noise_var=nv)
+    b = tiny_codec.decode(y, enc.meta, 10 * math.log10(4.0))
+    torch.testing.assert_close(a, b)
+    nv2 = nv.clone()
+    nv2[:, ::2] = 3.0  # half the symbols in deep fades
+    w = 1 / (1 + nv2)
+    nv_eff = 1 / w.mean(1, keepdim=True) - 1
+    scaled = y * ((1 + nv_eff) * w)
+    snr_eff = (-10 * torch.log10(nv_eff[:, 0])).tolist()
+    want = torch.cat([tiny_codec.decode(scaled[i : i + 1], enc.meta, snr_eff[i]) for i in range(2)])
+    torch.testing.assert_close(tiny_codec.decode(y, enc.meta, 0.0, noise_var=nv2), want)
