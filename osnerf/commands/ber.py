@@ -14,12 +14,12 @@ import time
 
 from osnerf.cli import UsageError
 
-CHANNEL_CHOICES = ("awgn", "rayleigh")
 MAX_NUM_BITS = 10**9
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from phy.modulation import MODULATIONS
+    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
 
     p.add_argument(
         "--channel",
@@ -62,6 +62,7 @@ def parse_snr_list(text: str) -> list[float]:
 
 def parse_args(args: argparse.Namespace) -> dict:
     from phy.modulation import MODULATIONS
+    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES
 
     if args.channel not in CHANNEL_CHOICES:
         raise UsageError(

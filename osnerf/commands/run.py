@@ -17,8 +17,12 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from osnerf.pipeline import CHANNELS, OTA_DEVICES, SCHEMES
+    from osnerf.ota_link import DEVICES as OTA_DEVICES
+    from osnerf.run.config import RUN_CHANNELS
     from osnerf.scenes import DEFAULT_SCENE
+    from osnerf.schemes import DEFAULT_SCHEMES, load_entry_points, parse_schemes
+
+    schemes = load_entry_points()
 
     p.add_argument(
         "--scene",
@@ -33,14 +37,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--channel",
         default="rayleigh",
-        choices=CHANNELS,
-        help=f"one of {', '.join(CHANNELS)} (default rayleigh)",
+        choices=RUN_CHANNELS,
+        help="phy's channels (flat ones with perfect CSI; tdl/cdl over OFDM with LS "
+        "estimates; raytraced per drone position) or ota (default rayleigh: block fading)",
     )
     p.add_argument("--snr-db", type=float, default=0.0, help="Es/N0 in dB (default 0)")
     p.add_argument(
         "--schemes",
-        default=",".join(SCHEMES),
-        help=f"comma-separated subset of {','.join(SCHEMES)}",
+        type=parse_schemes,
+        default=DEFAULT_SCHEMES,
+        help="comma-separated schemes: "
+        + "; ".join(f"{n}: {c.help}" for n, c in schemes.items())
+        + f" (default {','.join(DEFAULT_SCHEMES)})",
     )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="RUN_DIR: report and stage cache")
@@ -97,10 +105,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.pipeline import RunConfig, run_pipeline
     from osnerf.report import write_report
+    from osnerf.run import RunConfig, run_pipeline
 
-    schemes = tuple(s.strip() for s in args.schemes.split(",") if s.strip())
+    schemes = tuple(args.schemes)
     cfg = RunConfig(
         scene=args.scene,
         demand=args.demand,
@@ -122,15 +130,18 @@ def run(args: argparse.Namespace) -> int:
         nerf_steps=args.nerf_steps,
     )
     out = Path(args.out)
-    body, pictures = run_pipeline(
+    report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
     )
     config = {**asdict(cfg), "schemes": list(cfg.schemes), "cache_key": cfg.key()}
-    write_report(out, config, cfg.seed, body, pictures)
-    for name, s in body["schemes"].items():
-        po = "n/a" if s["psnr_object"] is None else f"{s['psnr_object']:.2f}"
+    write_report(out, config, cfg.seed, report, pictures)
+    for name, s in report.schemes.items():
+        po = "n/a" if s.psnr_object is None else f"{s.psnr_object:.2f}"
+        lp = "n/a" if s.lpips is None else f"{s.lpips:.3f}"
+        tag = " (bound)" if s.bound else ""
         print(
-            f"{name:8s} psnr_object {po} dB  psnr {s['psnr']:.2f} dB  symbols {s['symbols_sent']}",
+            f"{name:8s} psnr_object {po} dB  psnr {s.psnr:.2f} dB  lpips {lp}  "
+            f"symbols {s.symbols_sent}{tag}",
             file=sys.stderr,
         )
     print(f"report: {out / 'report.json'} and {out / 'report.html'}", file=sys.stderr)
