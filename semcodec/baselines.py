@@ -27,7 +27,7 @@ from torch.nn import functional as F
 
 from phy import noise_var_to_snr_db
 from semcodec.codec import Codec, check_images
-from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_to_budget
+from semcodec.image_codecs import IMAGE_CODECS, decode_wire, encode_to_budget
 
 LOST_IMAGE_VALUE = 0.5
 ENVELOPE = "envelope"
@@ -99,14 +99,13 @@ def _grey(shape) -> Tensor:
     return torch.full(shape, LOST_IMAGE_VALUE)
 
 
-def _decode_or_grey(data: bytes | None, shape) -> tuple[Tensor, bool]:
+def _decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
+    """Wire bytes -> ([3, H, W] image, True), or (mid-grey, False) when undecodable."""
     if data is None:
         return _grey(shape), False
     try:
-        a = decode_image(data)
+        a = decode_wire(data, image_codec, shape[1], shape[2])
     except ValueError:
-        return _grey(shape), False
-    if a.shape[:2] != tuple(shape[1:]):
         return _grey(shape), False
     return torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1), True
 
@@ -134,7 +133,7 @@ def transmit_ideal(
     out, qualities, sizes = [], [], []
     for img in x:
         data, q = encode_to_budget(img, bits // 8, image_codec)
-        rec, _ = _decode_or_grey(data, img.shape)
+        rec, _ = _decode_or_grey(data, img.shape, image_codec)
         out.append(rec)
         qualities.append(q)
         sizes.append(0 if data is None else len(data))
@@ -200,7 +199,7 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
     r = transmit_bytes(
         data, mcs, link, snr_db, generator=torch.Generator().manual_seed(seed), num_symbols=n
     )
-    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape)
+    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
     failed = (
         len([c for c in r.failed_codewords if c < r.num_payload_codewords])
         if r.num_payload_codewords
