@@ -301,7 +301,7 @@ def transmit_digital(
         calibrated).
     """
     from phy.digital import MCS_TABLE, get_mcs
-    from semcodec.digital_calibration import choose_mcs, load_calibration
+    from semcodec.digital_calibration import load_calibration
 
     x = check_images(images)
     n = _check_num_symbols(num_symbols)
@@ -316,7 +316,8 @@ def transmit_digital(
     kind = None
     if mode in MCS_MODES:
         kind = channel or channel_kind(link)
-        calibration = load_calibration().source(kind)
+        table = load_calibration()
+        calibration = table.source(kind)
     gen = generator or torch.Generator().manual_seed(0)
     lo = get_image_codec(image_codec).quality_range[0]
     out, infos = [], []
@@ -327,7 +328,7 @@ def transmit_digital(
         else:
             h, w = img.shape[1:]
             min_bytes = len(encode_image(img, image_codec, lo))
-            choice, expected = choose_mcs(kind, float(snr_db), n, h * w, image_codec, min_bytes)
+            choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
             if mode == AUTO:
                 rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
             else:

@@ -109,6 +109,7 @@ class DigitalCalibration:
         self.curves = doc["codeword_curves"]
         self.rd = doc["rate_distortion"]
         self.lost_psnr_db = float(doc["lost_psnr_db"])
+        self._choices: dict = {}
 
     @property
     def channels(self) -> list[str]:
@@ -203,9 +204,13 @@ class DigitalCalibration:
         min_bytes: int = 0,
     ) -> tuple[str, float]:
         """(MCS name, its expected PSNR): the argmax of :meth:`expected_psnr` over
-        :data:`phy.digital.MCS_TABLE` (ties: the lower rate). No channel draw is consulted."""
+        :data:`phy.digital.MCS_TABLE` (ties: the lower rate). No channel draw is consulted.
+        Answers are memoised per argument set."""
         from phy.digital import MCS_TABLE
 
+        key = (channel, float(snr_db), int(num_symbols), int(num_pixels), image_codec, min_bytes)
+        if key in self._choices:
+            return self._choices[key]
         best = None
         for name in MCS_TABLE:
             v = self.expected_psnr(
@@ -213,6 +218,7 @@ class DigitalCalibration:
             )
             if best is None or v > best[1] + 1e-9:
                 best = (name, v)
+        self._choices[key] = best
         return best
 
 
@@ -221,21 +227,6 @@ def load_calibration(path: str | None = None) -> DigitalCalibration:
     """The shipped table (or one at ``path``)."""
     p = Path(path) if path else CALIBRATION_PATH
     return DigitalCalibration(json.loads(p.read_text()))
-
-
-@functools.lru_cache(maxsize=4096)
-def choose_mcs(
-    channel: str,
-    snr_db: float,
-    num_symbols: int,
-    num_pixels: int,
-    image_codec: str = "avif",
-    min_bytes: int = 0,
-) -> tuple[str, float]:
-    """:meth:`DigitalCalibration.choose_mcs` on the shipped table (cached)."""
-    return load_calibration().choose_mcs(
-        channel, float(snr_db), int(num_symbols), int(num_pixels), image_codec, int(min_bytes)
-    )
 
 
 # ----------------------------------------------------------------------------- measuring
