@@ -292,8 +292,10 @@ def transmit_digital(
         image_codec: a name of ``semcodec.IMAGE_CODECS``.
         generator: the draws; each image takes one seed from it (the same seed for every
             try of the genie, so the same fade and noise).
-        channel: ``phy.CHANNELS`` name of the link's channel for ``"auto"``/``"genie"``
-            (default: told from ``link``; see :func:`channel_kind`).
+        channel: ``phy.CHANNELS`` name of the link's channel for ``"auto"`` (and the genie's
+            starting point) (default: told from ``link``; see :func:`channel_kind`). Needed
+            for links whose channel type does not tell (``raytraced`` per-position links); a
+            genie without it searches from the lowest MCS.
     Returns:
         TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images,
         views_lost {"budget", "channel"}, mcs / quality / expected_psnr per image,
@@ -314,8 +316,14 @@ def transmit_digital(
         except KeyError:
             raise KeyError(f"mcs must be 'auto', 'genie' or one of {names}, got {mcs!r}") from None
     kind = None
-    if mode in MCS_MODES:
+    if mode == AUTO:
         kind = channel or channel_kind(link)
+    elif mode == GENIE:  # the genie needs no calibration: without one it searches from the bottom
+        try:
+            kind = channel or channel_kind(link)
+        except KeyError:
+            kind = None
+    if kind is not None:
         table = load_calibration()
         calibration = table.source(kind)
     gen = generator or torch.Generator().manual_seed(0)
@@ -326,15 +334,18 @@ def transmit_digital(
         if mode not in MCS_MODES:
             rec, ok, info = _send_digital(img, mode, link, snr_db, n, image_codec, seed)
         else:
-            h, w = img.shape[1:]
-            min_bytes = len(encode_image(img, image_codec, lo))
-            choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
+            choice, expected = names[0], None
+            if kind is not None:
+                h, w = img.shape[1:]
+                min_bytes = len(encode_image(img, image_codec, lo))
+                choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
+                expected = round(expected, 3)
             if mode == AUTO:
                 rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
             else:
                 start = names.index(choice)
                 rec, ok, info = _genie(img, start, names, link, snr_db, n, image_codec, seed)
-            info["expected_psnr"] = round(expected, 3)
+            info["expected_psnr"] = expected
         info["ok"] = ok
         out.append(rec)
         infos.append(info)

@@ -156,3 +156,18 @@ def test_envelope_is_the_genie_and_unknown_modes_list_the_known_ones():
     assert res.stats["mcs_choice"] == "genie (bound)"
     with pytest.raises(KeyError, match="auto.*genie.*qpsk-1/3"):
         transmit_digital(x, _link("awgn"), 10.0, 768, mcs="best")
+
+
+def test_honest_digital_needs_the_channel_kind_the_genie_does_not():
+    class Opaque(phy.AWGN):
+        pass
+
+    link = phy.FlatLink(Opaque(), csi="perfect", equalizer="zf")
+    x = _img(8, 32, 32)
+    with pytest.raises(KeyError, match="pass channel="):
+        transmit_digital(x, link, 10.0, 768, mcs="auto")
+    assert (
+        transmit_digital(x, link, 10.0, 768, mcs="auto", channel="awgn").stats["channel"] == "awgn"
+    )
+    res = transmit_digital(x, link, 10.0, 768, mcs="genie")
+    assert res.stats["mcs_choice"] == "genie (bound)" and "calibration" not in res.stats
