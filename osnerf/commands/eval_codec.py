@@ -208,6 +208,7 @@ def run(args: argparse.Namespace) -> int:
             lost = {"budget": 0, "channel": 0}
             mcs_used: dict[str, int] = {}
             stats_keys = {}
+            separate = False  # the scheme reported views lost (a separate source-channel code)
             for ii, img in enumerate(images):
                 row = []
                 for d in range(args.draws):
@@ -219,6 +220,7 @@ def run(args: argparse.Namespace) -> int:
                         ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
                     for k in extra:
                         extra[k] += int(res.stats.get(k, 0) or 0)
+                    separate = separate or "views_lost" in res.stats
                     for k, v in (res.stats.get("views_lost") or {}).items():
                         lost[k] += int(v)
                     for m in res.stats.get("mcs") or []:
@@ -245,7 +247,7 @@ def run(args: argparse.Namespace) -> int:
                 **extra,
                 "seconds": round(time.perf_counter() - t0, 2),
             }
-            if SCHEMES[scheme].kind == "digital":
+            if separate:
                 r["views_lost"] = lost
                 r["mcs_used"] = mcs_used
                 r.update(stats_keys)
