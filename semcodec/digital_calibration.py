@@ -12,12 +12,14 @@ channel's fading distribution, PSNR(rate) the image codec's rate-distortion curv
 PSNR(lost) that of the mid-grey a lost image is shown as. Deep fades cost outages.
 
 What the table (``semcodec/data/digital_calibration.json``) holds and how it was computed
-(``python -m semcodec.digital_calibration --out PATH`` recomputes it, about 20 CPU minutes):
+(``python -m semcodec.digital_calibration --kodak KODAK --out PATH`` recomputes it, about
+30 CPU minutes; :data:`HOW` is what the file says of itself):
 
 * ``codeword_curves[channel][mcs][E]``: the block error probability of one codeword of
   ``E`` coded bits against SNR, a probit ``Q((snr_db - t) / s)`` fitted by maximum
   likelihood to Monte-Carlo counts (kept beside it) of :func:`phy.digital.codeword_errors`:
-  AWGN, and fast Rayleigh fading with perfect-CSI ZF (each codeword sees many fades).
+  AWGN (E = 960, 1920, 3840), and fast Rayleigh fading with perfect-CSI ZF (each codeword
+  sees many fades; E = 3840, used for shorter codewords too).
 * ``rate_distortion[codec]``: mean bpp and mean PSNR over the 24 Kodak images per quality.
 * ``lost_psnr_db``: mean PSNR of mid-grey (0.5) against the Kodak images.
 
@@ -65,6 +67,16 @@ ALIAS_REASONS = {
     "selective ray-traced response (conservative; the response is fixed per position)",
 }
 RICIAN_K_DB = 6.0  # phy.RicianFading's default
+HOW = (
+    "codeword_curves[channel][mcs][E]: block error probability of one LDPC codeword of E coded "
+    "bits vs Es/N0 (dB), probit Q((snr_db - t_db) / s_db) fitted by maximum likelihood to the "
+    "Monte-Carlo points [snr_db, errors, trials] of phy.digital.codeword_errors (CRC24B, 5G "
+    "LDPC, QAM, BP <= 20 iterations); awgn at E = 960, 1920, 3840; rayleigh_fast (perfect-CSI "
+    "ZF, a fade per symbol) at E = 3840. Block fading = the awgn curve averaged over the fade. "
+    "rate_distortion[codec]: mean bpp (wire bytes, container stripped) and mean PSNR over the "
+    "Kodak images per quality. lost_psnr_db: mean PSNR of mid-grey against Kodak. Recompute: "
+    "python -m semcodec.digital_calibration --kodak KODAK --out FILE (about 30 CPU minutes)."
+)
 
 
 def _q(x):
@@ -310,7 +322,13 @@ def measure_rate_distortion(images, image_codec: str, qualities) -> list[dict]:
             mse = float(np.mean((rec - ref) ** 2))
             bpps.append(8 * len(data) / (h * w))
             psnrs.append(10 * math.log10(1.0 / max(mse, 1e-12)))
-        out.append({"quality": q, "bpp": float(np.mean(bpps)), "psnr_db": float(np.mean(psnrs))})
+        out.append(
+            {
+                "quality": q,
+                "bpp": round(float(np.mean(bpps)), 5),
+                "psnr_db": round(float(np.mean(psnrs)), 3),
+            }
+        )
     return out
 
 
@@ -351,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     doc = json.loads(out.read_text()) if out.exists() else {}
     doc.setdefault("codeword_curves", {})
-    doc["how"] = __doc__.split("What the table")[1].split("Image BLER")[0].strip()
+    doc["how"] = HOW
     if args.part in ("all", "curves"):
         for ch, lengths in MEASURED.items():
             for mcs in MCS_TABLE:
