@@ -37,7 +37,8 @@ ANCHORS: dict[str, dict[str, list[tuple[float, float]]]] = {
         "WITT": list(zip(_SNRS, (29.7, 31.3, 32.6, 33.6, 34.3))),
         "SwinJSCC, one model": list(zip(_SNRS, (29.54, 31.09, 32.27, 33.17, 33.80))),
     },
-    "rayleigh": {
+    # the published Rayleigh results are fast fading with CSI at the receiver (issue #12)
+    "rayleigh_fast": {
         "BPG + 5G LDPC, best MCS (WITT paper)": [
             (2.4, 27.9),
             (5.2, 29.3),
@@ -182,9 +183,19 @@ def _label(keys: tuple[str, ...], values: tuple) -> str:
             parts.append(f"CBR 1/{1 / v:.3g}")
         elif k == "snr_db" and _finite(v):
             parts.append(f"{v:g} dB")
+        elif k == "scheme" and _is_bound(v):
+            parts.append(f"{v} (bound)")
         else:
             parts.append(str(v))
     return ", ".join(parts) or "result"
+
+
+def _is_bound(scheme) -> bool:
+    """Whether a link-level scheme is a bound, not a system (``semcodec.evaluation.SCHEMES``)."""
+    from semcodec.evaluation import SCHEMES
+
+    s = SCHEMES.get(str(scheme))
+    return bool(s and s.bound)
 
 
 def _ber_row_is_pooled(rows: list[dict]) -> bool:

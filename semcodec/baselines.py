@@ -3,12 +3,14 @@
 Every ``transmit_*`` takes images [batch, 3, height, width] float32 in [0, 1] and returns a
 :class:`TransmitResult` (received images of the same shape + stats).
 
-* digital: image codec (AVIF by default) at the byte budget the MCS allows in
-  ``num_symbols`` (``phy.digital.payload_capacity_bits``), then phy.digital's CRC + 5G LDPC
-  + QAM through the same link. ``mcs="envelope"`` picks the best MCS per image and SNR
-  (see :func:`transmit_digital`); a fixed MCS name shows the cliff. A lost image (any
-  payload codeword failing its CRC, or a budget too small for the codec's lowest quality)
-  is received as mid-grey (0.5 everywhere): the receiver has nothing better to show.
+* digital: image codec (AVIF by default, wire bytes: container stripped) at the byte
+  budget the MCS allows in ``num_symbols`` (``phy.digital.payload_capacity_bits``), then
+  phy.digital's CRC + 5G LDPC + QAM through the same link. ``mcs="auto"`` (honest: the
+  MCS from a shipped calibration table, no CSI at the transmitter), ``"genie"`` (a bound:
+  the best MCS for this very draw) or a fixed MCS name (the cliff); see
+  :func:`transmit_digital`. A lost image (any payload codeword failing its CRC, or a
+  budget too small for the codec's lowest quality) is received as mid-grey (0.5
+  everywhere): the receiver has nothing better to show.
 * ideal: the codec at capacity, ``num_symbols * log2(1 + snr)`` bits, error free.
 * analog: uncoded pixels; each image's values standardised (mean and std sent as side
   information), paired into complex symbols, LMMSE-scaled at the receiver.
@@ -16,7 +18,6 @@ Every ``transmit_*`` takes images [batch, 3, height, width] float32 in [0, 1] an
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 
@@ -25,12 +26,17 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from phy import noise_var_to_snr_db
-from semcodec.codec import Codec, check_images
-from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_to_budget
+from phy import Channel, FlatLink
+from semcodec.codec import Codec, Encoded, check_images
+from semcodec.image_codecs import (
+    IMAGE_CODECS,
+    decode_wire,
+    encode_image,
+    encode_to_budget,
+    get_image_codec,
+)
 
 LOST_IMAGE_VALUE = 0.5
-ENVELOPE = "envelope"
 
 
 @dataclass
@@ -45,18 +51,12 @@ class TransmitResult:
 
 
 def _run_link(link, x: Tensor, snr_db, generator):
-    """(x_hat, noise_var [batch, num_symbols]) from a phy link or a bare phy channel."""
+    """(unbiased x_hat, noise_var [batch, num_symbols]) from a phy link or a bare phy channel
+    (which gets a one-tap ZF receiver with perfect CSI)."""
+    if isinstance(link, Channel):
+        link = FlatLink(link, csi="perfect", equalizer="zf")
     out = link(x, snr_db, generator=generator)
-    if hasattr(out, "x_hat"):
-        return out.x_hat, out.noise_var
-    nv = out.noise_var.reshape(-1, 1).expand(x.shape).to(torch.float32)
-    return out.equalized("mmse"), nv
-
-
-def receiver_snr_db(noise_var: Tensor) -> Tensor:
-    """[batch] SNR in dB that a receiver infers from the link's per-symbol noise variance."""
-    nv = noise_var.reshape(noise_var.shape[0], -1).mean(dim=1).clamp(1e-6, 1e3)
-    return noise_var_to_snr_db(nv).clamp(-30.0, 60.0)
+    return out.x_hat, out.noise_var
 
 
 def transmit_jscc(
@@ -69,20 +69,25 @@ def transmit_jscc(
     generator: torch.Generator | None = None,
     demand_weights=None,
     rx_codec: Codec | None = None,
+    encoded: Encoded | None = None,
 ) -> TransmitResult:
-    """Images through the JSCC and the link; the decoder is told the SNR the link reports.
+    """Images through the JSCC and the link. The decoder gets the link's unbiased estimates
+    with their per-symbol noise variance and the average SNR (``Codec.decode``'s convention).
 
     Args:
-        link: ``phy.FlatLink``/``phy.OFDMLink`` (or a bare ``phy`` channel).
-        snr_db: float or [batch], the link's Es/N0 (also the encoder's SNR input).
+        link: ``phy.FlatLink``/``phy.OFDMLink`` with ``equalizer="zf"`` (or a bare ``phy``
+            channel: perfect-CSI ZF).
+        snr_db: float or [batch], the average Es/N0 (the encoder's and decoder's SNR input).
         rx_codec: the receiver's codec (default the transmitter's); hashes must match.
+        encoded: ``codec.encode(images, snr_db, cbr, mask, demand_weights)`` when the caller
+            has it already (several draws of one image), else computed here.
     """
     x = check_images(images)
-    enc = codec.encode(x, snr_db, cbr, mask=mask, demand_weights=demand_weights)
+    enc = encoded or codec.encode(x, snr_db, cbr, mask=mask, demand_weights=demand_weights)
     with torch.no_grad():
         x_hat, nv = _run_link(link, enc.symbols, snr_db, generator)
     rx = rx_codec or codec
-    y = rx.decode(x_hat, enc.meta, receiver_snr_db(nv), expected_sha256=codec.sha256)
+    y = rx.decode(x_hat, enc.meta, snr_db, expected_sha256=codec.sha256, noise_var=nv)
     n = x.shape[0]
     return TransmitResult(
         y,
@@ -99,14 +104,13 @@ def _grey(shape) -> Tensor:
     return torch.full(shape, LOST_IMAGE_VALUE)
 
 
-def _decode_or_grey(data: bytes | None, shape) -> tuple[Tensor, bool]:
+def _decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
+    """Wire bytes -> ([3, H, W] image, True), or (mid-grey, False) when undecodable."""
     if data is None:
         return _grey(shape), False
     try:
-        a = decode_image(data)
+        a = decode_wire(data, image_codec, shape[1], shape[2])
     except ValueError:
-        return _grey(shape), False
-    if a.shape[:2] != tuple(shape[1:]):
         return _grey(shape), False
     return torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1), True
 
@@ -134,7 +138,7 @@ def transmit_ideal(
     out, qualities, sizes = [], [], []
     for img in x:
         data, q = encode_to_budget(img, bits // 8, image_codec)
-        rec, _ = _decode_or_grey(data, img.shape)
+        rec, _ = _decode_or_grey(data, img.shape, image_codec)
         out.append(rec)
         qualities.append(q)
         sizes.append(0 if data is None else len(data))
@@ -151,56 +155,53 @@ def transmit_ideal(
     )
 
 
-def _is_awgn_link(link) -> bool:
-    ch = getattr(link, "channel", None)
-    return type(ch).__name__ == "AWGN"
+AUTO = "auto"
+GENIE = "genie"
+ENVELOPE = "envelope"  # the old name of the genie (an oracle, kept for old configs)
+MCS_MODES = (AUTO, GENIE)
 
 
-@functools.lru_cache(maxsize=256)
-def _calibrated_mcs_index(num_symbols: int, snr_db: float, seed: int) -> int:
-    """AWGN: index of the highest MCS (in MCS_TABLE order) whose random-payload block of this
-    length decodes at this SNR (bottom-up, stopping at the first failure); -1 if none."""
-    import phy
-    from phy.digital import MCS_TABLE, payload_capacity_bits, transmit_bytes
-
-    link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
-    best = -1
-    rng = np.random.default_rng(seed)
-    for i, name in enumerate(MCS_TABLE):
-        nbytes = payload_capacity_bits(num_symbols, name) // 8
-        if nbytes <= 0:
-            continue
-        payload = rng.integers(0, 256, nbytes, dtype=np.uint8).tobytes()
-        r = transmit_bytes(
-            payload,
-            name,
-            link,
-            snr_db,
-            generator=torch.Generator().manual_seed(seed + i),
-            num_symbols=num_symbols,
+def channel_kind(link) -> str:
+    """The ``phy.CHANNELS`` name of a link's channel (what the transmitter may know: the
+    fading *distribution*, never the draw). KeyError when it cannot be told."""
+    ch = getattr(link, "channel", link)
+    name = type(ch).__name__
+    mode = getattr(ch, "mode", None)
+    kinds = {
+        ("AWGN", None): "awgn",
+        ("RayleighFading", "block"): "rayleigh",
+        ("RayleighFading", "fast"): "rayleigh_fast",
+        ("RicianFading", "block"): "rician",
+        ("RicianFading", "fast"): "rician_fast",
+        ("TDLChannel", None): "tdl",
+        ("CDLChannel", None): "cdl",
+    }
+    key = (name, mode if name in ("RayleighFading", "RicianFading") else None)
+    if key not in kinds:
+        raise KeyError(
+            f"cannot tell the channel kind of {name}; pass channel= one of {sorted(set(kinds.values()))}"
         )
-        if not r.ok:
-            break
-        best = i
-    return best
+    return kinds[key]
+
+
+def _lost(img: Tensor, mcs, why: str, failed: int = 0) -> tuple[Tensor, bool, dict]:
+    info = {"mcs": mcs, "quality": None, "bits": 0, "failed_codewords": failed, "lost": why}
+    return _grey(img.shape), False, info
 
 
 def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str, seed: int):
-    """One image at one MCS. Returns (received [3,H,W], ok, info)."""
+    """One image at one MCS, one shot. Returns (received [3,H,W], ok, info); ``info["lost"]``
+    is None, ``"budget"`` (nothing fitted) or ``"channel"`` (a payload codeword failed)."""
     from phy.digital import payload_capacity_bits, transmit_bytes
 
     budget = payload_capacity_bits(n, mcs) // 8
     data, q = encode_to_budget(img, budget, image_codec)
     if data is None:
-        return (
-            _grey(img.shape),
-            False,
-            {"mcs": mcs, "quality": None, "bits": 0, "failed_codewords": 0},
-        )
+        return _lost(img, mcs, "budget")
     r = transmit_bytes(
         data, mcs, link, snr_db, generator=torch.Generator().manual_seed(seed), num_symbols=n
     )
-    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape)
+    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
     failed = (
         len([c for c in r.failed_codewords if c < r.num_payload_codewords])
         if r.num_payload_codewords
@@ -215,8 +216,44 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
             "bits": 8 * len(data),
             "failed_codewords": failed,
             "num_codewords": r.num_codewords,
+            "lost": None if ok else "channel",
         },
     )
+
+
+def _psnr(a: Tensor, b: Tensor) -> float:
+    return float(-10.0 * torch.log10(((a - b) ** 2).mean().clamp_min(1e-12)))
+
+
+def _genie(img, start: int, names, link, snr_db, n, image_codec, seed):
+    """The oracle: with this draw's fade and noise (the same seed for every try), the best
+    image over the MCSs that decode, searching from ``start`` (up while they decode, else
+    down until one does). Same draw as honest at ``start`` -> never below it."""
+    tries = {}
+
+    def attempt(i):
+        if i not in tries:
+            tries[i] = _send_digital(img, names[i], link, snr_db, n, image_codec, seed)
+        return tries[i]
+
+    if attempt(start)[1]:
+        i = start + 1
+        while i < len(names) and attempt(i)[1]:
+            i += 1
+    else:
+        i = start - 1
+        while i >= 0 and not attempt(i)[1]:
+            i -= 1
+    good = [(k, t) for k, t in tries.items() if t[1]]
+    failed = sum(t[2]["failed_codewords"] for t in tries.values())
+    if not good:
+        why = "budget" if all(t[2]["lost"] == "budget" for t in tries.values()) else "channel"
+        rec, ok, info = _lost(img, None, why, failed)
+    else:
+        _, (rec, ok, info) = max(good, key=lambda kt: (_psnr(kt[1][0], img), kt[0]))
+        info = {**info, "failed_codewords": failed}
+    info["tries"] = len(tries)
+    return rec, ok, info
 
 
 def transmit_digital(
@@ -224,78 +261,114 @@ def transmit_digital(
     link,
     snr_db: float,
     num_symbols: int,
-    mcs: str = ENVELOPE,
+    mcs: str = AUTO,
     image_codec: str = "avif",
     generator: torch.Generator | None = None,
+    channel: str | None = None,
 ) -> TransmitResult:
     """Image codec + CRC + 5G LDPC + QAM through ``link`` in ``num_symbols`` symbols per image.
 
-    ``mcs="envelope"``: the best MCS per image, i.e. the highest-rate MCS whose block decodes
-    (a higher rate always means a larger file, so a better image). Over AWGN the starting
-    MCS comes from a calibration block of random payload at the same length and SNR (the
-    highest MCS that decodes, bottom-up); if the image fails at it the next lower MCS is
-    tried, down to the lowest. Over other links (fading) each image searches upward from the
-    lowest MCS with the same channel realisation for every attempt (an oracle MCS choice).
+    ``mcs``:
+
+    * ``"auto"`` (the honest link, ``digital``): no CSI at the transmitter. The MCS comes
+      from the shipped calibration table (:mod:`semcodec.digital_calibration`) given the
+      channel kind, the average ``snr_db``, ``num_symbols``, the image size and the size of
+      the image's lowest-quality file: the MCS of highest expected PSNR over the channel's
+      fading distribution. One shot: a failed codeword loses the image (an outage).
+    * ``"genie"`` (``digital_genie``, a bound; ``"envelope"`` is its old name): knows this
+      draw's fade and noise; the best image over every MCS that decodes on the same draw,
+      searched from the honest choice, so it is never below ``"auto"`` on the same draws.
+    * a name in ``phy.digital.MCS_TABLE``: that MCS always (shows the cliff).
+
+    The codec's wire bytes are sent (container stripped, :mod:`semcodec.image_codecs`).
+    A lost image is mid-grey: ``"budget"`` when no file fits, ``"channel"`` when a payload
+    codeword failed.
 
     Args:
-        link: ``phy.FlatLink`` / ``phy.OFDMLink`` (equalizer "zf" recommended for QAM LLRs).
-        mcs: ``"envelope"`` or a name in ``phy.digital.MCS_TABLE``.
-        image_codec: ``"avif"``, ``"webp"`` or ``"jpeg"``.
+        images: [batch, 3, height, width] float32 in [0, 1].
+        link: ``phy.FlatLink`` / ``phy.OFDMLink`` with ``equalizer="zf"``.
+        snr_db: average Es/N0 in dB (what the transmitter knows).
+        num_symbols: channel symbols per image.
+        image_codec: a name of ``semcodec.IMAGE_CODECS``.
+        generator: the draws; each image takes one seed from it (the same seed for every
+            try of the genie, so the same fade and noise).
+        channel: ``phy.CHANNELS`` name of the link's channel for ``"auto"`` (and the genie's
+            starting point) (default: told from ``link``; see :func:`channel_kind`). Needed
+            for links whose channel type does not tell (``raytraced`` per-position links); a
+            genie without it searches from the lowest MCS.
     Returns:
-        TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images, mcs and
-        quality per image.
+        TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images,
+        views_lost {"budget", "channel"}, mcs / quality / expected_psnr per image,
+        mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
+        calibrated).
     """
     from phy.digital import MCS_TABLE, get_mcs
+    from semcodec.digital_calibration import load_calibration
 
     x = check_images(images)
     n = _check_num_symbols(num_symbols)
     _check_codec(image_codec)
+    mode = GENIE if mcs == ENVELOPE else mcs
     names = list(MCS_TABLE)
-    if mcs != ENVELOPE:
-        get_mcs(mcs)
+    if mode not in MCS_MODES:
+        try:
+            get_mcs(mode)
+        except KeyError:
+            raise KeyError(f"mcs must be 'auto', 'genie' or one of {names}, got {mcs!r}") from None
+    kind = None
+    if mode == AUTO:
+        kind = channel or channel_kind(link)
+    elif mode == GENIE:  # the genie needs no calibration: without one it searches from the bottom
+        try:
+            kind = channel or channel_kind(link)
+        except KeyError:
+            kind = None
+    if kind is not None:
+        table = load_calibration()
+        calibration = table.source(kind)
     gen = generator or torch.Generator().manual_seed(0)
+    lo = get_image_codec(image_codec).quality_range[0]
     out, infos = [], []
     for img in x:
         seed = int(torch.randint(0, 2**62, (1,), generator=gen))
-        if mcs != ENVELOPE:
-            rec, ok, info = _send_digital(img, mcs, link, snr_db, n, image_codec, seed)
-        elif _is_awgn_link(link):
-            start = _calibrated_mcs_index(n, float(snr_db), 12345)
-            rec, ok, info = (
-                _grey(img.shape),
-                False,
-                {"mcs": None, "quality": None, "bits": 0, "failed_codewords": 0},
-            )
-            for i in range(start, -1, -1):
-                r2, ok2, info2 = _send_digital(img, names[i], link, snr_db, n, image_codec, seed)
-                info2["failed_codewords"] += info["failed_codewords"]
-                rec, ok, info = r2, ok2, info2
-                if ok:
-                    break
+        if mode not in MCS_MODES:
+            rec, ok, info = _send_digital(img, mode, link, snr_db, n, image_codec, seed)
         else:
-            rec, ok, info = (
-                _grey(img.shape),
-                False,
-                {"mcs": None, "quality": None, "bits": 0, "failed_codewords": 0},
-            )
-            for name in names:
-                r2, ok2, info2 = _send_digital(img, name, link, snr_db, n, image_codec, seed)
-                if not ok2:
-                    info["failed_codewords"] += info2["failed_codewords"]
-                    break
-                info2["failed_codewords"] += info["failed_codewords"]
-                rec, ok, info = r2, ok2, info2
+            choice, expected = names[0], None
+            if kind is not None:
+                h, w = img.shape[1:]
+                min_bytes = len(encode_image(img, image_codec, lo))
+                choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
+                expected = round(expected, 3)
+            if mode == AUTO:
+                rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
+            else:
+                start = names.index(choice)
+                rec, ok, info = _genie(img, start, names, link, snr_db, n, image_codec, seed)
+            info["expected_psnr"] = expected
         info["ok"] = ok
         out.append(rec)
         infos.append(info)
+    lost = {"budget": 0, "channel": 0}
+    for i in infos:
+        if i["lost"]:
+            lost[i["lost"]] += 1
     stats = {
         "bits": sum(i["bits"] for i in infos),
         "num_symbols": n * len(x),
         "failed_codewords": sum(i["failed_codewords"] for i in infos),
         "lost_images": sum(not i["ok"] for i in infos),
+        "views_lost": lost,
         "mcs": [i["mcs"] for i in infos],
         "quality": [i["quality"] for i in infos],
+        "mcs_choice": {AUTO: "auto", GENIE: "genie (bound)"}.get(mode, "fixed"),
     }
+    if kind is not None:
+        stats["channel"] = kind
+        stats["calibration"] = calibration
+        stats["expected_psnr"] = [i["expected_psnr"] for i in infos]
+    if mode == GENIE:
+        stats["tries"] = sum(i["tries"] for i in infos)
     return TransmitResult(torch.stack(out), stats)
 
 

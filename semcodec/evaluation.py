@@ -1,7 +1,8 @@
 """Scheme registry and per-image scoring for ``osnerf eval-codec`` and the benchmark.
 
-:data:`SCHEMES`: name -> function(ctx, image [1, 3, H, W], snr_db, cbr, generator) ->
-TransmitResult. One table; unknown names raise KeyError listing the known ones.
+:data:`SCHEMES`: name -> :class:`LinkScheme`, called as ``scheme(ctx, image [1, 3, H, W],
+snr_db, cbr, generator) -> TransmitResult``. One table; unknown names raise KeyError listing
+the known ones. ``digital_genie`` and ``ideal*`` are bounds (``LinkScheme.bound``).
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import torch
 
 from phy import num_symbols_for_cbr
 from semcodec.baselines import (
-    ENVELOPE,
+    AUTO,
+    GENIE,
     TransmitResult,
     transmit_analog,
     transmit_digital,
@@ -25,28 +27,53 @@ from semcodec.baselines import (
 from semcodec.codec import MIN_SIDE_PX, Codec
 from semcodec.image_codecs import read_image_file
 
-EVAL_CHANNELS = ("awgn", "rayleigh")
+OFDM_CHANNELS = ("tdl", "cdl")
+"""Channels that ``eval-codec`` runs over OFDM with pilots and LS estimates (the rest: one
+tap per symbol, perfect CSI)."""
 DEFAULT_FIXED_MCS = "16qam-1/2"
+
+
+def eval_channels() -> list[str]:
+    """The channels ``eval-codec`` accepts: every name of ``phy.CHANNELS``."""
+    import phy
+
+    return list(phy.CHANNELS)
 
 
 @dataclass
 class EvalContext:
-    """What the schemes share: codec, links, fixed MCS."""
+    """What the schemes share: codec, the channel's link, fixed MCS.
+
+    Every link has a ZF equaliser: unbiased estimates and the per-symbol effective noise
+    variance (the codec's and the soft demapper's convention). Flat channels: perfect CSI;
+    ``tdl``/``cdl``: OFDM (``phy.ResourceGrid()``) with pilot LS estimates.
+    """
 
     channel: str
     codec: Codec | None = None
     fixed_mcs: str = DEFAULT_FIXED_MCS
     links: dict = field(default_factory=dict)
+    encodings: dict = field(default_factory=dict)  # (id, snr, cbr) -> (image, Encoded), latest
 
-    def link(self, equalizer: str):
-        """phy.FlatLink over AWGN or Rayleigh block fading with perfect CSI."""
-        if equalizer not in self.links:
+    def link(self):
+        """The ``phy`` link of ``channel`` (built once)."""
+        if "zf" not in self.links:
             import phy
 
-            self.links[equalizer] = phy.FlatLink(
-                phy.make_channel(self.channel), csi="perfect", equalizer=equalizer
-            )
-        return self.links[equalizer]
+            ch = phy.make_channel(self.channel)
+            if self.channel in OFDM_CHANNELS:
+                link = phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
+            else:
+                link = phy.FlatLink(ch, csi="perfect", equalizer="zf")
+            self.links["zf"] = link
+        return self.links["zf"]
+
+    @property
+    def receiver(self) -> str:
+        """The receiver in words (for result files)."""
+        if self.channel in OFDM_CHANNELS:
+            return "OFDM, pilot LS estimates, ZF + per-symbol noise variance"
+        return "one tap, perfect CSI, ZF + per-symbol noise variance"
 
 
 def _n(img, cbr) -> int:
@@ -54,14 +81,26 @@ def _n(img, cbr) -> int:
 
 
 def _jscc(ctx, img, snr, cbr, gen):
-    return transmit_jscc(ctx.codec, img, ctx.link("mmse"), snr, cbr, generator=gen)
+    key = (id(img), float(snr), float(cbr))
+    if key not in ctx.encodings:  # the encoder is deterministic: once for all draws
+        ctx.encodings.clear()
+        ctx.encodings[key] = (img, ctx.codec.encode(img, snr, cbr))
+    enc = ctx.encodings[key][1]
+    return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
 
 
-def _digital(codec_name, mcs_attr=None):
+def _digital(codec_name, mcs=AUTO):
     def run(ctx, img, snr, cbr, gen):
-        mcs = getattr(ctx, mcs_attr) if mcs_attr else ENVELOPE
+        m = ctx.fixed_mcs if mcs is None else mcs
         return transmit_digital(
-            img, ctx.link("zf"), snr, _n(img, cbr), mcs=mcs, image_codec=codec_name, generator=gen
+            img,
+            ctx.link(),
+            snr,
+            _n(img, cbr),
+            mcs=m,
+            image_codec=codec_name,
+            generator=gen,
+            channel=ctx.channel,
         )
 
     return run
@@ -75,20 +114,64 @@ def _ideal(codec_name):
 
 
 def _analog(ctx, img, snr, cbr, gen):
-    return transmit_analog(img, ctx.link("mmse"), snr, _n(img, cbr), generator=gen)
+    return transmit_analog(img, ctx.link(), snr, _n(img, cbr), generator=gen)
 
 
-SCHEMES: dict[str, Callable[..., TransmitResult]] = {
-    "jscc": _jscc,
-    "digital": _digital("avif"),
-    "digital_fixed": _digital("avif", "fixed_mcs"),
-    "ideal": _ideal("avif"),
-    "analog": _analog,
-    "digital_webp": _digital("webp"),
-    "digital_jpeg": _digital("jpeg"),
-    "ideal_webp": _ideal("webp"),
-    "ideal_jpeg": _ideal("jpeg"),
+@dataclass(frozen=True)
+class LinkScheme:
+    """One link-level scheme: ``scheme(ctx, image [1, 3, H, W], snr_db, cbr, generator)``.
+
+    Attributes:
+        run: the function that sends the image (returns a ``TransmitResult``).
+        help: one line for ``--help``, plots and reports.
+        kind: ``"jscc"``, ``"digital"``, ``"ideal"`` or ``"analog"``.
+        bound: what it bounds when it is not a real system (shown as such), else None.
+        over_the_air: ``osnerf ota`` can send it between two radios.
+    """
+
+    run: Callable[..., TransmitResult]
+    help: str
+    kind: str
+    bound: str | None = None
+    over_the_air: bool = False
+
+    def __call__(self, ctx, img, snr_db, cbr, generator) -> TransmitResult:
+        return self.run(ctx, img, snr_db, cbr, generator)
+
+
+_GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on it"
+_IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
+
+SCHEMES: dict[str, LinkScheme] = {
+    "jscc": LinkScheme(_jscc, "semantic JSCC", "jscc", over_the_air=True),
+    "digital": LinkScheme(
+        _digital("avif"),
+        "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",
+        "digital",
+        over_the_air=True,
+    ),
+    "digital_genie": LinkScheme(_digital("avif", GENIE), f"AVIF, {_GENIE}", "digital", _GENIE),
+    "digital_fixed": LinkScheme(
+        _digital("avif", None), "AVIF + LDPC + QAM at one fixed MCS (--mcs): the cliff", "digital"
+    ),
+    "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", "ideal", _IDEAL),
+    "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", "analog"),
+    "digital_webp": LinkScheme(
+        _digital("webp"), "WebP + LDPC + QAM, MCS from the average SNR", "digital"
+    ),
+    "digital_jpeg": LinkScheme(
+        _digital("jpeg"), "JPEG + LDPC + QAM, MCS from the average SNR", "digital"
+    ),
+    "ideal_webp": LinkScheme(_ideal("webp"), f"WebP, {_IDEAL}", "ideal", _IDEAL),
+    "ideal_jpeg": LinkScheme(_ideal("jpeg"), f"JPEG, {_IDEAL}", "ideal", _IDEAL),
 }
+"""name -> :class:`LinkScheme`: the one table of link-level schemes (``eval-codec``,
+``osnerf ota``, the codec benchmark)."""
+
+
+def schemes_help() -> str:
+    """``name: help`` of every scheme, bounds marked, for ``--help``."""
+    return "; ".join(f"{k} ({v.help})" for k, v in SCHEMES.items())
 
 
 def parse_schemes(text: str) -> list[str]:

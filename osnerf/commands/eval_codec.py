@@ -1,12 +1,19 @@
 """`osnerf eval-codec`: image transmission quality, JSCC vs digital vs ideal (vs analog).
 
 Reads every PNG/JPEG of ``--images``, sends each image (one at a time, its own size)
-through every scheme at every SNR, and writes
-``{"config", "seed", "git_commit", "versions", "checkpoint": {"name", "sha256"},
-"results": [{"scheme", "snr_db", "cbr", "psnr", "ssim", "lpips", "num_images", ...}]}`` where
-psnr/ssim/lpips are the mean of per-image values (PSNR peak 1.0; LPIPS-AlexNet v0.1 from
-:func:`renderer.lpips`, null with ``--no-lpips`` or when an image is smaller than 31x31 px).
-All input is checked before any work; the result file is written once, atomically, at the end.
+through every scheme at every SNR, ``--draws`` times over independent noise and fading
+draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
+"sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
+"num_images", "draws", ...}]}`` where psnr/ssim/lpips are the mean over images x draws of
+per-image values (PSNR peak 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with
+``--no-lpips`` or when an image is smaller than 31x31 px) and ``psnr_ci95`` the 95 %
+Student-t interval of that mean over the images x draws values.
+
+Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI ZF receiver,
+``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
+variance. Draw ``d`` of image ``i`` at SNR ``k`` uses the same seed in every scheme (common
+random numbers: ``digital`` and ``digital_genie`` see the same fades). All input is checked
+before any work; the result file is written once, atomically, at the end.
 """
 
 from __future__ import annotations
@@ -23,13 +30,21 @@ from osnerf.commands import args as checks
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", required=True, help="folder of PNG/JPEG images")
-    from semcodec.evaluation import EVAL_CHANNELS
+    from semcodec.evaluation import eval_channels, schemes_help
 
     p.add_argument(
         "--channel",
         default="awgn",
-        choices=EVAL_CHANNELS,
-        help="awgn or rayleigh (block fading, perfect CSI)",
+        help=f"one of phy.CHANNELS: {', '.join(eval_channels())} (rayleigh = block fading, "
+        "one fade per image; rayleigh_fast = one per symbol, the setting of the published "
+        "Rayleigh anchors)",
+    )
+    p.add_argument(
+        "--draws",
+        type=int,
+        default=1,
+        help="independent noise and fading draws per image (default 1); results give the "
+        "mean and a 95%% interval over images x draws",
     )
     p.add_argument(
         "--snr-db",
@@ -43,7 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--schemes",
         default="jscc,digital,ideal",
-        help="comma-separated: jscc, digital, digital_fixed, ideal, analog, digital_webp, digital_jpeg, ideal_webp, ideal_jpeg",
+        help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
@@ -66,6 +81,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def draw_seed(seed: int, snr_index: int, image_index: int, draw: int) -> int:
+    """Seed of one draw, the same in every scheme (common random numbers)."""
+    return ((seed * 1_000_003 + snr_index) * 100_003 + image_index) * 1_009 + draw
+
+
+def mean_ci95(values) -> tuple[float, float, float]:
+    """(mean, low, high): the 95 % Student-t interval of the mean (a point for one value)."""
+    v = np.asarray(values, dtype=np.float64)
+    m = float(v.mean())
+    if v.size < 2:
+        return m, m, m
+    from scipy.stats import t
+
+    half = float(t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size))
+    return m, m - half, m + half
+
+
 def run(args: argparse.Namespace) -> int:
     import torch
 
@@ -75,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
     from semcodec.codec import load_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
-        EVAL_CHANNELS,
         SCHEMES,
         EvalContext,
+        eval_channels,
         load_image_folder,
         parse_schemes,
         psnr,
@@ -89,8 +121,11 @@ def run(args: argparse.Namespace) -> int:
         checks.output_file(args.plot, "--plot")
     checks.distinct_outputs(out=args.out, plot=args.plot)
     torch.set_num_threads(args.threads)
-    if args.channel not in EVAL_CHANNELS:
-        raise ValueError(f"--channel must be one of {list(EVAL_CHANNELS)}, got {args.channel!r}")
+    channels = eval_channels()
+    if args.channel not in channels:
+        raise KeyError(f"--channel: unknown channel {args.channel!r}; known: {channels}")
+    if args.draws < 1:
+        raise ValueError(f"--draws must be >= 1, got {args.draws}")
     schemes = parse_schemes(args.schemes)
     snrs = list(args.snr_db)
     try:
@@ -114,10 +149,10 @@ def run(args: argparse.Namespace) -> int:
                 f"--cbr {args.cbr} is outside the codec's range [1/48, {round(hi * 48)}/48]"
             ) from None
         slo, shi = codec.snr_range_db
-        bad = [s for s in snrs if not slo <= s <= shi]
-        if bad:
+        if not slo <= min(snrs) <= max(snrs) <= shi:
             raise ValueError(
-                f"--snr-db {bad[0]:g} is outside the codec's range [{slo:g}, {shi:g}] dB"
+                f"--snr-db [{min(snrs):g}, {max(snrs):g}] dB is not covered by checkpoint "
+                f"{codec.name!r}, trained for SNR [{slo:g}, {shi:g}] dB"
             )
     names, images = load_image_folder(args.images)
     if args.max_images is not None:
@@ -134,10 +169,15 @@ def run(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"{e}, or pass --no-lpips") from None
 
     ctx = EvalContext(channel=args.channel, codec=codec, fixed_mcs=mcs)
+    ctx.link()  # builds the channel (bad channel settings fail before any work)
     config = {
         "images": str(args.images),
         "image_names": names,
         "channel": args.channel,
+        "receiver": ctx.receiver,
+        "draws": args.draws,
+        "interval": "95% Student-t interval of the mean over images x draws",
+        "bounds": {s: SCHEMES[s].bound for s in schemes if SCHEMES[s].bound},
         "snr_db": snrs,
         "cbr": cbr,
         "schemes": schemes,
@@ -150,38 +190,68 @@ def run(args: argparse.Namespace) -> int:
     results = []
     from tqdm import tqdm
 
-    bar = tqdm(total=len(schemes) * len(snrs) * len(images), desc="eval-codec", file=sys.stderr)
-    for si, scheme in enumerate(schemes):
+    bar = tqdm(
+        total=len(schemes) * len(snrs) * len(images) * args.draws,
+        desc="eval-codec",
+        file=sys.stderr,
+    )
+    for scheme in schemes:
         for ki, snr in enumerate(snrs):
-            gen = torch.Generator().manual_seed(args.seed * 1_000_003 + si * 1000 + ki)
             ps, ss, ls, t0 = [], [], [], time.perf_counter()
             extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
-            for img in images:
-                res = SCHEMES[scheme](ctx, img, snr, cbr, gen)
-                ps.append(psnr(res.images, img))
-                ss.append(ssim(res.images, img))
-                if score_lpips:
-                    ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
-                for k in extra:
-                    extra[k] += int(res.stats.get(k, 0) or 0)
-                bar.update(1)
-            results.append(
-                {
-                    "scheme": scheme,
-                    "snr_db": snr,
-                    "cbr": cbr,
-                    "psnr": float(np.mean(ps)),
-                    "ssim": float(np.mean(ss)),
-                    "lpips": float(np.mean(ls)) if ls else None,
-                    "num_images": len(images),
-                    "psnr_per_image": ps,
-                    **extra,
-                    "seconds": round(time.perf_counter() - t0, 2),
-                }
-            )
+            lost = {"budget": 0, "channel": 0}
+            mcs_used: dict[str, int] = {}
+            stats_keys = {}
+            separate = False  # the scheme reported views lost (a separate source-channel code)
+            for ii, img in enumerate(images):
+                row = []
+                for d in range(args.draws):
+                    gen = torch.Generator().manual_seed(draw_seed(args.seed, ki, ii, d))
+                    res = SCHEMES[scheme](ctx, img, snr, cbr, gen)
+                    row.append(psnr(res.images, img))
+                    ss.append(ssim(res.images, img))
+                    if score_lpips:
+                        ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
+                    for k in extra:
+                        extra[k] += int(res.stats.get(k, 0) or 0)
+                    separate = separate or "views_lost" in res.stats
+                    for k, v in (res.stats.get("views_lost") or {}).items():
+                        lost[k] += int(v)
+                    for m in res.stats.get("mcs") or []:
+                        mcs_used[str(m)] = mcs_used.get(str(m), 0) + 1
+                    for k in ("mcs_choice", "calibration"):
+                        if k in res.stats:
+                            stats_keys[k] = res.stats[k]
+                    bar.update(1)
+                ps.append(row)
+            flat = [v for row in ps for v in row]
+            mean, lo, hi = mean_ci95(flat)
+            r = {
+                "scheme": scheme,
+                "snr_db": snr,
+                "cbr": cbr,
+                "psnr": mean,
+                "psnr_ci95": [lo, hi],
+                "ssim": float(np.mean(ss)),
+                "lpips": float(np.mean(ls)) if ls else None,
+                "num_images": len(images),
+                "draws": args.draws,
+                "psnr_per_image": [float(np.mean(row)) for row in ps],
+                "psnr_per_draw": ps,
+                **extra,
+                "seconds": round(time.perf_counter() - t0, 2),
+            }
+            if separate:
+                r["views_lost"] = lost
+                r["mcs_used"] = mcs_used
+                r.update(stats_keys)
+            if SCHEMES[scheme].bound:
+                r["bound"] = SCHEMES[scheme].bound
+            results.append(r)
             lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
             print(
-                f"eval-codec: {scheme} {snr:g} dB: PSNR {np.mean(ps):.2f} dB, SSIM {np.mean(ss):.4f}{lp}",
+                f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB [{lo:.2f}, {hi:.2f}], "
+                f"SSIM {np.mean(ss):.4f}{lp}",
                 file=sys.stderr,
             )
     bar.close()
@@ -191,7 +261,8 @@ def run(args: argparse.Namespace) -> int:
         "results": results,
     }
     if args.plot:
-        _plot(results, Path(args.plot), f"{args.channel}, CBR {args.cbr}")
+        title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"
+        _plot(results, Path(args.plot), title)
     write_json_atomic(out, doc)
     print(f"eval-codec: {len(results)} points -> {out}", file=sys.stderr)
     return 0
@@ -203,10 +274,25 @@ def _plot(results: list[dict], path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5, 3.5))
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for s in dict.fromkeys(r["scheme"] for r in results):
-        pts = [(r["snr_db"], r["psnr"]) for r in results if r["scheme"] == s]
-        ax.plot(*zip(*pts), marker="o", label=s)
+        rows = [r for r in results if r["scheme"] == s]
+        x = [r["snr_db"] for r in rows]
+        y = [r["psnr"] for r in rows]
+        err = [
+            [r["psnr"] - r["psnr_ci95"][0] for r in rows],
+            [r["psnr_ci95"][1] - r["psnr"] for r in rows],
+        ]
+        bound = rows[0].get("bound")
+        ax.errorbar(
+            x,
+            y,
+            yerr=err,
+            marker="o",
+            capsize=3,
+            linestyle="--" if bound else "-",
+            label=f"{s} (bound)" if bound else s,
+        )
     ax.set_xlabel("SNR (Es/N0) [dB]")
     ax.set_ylabel("PSNR [dB] (mean per image)")
     ax.set_title(title)

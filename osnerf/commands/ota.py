@@ -18,7 +18,6 @@ capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).
 from __future__ import annotations
 
 import argparse
-import io
 import math
 import sys
 import time
@@ -30,8 +29,6 @@ import numpy as np
 from osnerf.commands import args as checks
 
 DEVICE_KINDS = ("emulated", "loopback", "hackrf")
-SCHEMES = ("digital", "jscc")
-IMAGE_CODECS = ("avif", "jpeg", "webp")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 
@@ -41,12 +38,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from hil.emulator import FAULT_NAMES
     from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
     from phy.digital import MCS_TABLE
+    from semcodec.evaluation import SCHEMES
+    from semcodec.image_codecs import IMAGE_CODECS
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
     p.add_argument(
-        "--scheme", required=True, choices=SCHEMES, help="digital (codec + LDPC + QAM) or jscc"
+        "--scheme",
+        required=True,
+        choices=[k for k, v in SCHEMES.items() if v.over_the_air],
+        help="digital (codec + LDPC + QAM at --mcs) or jscc",
     )
     p.add_argument(
         "--snr-db",
@@ -90,10 +92,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"digital: modulation and coding, one of {', '.join(MCS_TABLE)} (default qpsk-1/2)",
     )
     p.add_argument(
-        "--image-codec", default="avif", choices=IMAGE_CODECS, help="digital: image codec"
+        "--image-codec", default="avif", choices=list(IMAGE_CODECS), help="digital: image codec"
     )
     p.add_argument(
-        "--quality", type=int, default=50, help="digital: codec quality 1-100 (default 50)"
+        "--quality",
+        type=int,
+        default=50,
+        help="digital: codec quality, 1-100 (JPEG 1-95; default 50)",
     )
     p.add_argument(
         "--cbr", default="1/16", help="jscc: channel symbols per source value (default 1/16)"
@@ -220,26 +225,22 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def encode_image_bytes(image: np.ndarray, codec: str, quality: int) -> bytes:
-    """[3, H, W] float in [0, 1] -> compressed bytes (Pillow; AVIF tuned like the baseline)."""
-    from PIL import Image
+    """[3, H, W] float in [0, 1] -> the codec's wire bytes (``semcodec.IMAGE_CODECS``, the
+    baseline's settings, container stripped)."""
+    from semcodec.image_codecs import encode_image
 
-    im = Image.fromarray(np.clip(np.round(image.transpose(1, 2, 0) * 255), 0, 255).astype(np.uint8))
-    buf = io.BytesIO()
-    im.save(
-        buf, format={"avif": "AVIF", "jpeg": "JPEG", "webp": "WEBP"}[codec], quality=int(quality)
-    )
-    return buf.getvalue()
+    return encode_image(image, codec, int(quality))
 
 
-def decode_image_bytes(data: bytes, shape) -> np.ndarray | None:
-    from PIL import Image
+def decode_image_bytes(data: bytes, shape, codec: str) -> np.ndarray | None:
+    """Wire bytes -> [3, H, W] float32, or None when undecodable (a lost image)."""
+    from semcodec.image_codecs import decode_wire
 
     try:
-        im = Image.open(io.BytesIO(data)).convert("RGB")
-        arr = np.asarray(im, np.float32).transpose(2, 0, 1) / 255.0
-    except Exception:  # noqa: BLE001 - undecodable bytes are a lost image, not a crash
+        arr = decode_wire(data, codec, shape[1], shape[2])
+    except ValueError:
         return None
-    return arr if arr.shape == tuple(shape) else None
+    return np.asarray(arr, np.float32).transpose(2, 0, 1) / 255.0
 
 
 # ----------------------------------------------------------------------------- devices
@@ -324,7 +325,7 @@ def digital_receive(result, chunks, images, args, cfg):
                 got.append(r.payload)
             else:
                 ok_all, failed = False, failed + 1
-        decoded = decode_image_bytes(b"".join(got), img.shape) if ok_all else None
+        decoded = decode_image_bytes(b"".join(got), img.shape, args.image_codec) if ok_all else None
         shown = decoded if decoded is not None else np.full_like(img, 0.5)
         out.append(
             {
@@ -379,8 +380,13 @@ def run(args: argparse.Namespace) -> int:
         raise _usage(f"--size must be in [8, 1024] px, got {args.size}")
     if args.max_images < 1:
         raise _usage(f"--max-images must be >= 1, got {args.max_images}")
-    if not 1 <= args.quality <= 100:
-        raise _usage(f"--quality must be in [1, 100], got {args.quality}")
+    from semcodec.image_codecs import IMAGE_CODECS
+
+    qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
+    if not max(qlo, 1) <= args.quality <= qhi:
+        raise _usage(
+            f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
+        )
     if args.max_overruns < 0:
         raise _usage(f"--max-overruns must be >= 0, got {args.max_overruns}")
     device_kinds(args)

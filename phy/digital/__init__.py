@@ -3,6 +3,7 @@
 ``import phy.digital`` is cheap: sionna is imported on the first encode or decode.
 """
 
+from phy.digital.bler import codeword_errors
 from phy.digital.chain import (
     DEFAULT_NUM_ITER,
     DigitalResult,
@@ -28,6 +29,7 @@ __all__ = [
     "MCS_TABLE",
     "CodewordLayout",
     "DigitalResult",
+    "codeword_errors",
     "codeword_layout",
     "decode_symbols",
     "encode_bytes",

@@ -179,3 +179,17 @@ def test_bad_input_one_line_errors():
     with pytest.raises(KeyError, match="mcs must be one of") as e:
         decode_symbols(x, 0.1, "nope", 5)
     assert "\n" not in str(e.value)
+
+
+def test_codeword_errors_waterfall_and_arguments():
+    from phy.digital import codeword_errors
+
+    link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
+    g = torch.Generator().manual_seed(0)
+    # qpsk-1/2 needs about 1 dB (Es/N0) for 50 % codeword errors at E = 960
+    assert not codeword_errors("qpsk-1/2", 960, link, 5.0, 20, generator=g).any()
+    assert codeword_errors("qpsk-1/2", 960, link, -3.0, 20, generator=g).all()
+    with pytest.raises(ValueError, match="multiple of 4"):
+        codeword_errors("16qam-1/2", 962, link, 5.0, 2)
+    with pytest.raises(ValueError, match="no room for the CRC"):
+        codeword_errors("qpsk-1/3", 60, link, 5.0, 2)

@@ -33,7 +33,7 @@ def test_budget_bisection_is_maximal(codec):
     budget = 600
     data, q = encode_to_budget(x, budget, codec)
     assert data is not None and len(data) <= budget
-    hi = IMAGE_CODECS[codec][2]
+    hi = IMAGE_CODECS[codec].quality_range[1]
     if q < hi:  # the next quality would not fit
         assert len(encode_image(x, codec, q + 1)) > budget
     assert encode_to_budget(x, 10, codec) == (None, None)

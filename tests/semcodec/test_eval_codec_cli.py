@@ -134,3 +134,64 @@ def test_train_codec_resumes(image_dir, tmp_path):
     from semcodec import load_codec
 
     assert load_codec(out / "last.safetensors").card["training"]["steps"] == second["steps"]
+
+
+def test_draws_give_mean_and_interval_and_the_genie_is_a_bound(image_dir, tmp_path, tiny_ckpt):
+    out = tmp_path / "draws.json"
+    argv = ["eval-codec", "--images", str(image_dir), "--channel", "rayleigh", "--draws", "3"]
+    argv += ["--snr-db", "4", "--schemes", "jscc,digital,digital_genie", "--no-lpips"]
+    argv += ["--checkpoint", str(tiny_ckpt), "--out", str(out)]
+    assert main(argv) == 0
+    doc = json.loads(out.read_text())
+    assert doc["config"]["draws"] == 3 and "Student-t" in doc["config"]["interval"]
+    assert "perfect CSI" in doc["config"]["receiver"]
+    rows = {r["scheme"]: r for r in doc["results"]}
+    for r in rows.values():
+        flat = [v for row in r["psnr_per_draw"] for v in row]
+        assert len(r["psnr_per_draw"]) == 2 and len(flat) == 6
+        assert r["psnr"] == pytest.approx(np.mean(flat))
+        lo, hi = r["psnr_ci95"]
+        assert lo <= r["psnr"] <= hi
+    assert rows["digital_genie"]["bound"] and "digital_genie" in doc["config"]["bounds"]
+    assert rows["digital"]["mcs_choice"] == "auto" and "rayleigh" in rows["digital"]["calibration"]
+    assert set(rows["digital"]["views_lost"]) == {"budget", "channel"}
+    assert len(rows["digital"]["mcs_used"]) == 1  # one MCS for every draw at one SNR
+    honest = np.array(rows["digital"]["psnr_per_draw"])
+    genie = np.array(rows["digital_genie"]["psnr_per_draw"])
+    assert (genie >= honest - 1e-9).all()  # same draws (common random numbers)
+
+
+def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeypatch):
+    import semcodec.codec
+    import semcodec.evaluation
+
+    def boom(*a, **k):
+        raise AssertionError("work started")
+
+    monkeypatch.setattr(semcodec.codec, "load_codec", boom)
+    monkeypatch.setattr(semcodec.evaluation, "load_image_folder", boom)
+    for n in ("0", "-2"):
+        _bad(tmp_path, "--draws", n, images=image_dir)
+        assert f"--draws must be >= 1, got {n}" in capsys.readouterr().err
+
+
+def test_unknown_channel_lists_the_known_ones(image_dir, tmp_path, capsys):
+    _bad(tmp_path, "--channel", "mars", images=image_dir)
+    err = capsys.readouterr().err
+    assert "unknown channel 'mars'" in err and "rayleigh_fast" in err and "tdl" in err
+
+
+def test_checkpoint_for_another_snr_range_is_refused_naming_both(image_dir, tmp_path, capsys):
+    import dataclasses
+
+    from semcodec import JSCCModel, make_model, save_checkpoint
+
+    cfg = dataclasses.replace(make_model("adjscc_s4_w64").cfg, snr_min_db=5.0, snr_max_db=20.0)
+    ck = tmp_path / "high.safetensors"
+    save_checkpoint(ck, JSCCModel(cfg), {"name": "high-snr"})
+    out = tmp_path / "bad.json"
+    argv = ["eval-codec", "--images", str(image_dir), "--snr-db", "1,10", "--schemes", "jscc"]
+    rc = main([*argv, "--checkpoint", str(ck), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2 and not out.exists()
+    assert "[1, 10] dB" in err and "[5, 20] dB" in err and "high-snr" in err

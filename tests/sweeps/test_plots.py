@@ -244,3 +244,16 @@ def test_plot_cli(tmp_path, capsys):
     assert "holds no finished points" in capsys.readouterr().err
     assert not (tmp_path / "e").exists()
     json.dumps(result_rows([_eval_record(1, 0, 1.0, 2.0)]))  # rows are plain JSON
+
+
+def test_bounds_are_labelled_and_rayleigh_anchors_sit_beside_fast_fading():
+    rows = [
+        {"scheme": s, "snr_db": v, "psnr": p, "channel": "rayleigh_fast"}
+        for s, p in (("digital", 25.0), ("digital_genie", 27.0), ("ideal", 30.0))
+        for v in (1.0, 4.0)
+    ]
+    ax = plot_quality_vs_snr(rows, "psnr", anchors=True).axes[0]
+    labels = [ln.get_label() for ln in ax.get_lines()]
+    assert "digital" in labels and "digital_genie (bound)" in labels and "ideal (bound)" in labels
+    assert any("WITT [Kodak, rayleigh_fast" in s for s in labels)
+    assert "rayleigh" not in ANCHORS  # block fading has no published counterpart
