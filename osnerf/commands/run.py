@@ -84,10 +84,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--mcs",
-        default="envelope",
-        choices=("envelope", *MCS_TABLE),
+        default="auto",
+        choices=("auto", *MCS_TABLE),
         metavar="MCS",
-        help=f"digital baseline MCS: envelope or one of {', '.join(MCS_TABLE)} (default envelope)",
+        help="the digital scheme's MCS: auto (from the average SNR alone, no CSI at the "
+        f"transmitter; default) or a fixed one of {', '.join(MCS_TABLE)}; digital_genie is the "
+        "bound that knows each draw",
     )
     p.add_argument(
         "--image-codec",

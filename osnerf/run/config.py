@@ -39,7 +39,8 @@ class RunConfig:
         num_train_views, num_test_views: drone views captured and held out.
         symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
         codec, receiver_codec: codec checkpoints (None = semcodec's default; the same).
-        mcs: digital baseline MCS: "envelope" or a phy.digital.MCS_TABLE name.
+        mcs: the digital scheme's MCS: "auto" (from the average SNR, no CSI at the
+            transmitter) or a fixed phy.digital.MCS_TABLE name.
         image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).
         render_spp: Mitsuba samples per pixel.
         nerf_clock: what ``max_seconds`` counts: "wall" or "cpu".
@@ -60,7 +61,7 @@ class RunConfig:
     symbol_rate_hz: float = 1e6
     codec: str | None = None
     receiver_codec: str | None = None
-    mcs: str = "envelope"
+    mcs: str = "auto"
     image_codec: str = "avif"
     render_spp: int = 32
     nerf_clock: str = "wall"
@@ -106,9 +107,9 @@ class RunConfig:
         from phy.digital import MCS_TABLE
         from semcodec.image_codecs import IMAGE_CODECS
 
-        if self.mcs != "envelope" and self.mcs not in MCS_TABLE:
+        if self.mcs != "auto" and self.mcs not in MCS_TABLE:
             raise ValueError(
-                f"mcs must be 'envelope' or one of {', '.join(MCS_TABLE)}, got {self.mcs!r}"
+                f"mcs must be 'auto' or one of {', '.join(MCS_TABLE)}, got {self.mcs!r}"
             )
         if self.image_codec not in IMAGE_CODECS:
             raise ValueError(

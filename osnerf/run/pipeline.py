@@ -126,7 +126,8 @@ def transmit(
         )
         pixels = col.images if scheme.object_routed else views.images[[p.view for p in plans]]
         images = torch.from_numpy(np.ascontiguousarray(pixels)).permute(0, 3, 1, 2).float()
-        gen = torch.Generator().manual_seed(scheme_seed(ctx.config.seed, scheme.name))
+        seed = scheme_seed(ctx.config.seed, scheme.seed_name or scheme.name)
+        gen = torch.Generator().manual_seed(seed)
         tx = scheme.transmit(ctx, plans, images, gen)
         arrays = {"images": tx.images.numpy(), "symbols": tx.symbols}
         if tx.rx_masks is not None:

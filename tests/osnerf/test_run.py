@@ -70,7 +70,7 @@ def test_knowledge_base_mismatch_is_refused(env, tmp_path, capsys):
 
 def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     out = tmp_path / "tiny"
-    schemes = "jscc,digital,full,gt"
+    schemes = "jscc,digital,digital_genie,full,gt"
     assert (
         _run(env, out, "--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3")
         == 0
