@@ -1,0 +1,293 @@
+"""Preamble detection with processing gain: the search for frames in a capture.
+
+The sync preamble (:mod:`phy.frame`) is K segments of one base sequence ``b`` of L samples
+under a +-1 cover code ``s``. One correlation per sample, ``c[d] = sum_m r[d+m] conj(b[m])``,
+gives every segment's correlation ``c[d + k L]``. Two statistics use them:
+
+* **Search** (every sample, CFO-proof): the differential sum
+  ``D[d] = sum_k s_k s_{k+1} c[d+(k+1)L] conj(c[d+kL])``. A CFO rotates every term by the
+  same ``exp(2j pi f L)``, so ``|D|`` does not care; the cover code makes it peak only at the
+  true alignment. Normalised by its noise-only variance,
+  ``S = |D|^2 / ((K - 1) (L sigma^2)^2)`` with ``sigma^2`` the window's mean power, it is
+  about Exp(1) in noise (a sum of K - 1 uncorrelated products, slightly heavier-tailed);
+  samples with ``S > SEARCH_THRESHOLD`` become candidates.
+* **Decision** (candidates only): the coherent metric over CFO hypotheses,
+  ``Q(d, f) = |sum_k s_k exp(-2j pi f k L) c[d + kL]|^2 / (N E[d])`` with ``E[d]`` the energy of
+  the N = K L samples of the window: the fraction of that energy along the preamble at CFO f
+  (a zero-padded FFT across segments evaluates every f in +-1/(2L) cycles per sample). In
+  white Gaussian noise Q ~ Beta(1, N - 1) exactly, whatever the noise level:
+  ``Pfa = (1 - t)^(N - 1)`` (:func:`pfa_coherent`); with a preamble at per-sample SNR rho
+  along the hypothesis, ``Q > t`` is a noncentral F event (:func:`pd_coherent`).
+
+The coarse CFO is the best hypothesis (parabolic interpolation between bins), refined by the
+phase between the two halves of the preamble; timing is the earliest lag (first arriving
+path) within the prefix before the strongest one whose Q is a fair share of the peak.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+from scipy import stats
+
+SEARCH_THRESHOLD = 11.0  # S above this is a candidate: about 1e-4 per sample in noise
+_OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
+_SPAN = 8  # lags either side of the search peak where Q is evaluated
+_CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
+_POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
+_PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
+_PATH_PFA = 1e-6  # ... and Q above noise at this false-alarm rate
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detected preamble.
+
+    Attributes:
+        start: first sample of the sync preamble (first arriving path).
+        cfo: carrier-frequency offset, subcarrier spacings.
+        metric: the coherent metric Q at the strongest path, in [0, 1].
+    """
+
+    start: int
+    cfo: float
+    metric: float
+
+
+def pfa_coherent(threshold: float, num_samples: int) -> float:
+    """P(Q > t) in noise alone for one lag and CFO hypothesis: Q ~ Beta(1, N - 1)."""
+    return float((1.0 - threshold) ** (num_samples - 1))
+
+
+def threshold_for_pfa(pfa: float, num_samples: int) -> float:
+    """The t with ``pfa_coherent(t, N) == pfa``."""
+    return float(1.0 - pfa ** (1.0 / (num_samples - 1)))
+
+
+def pd_coherent(threshold: float, num_samples: int, snr: float) -> float:
+    """P(Q > t) with a preamble at per-sample SNR ``snr`` (linear) along the hypothesis.
+
+    ``Q = X1 / (X1 + X2)``, ``X1 ~ ncx2(2, 2 N snr)``, ``X2 ~ chi2(2 (N - 1))``, so
+    ``Q > t`` iff ``(X1 / 2) / (X2 / (2 (N - 1))) > (N - 1) t / (1 - t)``: a noncentral F.
+    """
+    n = int(num_samples)
+    f = (n - 1) * threshold / (1.0 - threshold)
+    return float(stats.ncf.sf(f, 2, 2 * (n - 1), 2 * n * snr))
+
+
+def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """c[d] = sum_m r[d+m] conj(base[m]). [num_samples] -> [num_samples - L + 1] complex64.
+
+    Long inputs go through one matrix product: with ``r`` as rows of L samples, output
+    ``c[q L + p]`` is row q (from column p) and row q + 1 (up to column p) against the
+    shifted base, so ``c = [rows q | rows q + 1] @ M`` for a fixed [2L, L] matrix M.
+    """
+    seg = base.size
+    r = np.asarray(r, np.complex64)
+    q = r.size // seg
+    if q < 64:
+        return np.correlate(r, base.astype(np.complex64), mode="valid")
+    rows = r[: q * seg].reshape(q, seg)
+    head = (np.concatenate([rows[:-1], rows[1:]], axis=1) @ _shift_matrix(base)).reshape(-1)
+    tail = np.correlate(r[(q - 1) * seg :], base.astype(np.complex64), mode="valid")
+    return np.concatenate([head, tail])
+
+
+def _shift_matrix(base: np.ndarray) -> np.ndarray:
+    """[2L, L] complex64: column p holds conj(base) starting at row p."""
+    seg = base.size
+    m = np.zeros((2 * seg, seg), np.complex64)
+    for p in range(seg):
+        m[p : p + seg, p] = np.conj(base)
+    return m
+
+
+@functools.lru_cache(maxsize=16)
+def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(base [L] complex64, cover [K], comb spectrum [block] complex64, block): the
+    differential comb ``g[kL] = s_k s_{k+1}`` in the frequency domain for overlap-save."""
+    from phy.frame import sync_sequence
+
+    base, cover = sync_sequence(cfg)
+    seg, k = cfg.sync_segment_length, cfg.num_sync_segments
+    g = np.zeros((k - 2) * seg + 1)
+    g[::seg] = cover[1:] * cover[:-1]
+    block = 1 << max(13, math.ceil(math.log2(4 * g.size)))
+    spec = np.conj(scipy.fft.fft(g.astype(np.complex64), block))
+    return base.astype(np.complex64), cover, spec.astype(np.complex64), block
+
+
+def _comb_correlate(w: np.ndarray, spec: np.ndarray, block: int, taps: int) -> np.ndarray:
+    """``out[d] = sum_j w[d + j] g[j]`` (valid part) by overlap-save; ``spec = conj(FFT(g))``."""
+    hop = block - taps + 1
+    nout = w.size - taps + 1
+    nb = -(-nout // hop)
+    wp = np.zeros(nb * hop + taps - 1, np.complex64)
+    wp[: w.size] = w
+    frames = np.lib.stride_tricks.sliding_window_view(wp, block)[::hop][:nb]  # [nb, block]
+    out = scipy.fft.ifft(scipy.fft.fft(frames, axis=-1) * spec[None, :], axis=-1)
+    return out[:, :hop].reshape(-1)[:nout]
+
+
+def search_metric(r: np.ndarray, cfg) -> np.ndarray:
+    """The normalised differential statistic S[d] for every preamble start d.
+
+    The noise level is the mean of ``|c|^2`` over the window, taken over blocks of
+    ``_POWER_BLOCK`` lags (a CFAR normaliser of in-band power, so coloured signals such as
+    OFDM data normalise like white noise; the decision uses the exact window energy).
+
+    Args:
+        r: [num_samples] complex64.
+    Returns:
+        [num_samples - N + 1] float32 (empty when the capture is shorter than N).
+    """
+    _, power, var = _search(r, cfg)
+    return power / np.repeat(var, _POWER_BLOCK)[: power.size]
+
+
+def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(c [num_samples - L + 1], |D|^2 [num_samples - N + 1], noise-only variance of D per
+    block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)])."""
+    base, cover, spec, block = _search_plan(cfg)
+    seg, k = base.size, cover.size
+    n = seg * k
+    c = segment_correlation(r, base)
+    if r.size < n:
+        return c, np.zeros(0, np.float32), np.ones(0, np.float32)
+    w = c[seg:] * np.conj(c[:-seg])  # [num_samples - 2L + 1]: neighbouring segments
+    d = _comb_correlate(w, spec, block, (k - 2) * seg + 1)  # [num_samples - N + 1]
+    power = d.real * d.real + d.imag * d.imag
+    nb = -(-power.size // _POWER_BLOCK)
+    per = n // _POWER_BLOCK
+    p = c.real * c.real + c.imag * c.imag
+    pb = np.zeros((nb + per) * _POWER_BLOCK, np.float32)
+    pb[: p.size] = p
+    cs = np.concatenate([[0.0], np.cumsum(pb.reshape(nb + per, -1).sum(1, dtype=np.float64))])
+    level = (cs[per : per + nb] - cs[:nb]) / n  # mean |c|^2 over each block's window
+    return c, power, ((k - 1) * np.maximum(level, 1e-30) ** 2).astype(np.float32)
+
+
+def coherent_metric(
+    c: np.ndarray, energy: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Q(d, f) at the given lags over the CFO hypotheses of a zero-padded FFT across segments.
+
+    Args:
+        c: segment correlations (:func:`segment_correlation`) covering ``lags + N - L``.
+        energy: [num_lags] window energies ``E[d]`` of the lags.
+        lags: [num_lags] int preamble starts (indices into ``c``).
+        cover: [K] the cover code; seg: L.
+    Returns:
+        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex),
+        bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
+    """
+    k = cover.size
+    v = c[lags[:, None] + seg * np.arange(k)[None, :]] * cover[None, :]  # [num_lags, K]
+    spec = scipy.fft.fft(v, _OVERSAMPLE * k, axis=-1)
+    q = (spec.real**2 + spec.imag**2) / (k * seg * np.maximum(energy, 1e-30))[:, None]
+    return q, spec
+
+
+def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
+    """Coarse CFO (cycles/sample) from the best bin, parabolic interpolation on |spec|."""
+    m = spec_row.size
+    a, b, c = (abs(spec_row[(v_bin + j) % m]) for j in (-1, 0, 1))
+    den = a - 2 * b + c
+    delta = 0.5 * (a - c) / den if den < 0 else 0.0
+    f = ((v_bin + delta) / m + 0.5) % 1.0 - 0.5  # cycles per segment
+    return f / seg
+
+
+def _segment_sums(c: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int, f: float):
+    """[num_lags, K] cover-removed segment correlations, CFO f (cycles/sample) removed."""
+    k = cover.size
+    rot = cover * np.exp(-2j * np.pi * f * seg * np.arange(k))
+    return c[lags[:, None] + seg * np.arange(k)[None, :]] * rot[None, :]
+
+
+def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
+    """Stage two around the search peak ``d1`` (indices into ``x`` and ``c``).
+
+    Returns (start, cfo subcarriers, Q at the strongest path) or None.
+    """
+    seg, k = cfg.sync_segment_length, cfg.num_sync_segments
+    n = seg * k
+    look = cfg.cp_length - cfg.backoff
+    lo = max(0, d1 - _SPAN - look)
+    hi = min(x.size - n, d1 + _SPAN)
+    if hi < max(lo, d1 - _SPAN):
+        return None
+    e = x[lo : hi + n]
+    cs = np.concatenate([[0.0], np.cumsum(e.real.astype(np.float64) ** 2 + e.imag**2)])
+    energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
+    lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
+    q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    i, j = np.unravel_index(int(np.argmax(q)), q.shape)
+    q_peak = float(q[i, j])
+    if q_peak <= cfg.detection_threshold:
+        return None
+    peak = int(lags[i])
+    f = _cfo_cycles(spec[i], int(j), seg)
+    # fine CFO: the phase between the preamble's halves once the coarse f is removed
+    v = _segment_sums(c, np.array([peak]), cover, seg, f)[0]
+    h = k // 2
+    f += float(np.angle(v[h : 2 * h].sum() * np.conj(v[:h].sum()))) / (2 * np.pi * h * seg)
+    cfo = f * cfg.fft_size
+    if abs(cfo) > cfg.max_cfo_subcarriers:
+        return None
+    # first arriving path: the earliest lag within the prefix before the peak whose Q at f
+    # is a fair share of the peak's and above noise
+    early = np.arange(max(lo, peak - look), peak + 1)
+    qf = np.abs(_segment_sums(c, early, cover, seg, f).sum(axis=1)) ** 2
+    qf /= n * np.maximum(energy[early - lo], 1e-30)
+    floor = max(_PATH_FRACTION * q_peak, threshold_for_pfa(_PATH_PFA, n))
+    start = int(early[np.flatnonzero(qf >= floor)[0]]) if np.any(qf >= floor) else peak
+    return start, cfo, q_peak
+
+
+def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
+    """Every sync preamble in ``r`` (DC already removed), ascending.
+
+    Args:
+        r: [num_samples] complex64.
+        cfg: :class:`phy.FrameConfig`.
+    Returns:
+        list of :class:`Detection`; starts at least ``cfg.sync_length`` apart.
+    """
+    _, cover, _, _ = _search_plan(cfg)
+    n = cfg.sync_length
+    margin = _SPAN + cfg.cp_length
+    found: list[Detection] = []
+    for a in range(0, max(r.size - n + 1, 0), _CHUNK):
+        s0 = max(0, a - margin)  # the chunk searches lags [a, a + _CHUNK)
+        x = r[s0 : a + _CHUNK + n - 1 + _SPAN]
+        c, power, var = _search(x, cfg)
+        lo, hi = a - s0, min(a - s0 + _CHUNK, power.size)
+        if hi <= lo:
+            continue
+        blocks = -(-power.size // _POWER_BLOCK)
+        pw = np.zeros(blocks * _POWER_BLOCK, np.float32)
+        pw[: power.size] = power
+        over = pw.reshape(blocks, -1) > (SEARCH_THRESHOLD * var)[:, None]
+        hit = np.flatnonzero(over.reshape(-1)[lo:hi]) + lo
+        if hit.size == 0:
+            continue
+        breaks = np.flatnonzero(np.diff(hit) > n) + 1
+        for h in np.split(hit, breaks):
+            # the cluster's peak by |D| (a normalised S also peaks where the window holds
+            # the first samples of a strong frame after silence)
+            d1 = int(h[np.argmax(power[h])])
+            got = _confirm(x, c, d1, cfg, cover)
+            if got is None:
+                continue
+            det = Detection(got[0] + s0, got[1], got[2])
+            if found and det.start - found[-1].start < n:
+                if det.metric > found[-1].metric:
+                    found[-1] = det
+                continue
+            found.append(det)
+    return found
