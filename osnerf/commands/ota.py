@@ -285,10 +285,7 @@ def jscc_receive(result, encs, codec, images):
         x_hat, nv = result.blocks[b]  # zero-forced symbols, their effective noise variance
         snr = result.snr_db_measured(b)
         snr_in = float(np.clip(snr if snr is not None else 0.0, *codec.snr_range_db))
-        # a version-2 codec weighs every symbol by its reliability; version 1 was trained on
-        # symbols as received (per-symbol LMMSE shrinkage costs it 1-2 dB on multipath)
-        per_symbol = bool(getattr(codec.model.cfg, "decoder_reliability", False))
-        nv_in = torch.from_numpy(nv)[None] if per_symbol else None
+        nv_in = torch.from_numpy(nv)[None]  # faded carriers and lost frames weigh less
         rec = codec.decode(torch.from_numpy(x_hat)[None], enc.meta, snr_in, noise_var=nv_in)
         rec = rec[0].numpy()
         out.append(
