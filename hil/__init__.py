@@ -8,6 +8,7 @@ May import ``phy`` only. Public names::
     open_loopback, loopback_pair  the same driver without USB
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf   over-the-air bursts in phy's frames
+    decode_capture                a recorded capture decoded again, offline
     HilError and subclasses
 """
 
@@ -34,7 +35,15 @@ from hil.errors import (
 from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
-from hil.ota import BurstResult, FrameReport, OtaConfig, PhyFrames, save_sigmf, send_blocks
+from hil.ota import (
+    BurstResult,
+    FrameReport,
+    OtaConfig,
+    PhyFrames,
+    decode_capture,
+    save_sigmf,
+    send_blocks,
+)
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 
@@ -45,6 +54,7 @@ __all__ = [
     "OtaConfig",
     "PhyFrames",
     "save_sigmf",
+    "decode_capture",
     "send_blocks",
     "Annotation",
     "ControlRequest",

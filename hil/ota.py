@@ -424,6 +424,36 @@ def receive_burst(
     return list(zip(x_hats, nvs))
 
 
+def _default_frames(cfg: OtaConfig) -> PhyFrames:
+    return PhyFrames(
+        sample_rate_hz=cfg.sample_rate_hz,
+        detection_threshold=cfg.detection_threshold,
+        # a HackRF derives its LO and sample clock from one crystal: the receiver takes the
+        # sampling-clock offset from the CFO, which stays exact at -10 dB
+        carrier_freq_hz=cfg.center_freq_hz,
+    )
+
+
+def decode_capture(capture, block_sizes: list, cfg: OtaConfig | None = None, frames=None):
+    """Decode a recorded capture again, offline (e.g. the RX SigMF file of a run): the same
+    receiver as :func:`send_blocks`, given only the symbols per block that were sent (the
+    burst's layout follows from them).
+
+    Args:
+        capture: [num_samples] complex64, full scale 1.0 (``hil.read_sigmf(path).samples``).
+        block_sizes: symbols of each block sent, in order.
+    Returns:
+        :class:`BurstResult` (its ``burst`` is the layout's zero-payload rebuild).
+    """
+    cfg = cfg or OtaConfig()
+    frames = frames or _default_frames(cfg)
+    zeros = [np.zeros(int(n), np.complex64) for n in block_sizes]
+    burst, reports, layout = build_burst(zeros, cfg, frames)
+    capture = np.asarray(capture, np.complex64).reshape(-1)
+    received = receive_burst(capture, reports, layout, list(block_sizes), cfg, frames)
+    return BurstResult(received, reports, burst, capture)
+
+
 def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None) -> BurstResult:
     """Send symbol blocks from ``tx`` to ``rx`` (HackRFs, real, emulated or loopback).
 
@@ -436,13 +466,7 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
         :class:`BurstResult`.
     """
     cfg = cfg or OtaConfig()
-    frames = frames or PhyFrames(
-        sample_rate_hz=cfg.sample_rate_hz,
-        detection_threshold=cfg.detection_threshold,
-        # a HackRF derives its LO and sample clock from one crystal: the receiver takes the
-        # sampling-clock offset from the CFO, which stays exact at -10 dB
-        carrier_freq_hz=cfg.center_freq_hz,
-    )
+    frames = frames or _default_frames(cfg)
     for dev in (tx, rx):
         _configure(dev, cfg)
     burst, reports, layout = build_burst(blocks, cfg, frames)
