@@ -34,7 +34,8 @@ import numpy as np
 import scipy.fft
 from scipy import stats
 
-SEARCH_THRESHOLD = 11.0  # S above this is a candidate: about 1e-4 per sample in noise
+SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
+# a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
 _SPAN = 8  # lags either side of the search peak where Q is evaluated
 _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
@@ -82,23 +83,30 @@ def pd_coherent(threshold: float, num_samples: int, snr: float) -> float:
 def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
     """c[d] = sum_m r[d+m] conj(base[m]). [num_samples] -> [num_samples - L + 1] complex64.
 
-    Long inputs go through one matrix product: with ``r`` as rows of L samples, output
+    Long inputs go through matrix products: with ``r`` as rows of L samples, output
     ``c[q L + p]`` is row q (from column p) and row q + 1 (up to column p) against the
-    shifted base, so ``c = [rows q | rows q + 1] @ M`` for a fixed [2L, L] matrix M.
+    shifted base, so ``c = rows[:-1] @ M_top + rows[1:] @ M_bottom`` for a fixed [2L, L] M.
     """
     seg = base.size
     r = np.asarray(r, np.complex64)
+    b64 = np.asarray(base, np.complex64)
     q = r.size // seg
     if q < 64:
-        return np.correlate(r, base.astype(np.complex64), mode="valid")
+        return np.correlate(r, b64, mode="valid")
+    m = _shift_matrix(b64.tobytes())
     rows = r[: q * seg].reshape(q, seg)
-    head = (np.concatenate([rows[:-1], rows[1:]], axis=1) @ _shift_matrix(base)).reshape(-1)
-    tail = np.correlate(r[(q - 1) * seg :], base.astype(np.complex64), mode="valid")
-    return np.concatenate([head, tail])
+    out = np.empty(r.size - seg + 1, np.complex64)
+    head = out[: (q - 1) * seg].reshape(q - 1, seg)
+    np.matmul(rows[:-1], m[:seg], out=head)
+    head += rows[1:] @ m[seg:]
+    out[(q - 1) * seg :] = np.correlate(r[(q - 1) * seg :], b64, mode="valid")
+    return out
 
 
-def _shift_matrix(base: np.ndarray) -> np.ndarray:
+@functools.lru_cache(maxsize=8)
+def _shift_matrix(base_bytes: bytes) -> np.ndarray:
     """[2L, L] complex64: column p holds conj(base) starting at row p."""
+    base = np.frombuffer(base_bytes, np.complex64)
     seg = base.size
     m = np.zeros((2 * seg, seg), np.complex64)
     for p in range(seg):
@@ -126,11 +134,19 @@ def _comb_correlate(w: np.ndarray, spec: np.ndarray, block: int, taps: int) -> n
     hop = block - taps + 1
     nout = w.size - taps + 1
     nb = -(-nout // hop)
-    wp = np.zeros(nb * hop + taps - 1, np.complex64)
-    wp[: w.size] = w
-    frames = np.lib.stride_tricks.sliding_window_view(wp, block)[::hop][:nb]  # [nb, block]
-    out = scipy.fft.ifft(scipy.fft.fft(frames, axis=-1) * spec[None, :], axis=-1)
-    return out[:, :hop].reshape(-1)[:nout]
+    full = max(0, min(nb, (w.size - block) // hop + 1))  # blocks that lie inside w
+    parts = [np.lib.stride_tricks.sliding_window_view(w, block)[::hop][:full]] if full else []
+    if full < nb:
+        tail = np.zeros(((nb - full - 1) * hop + block), np.complex64)
+        rest = w[full * hop :]
+        tail[: rest.size] = rest
+        parts.append(np.lib.stride_tricks.sliding_window_view(tail, block)[::hop][: nb - full])
+    out = []
+    for frames in parts:  # [num_blocks, block]
+        spec_w = scipy.fft.fft(frames, axis=-1)
+        spec_w *= spec[None, :]
+        out.append(scipy.fft.ifft(spec_w, axis=-1, overwrite_x=True)[:, :hop].reshape(-1))
+    return np.concatenate(out)[:nout] if len(out) > 1 else out[0][:nout]
 
 
 def search_metric(r: np.ndarray, cfg) -> np.ndarray:
@@ -158,15 +174,21 @@ def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c = segment_correlation(r, base)
     if r.size < n:
         return c, np.zeros(0, np.float32), np.ones(0, np.float32)
-    w = c[seg:] * np.conj(c[:-seg])  # [num_samples - 2L + 1]: neighbouring segments
+    w = np.conj(c[:-seg])
+    w *= c[seg:]  # [num_samples - 2L + 1]: neighbouring segments
     d = _comb_correlate(w, spec, block, (k - 2) * seg + 1)  # [num_samples - N + 1]
-    power = d.real * d.real + d.imag * d.imag
+    sq = d.view(np.float32).reshape(-1, 2)
+    np.square(sq, out=sq)
+    power = sq[:, 0] + sq[:, 1]
     nb = -(-power.size // _POWER_BLOCK)
     per = n // _POWER_BLOCK
-    p = c.real * c.real + c.imag * c.imag
-    pb = np.zeros((nb + per) * _POWER_BLOCK, np.float32)
-    pb[: p.size] = p
-    cs = np.concatenate([[0.0], np.cumsum(pb.reshape(nb + per, -1).sum(1, dtype=np.float64))])
+    cv = c.view(np.float32)
+    whole = cv.size // (2 * _POWER_BLOCK)
+    sums = np.zeros(nb + per, np.float64)
+    sums[:whole] = np.square(cv[: whole * 2 * _POWER_BLOCK]).reshape(whole, -1).sum(1)
+    if whole < sums.size:
+        sums[whole] = float(np.sum(np.square(cv[whole * 2 * _POWER_BLOCK :])))
+    cs = np.concatenate([[0.0], np.cumsum(sums)])
     level = (cs[per : per + nb] - cs[:nb]) / n  # mean |c|^2 over each block's window
     return c, power, ((k - 1) * np.maximum(level, 1e-30) ** 2).astype(np.float32)
 
@@ -269,11 +291,8 @@ def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
         lo, hi = a - s0, min(a - s0 + _CHUNK, power.size)
         if hi <= lo:
             continue
-        blocks = -(-power.size // _POWER_BLOCK)
-        pw = np.zeros(blocks * _POWER_BLOCK, np.float32)
-        pw[: power.size] = power
-        over = pw.reshape(blocks, -1) > (SEARCH_THRESHOLD * var)[:, None]
-        hit = np.flatnonzero(over.reshape(-1)[lo:hi]) + lo
+        thr = np.repeat(SEARCH_THRESHOLD * var, _POWER_BLOCK)[lo:hi]
+        hit = np.flatnonzero(power[lo:hi] > thr) + lo
         if hit.size == 0:
             continue
         breaks = np.flatnonzero(np.diff(hit) > n) + 1
