@@ -60,7 +60,9 @@ class FrameResult:
 
 def _without_dc(r: np.ndarray) -> np.ndarray:
     """Remove the capture's mean (an SDR's DC offset would make silence look periodic)."""
-    return (r - r.mean()).astype(np.complex64) if r.size else r
+    if not r.size:
+        return r
+    return r - np.complex64(_sum(r) / r.size)
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
@@ -219,8 +221,17 @@ def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
     the mean of everything."""
     outside = r.size - length
     if outside >= 256:
-        return complex((r[:start].sum() + r[start + length :].sum()) / outside)
-    return complex(r.mean())
+        total = _sum(r[:start]) + _sum(r[start + length :])
+        return total / outside
+    return _sum(r) / max(r.size, 1)
+
+
+def _sum(r: np.ndarray) -> complex:
+    """Sum of a complex64 array in float64 (on the real view: fast)."""
+    if not r.size:
+        return 0j
+    s = r.view(np.float32).reshape(-1, 2).sum(axis=0, dtype=np.float64)
+    return complex(s[0], s[1])
 
 
 def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
