@@ -227,11 +227,8 @@ def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
 
 
 def _sum(r: np.ndarray) -> complex:
-    """Sum of a complex64 array in float64 (on the real view: fast)."""
-    if not r.size:
-        return 0j
-    s = r.view(np.float32).reshape(-1, 2).sum(axis=0, dtype=np.float64)
-    return complex(s[0], s[1])
+    """Sum of a complex64 array, accumulated in complex128."""
+    return complex(r.sum(dtype=np.complex128)) if r.size else 0j
 
 
 def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
