@@ -40,15 +40,6 @@ FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
 FOCUS_REL_THRESHOLD = 0.05  # positions with >= 5 % of the peak attribution form the box
 
 
-def _per_symbol(noise_var, like: Tensor) -> Tensor:
-    """noise_var (float, [batch] or [batch, num_symbols]) -> float32 broadcastable to ``like``,
-    non-finite values (erasures) as 1e6."""
-    nv = torch.as_tensor(noise_var, dtype=torch.float32)
-    if nv.dim() == 1 and like.dim() == 2:
-        nv = nv[:, None]
-    return torch.nan_to_num(nv, nan=1e6, posinf=1e6).clamp(0.0, 1e6)
-
-
 @dataclass(frozen=True)
 class EncodedMeta:
     """What the receiver needs besides the symbols (side information).
@@ -293,17 +284,10 @@ class Codec:
         m = meta.num_channels
         c = cfg.num_complex_channels
         nv = 10.0 ** (-snr / 10.0) if noise_var is None else noise_var
-        x_hat = x_hat.to(torch.complex64)
-        if not cfg.decoder_reliability:
-            # version 1 was trained on AWGN symbols as received: a symbol at the nominal SNR
-            # goes in as it is, a noisier one (a faded carrier) is shrunk by its LMMSE factor
-            # relative to the nominal one (+1 dB over ZF symbols as received on multipath)
-            if noise_var is not None:
-                ref = (1.0 + 10.0 ** (-snr / 10.0)).reshape(-1, 1)  # [batch, 1]
-                x_hat = x_hat * (ref / (1.0 + _per_symbol(noise_var, x_hat))).to(x_hat.dtype)
-            nv = 0.0
+        if noise_var is None and not cfg.decoder_reliability:
+            nv = 0.0  # version 1 was trained on AWGN symbols as received
         try:
-            x_hat, rel = lmmse_input(x_hat, nv)
+            x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)
         except RuntimeError:
             raise ValueError(
                 f"noise_var must be a float, [batch] or [batch, num_symbols] = [{b}, {meta.num_symbols}]"

@@ -113,22 +113,3 @@ def test_fast_fading_reliability_follows_each_fade():
     want = 1 - nv * math.exp(nv) * exp1(nv)
     assert float(rel.mean()) == pytest.approx(want, abs=0.01)
     assert float(rel.std()) > 0.1  # one reliability per symbol, not per image
-
-
-def test_version_1_decoder_shrinks_only_symbols_noisier_than_nominal(tiny_codec):
-    """A v1 decoder (trained on symbols as received) fed per-symbol noise variances: at the
-    nominal noise every symbol goes in unchanged, a noisier one is scaled by the relative
-    LMMSE factor (1 + nominal) / (1 + noise_var) (the same output as scaling it by hand)."""
-    assert not tiny_codec.model.cfg.decoder_reliability
-    g = torch.Generator().manual_seed(3)
-    enc = tiny_codec.encode(torch.rand(1, 3, 32, 32, generator=g), 0.0, 1 / 16)
-    y = enc.symbols + 0.5 * torch.randn(enc.symbols.shape, generator=g, dtype=torch.complex64)
-    plain = tiny_codec.decode(y, enc.meta, 0.0)
-    nominal = torch.full(y.shape, 1.0)  # 0 dB
-    torch.testing.assert_close(tiny_codec.decode(y, enc.meta, 0.0, noise_var=nominal), plain)
-    nv = nominal.clone()
-    nv[0, ::3] = 9.0  # every third symbol on a carrier faded by 10 dB
-    by_hand = y * torch.where(nv > 1.0, 2.0 / 10.0, 1.0).to(y.dtype)
-    torch.testing.assert_close(
-        tiny_codec.decode(y, enc.meta, 0.0, noise_var=nv), tiny_codec.decode(by_hand, enc.meta, 0.0)
-    )
