@@ -94,8 +94,9 @@ class _Layout:
     k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
     x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
     counts: np.ndarray  # [num_used] observations per used carrier
-    smoothers: tuple  # (P [num_used, num_used] complex64, mse factor [num_used], dof) per
-    # candidate channel model, shortest delay window first, per-carrier LS last
+    smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
+    # [num_models, num_used], dofs [num_models]): the candidate channel models, shortest
+    # delay window first, per-carrier LS last
     smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
     pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
     d_row: np.ndarray  # [num_data_elements] row of each data element (row-major)
@@ -145,7 +146,11 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         k_flat=k_row * n + (k_col + n // 2) % n,
         x_known=x[k_row, k_col],
         counts=counts,
-        smoothers=tuple(smoothers),
+        smoothers=(
+            np.stack([m[0] for m in smoothers]),
+            np.stack([m[1] for m in smoothers]),
+            np.array([m[2] for m in smoothers], np.float64),
+        ),
         smoother_training=smoother_training.astype(np.complex64),
         pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
         d_row=d_row,
@@ -350,15 +355,13 @@ def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
         (h [fft_size] complex64 centred order, mse factor [num_used], dof).
     """
     mean = sums / lay.counts
-    best = None
-    for p_mat, factor, dof in lay.smoothers:
-        h_used = p_mat @ sums.astype(np.complex64)
-        cp = float(np.sum(lay.counts * np.abs(mean - h_used) ** 2)) + 2 * noise_var * dof
-        if best is None or cp < best[0]:
-            best = (cp, h_used, factor, dof)
+    p_mats, factors, dofs = lay.smoothers
+    h_used = p_mats @ sums.astype(np.complex64)  # [num_models, num_used]
+    cp = np.sum(lay.counts * np.abs(mean[None, :] - h_used) ** 2, axis=1) + 2 * noise_var * dofs
+    i = int(np.argmin(cp))
     h = np.zeros(lay.fft_size, np.complex64)
-    h[lay.used] = best[1]
-    return h, best[2], best[3]
+    h[lay.used] = h_used[i]
+    return h, factors[i], int(dofs[i])
 
 
 def _channel(obs: np.ndarray, lay: _Layout, smoother, training_only: bool = False) -> np.ndarray:
