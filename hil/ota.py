@@ -51,10 +51,10 @@ class OtaConfig:
             capture is longer by as many samples).
         detection_threshold: the receiver's normalised coherent preamble metric that counts
             as a frame, in (0, 1) (``phy.FrameConfig.detection_threshold``: in noise alone it
-            is Beta(1, N - 1) distributed, so the default 0.03 with the 1024-sample preamble
-            has a false-alarm probability of 3e-14 per lag and CFO hypothesis, while a
-            preamble at -10 dB per sample reaches about 0.07); false alarms that pass are
-            also rejected by the frame number's check.
+            is Beta(1, N - 1) distributed, so the default 0.015 with the 2048-sample preamble
+            has a false-alarm probability of 4e-14 per lag and CFO hypothesis, while a
+            preamble at -10 dB per sample reaches about 0.045 through the emulated boards);
+            a detection where no frame of the burst starts is dropped.
         lna_gain_db, vga_gain_db, txvga_gain_db: radio gains (quantised by the driver).
     """
 
@@ -66,7 +66,7 @@ class OtaConfig:
     gap_samples: int = 2000
     rx_margin_samples: int = 20000
     rx_lead_s: float = 0.02
-    detection_threshold: float = 0.03
+    detection_threshold: float = 0.015
     lna_gain_db: float = 16
     vga_gain_db: float = 24
     txvga_gain_db: float = 30

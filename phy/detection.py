@@ -40,6 +40,7 @@ _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
 _SPAN = 8  # lags either side of the search peak where Q is evaluated
 _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
 _POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
+_HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
 _PATH_PFA = 1e-6  # ... and Q above noise at this false-alarm rate
 
@@ -231,6 +232,17 @@ def _segment_sums(c: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int, 
     return c[lags[:, None] + seg * np.arange(k)[None, :]] * rot[None, :]
 
 
+@functools.lru_cache(maxsize=16)
+def _half_sample_base(cfg) -> np.ndarray:
+    """[L] complex64: the periodic base sequence delayed by half a sample (band-limited)."""
+    from phy.frame import sync_sequence
+
+    base, _ = sync_sequence(cfg)
+    seg = base.size
+    j = np.fft.fftfreq(seg) * seg  # signed line index
+    return np.fft.ifft(np.fft.fft(base) * np.exp(-1j * np.pi * j / seg)).astype(np.complex64)
+
+
 def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     """Stage two around the search peak ``d1`` (indices into ``x`` and ``c``).
 
@@ -248,6 +260,15 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
     lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
     q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
+    # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
+    # each Beta(1, N - 1) in noise
+    base_half = _half_sample_base(cfg)
+    c_half = segment_correlation(x[lo : hi + n], base_half)
+    q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
+    if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
+        q, spec = q_h, spec_h
+        c = np.concatenate([np.zeros(lo, np.complex64), c_half])  # index by lag again
     i, j = np.unravel_index(int(np.argmax(q)), q.shape)
     q_peak = float(q[i, j])
     if q_peak <= cfg.detection_threshold:
@@ -263,12 +284,35 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
         return None
     # first arriving path: the earliest lag within the prefix before the peak whose Q at f
     # is a fair share of the peak's and above noise
-    early = np.arange(max(lo, peak - look), peak + 1)
-    qf = np.abs(_segment_sums(c, early, cover, seg, f).sum(axis=1)) ** 2
+    # (on the region with f removed sample by sample: a CFO also rotates within segments and
+    # skews the correlation's peak by a sample at the edge of the CFO range, so the
+    # strongest path is looked for again there)
+    early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
+    region = x[early[0] : early[-1] + n]
+    rot = np.exp(-2j * np.pi * f * np.arange(region.size)).astype(np.complex64)
+    c_f = segment_correlation(region * rot, _search_plan(cfg)[0])  # timing on the grid
+    qf = np.abs(_segment_sums(c_f, early - early[0], cover, seg, 0.0).sum(axis=1)) ** 2
     qf /= n * np.maximum(energy[early - lo], 1e-30)
-    floor = max(_PATH_FRACTION * q_peak, threshold_for_pfa(_PATH_PFA, n))
-    start = int(early[np.flatnonzero(qf >= floor)[0]]) if np.any(qf >= floor) else peak
+    near = np.abs(early - peak) <= 2
+    best = int(np.flatnonzero(near)[np.argmax(qf[near])])
+    floor = max(_PATH_FRACTION * qf[best], threshold_for_pfa(_PATH_PFA, n))
+    ok = np.flatnonzero(qf[: best + 1] >= floor)
+    start = int(early[ok[0]]) if ok.size else int(early[best])
     return start, cfo, q_peak
+
+
+def _peaks(hit: np.ndarray, power: np.ndarray, width: int) -> list[int]:
+    """Candidates at ``hit`` (ascending) by non-maximum suppression: the strongest by |D|
+    (a normalised S also peaks where the window holds the first samples of a strong frame
+    after silence), then the strongest more than ``width`` away from every one taken, ...
+    (no chaining: noise candidates between two frames cannot merge them into one)."""
+    left = np.ones(hit.size, bool)
+    out = []
+    while left.any():
+        i = int(np.flatnonzero(left)[np.argmax(power[left])])
+        out.append(int(hit[i]))
+        left &= np.abs(hit - hit[i]) > width
+    return sorted(out)
 
 
 def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
@@ -295,11 +339,7 @@ def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
         hit = np.flatnonzero(power[lo:hi] > thr) + lo
         if hit.size == 0:
             continue
-        breaks = np.flatnonzero(np.diff(hit) > n) + 1
-        for h in np.split(hit, breaks):
-            # the cluster's peak by |D| (a normalised S also peaks where the window holds
-            # the first samples of a strong frame after silence)
-            d1 = int(h[np.argmax(power[h])])
+        for d1 in _peaks(hit, power[hit], n):
             got = _confirm(x, c, d1, cfg, cover)
             if got is None:
                 continue

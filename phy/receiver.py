@@ -270,7 +270,12 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
             obs = yx * rot[kr]
-            h, factor, taps = _best_channel(_carrier_sums(obs, lay), lay, noise_var)
+            sums = _carrier_sums(obs, lay)
+            # Cp's noise level from the richest model (per-carrier means): unbiased whichever
+            # model is right, so a low training-difference estimate cannot pick a noisy model
+            scatter = float(np.vdot(obs, obs).real) - float(np.sum(np.abs(sums) ** 2 / lay.counts))
+            cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
+            h, factor, taps = _best_channel(sums, lay, cp_noise)
             dof = max(kr.size - taps - lay.rows, 1)
             e = obs - h[kc]
             noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)

@@ -88,9 +88,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--detection-threshold",
         type=float,
-        default=0.03,
-        help="normalised preamble correlation that counts as a frame, in (0, 1) (default 0.03: "
-        "3e-14 false alarms per lag in noise, finds frames at -10 dB)",
+        default=0.015,
+        help="normalised preamble correlation that counts as a frame, in (0, 1) (default 0.015: "
+        "4e-14 false alarms per lag and CFO hypothesis in noise, finds frames at -10 dB)",
     )
 
 

@@ -45,7 +45,7 @@ def test_coherent_metric_in_noise_is_beta_1_n_minus_1():
         assert abs(k - pfa * lags.size) < 4 * math.sqrt(pfa * lags.size) * 1.3
 
 
-@pytest.mark.parametrize("snr_db", [-16.0, -14.0])
+@pytest.mark.parametrize("snr_db", [-19.0, -18.0])
 def test_coherent_metric_detection_probability_is_the_noncentral_f(snr_db):
     """A preamble at per-sample SNR rho, at its lag and CFO: Pd = P(Q > t) from the
     noncentral F with noncentrality 2 N rho, within 4 binomial sigmas over 2000 trials."""
@@ -64,10 +64,10 @@ def test_coherent_metric_detection_probability_is_the_noncentral_f(snr_db):
 
 
 def test_default_threshold_pd_at_minus_10_db_and_pfa():
-    """The documented operating point: Pd > 0.999 at -10 dB even with 2 dB of CFO and
-    multipath losses; Pfa per hypothesis below 1e-13."""
+    """The documented operating point: Pd > 0.9999 at -10 dB even with 3 dB of CFO,
+    multipath and ADC-clipping losses; Pfa per hypothesis below 1e-13."""
     t = CFG.detection_threshold
-    assert detection.pd_coherent(t, N, 10 ** (-12 / 10)) > 0.999
+    assert detection.pd_coherent(t, N, 10 ** (-13 / 10)) > 0.9999
     assert detection.pfa_coherent(t, N) < 1e-13
 
 

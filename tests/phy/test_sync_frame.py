@@ -49,19 +49,19 @@ def test_frame_layout_power_and_sync_repetitions():
     x = _qpsk(1000)
     t = phy.build_frame(x, CFG)
     assert t.dtype == np.complex64 and t.shape == (CFG.num_samples(1000),)
-    # sync (1024) + two training symbols + ceil(1000 / 38) data symbols (52 used - 14 pilots)
-    assert CFG.num_samples(1000) == 1024 + 2 * 80 + math.ceil(1000 / 38) * 80
+    # sync (2048) + two training symbols + ceil(1000 / 38) data symbols (52 used - 14 pilots)
+    assert CFG.num_samples(1000) == 2048 + 2 * 80 + math.ceil(1000 / 38) * 80
     assert np.sqrt(np.mean(np.abs(t) ** 2)) == pytest.approx(CFG.rms_amplitude, rel=0.03)
     assert np.abs(t).max() <= 1.0
     base, cover = phy.frame.sync_sequence(CFG)
-    segs = t[:1024].reshape(64, 16)
+    segs = t[:2048].reshape(128, 16)
     np.testing.assert_allclose(segs, np.outer(cover, base) * CFG.rms_amplitude, atol=1e-6)
     # the base sequence lives on used carriers only: nothing on DC or in the guards
     spec = np.abs(np.fft.fft(base)) ** 2
     assert spec[0] < 1e-20 and np.mean(np.abs(base) ** 2) == pytest.approx(1.0)
-    lts = t[1024 : 1024 + 80]
+    lts = t[2048 : 2048 + 80]
     np.testing.assert_allclose(lts[:16], lts[-16:], atol=1e-7)  # cyclic prefix
-    np.testing.assert_allclose(t[1024:1104], t[1104:1184], atol=1e-7)  # two equal symbols
+    np.testing.assert_allclose(t[2048:2128], t[2128:2208], atol=1e-7)  # two equal symbols
 
 
 def test_correct_cfo_removes_a_rotation():
