@@ -8,8 +8,9 @@ gives every segment's correlation ``c[d + k L]``. Two statistics use them:
   ``D[d] = sum_k s_k s_{k+1} c[d+(k+1)L] conj(c[d+kL])``. A CFO rotates every term by the
   same ``exp(2j pi f L)``, so ``|D|`` does not care; the cover code makes it peak only at the
   true alignment. Normalised by its noise-only variance,
-  ``S = |D|^2 / ((K - 1) (L sigma^2)^2)`` with ``sigma^2`` the window's mean power, it is
-  about Exp(1) in noise (a sum of K - 1 uncorrelated products, slightly heavier-tailed);
+  ``S = |D|^2 / ((K - 1) mean|w|^2)`` with ``w`` the neighbouring-segment products over
+  the window, it is about Exp(1) in noise (a sum of K - 1 uncorrelated products, slightly
+  heavier-tailed);
   samples with ``S > SEARCH_THRESHOLD`` become candidates.
 * **Decision** (candidates only): the coherent metric over CFO hypotheses,
   ``Q(d, f) = |sum_k s_k exp(-2j pi f k L) c[d + kL]|^2 / (N E[d])`` with ``E[d]`` the energy of
@@ -37,9 +38,10 @@ from scipy import stats
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
 # a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
-_SPAN = 8  # lags either side of the search peak where Q is evaluated
+_SPAN = 4  # lags either side of the search peak where Q is evaluated
 _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
 _POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
+_QUICK = 0.25  # the quick look needs this share of the detection threshold
 _HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
 _PATH_PFA = 1e-6  # ... and Q above noise at this false-alarm rate
@@ -153,9 +155,10 @@ def _comb_correlate(w: np.ndarray, spec: np.ndarray, block: int, taps: int) -> n
 def search_metric(r: np.ndarray, cfg) -> np.ndarray:
     """The normalised differential statistic S[d] for every preamble start d.
 
-    The noise level is the mean of ``|c|^2`` over the window, taken over blocks of
-    ``_POWER_BLOCK`` lags (a CFAR normaliser of in-band power, so coloured signals such as
-    OFDM data normalise like white noise; the decision uses the exact window energy).
+    The noise level is the mean of ``|w|^2`` (the neighbouring-segment products) over the
+    window, taken over blocks of ``_POWER_BLOCK`` lags (a CFAR normaliser: coloured
+    signals such as OFDM data normalise like white noise; the decision uses the exact
+    window energy).
 
     Args:
         r: [num_samples] complex64.
@@ -183,15 +186,22 @@ def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     power = sq[:, 0] + sq[:, 1]
     nb = -(-power.size // _POWER_BLOCK)
     per = n // _POWER_BLOCK
-    cv = c.view(np.float32)
-    whole = cv.size // (2 * _POWER_BLOCK)
+    # the variance of D is (K - 1) E|w|^2: estimated from w itself, block-wise (for white
+    # noise E|w|^2 = (E|c|^2)^2; OFDM data, whose tones repeat from segment to segment,
+    # has twice that, and normalising by |c|^2 would let it through 8 times as often)
+    wv = w.view(np.float32)
+    w2 = np.square(wv)
+    p = w2[0::2] + w2[1::2]  # |w|^2
+    whole = p.size // _POWER_BLOCK
     sums = np.zeros(nb + per, np.float64)
-    sums[:whole] = np.square(cv[: whole * 2 * _POWER_BLOCK]).reshape(whole, -1).sum(1)
+    sums[: min(whole, sums.size)] = (
+        p[: whole * _POWER_BLOCK].reshape(whole, -1).sum(1, dtype=np.float64)[: sums.size]
+    )
     if whole < sums.size:
-        sums[whole] = float(np.sum(np.square(cv[whole * 2 * _POWER_BLOCK :])))
+        sums[whole] = float(np.sum(p[whole * _POWER_BLOCK :], dtype=np.float64))
     cs = np.concatenate([[0.0], np.cumsum(sums)])
-    level = (cs[per : per + nb] - cs[:nb]) / n  # mean |c|^2 over each block's window
-    return c, power, ((k - 1) * np.maximum(level, 1e-30) ** 2).astype(np.float32)
+    level = (cs[per : per + nb] - cs[:nb]) / n  # mean |w|^2 over each block's window
+    return c, power, ((k - 1) * np.maximum(level, 1e-30)).astype(np.float32)
 
 
 def coherent_metric(
@@ -259,6 +269,14 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     cs = np.concatenate([[0.0], np.cumsum(e.real.astype(np.float64) ** 2 + e.imag**2)])
     energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
     lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
+    # a quick look at the search peak and its neighbours first: most noise candidates stop
+    # here (a frame's Q there is within a few dB of its peak, noise's far below threshold)
+    near = lags[np.abs(lags - d1) <= 1]
+    if (
+        coherent_metric(c, energy[near - lo], near, cover, seg)[0].max()
+        < _QUICK * cfg.detection_threshold
+    ):
+        return None
     q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
     # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
     # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
