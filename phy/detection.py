@@ -281,12 +281,12 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
     # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
     # each Beta(1, N - 1) in noise
-    base_half = _half_sample_base(cfg)
-    c_half = segment_correlation(x[lo : hi + n], base_half)
-    q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
-    if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
-        q, spec = q_h, spec_h
-        c = np.concatenate([np.zeros(lo, np.complex64), c_half])  # index by lag again
+    if q.max() < 2 * cfg.detection_threshold:  # only where the 1.3 dB can matter
+        c_half = segment_correlation(x[lo : hi + n], _half_sample_base(cfg))
+        q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
+        if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
+            q, spec = q_h, spec_h
+            c = np.concatenate([np.zeros(lo, np.complex64), c_half])  # index by lag again
     i, j = np.unravel_index(int(np.argmax(q)), q.shape)
     q_peak = float(q[i, j])
     if q_peak <= cfg.detection_threshold:
