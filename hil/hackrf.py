@@ -549,7 +549,8 @@ class HackRF:
         Args:
             num_samples: samples to return (> 0).
             save_to: SigMF path stem: the capture (``ci8``) is written there; on a fault
-                the capture so far is written and named in the raised error.
+                the capture so far is written and named in the raised error (nothing is
+                written when no sample arrived; the error says so).
             max_shortfalls: raise :class:`StreamError` when the stream counted more
                 overruns than this (None: warn only).
         Returns:
@@ -571,16 +572,24 @@ class HackRF:
                     self.stop_rx()
             except HilError:
                 pass
-            e.capture = _to_complex(partial[: len(partial) // 2 * 2])[None, :]
-            if save_to is not None:
+            partial = partial[: len(partial) // 2 * 2]
+            e.capture = _to_complex(partial)[None, :]
+            if save_to is not None and len(partial):
                 e.sigmf_path = self._save(partial, save_to, note=f"partial capture: {e}")
+            elif save_to is not None:  # SigMF cannot hold an empty recording: write nothing
+                e.args = (f"{e}; no sample arrived before it, so no capture was saved",)
             raise
         if own:
             stats = self.stop_rx()
             if max_shortfalls is not None and stats.device_shortfalls > max_shortfalls:
-                raise StreamError(
-                    f"receive: {stats.device_shortfalls} overruns (allowed {max_shortfalls})"
+                err = StreamError(
+                    f"receive: {stats.device_shortfalls} overruns (allowed {max_shortfalls}); "
+                    "samples were lost",
+                    capture=_to_complex(raw)[None, :],
                 )
+                if save_to is not None:
+                    err.sigmf_path = self._save(raw, save_to, note=f"capture with overruns: {err}")
+                raise err
         if save_to is not None:
             self._save(raw, save_to)
         return _to_complex(raw)[None, :]

@@ -56,6 +56,8 @@ class OtaConfig:
             preamble at -10 dB per sample reaches about 0.045 through the emulated boards);
             a detection where no frame of the burst starts is dropped.
         lna_gain_db, vga_gain_db, txvga_gain_db: radio gains (quantised by the driver).
+        max_rx_overruns: receive overruns (lost samples) tolerated before the capture
+            fails with :class:`hil.StreamError` (None: warn only).
     """
 
     sample_rate_hz: float = 4e6
@@ -70,10 +72,20 @@ class OtaConfig:
     lna_gain_db: float = 16
     vga_gain_db: float = 24
     txvga_gain_db: float = 30
+    max_rx_overruns: int | None = None
 
     def __post_init__(self):
+        from hil.protocol import FREQ_RANGE_HZ
+
         if not 2e6 <= self.sample_rate_hz <= 20e6:
             raise ValueError(f"sample_rate_hz must be in [2e6, 20e6], got {self.sample_rate_hz!r}")
+        lo, hi = FREQ_RANGE_HZ
+        if not lo <= self.center_freq_hz <= hi:
+            raise ValueError(
+                f"center_freq_hz must be in [{lo:g}, {hi:g}] Hz, got {self.center_freq_hz!r}"
+            )
+        if self.max_rx_overruns is not None and self.max_rx_overruns < 0:
+            raise ValueError(f"max_rx_overruns must be >= 0 or None, got {self.max_rx_overruns!r}")
         if not isinstance(self.symbols_per_frame, int) or self.symbols_per_frame < 64:
             raise ValueError(
                 f"symbols_per_frame must be an integer >= 64, got {self.symbols_per_frame!r}"
@@ -295,7 +307,12 @@ def _configure(dev, cfg: OtaConfig) -> None:
 
 
 def transmit_and_capture(
-    tx, rx, burst: np.ndarray, num_rx_samples: int, lead_s: float = 0.0
+    tx,
+    rx,
+    burst: np.ndarray,
+    num_rx_samples: int,
+    lead_s: float = 0.0,
+    max_rx_overruns: int | None = None,
 ) -> np.ndarray:
     """Capture ``num_rx_samples`` on ``rx`` (own thread) while ``tx`` sends ``burst``.
 
@@ -303,13 +320,14 @@ def transmit_and_capture(
     the virtual clock makes this irrelevant: both start at virtual time 0).
 
     Returns:
-        [num_rx_samples] complex64. Errors of either side are raised here.
+        [num_rx_samples] complex64. Errors of either side are raised here; a receive
+        error carries the capture so far as ``error.capture`` (see :func:`save_partial_capture`).
     """
     out: dict = {}
 
     def receive():
         try:
-            out["capture"] = rx.rx(num_rx_samples)
+            out["capture"] = rx.rx(num_rx_samples, max_shortfalls=max_rx_overruns)
         except BaseException as e:  # noqa: BLE001 - re-raised in the caller's thread
             out["error"] = e
 
@@ -472,11 +490,39 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
     burst, reports, layout = build_burst(blocks, cfg, frames)
     lead = int(cfg.rx_lead_s * cfg.sample_rate_hz)
     capture = transmit_and_capture(
-        tx, rx, burst, len(burst) + lead + cfg.rx_margin_samples, lead_s=cfg.rx_lead_s
+        tx,
+        rx,
+        burst,
+        len(burst) + lead + cfg.rx_margin_samples,
+        lead_s=cfg.rx_lead_s,
+        max_rx_overruns=cfg.max_rx_overruns,
     )
     sizes = [len(np.asarray(b).reshape(-1)) for b in blocks]
     received = receive_burst(capture, reports, layout, sizes, cfg, frames)
     return BurstResult(received, reports, burst, capture)
+
+
+def save_partial_capture(
+    error: HilError, stem, cfg: OtaConfig, hw: str = "HackRF One"
+) -> Path | None:
+    """Write what the receiver got before ``error`` as ci8 SigMF at ``<stem>_rx_partial``.
+
+    Sets ``error.sigmf_path``. Returns the ``.sigmf-meta`` path, or None when the error
+    carries no samples (SigMF cannot hold an empty recording).
+    """
+    capture = getattr(error, "capture", None)
+    if capture is None or np.asarray(capture).size == 0:
+        return None
+    stem = Path(stem)
+    error.sigmf_path = write_sigmf(
+        stem.with_name(stem.name + "_rx_partial"),
+        np.asarray(capture).reshape(-1),
+        sample_rate_hz=cfg.sample_rate_hz,
+        center_freq_hz=cfg.center_freq_hz,
+        hw=f"{hw} (RX)",
+        description=f"capture so far, stopped by: {error}",
+    )
+    return error.sigmf_path
 
 
 def save_sigmf(result: BurstResult, stem, cfg: OtaConfig, hw: str = "HackRF One") -> list[Path]:

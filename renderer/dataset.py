@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from renderer.cameras import Intrinsics
+from renderer.cameras import Intrinsics, pose_problem
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 SPLITS = ("train", "val", "test", "all")
@@ -272,14 +272,11 @@ def load_dataset(
             pose = np.asarray(f["transform_matrix"], dtype=np.float64)
         except (TypeError, ValueError) as e:
             raise ValueError(f"{path}: frames[{i}].transform_matrix is not a 4x4 matrix") from e
+        problem = pose_problem(pose) if pose.ndim == 2 else f"has shape {pose.shape}"
+        if problem:
+            raise ValueError(f"{path}: frames[{i}].transform_matrix {problem}")
         if pose.shape == (3, 4):
             pose = np.vstack([pose, [0.0, 0.0, 0.0, 1.0]])
-        if pose.shape != (4, 4):
-            raise ValueError(
-                f"{path}: frames[{i}].transform_matrix has shape {pose.shape}, expected 4x4"
-            )
-        if not np.isfinite(pose).all():
-            raise ValueError(f"{path}: frames[{i}].transform_matrix has non-finite entries")
         img_path = _resolve_image(path.parent, f["file_path"], path, i, "file_path")
         img = _read_image(img_path)
         size = img.shape[:2]

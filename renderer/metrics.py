@@ -1,7 +1,6 @@
 """Image quality of rendered views: PSNR (peak 1.0), SSIM (scikit-image, data_range=1.0),
-PSNR inside an object mask. Multi-view results are means of per-view values.
-
-LPIPS is not provided: it needs pretrained AlexNet/VGG weights that we never download.
+PSNR inside an object mask, and (on request) LPIPS-AlexNet (:mod:`renderer.perceptual`, weights
+converted at setup). Multi-view results are means of per-view values.
 """
 
 from __future__ import annotations
@@ -41,14 +40,17 @@ def masked_psnr(pred, target, mask) -> float:
     return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
 
 
-def image_metrics(preds, targets, masks=None) -> dict:
+def image_metrics(preds, targets, masks=None, with_lpips: bool = False) -> dict:
     """Mean over views of per-view PSNR and SSIM (and masked PSNR when masks are given).
 
     Args:
         preds, targets: [num_views, height, width, 3] in [0, 1].
         masks: [num_views, height, width] or None.
+        with_lpips: also LPIPS-AlexNet (:func:`renderer.lpips`; needs the converted weights
+            and views of at least 31x31 px).
     Returns:
-        {"psnr", "ssim", "num_views", "psnr_per_view", ["masked_psnr"]}: means of per-view values.
+        {"psnr", "ssim", "num_views", "psnr_per_view", ["masked_psnr"], ["lpips",
+        "lpips_per_view"]}: means of per-view values.
     """
     preds, targets = _np(preds), _np(targets)
     if preds.shape != targets.shape:
@@ -64,6 +66,12 @@ def image_metrics(preds, targets, masks=None) -> dict:
         vals = [masked_psnr(p, t, m) for p, t, m in zip(preds, targets, _np(masks))]
         vals = [v for v in vals if not math.isnan(v)]
         out["masked_psnr"] = float(np.mean(vals)) if vals else math.nan
+    if with_lpips:
+        from renderer.perceptual import lpips
+
+        per_view_lpips = [float(v) for v in lpips(preds, targets)]
+        out["lpips"] = float(np.mean(per_view_lpips))
+        out["lpips_per_view"] = per_view_lpips
     return out
 
 

@@ -146,19 +146,43 @@ def save_model(model: RadianceField, path) -> Path:
 
 
 def load_model(path) -> RadianceField:
-    """Load a model written by :func:`save_model`."""
+    """Load a model written by :func:`save_model`.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: naming the file: not a model file (corrupt, truncated, another kind of
+            file, missing or mismatched entries), or weights that are NaN / infinite.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: model file not found")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    aabb = torch.tensor(payload["aabb"])
-    spec = json.loads(json.dumps(payload["spec"]))
-    field = build_field(spec, aabb)
-    state = payload["state_dict"]
-    if isinstance(field, GridField):  # grids may have been upsampled since construction
-        field.density_grid = nn.Parameter(torch.empty_like(state["field.density_grid"]))
-        field.color_grid = nn.Parameter(torch.empty_like(state["field.color_grid"]))
-    occ = OccupancyGrid(aabb, tuple(payload["occupancy_cells"]))
-    model = RadianceField(field, occ, payload["step_m"], tuple(payload["background"]), spec)
-    model.load_state_dict(state)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        raise ValueError(
+            f"{path}: not a readable model file (corrupt or truncated? {type(e).__name__}: "
+            f"{first[:120]})"
+        ) from None
+    try:
+        aabb = torch.tensor(payload["aabb"])
+        spec = json.loads(json.dumps(payload["spec"]))
+        field = build_field(spec, aabb)
+        state = payload["state_dict"]
+        if isinstance(field, GridField):  # grids may have been upsampled since construction
+            field.density_grid = nn.Parameter(torch.empty_like(state["field.density_grid"]))
+            field.color_grid = nn.Parameter(torch.empty_like(state["field.color_grid"]))
+        occ = OccupancyGrid(aabb, tuple(payload["occupancy_cells"]))
+        model = RadianceField(field, occ, payload["step_m"], tuple(payload["background"]), spec)
+        model.load_state_dict(state)
+    except KeyError as e:
+        raise ValueError(
+            f"{path}: not a model saved by save_model (no entry {e.args[0]!r})"
+        ) from None
+    except (TypeError, ValueError, RuntimeError, AttributeError) as e:
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        raise ValueError(f"{path}: not a model saved by save_model ({first[:160]})") from None
+    for name, t in state.items():
+        if torch.is_floating_point(t) and not torch.isfinite(t).all():
+            raise ValueError(f"{path}: {name} holds NaN or infinite values (training diverged?)")
     return model

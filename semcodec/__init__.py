@@ -19,7 +19,17 @@ from semcodec.checkpoint import (
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.codec import DEFAULT_CHECKPOINT, Codec, Encoded, EncodedMeta, check_images, load_codec
+from semcodec.codec import (
+    BLOCK_PX,
+    DEFAULT_CHECKPOINT,
+    Codec,
+    Encoded,
+    EncodedMeta,
+    check_images,
+    load_codec,
+    positions_to_mask,
+    receiver_mask,
+)
 from semcodec.evaluation import SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
 from semcodec.focus_eval import focus_gain, masked_psnr
@@ -48,7 +58,10 @@ __all__ = [
     "transmit_ideal",
     "transmit_jscc",
     "MODELS",
+    "BLOCK_PX",
     "Codec",
+    "positions_to_mask",
+    "receiver_mask",
     "Encoded",
     "EncodedMeta",
     "JSCCConfig",

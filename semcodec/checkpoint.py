@@ -20,11 +20,17 @@ from safetensors.torch import load_file, save_file
 from semcodec.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
-FORMAT_VERSION = "1"
+FORMAT_VERSIONS = ("1", "2")
+"""Knowledge-base versions this code reads: 1 = the decoder sees LMMSE symbols and one SNR;
+2 = it also sees each symbol's reliability (``JSCCConfig.decoder_reliability``)."""
 
 
 class KnowledgeBaseMismatch(ValueError):
     """The receiver's codec is not the one the transmitter used (hashes differ)."""
+
+
+class _Unsupported(Exception):
+    pass
 
 
 def weights_sha256(state: dict[str, torch.Tensor], cfg: JSCCConfig) -> str:
@@ -55,7 +61,7 @@ def save_checkpoint(path: str | os.PathLike, model: JSCCModel, card: dict | None
     sha = weights_sha256(state, model.cfg)
     full = {
         **(card or {}),
-        "format_version": FORMAT_VERSION,
+        "format_version": "2" if model.cfg.decoder_reliability else "1",
         "architecture": model.cfg.to_dict(),
         "cbr_range": list(model.cfg.cbr_range),
         "snr_range_db": [model.cfg.snr_min_db, model.cfg.snr_max_db],
@@ -96,8 +102,16 @@ def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
         with safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}
         card = json.loads(meta[CARD_KEY])
+        version = str(card.get("format_version", "1"))
+        if version not in FORMAT_VERSIONS:
+            raise _Unsupported(
+                f"checkpoint {path} is knowledge-base version {version}; this osnerf reads "
+                f"versions {', '.join(FORMAT_VERSIONS)}: update osnerf or use a matching checkpoint"
+            )
         cfg = JSCCConfig(**card["architecture"])
         state = load_file(str(path))
+    except _Unsupported as e:
+        raise ValueError(str(e)) from None
     except (
         Exception
     ) as e:  # safetensors raises a variety of errors on garbage (e.g. header too large)

@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import Tensor
 from torch.nn import functional as F
@@ -251,7 +252,8 @@ class Codec:
         Args:
             x_hat: [batch, num_symbols] complex64, unbiased equalised symbols.
             meta: the transmitter's :class:`EncodedMeta`.
-            snr_db: float or [batch]: the receiver's (average) SNR estimate in dB.
+            snr_db: float or [batch]: the receiver's average SNR estimate in dB (what the AF
+                modules see; version-1 models given ``noise_var`` see the SNR it implies).
             noise_var: None (AWGN: ``10**(-snr_db/10)`` for every symbol), [batch] or
                 [batch, num_symbols] effective noise variance per symbol.
             expected_sha256: the codec hash the transmitter announced (also checked against
@@ -284,8 +286,13 @@ class Codec:
         m = meta.num_channels
         c = cfg.num_complex_channels
         nv = 10.0 ** (-snr / 10.0) if noise_var is None else noise_var
-        if noise_var is None and not cfg.decoder_reliability:
-            nv = 0.0  # version 1 was trained on AWGN symbols as received
+        if not cfg.decoder_reliability:
+            # version 1 was trained on AWGN symbols as received, told their SNR: give it the
+            # unbiased symbols and the SNR their mean noise variance implies
+            if noise_var is not None:
+                mean_nv = torch.as_tensor(noise_var, dtype=torch.float32).reshape(b, -1).mean(1)
+                snr = (-10.0 * torch.log10(mean_nv.clamp_min(1e-12))).clamp(*self.snr_range_db)
+            nv = 0.0
         try:
             x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)
         except RuntimeError:
@@ -327,3 +334,33 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
     p = DEFAULT_CHECKPOINT if path is None else Path(path)
     model, card = load_checkpoint(p)
     return Codec(model, card, p)
+
+
+BLOCK_PX = 4
+"""Pixels per feature position along each axis (the encoder downsamples by 4)."""
+
+
+def positions_to_mask(positions, height: int, width: int) -> np.ndarray:
+    """[height, width] float32: 1 on the pixels of the sent feature positions.
+
+    Args:
+        positions: [num_positions] indices, row-major on the ceil(h/4) x ceil(w/4) grid.
+    """
+    hf, wf = -(-height // BLOCK_PX), -(-width // BLOCK_PX)
+    grid = np.zeros(hf * wf, np.float32)
+    grid[np.asarray(positions, np.int64)] = 1.0
+    full = np.kron(grid.reshape(hf, wf), np.ones((BLOCK_PX, BLOCK_PX), np.float32))
+    return full[:height, :width]
+
+
+def receiver_mask(meta: EncodedMeta, height: int, width: int) -> np.ndarray | None:
+    """[height, width] float32: the pixels the focus-mode side information says were sent
+    (``meta.crop`` box, or ``meta.positions`` of the first image); None = whole image."""
+    if meta.crop is not None:
+        top, left, rows, cols = (int(v) for v in meta.crop)
+        m = np.zeros((height, width), np.float32)
+        m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
+        return m
+    if meta.positions is not None:
+        return positions_to_mask(meta.positions[0].cpu().numpy(), height, width)
+    return None

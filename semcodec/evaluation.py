@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image, UnidentifiedImageError
 
 from phy import num_symbols_for_cbr
 from semcodec.baselines import (
@@ -24,6 +23,7 @@ from semcodec.baselines import (
     transmit_jscc,
 )
 from semcodec.codec import MIN_SIDE_PX, Codec
+from semcodec.image_codecs import read_image_file
 
 EVAL_CHANNELS = ("awgn", "rayleigh")
 DEFAULT_FIXED_MCS = "16qam-1/2"
@@ -112,12 +112,10 @@ def load_image_folder(folder: str | Path) -> tuple[list[str], list[torch.Tensor]
     names, images = [], []
     for p in paths:
         try:
-            with Image.open(p) as im:
-                im.load()
-                mode = im.mode
-                a = np.asarray(im)
-        except (UnidentifiedImageError, OSError, SyntaxError) as e:
-            raise ValueError(f"--images: cannot read {p.name} ({type(e).__name__})") from None
+            im = read_image_file(p)
+        except ValueError as e:
+            raise ValueError(f"--images: {e}") from None
+        mode, a = im.mode, np.asarray(im)
         if mode != "RGB":
             raise ValueError(
                 f"--images: {p.name} is not RGB (mode {mode}); convert it to 8-bit RGB"

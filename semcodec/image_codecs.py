@@ -56,6 +56,25 @@ IMAGE_CODECS: dict[str, tuple[Callable[[Image.Image, int], bytes], int, int]] = 
 }
 
 
+def read_image_file(path) -> Image.Image:
+    """Open and fully decode an image file.
+
+    Raises:
+        ValueError: naming the file when it is not a readable image (corrupt, truncated,
+            another kind of file), so a command reports bad input (exit 2), not a crash.
+    """
+    from PIL import UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            im.load()
+            return im.copy()
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as e:
+        raise ValueError(
+            f"{path}: not a readable image ({type(e).__name__}); replace or remove it"
+        ) from None
+
+
 def _get(codec: str):
     try:
         return IMAGE_CODECS[codec]

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
 from semcodec.channel_layers import masked_transmit, parse_train_channels
 from semcodec.checkpoint import load_checkpoint, save_checkpoint
+from semcodec.image_codecs import read_image_file
 from semcodec.model import JSCCModel, make_model, side_info
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -112,7 +112,7 @@ def list_images(folder: str | Path) -> list[Path]:
 def load_uint8_images(paths: list[Path]) -> list[torch.Tensor]:
     """RGB images as [3, height, width] uint8 tensors."""
     return [
-        torch.from_numpy(np.array(Image.open(p).convert("RGB"))).permute(2, 0, 1).contiguous()
+        torch.from_numpy(np.array(read_image_file(p).convert("RGB"))).permute(2, 0, 1).contiguous()
         for p in paths
     ]
 
@@ -231,6 +231,28 @@ def load_compatible(model: JSCCModel, init: JSCCModel) -> None:
     model.load_state_dict(own)
 
 
+STATE_KEYS = ("config", "model", "optimizer", "step", "elapsed_s", "best", "rng", "gen")
+
+
+def load_train_state(path: Path) -> dict:
+    """Read ``last_state.pt`` (what :func:`train` resumes from).
+
+    Raises:
+        ValueError: naming the file when it is corrupt, truncated or not a training state.
+    """
+    try:
+        st = torch.load(path, weights_only=False)
+    except Exception as e:  # noqa: BLE001 - torch/pickle raise many kinds for a bad file
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:120]
+        raise ValueError(
+            f"{path}: cannot resume from it, corrupt or truncated ({type(e).__name__}: {first})"
+        ) from None
+    missing = [k for k in STATE_KEYS if not isinstance(st, dict) or k not in st]
+    if missing:
+        raise ValueError(f"{path}: cannot resume from it, not a training state (no {missing[0]!r})")
+    return st
+
+
 def train(
     cfg: TrainConfig,
     train_dirs: list[Path],
@@ -272,7 +294,7 @@ def train(
     step, elapsed, best = 0, 0.0, -math.inf
     state_path = out_dir / "last_state.pt"
     if resume and state_path.exists():
-        st = torch.load(state_path, weights_only=False)
+        st = load_train_state(state_path)
         if st["config"] != dataclasses.asdict(cfg) | {"max_minutes": st["config"]["max_minutes"]}:
             print("train-codec: resuming with a changed config", file=sys.stderr)
         model.load_state_dict(st["model"])

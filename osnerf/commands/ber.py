@@ -13,13 +13,14 @@ import sys
 import time
 
 from osnerf.cli import UsageError
+from osnerf.commands import args as checks
 
-CHANNEL_CHOICES = ("awgn", "rayleigh")
 MAX_NUM_BITS = 10**9
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from phy.modulation import MODULATIONS
+    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
 
     p.add_argument(
         "--channel",
@@ -36,32 +37,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--snr-db",
         default="0,5,10",
+        type=checks.snr_db_list,
         help="comma-separated Es/N0 values in dB, e.g. -10,-5,0 (default 0,5,10)",
     )
     p.add_argument("--num-bits", default="1000000", help="bits per SNR point (default 1000000)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the torch.Generator (default 0)")
+    p.add_argument(
+        "--seed", type=checks.seed, default=0, help="seed of the torch.Generator (default 0)"
+    )
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG: simulation and theory")
 
 
-def parse_snr_list(text: str) -> list[float]:
-    """'0,5,10' -> [0.0, 5.0, 10.0]; UsageError naming --snr-db otherwise."""
-    from phy.conventions import SNR_DB_RANGE
-
-    lo, hi = SNR_DB_RANGE
+def parse_snr_list(text) -> list[float]:
+    """'0,5,10' (or an already parsed list) -> [0.0, 5.0, 10.0]; UsageError naming --snr-db."""
     try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError:
-        raise UsageError(
-            f"--snr-db must be comma-separated numbers in [{lo:g}, {hi:g}] dB, got {text!r}"
-        ) from None
-    if not values or any(not math.isfinite(v) or not lo <= v <= hi for v in values):
-        raise UsageError(f"--snr-db values must be in [{lo:g}, {hi:g}] dB, got {text!r}")
-    return values
+        return checks.snr_db_list(",".join(map(str, text)) if isinstance(text, list) else text)
+    except argparse.ArgumentTypeError as e:
+        raise UsageError(f"--snr-db {e}") from None
 
 
 def parse_args(args: argparse.Namespace) -> dict:
     from phy.modulation import MODULATIONS
+    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES
 
     if args.channel not in CHANNEL_CHOICES:
         raise UsageError(
@@ -83,6 +80,10 @@ def parse_args(args: argparse.Namespace) -> dict:
         raise UsageError(f"--num-bits must be in [1, {MAX_NUM_BITS:.0e}], got {args.num_bits!r}")
     if args.plot is not None and not str(args.plot).lower().endswith(".png"):
         raise UsageError(f"--plot must be a .png path, got {args.plot!r}")
+    checks.output_file(args.out, "--out")
+    if args.plot is not None:
+        checks.output_file(args.plot, "--plot")
+    checks.distinct_outputs(out=args.out, plot=args.plot)
     return {
         "channel": args.channel,
         "modulation": args.modulation,

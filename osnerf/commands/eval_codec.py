@@ -3,9 +3,10 @@
 Reads every PNG/JPEG of ``--images``, sends each image (one at a time, its own size)
 through every scheme at every SNR, and writes
 ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name", "sha256"},
-"results": [{"scheme", "snr_db", "cbr", "psnr", "ssim", "num_images", ...}]}`` where
-psnr/ssim are the mean of per-image values (peak 1.0). All input is checked before any
-work; the result file is written once, atomically, at the end.
+"results": [{"scheme", "snr_db", "cbr", "psnr", "ssim", "lpips", "num_images", ...}]}`` where
+psnr/ssim/lpips are the mean of per-image values (PSNR peak 1.0; LPIPS-AlexNet v0.1 from
+:func:`renderer.lpips`, null with ``--no-lpips`` or when an image is smaller than 31x31 px).
+All input is checked before any work; the result file is written once, atomically, at the end.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from osnerf.commands import args as checks
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,7 +31,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=EVAL_CHANNELS,
         help="awgn or rayleigh (block fading, perfect CSI)",
     )
-    p.add_argument("--snr-db", default="1,4,7,10,13", help="comma-separated Es/N0 values in dB")
+    p.add_argument(
+        "--snr-db",
+        default="1,4,7,10,13",
+        type=checks.snr_db_list,
+        help="comma-separated Es/N0 values in dB",
+    )
     p.add_argument(
         "--cbr", default="1/16", help="channel bandwidth ratio, e.g. 1/16 (JSCC: 1/48..1/6)"
     )
@@ -38,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="comma-separated: jscc, digital, digital_fixed, ideal, analog, digital_webp, digital_jpeg, ideal_webp, ideal_jpeg",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of channel noise and fading")
+    p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
     p.add_argument("--checkpoint", default=None, help="codec checkpoint (default: the shipped one)")
@@ -46,25 +54,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--max-images", type=int, default=None, help="use only the first N images (sorted by name)"
     )
     p.add_argument(
+        "--no-lpips",
+        action="store_true",
+        help="skip LPIPS (it needs the weights that `make lpips` converts at setup)",
+    )
+    p.add_argument(
         "--threads",
-        type=int,
+        type=checks.threads,
         default=1,
         help="torch CPU threads (default 1: the machine is shared)",
     )
-
-
-def _parse_snrs(text: str) -> list[float]:
-    from phy import validate_snr_db
-
-    try:
-        vals = [float(s) for s in str(text).split(",") if s.strip()]
-    except ValueError:
-        raise ValueError(f"--snr-db must be comma-separated numbers in dB, got {text!r}") from None
-    if not vals:
-        raise ValueError("--snr-db must list at least one value")
-    for v in vals:
-        validate_snr_db(v, "--snr-db")
-    return vals
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
     from osnerf.provenance import result_header, write_json_atomic
     from phy import parse_cbr
+    from renderer import LPIPS_MIN_SIDE_PX, lpips, lpips_weights
     from semcodec.codec import load_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
@@ -84,11 +84,15 @@ def run(args: argparse.Namespace) -> int:
         ssim,
     )
 
-    torch.set_num_threads(max(1, args.threads))
+    out = checks.output_file(args.out, "--out")
+    if args.plot:
+        checks.output_file(args.plot, "--plot")
+    checks.distinct_outputs(out=args.out, plot=args.plot)
+    torch.set_num_threads(args.threads)
     if args.channel not in EVAL_CHANNELS:
         raise ValueError(f"--channel must be one of {list(EVAL_CHANNELS)}, got {args.channel!r}")
     schemes = parse_schemes(args.schemes)
-    snrs = _parse_snrs(args.snr_db)
+    snrs = list(args.snr_db)
     try:
         cbr = parse_cbr(args.cbr)
     except ValueError as e:
@@ -120,9 +124,14 @@ def run(args: argparse.Namespace) -> int:
         if args.max_images < 1:
             raise ValueError(f"--max-images must be >= 1, got {args.max_images}")
         names, images = names[: args.max_images], images[: args.max_images]
-    out = Path(args.out)
-    if out.is_dir():
-        raise ValueError(f"--out {out} is a folder; give a file path")
+    score_lpips = not args.no_lpips and all(
+        min(img.shape[-2:]) >= LPIPS_MIN_SIDE_PX for img in images
+    )
+    if score_lpips:
+        try:
+            lpips_weights()  # checked before any work
+        except FileNotFoundError as e:
+            raise FileNotFoundError(f"{e}, or pass --no-lpips") from None
 
     ctx = EvalContext(channel=args.channel, codec=codec, fixed_mcs=mcs)
     config = {
@@ -134,7 +143,8 @@ def run(args: argparse.Namespace) -> int:
         "schemes": schemes,
         "fixed_mcs": mcs,
         "checkpoint": args.checkpoint,
-        "metric": "mean of per-image PSNR (peak 1.0) and SSIM",
+        "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
+        "lpips": score_lpips,
         "lost_image": "mid-grey 0.5",
     }
     results = []
@@ -144,12 +154,14 @@ def run(args: argparse.Namespace) -> int:
     for si, scheme in enumerate(schemes):
         for ki, snr in enumerate(snrs):
             gen = torch.Generator().manual_seed(args.seed * 1_000_003 + si * 1000 + ki)
-            ps, ss, t0 = [], [], time.perf_counter()
+            ps, ss, ls, t0 = [], [], [], time.perf_counter()
             extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
             for img in images:
                 res = SCHEMES[scheme](ctx, img, snr, cbr, gen)
                 ps.append(psnr(res.images, img))
                 ss.append(ssim(res.images, img))
+                if score_lpips:
+                    ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
                 for k in extra:
                     extra[k] += int(res.stats.get(k, 0) or 0)
                 bar.update(1)
@@ -160,14 +172,16 @@ def run(args: argparse.Namespace) -> int:
                     "cbr": cbr,
                     "psnr": float(np.mean(ps)),
                     "ssim": float(np.mean(ss)),
+                    "lpips": float(np.mean(ls)) if ls else None,
                     "num_images": len(images),
                     "psnr_per_image": ps,
                     **extra,
                     "seconds": round(time.perf_counter() - t0, 2),
                 }
             )
+            lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
             print(
-                f"eval-codec: {scheme} {snr:g} dB: PSNR {np.mean(ps):.2f} dB, SSIM {np.mean(ss):.4f}",
+                f"eval-codec: {scheme} {snr:g} dB: PSNR {np.mean(ps):.2f} dB, SSIM {np.mean(ss):.4f}{lp}",
                 file=sys.stderr,
             )
     bar.close()

@@ -9,6 +9,10 @@ out of the TX HackRF and into the RX HackRF. Emulated boards sit ``--ppm`` apart
 ``--multipath`` and ``--delay-us`` at ``--snr-db``. The result file reports per image the
 PSNR, the SNR measured from the pilots, frames sent and lost, and lists the SigMF files.
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
+
+``--fault`` switches on an emulated USB fault of the receiving board (stall, rx-timeout,
+unplug, overrun) to rehearse how a run reports it: exit 1 with a one-line message, and the
+capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).
 """
 
 from __future__ import annotations
@@ -18,9 +22,12 @@ import io
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
+
+from osnerf.commands import args as checks
 
 DEVICE_KINDS = ("emulated", "loopback", "hackrf")
 SCHEMES = ("digital", "jscc")
@@ -30,6 +37,11 @@ DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from hil.air import MAX_DELAY_S, SNR_DB_RANGE
+    from hil.emulator import FAULT_NAMES
+    from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
+    from phy.digital import MCS_TABLE
+
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
@@ -37,14 +49,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--scheme", required=True, choices=SCHEMES, help="digital (codec + LDPC + QAM) or jscc"
     )
     p.add_argument(
-        "--snr-db", type=float, default=15.0, help="air SNR of emulated boards, dB (default 15)"
+        "--snr-db",
+        type=checks.number(*SNR_DB_RANGE, "dB"),
+        default=15.0,
+        help="air SNR of emulated boards, dB (default 15)",
     )
     p.add_argument("--images", required=True, help="folder of images (png/jpg/...)")
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument(
         "--sigmf-dir", default=None, help="SigMF folder (default: <out>_sigmf beside --out)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the emulated air (default 0)")
+    p.add_argument(
+        "--seed", type=checks.seed, default=0, help="seed of the emulated air (default 0)"
+    )
     p.add_argument(
         "--ppm", default="0,20", help="crystal errors of emulated TX,RX in ppm (default 0,20)"
     )
@@ -54,7 +71,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"echoes 'delay_samples:gain,...' or 'none' (default {DEFAULT_MULTIPATH})",
     )
     p.add_argument(
-        "--delay-us", type=float, default=5.0, help="propagation delay, microseconds (default 5)"
+        "--delay-us",
+        type=checks.number(0.0, MAX_DELAY_S * 1e6, "us"),
+        default=5.0,
+        help="propagation delay, microseconds (default 5)",
     )
     p.add_argument(
         "--size", type=int, default=64, help="images are centre-cropped and resized to SIZE x SIZE"
@@ -63,7 +83,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--max-images", type=int, default=4, help="send at most this many images (default 4)"
     )
     p.add_argument(
-        "--mcs", default="qpsk-1/2", help="digital: modulation and coding (phy.digital.MCS_TABLE)"
+        "--mcs",
+        default="qpsk-1/2",
+        choices=tuple(MCS_TABLE),
+        metavar="MCS",
+        help=f"digital: modulation and coding, one of {', '.join(MCS_TABLE)} (default qpsk-1/2)",
     )
     p.add_argument(
         "--image-codec", default="avif", choices=IMAGE_CODECS, help="digital: image codec"
@@ -77,9 +101,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--codec", default=None, help="jscc: codec checkpoint (default: the shipped one)"
     )
-    p.add_argument("--sample-rate-hz", type=float, default=4e6, help="both radios (default 4e6)")
     p.add_argument(
-        "--center-freq-hz", type=float, default=2.45e9, help="both radios (default 2.45e9)"
+        "--sample-rate-hz",
+        type=checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
+        default=4e6,
+        help="both radios (default 4e6)",
+    )
+    p.add_argument(
+        "--center-freq-hz",
+        type=checks.number(*FREQ_RANGE_HZ, "Hz"),
+        default=2.45e9,
+        help="both radios (default 2.45e9)",
     )
     p.add_argument(
         "--max-papr-db", type=float, default=9.0, help="PAPR clip; mean power is -PAPR dBFS"
@@ -91,6 +123,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=0.015,
         help="normalised preamble correlation that counts as a frame, in (0, 1) (default 0.015: "
         "4e-14 false alarms per lag and CFO hypothesis in noise, finds frames at -10 dB)",
+    )
+    p.add_argument(
+        "--max-overruns",
+        type=int,
+        default=0,
+        help="receive overruns (lost samples) tolerated before the run fails (default 0)",
+    )
+    p.add_argument(
+        "--fault",
+        default=None,
+        choices=FAULT_NAMES,
+        help="emulated boards: inject this USB fault into the receiver, to see how a run "
+        "reports it (exit 1; the capture so far is saved as SigMF)",
     )
 
 
@@ -113,24 +158,34 @@ def parse_device(value: str, name: str) -> tuple[str, str | None]:
 def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
     if value.strip().lower() in ("", "none"):
         return ()
+    from hil.air import MAX_MULTIPATH_DELAY
+
     out = []
     try:
         for item in value.split(","):
             d, g = item.split(":")
             out.append((int(d), complex(g.replace(" ", ""))))
+            if not 1 <= out[-1][0] <= MAX_MULTIPATH_DELAY or not np.isfinite(out[-1][1]):
+                raise ValueError
     except ValueError:
         raise _usage(
-            f"--multipath must look like '2:0.4,5:0.2j' (delay_samples:gain) or 'none', got {value!r}"
+            f"--multipath must look like '2:0.4,5:0.2j' (delay_samples in [1, "
+            f"{MAX_MULTIPATH_DELAY}]:finite gain) or 'none', got {value!r}"
         ) from None
     return tuple(out)
 
 
 def parse_ppm(value: str) -> tuple[float, float]:
+    from hil.emulator import PPM_RANGE
+
+    lo, hi = PPM_RANGE
     try:
         a, b = (float(v) for v in value.split(","))
+        if not (lo <= a <= hi and lo <= b <= hi):  # also false for NaN
+            raise ValueError
     except ValueError:
         raise _usage(
-            f"--ppm must be two numbers 'TX,RX' in ppm, e.g. 0,20, got {value!r}"
+            f"--ppm must be two numbers 'TX,RX' in [{lo:g}, {hi:g}] ppm, e.g. 0,20, got {value!r}"
         ) from None
     return a, b
 
@@ -138,6 +193,8 @@ def parse_ppm(value: str) -> tuple[float, float]:
 def load_images(folder: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
     """Centre-cropped, resized images: (names, [batch, 3, size, size] float32 in [0, 1])."""
     from PIL import Image
+
+    from semcodec.image_codecs import read_image_file
 
     root = Path(folder)
     if not root.is_dir():
@@ -147,7 +204,10 @@ def load_images(folder: str, size: int, max_images: int) -> tuple[list[str], np.
         raise FileNotFoundError(f"--images: no images ({', '.join(IMAGE_SUFFIXES)}) in {folder!r}")
     out = []
     for f in files:
-        im = Image.open(f).convert("RGB")
+        try:
+            im = read_image_file(f).convert("RGB")
+        except ValueError as e:
+            raise _usage(f"--images: {e}") from None
         s = min(im.size)
         left, top = (im.size[0] - s) // 2, (im.size[1] - s) // 2
         im = im.crop((left, top, left + s, top + s)).resize((size, size), Image.Resampling.LANCZOS)
@@ -184,22 +244,31 @@ def decode_image_bytes(data: bytes, shape) -> np.ndarray | None:
 
 
 # ----------------------------------------------------------------------------- devices
-def open_pair(args, ota_cfg):
-    """(tx, rx, emulator or None) for the --tx/--rx kinds."""
-    from osnerf.ota_link import open_radios
-
+def device_kinds(args) -> tuple[str, str | None, str | None]:
+    """``(kind, tx_serial, rx_serial)`` of --tx/--rx: "emulated", "loopback" or "hackrf"."""
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
     simulated = {"emulated", "loopback"}
     if (tx_kind in simulated) != (rx_kind in simulated):
         raise _usage("--tx and --rx must both be simulated (emulated/loopback) or both hackrf")
-    if tx_kind not in simulated:
-        return open_radios("hackrf", args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
-    if tx_kind != rx_kind:
+    if tx_kind != rx_kind and tx_kind in simulated:
         raise _usage(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
         )
-    return open_radios(
+    if getattr(args, "fault", None) and tx_kind not in simulated:
+        raise _usage("--fault needs emulated boards (--tx emulated --rx emulated, or loopback)")
+    return tx_kind, tx_serial, rx_serial
+
+
+def open_pair(args, ota_cfg):
+    """(tx, rx, emulator or None) for the --tx/--rx kinds; --fault is set on the receiver."""
+    from hil import Faults
+    from osnerf.ota_link import open_radios
+
+    kind, tx_serial, rx_serial = device_kinds(args)
+    if kind == "hackrf":
+        return open_radios("hackrf", args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
+    tx, rx, emu = open_radios(
         "emulated",
         args.snr_db,
         ota_cfg,
@@ -207,8 +276,12 @@ def open_pair(args, ota_cfg):
         ppm=parse_ppm(args.ppm),
         multipath=parse_multipath(args.multipath),
         delay_s=args.delay_us * 1e-6,
-        loopback=tx_kind == "loopback",
+        loopback=kind == "loopback",
     )
+    if getattr(args, "fault", None):  # after the lead-in and half the margin: some capture
+        lead = int(ota_cfg.rx_lead_s * ota_cfg.sample_rate_hz)
+        emu.radios[1].faults = Faults.named(args.fault, lead + ota_cfg.rx_margin_samples // 2)
+    return tx, rx, emu
 
 
 # ----------------------------------------------------------------------------- schemes
@@ -318,8 +391,9 @@ def jscc_receive(result, encs, codec, images):
 
 # ----------------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
-    from hil import HilError, OtaConfig, save_sigmf, send_blocks
+    from hil import HilError, OtaConfig, save_partial_capture, save_sigmf, send_blocks
     from osnerf.provenance import result_header, write_json_atomic
+    from phy import parse_cbr
 
     if not 8 <= args.size <= 1024:
         raise _usage(f"--size must be in [8, 1024] px, got {args.size}")
@@ -327,22 +401,31 @@ def run(args: argparse.Namespace) -> int:
         raise _usage(f"--max-images must be >= 1, got {args.max_images}")
     if not 1 <= args.quality <= 100:
         raise _usage(f"--quality must be in [1, 100], got {args.quality}")
-    (
-        parse_device(args.tx, "--tx"),
-        parse_device(args.rx, "--rx"),
-        parse_ppm(args.ppm),
-        parse_multipath(args.multipath),
-    )
-    cfg = OtaConfig(
-        sample_rate_hz=args.sample_rate_hz,
-        center_freq_hz=args.center_freq_hz,
-        max_papr_db=args.max_papr_db,
-        symbols_per_frame=args.symbols_per_frame,
-        detection_threshold=args.detection_threshold,
-    )
-    names, images = load_images(args.images, args.size, args.max_images)
-    out = Path(args.out)
+    if args.max_overruns < 0:
+        raise _usage(f"--max-overruns must be >= 0, got {args.max_overruns}")
+    device_kinds(args)
+    parse_ppm(args.ppm)
+    parse_multipath(args.multipath)
+    if args.scheme == "jscc":
+        try:
+            parse_cbr(args.cbr)
+        except ValueError as e:
+            raise _usage(f"--{e}") from None
+    try:
+        cfg = OtaConfig(
+            sample_rate_hz=args.sample_rate_hz,
+            center_freq_hz=args.center_freq_hz,
+            max_papr_db=args.max_papr_db,
+            symbols_per_frame=args.symbols_per_frame,
+            detection_threshold=args.detection_threshold,
+            max_rx_overruns=args.max_overruns,
+        )
+    except ValueError as e:
+        raise checks.flag_error(e) from None
+    out = checks.output_file(args.out, "--out")
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
+    checks.output_dir(sigmf_dir, "--sigmf-dir")
+    names, images = load_images(args.images, args.size, args.max_images)
     t0 = time.perf_counter()
     if args.scheme == "digital":
         blocks, state = digital_blocks(images, args, cfg)
@@ -353,18 +436,24 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     tx, rx, emu = open_pair(args, cfg)
+    hw = "HackRF One (emulated)" if emu is not None else "HackRF One"
     try:
-        result = send_blocks(tx, rx, blocks, cfg)
-    except HilError:
-        raise
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = send_blocks(tx, rx, blocks, cfg)
+    except HilError as e:  # keep what arrived, then report the fault in one line (exit 1)
+        saved = save_partial_capture(e, sigmf_dir / "ota", cfg, hw=hw)
+        kept = f"; capture so far saved to {saved}" if saved else "; nothing was received"
+        raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
     finally:
         tx.close()
         rx.close()
+    for w in caught:  # one line each, not a Python warning with its source line
+        print(f"ota: warning: {w.message}", file=sys.stderr)
     if args.scheme == "digital":
         per_image = digital_receive(result, state, images, args, cfg)
     else:
         per_image = jscc_receive(result, state, codec, images)
-    hw = "HackRF One (emulated)" if emu is not None else "HackRF One"
     sigmf_paths = save_sigmf(result, sigmf_dir / "ota", cfg, hw=hw)
     results = []
     for b, (name, stats) in enumerate(zip(names, per_image)):

@@ -25,9 +25,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.commands import args as checks
     from osnerf.plots import make_plots
     from osnerf.sweeps import read_results
 
+    checks.output_dir(args.out, "--out")
     formats = tuple(f.strip().lower() for f in args.formats.split(",") if f.strip())
     records = read_results(args.results)
     if not records:

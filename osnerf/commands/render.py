@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from osnerf.cli import UsageError
+from osnerf.commands import args as checks
 
 VIDEOS = ("mp4", "gif", "none")
 
@@ -29,9 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--num-views", type=int, default=60, help="views on the orbit (default 60)")
     p.add_argument(
         "--resolution",
-        type=int,
+        type=checks.resolution,
         default=None,
-        help="image width in pixels (default: training width)",
+        help="image width in pixels, 16..512 (default: training width)",
     )
     p.add_argument(
         "--elevation-deg",
@@ -55,11 +56,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
     )
     p.add_argument("--fps", type=float, default=24.0, help="video frame rate (default 24)")
-    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    p.add_argument(
+        "--threads", type=checks.threads, default=2, help="torch CPU threads (default 2)"
+    )
 
 
 def _path_poses(path: Path):
     import torch
+
+    from renderer.cameras import pose_problem
 
     if not path.is_file():
         raise FileNotFoundError(f"--path {path}: file not found")
@@ -68,13 +73,12 @@ def _path_poses(path: Path):
         poses = torch.tensor([f["transform_matrix"] for f in frames], dtype=torch.float32)
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"--path {path}: needs frames[].transform_matrix (4x4 each)") from e
-    if (
-        poses.ndim != 3
-        or poses.shape[1:] != (4, 4)
-        or not torch.isfinite(poses).all()
-        or len(poses) == 0
-    ):
-        raise ValueError(f"--path {path}: frames[].transform_matrix must be finite 4x4 matrices")
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
+        raise ValueError(f"--path {path}: frames[].transform_matrix must be 4x4 matrices")
+    for i, pose in enumerate(poses):
+        problem = pose_problem(pose)
+        if problem:
+            raise ValueError(f"--path {path}: frames[{i}].transform_matrix {problem}")
     return poses
 
 
@@ -89,8 +93,6 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
     if args.num_views < 1:
         raise UsageError(f"--num-views must be >= 1, got {args.num_views}")
-    if args.resolution is not None and args.resolution < 8:
-        raise UsageError(f"--resolution must be >= 8 pixels, got {args.resolution}")
     if args.radius_m is not None and not args.radius_m > 0:
         raise UsageError(f"--radius-m must be > 0, got {args.radius_m}")
     if not args.fps > 0:
@@ -101,8 +103,12 @@ def run(args: argparse.Namespace) -> int:
         raise FileNotFoundError(
             f"--run {run_path}: no model.pt (train one with `osnerf train-nerf`)"
         )
-    torch.set_num_threads(max(1, args.threads))
-    model = load_model(model_path)
+    out_dir = checks.output_dir(args.out, "--out")
+    torch.set_num_threads(args.threads)
+    try:
+        model = load_model(model_path)
+    except ValueError as e:
+        raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
     cam = model.spec.get("camera", {})
     k = cam.get(
         "intrinsics", {"fl_x": 100.0, "fl_y": 100.0, "cx": 50.0, "cy": 50.0, "w": 100, "h": 100}
@@ -122,12 +128,15 @@ def run(args: argparse.Namespace) -> int:
             args.num_views, radius, args.elevation_deg, center, 0.0, args.arc_deg, up
         )
 
-    out_dir = Path(args.out)
     (out_dir / "frames").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     frames = []
     for i, pose in enumerate(poses):
         rgb = render_views(model, pose[None], intr)["rgb"][0]
+        if not torch.isfinite(rgb).all():
+            raise RuntimeError(
+                f"view {i} rendered non-finite colours: the model {model_path} is broken"
+            )
         frame = to_uint8(rgb)[..., ::-1]  # BGR for OpenCV
         cv2.imwrite(str(out_dir / "frames" / f"{i:03d}.png"), frame)
         frames.append(frame)

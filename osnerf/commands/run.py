@@ -15,10 +15,19 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
+from osnerf.cli import UsageError
+from osnerf.commands import args as checks
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from osnerf.pipeline import CHANNELS, OTA_DEVICES, SCHEMES
+    from osnerf.ota_link import DEVICES as OTA_DEVICES
+    from osnerf.run.config import RUN_CHANNELS
     from osnerf.scenes import DEFAULT_SCENE
+    from osnerf.schemes import DEFAULT_SCHEMES, load_entry_points, parse_schemes
+    from phy.digital import MCS_TABLE
+    from semcodec import IMAGE_CODECS
+
+    schemes = load_entry_points()
 
     p.add_argument(
         "--scene",
@@ -33,16 +42,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--channel",
         default="rayleigh",
-        choices=CHANNELS,
-        help=f"one of {', '.join(CHANNELS)} (default rayleigh)",
+        choices=RUN_CHANNELS,
+        help="phy's channels (flat ones with perfect CSI; tdl/cdl over OFDM with LS "
+        "estimates; raytraced per drone position) or ota (default rayleigh: block fading)",
     )
-    p.add_argument("--snr-db", type=float, default=0.0, help="Es/N0 in dB (default 0)")
+    p.add_argument("--snr-db", type=checks.snr_db, default=0.0, help="Es/N0 in dB (default 0)")
     p.add_argument(
         "--schemes",
-        default=",".join(SCHEMES),
-        help=f"comma-separated subset of {','.join(SCHEMES)}",
+        type=parse_schemes,
+        default=DEFAULT_SCHEMES,
+        help="comma-separated schemes: "
+        + "; ".join(f"{n}: {c.help}" for n, c in schemes.items())
+        + f" (default {','.join(DEFAULT_SCHEMES)})",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=checks.seed, default=0)
     p.add_argument("--out", required=True, help="RUN_DIR: report and stage cache")
     p.add_argument(
         "--max-seconds",
@@ -51,7 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="NeRF training seconds per scheme (default 60)",
     )
     p.add_argument(
-        "--resolution", type=int, default=80, help="drone image size in pixels (default 80)"
+        "--resolution",
+        type=checks.resolution,
+        default=80,
+        help="drone image size in pixels, 16..512 (default 80)",
     )
     p.add_argument("--views", type=int, default=24, help="drone views captured (default 24)")
     p.add_argument(
@@ -67,10 +83,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--receiver-codec", default=None, help="receiver's checkpoint (default: the same)"
     )
     p.add_argument(
-        "--mcs", default="envelope", help="digital baseline MCS: envelope or a phy.digital name"
+        "--mcs",
+        default="envelope",
+        choices=("envelope", *MCS_TABLE),
+        metavar="MCS",
+        help=f"digital baseline MCS: envelope or one of {', '.join(MCS_TABLE)} (default envelope)",
     )
     p.add_argument(
-        "--image-codec", default="avif", help="digital baseline image codec: avif, jpeg, webp"
+        "--image-codec",
+        default="avif",
+        choices=tuple(IMAGE_CODECS),
+        help=f"digital baseline image codec: {', '.join(IMAGE_CODECS)} (default avif)",
     )
     p.add_argument(
         "--nerf-steps",
@@ -96,17 +119,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def run(args: argparse.Namespace) -> int:
-    from osnerf.pipeline import RunConfig, run_pipeline
-    from osnerf.report import write_report
+def check_stage_cache(folder: Path) -> None:
+    """Refuse a run folder whose cached stages are unreadable, before any work.
 
-    schemes = tuple(s.strip() for s in args.schemes.split(",") if s.strip())
-    cfg = RunConfig(
+    Raises:
+        UsageError: naming the corrupt file and saying how to clear it.
+    """
+    import zipfile
+
+    for npz in sorted(folder.glob("*.npz")) if folder.is_dir() else ():
+        try:
+            with zipfile.ZipFile(npz) as z:
+                bad = z.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError) as e:
+            bad = f"{type(e).__name__}: {e}"
+        if bad is not None:
+            raise UsageError(
+                f"--out: cached stage {npz} is corrupt or truncated ({bad}); delete it "
+                f"(or the folder {folder}) and run again to recompute it"
+            )
+
+
+def run_config(args: argparse.Namespace):
+    """The ``osnerf.run.RunConfig`` of parsed arguments (validates them)."""
+    from osnerf.run import RunConfig
+
+    return RunConfig(
         scene=args.scene,
         demand=args.demand,
         channel=args.channel,
         snr_db=args.snr_db,
-        schemes=schemes,
+        schemes=tuple(args.schemes),
         seed=args.seed,
         max_seconds=args.max_seconds,
         resolution_px=args.resolution,
@@ -121,16 +164,29 @@ def run(args: argparse.Namespace) -> int:
         ota_device=args.ota_device,
         nerf_steps=args.nerf_steps,
     )
-    out = Path(args.out)
-    body, pictures = run_pipeline(
+
+
+def run(args: argparse.Namespace) -> int:
+    from osnerf.report import write_report
+    from osnerf.run import run_pipeline
+
+    cfg = run_config(args)
+    out = checks.output_dir(args.out, "--out")
+    if args.cache_dir:
+        checks.output_dir(args.cache_dir, "--cache-dir")
+    check_stage_cache(out / "cache" / cfg.key())
+    report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
     )
     config = {**asdict(cfg), "schemes": list(cfg.schemes), "cache_key": cfg.key()}
-    write_report(out, config, cfg.seed, body, pictures)
-    for name, s in body["schemes"].items():
-        po = "n/a" if s["psnr_object"] is None else f"{s['psnr_object']:.2f}"
+    write_report(out, config, cfg.seed, report, pictures)
+    for name, s in report.schemes.items():
+        po = "n/a" if s.psnr_object is None else f"{s.psnr_object:.2f}"
+        lp = "n/a" if s.lpips is None else f"{s.lpips:.3f}"
+        tag = " (bound)" if s.bound else ""
         print(
-            f"{name:8s} psnr_object {po} dB  psnr {s['psnr']:.2f} dB  symbols {s['symbols_sent']}",
+            f"{name:8s} psnr_object {po} dB  psnr {s.psnr:.2f} dB  lpips {lp}  "
+            f"symbols {s.symbols_sent}{tag}",
             file=sys.stderr,
         )
     print(f"report: {out / 'report.json'} and {out / 'report.html'}", file=sys.stderr)

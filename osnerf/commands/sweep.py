@@ -42,8 +42,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.commands import args as checks
     from osnerf.sweeps import errors_path, load_spec, run_sweep
 
+    checks.output_file(args.out, "--out")
+    if args.keep_outputs:
+        checks.output_dir(args.keep_outputs, "--keep-outputs")
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
     spec = load_spec(args.spec)

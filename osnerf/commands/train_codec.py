@@ -12,6 +12,8 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from osnerf.cli import UsageError
+from osnerf.commands import args as checks
 from osnerf.paths import shared_data_dir
 
 
@@ -72,19 +74,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--eval-every-s", type=float, default=d.eval_every_s, help="seconds between validations"
     )
     p.add_argument(
-        "--threads", type=int, default=d.num_threads, help="torch CPU threads (default: 2)"
+        "--threads",
+        type=checks.threads,
+        default=d.num_threads,
+        help="torch CPU threads (default: 2)",
     )
     p.add_argument(
         "--init", default=None, help="start from this checkpoint (fine-tuning, e.g. on rayleigh)"
     )
     p.add_argument("--no-resume", action="store_true", help="start over even if OUT holds a run")
-    p.add_argument("--seed", type=int, default=0, help="seed of crops, SNRs, rates and noise")
+    p.add_argument(
+        "--seed", type=checks.seed, default=0, help="seed of crops, SNRs, rates and noise"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     from osnerf.provenance import result_header, write_json_atomic
     from semcodec.model import MODELS
-    from semcodec.training import TrainConfig, train
+    from semcodec.training import TrainConfig, load_train_state, train
 
     if args.model not in MODELS:
         raise KeyError(f"--model must be one of {sorted(MODELS)}, got {args.model!r}")
@@ -116,7 +123,13 @@ def run(args: argparse.Namespace) -> int:
     if not val.is_dir():
         raise FileNotFoundError(f"--val folder not found: {val}")
     init = Path(args.init) if args.init else None
-    out = Path(args.out)
+    out = checks.output_dir(args.out, "--out")
+    state = out / "last_state.pt"
+    if not args.no_resume and state.exists():
+        try:
+            load_train_state(state)
+        except ValueError as e:
+            raise UsageError(f"{e}; start over with --no-resume (or delete it)") from None
     summary = train(
         cfg,
         data,

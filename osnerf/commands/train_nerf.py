@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from osnerf.cli import UsageError
+from osnerf.commands import args as checks
 
 FIELDS = ("grid", "mlp")
 CLOCKS = ("wall", "cpu")
@@ -25,12 +26,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="run folder for metrics.json, test views, model.pt")
     p.add_argument(
-        "--resolution", type=int, default=100, help="image width in pixels (default 100)"
+        "--resolution",
+        type=checks.resolution,
+        default=100,
+        help="image width in pixels, 16..512 (default 100)",
     )
     p.add_argument(
         "--max-seconds", type=float, default=120.0, help="training budget in seconds (default 120)"
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=checks.seed, default=0, help="random seed (default 0)")
     p.add_argument(
         "--field", default="grid", help=f"radiance field: {' | '.join(FIELDS)} (default grid)"
     )
@@ -50,7 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=10.0,
         help="curve spacing in training seconds (default 10)",
     )
-    p.add_argument("--threads", type=int, default=2, help="torch CPU threads (default 2)")
+    p.add_argument(
+        "--threads", type=checks.threads, default=2, help="torch CPU threads (default 2)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
 
@@ -85,12 +91,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--field must be one of {', '.join(FIELDS)}, got {args.field!r}")
     if args.clock not in CLOCKS:
         raise UsageError(f"--clock must be one of {', '.join(CLOCKS)}, got {args.clock!r}")
-    if args.resolution < 8:
-        raise UsageError(f"--resolution must be >= 8 pixels, got {args.resolution}")
     if not args.max_seconds > 0:
         raise UsageError(f"--max-seconds must be > 0, got {args.max_seconds}")
-    if args.threads < 1:
-        raise UsageError(f"--threads must be >= 1, got {args.threads}")
+    run_dir = checks.output_dir(args.out, "--out")
     data = Path(args.data)
     if not data.is_dir():
         raise FileNotFoundError(f"--data {data}: folder not found")
@@ -119,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
     out = render_views(result.model, test_set.poses, test_set.intrinsics)
     metrics = image_metrics(out["rgb"], test_set.images, test_set.masks)
 
-    run_dir = Path(args.out)
     (run_dir / "test").mkdir(parents=True, exist_ok=True)
     for i, img in enumerate(out["rgb"]):
         cv2.imwrite(str(run_dir / "test" / f"{i:03d}.png"), to_uint8(img)[..., ::-1])

@@ -7,7 +7,14 @@ Public API:
     drone_channels(folder, meta, positions_m, ...) -> DroneChannels (via phy.raytrace)
 """
 
-from osnerf.scenes.cameras import Intrinsics, look_at, pixel_rays, project, ring_positions
+from osnerf.scenes.cameras import (
+    Intrinsics,
+    intrinsics_from_fov,
+    look_at,
+    pixel_rays,
+    project,
+    ring_positions,
+)
 from osnerf.scenes.dataset import (
     RenderConfig,
     SceneViews,
@@ -25,6 +32,7 @@ __all__ = [
     "SCENES",
     "DroneChannels",
     "Intrinsics",
+    "intrinsics_from_fov",
     "Part",
     "RenderConfig",
     "SceneGeometry",

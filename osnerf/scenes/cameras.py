@@ -7,31 +7,20 @@ looks along -z), as in nerfstudio's ``transforms.json``. Mitsuba's sensor matrix
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from renderer.cameras import Intrinsics  # the one pinhole camera
 
 MITSUBA_FROM_GL = np.diag([-1.0, 1.0, -1.0, 1.0])
 
 
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics in pixels (pixel centres at half-integers)."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    width: int
-    height: int
-
-    @classmethod
-    def from_fov(cls, fov_deg: float, width: int, height: int) -> Intrinsics:
-        """Horizontal field of view ``fov_deg`` (Mitsuba's default axis)."""
-        if not 0.0 < fov_deg < 180.0:
-            raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg}")
-        f = (width / 2.0) / np.tan(np.radians(fov_deg) / 2.0)
-        return cls(float(f), float(f), width / 2.0, height / 2.0, int(width), int(height))
+def intrinsics_from_fov(fov_deg: float, width: int, height: int) -> Intrinsics:
+    """Pinhole intrinsics (pixel centres at half-integers) for a horizontal field of view
+    ``fov_deg`` (Mitsuba's default axis)."""
+    if not 0.0 < fov_deg < 180.0:
+        raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg}")
+    f = (width / 2.0) / np.tan(np.radians(fov_deg) / 2.0)
+    return Intrinsics(float(f), float(f), width / 2.0, height / 2.0, int(height), int(width))
 
 
 def look_at(origin_m, target_m, up=(0.0, 0.0, 1.0)) -> np.ndarray:

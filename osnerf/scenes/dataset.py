@@ -31,7 +31,7 @@ import numpy as np
 from PIL import Image
 
 from osnerf.provenance import write_json_atomic
-from osnerf.scenes.cameras import Intrinsics, look_at, ring_positions
+from osnerf.scenes.cameras import Intrinsics, intrinsics_from_fov, look_at, ring_positions
 from osnerf.scenes.registry import get_scene
 from osnerf.scenes.spec import SceneGeometry
 
@@ -221,7 +221,7 @@ def build_scene_dataset(
     geometry = info.build()
     mesh_paths = write_meshes(geometry, tmp / "meshes")
     radio_xml = write_radio_scene(geometry, mesh_paths, tmp / "radio")
-    intr = Intrinsics.from_fov(info.fov_deg, config.resolution_px, config.resolution_px)
+    intr = intrinsics_from_fov(info.fov_deg, config.resolution_px, config.resolution_px)
     train, test, centre, radius = trajectory(
         geometry, target, info.fov_deg, info.elevations_deg, info.min_radius_m, config
     )
@@ -320,7 +320,7 @@ def load_scene_views(folder: Path) -> SceneViews:
         images=images,
         poses=np.asarray([f["transform_matrix"] for f in frames], np.float64),
         intrinsics=Intrinsics(
-            meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"], meta["w"], meta["h"]
+            meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"], height=meta["h"], width=meta["w"]
         ),
         split=np.asarray([f["split"] for f in frames]),
         masks={

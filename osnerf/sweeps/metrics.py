@@ -70,7 +70,12 @@ def _train_nerf(result: dict[str, Any]) -> dict[str, Any]:
 
 
 def _run(result: dict[str, Any]) -> dict[str, Any]:
-    return {"schemes": dict(result["schemes"])}
+    from dataclasses import asdict
+
+    from osnerf.report import Report
+
+    report = Report.from_dict(result)
+    return {"schemes": {n: asdict(s) for n, s in report.schemes.items()}}
 
 
 DEFAULT_RULE = MetricRule("file", _without_header)

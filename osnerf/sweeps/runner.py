@@ -125,9 +125,51 @@ def _serial(tasks: list[tuple[str, Task]], workers: int, **_: Any) -> Iterator[t
         yield key, execute_point(task)
 
 
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _die_with_parent(parent_pid: int, poll_s: float = 0.5) -> None:
+    """Pool initializer: this worker dies when the sweep that started it dies.
+
+    A sweep killed with SIGKILL cannot shut its pool down; its workers would run on (and
+    block forever writing a result nobody reads). Linux sends SIGKILL on the parent's death
+    (``prctl(PR_SET_PDEATHSIG)``); a watchdog thread covers other systems and the window
+    before the call, exiting as soon as the parent process is no longer ``parent_pid``.
+    """
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # no prctl: the watchdog alone
+            pass
+
+    def orphaned() -> bool:
+        return os.getppid() != parent_pid
+
+    if orphaned():  # the parent died before prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while not orphaned():
+            time.sleep(poll_s)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    threading.Thread(target=watch, name="sweep-parent-watchdog", daemon=True).start()
+
+
 def _local(tasks: list[tuple[str, Task]], workers: int, **_: Any) -> Iterator[tuple[str, Outcome]]:
     ctx = multiprocessing.get_context("spawn")  # fork after torch/OpenMP threads is unsafe
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_die_with_parent,
+        initargs=(os.getpid(),),
+    )
     try:
         futures = {pool.submit(execute_point, task): key for key, task in tasks}
         for fut in as_completed(futures):

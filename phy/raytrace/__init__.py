@@ -3,7 +3,7 @@
 ``import phy.raytrace`` is cheap; sionna.rt (and Dr.Jit's LLVM check) loads on first use.
 """
 
-from phy.raytrace.channel import GAIN_NORMALIZATIONS, RayTracedChannel
+from phy.raytrace.channel import GAIN_NORMALIZATIONS, PerPositionChannel, RayTracedChannel
 from phy.raytrace.scene import builtin_scenes, load_scene
 from phy.raytrace.stats import RayStats, cir_stats
 from phy.raytrace.tracer import (
@@ -18,6 +18,7 @@ __all__ = [
     "GAIN_NORMALIZATIONS",
     "RayCIR",
     "RayStats",
+    "PerPositionChannel",
     "RayTracedChannel",
     "RayTracer",
     "RayTracingConfig",

@@ -168,3 +168,33 @@ class RayTracedChannel(Channel):
             f"num_positions={self.num_positions}, num_subcarriers={self.num_subcarriers}, "
             f"gain_normalization={self.gain_normalization!r}, tracer={self.tracer!r}"
         )
+
+
+class PerPositionChannel(Channel):
+    """A frequency-selective channel fixed by one position (its ray-traced CFR).
+
+    Symbol ``k`` of a block rides subcarrier ``k mod num_subcarriers``; the CFR is normalised
+    to unit mean power, so ``snr_db`` is the received SNR of this position.
+
+    Args:
+        h: [num_subcarriers] complex64 frequency response.
+    """
+
+    def __init__(self, h):
+        super().__init__()
+        h = torch.as_tensor(np.asarray(h, np.complex64))
+        p = float((h.abs() ** 2).mean())
+        self.register_buffer("h", h / math.sqrt(p) if p > 0 else h)
+
+    def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
+        validate_snr_db(snr_db)
+        n = x.shape[-1]
+        hk = self.h[torch.arange(n) % self.h.numel()].expand(x.shape[0], n)  # [batch, num_symbols]
+        nv = float(snr_db_to_noise_var(float(snr_db)))
+        noise = torch.complex(
+            torch.randn(x.shape, generator=generator), torch.randn(x.shape, generator=generator)
+        )
+        y = hk * x + noise.to(torch.complex64) * math.sqrt(nv / 2)
+        return ChannelOutput(
+            y, hk, torch.full((x.shape[0],), nv), torch.zeros(x.shape[0], dtype=torch.bool)
+        )

@@ -13,6 +13,7 @@ from hil import (
     DeviceNotFoundError,
     DisconnectedError,
     Emulator,
+    Faults,
     HackRF,
     RequestFailedError,
     StallError,
@@ -242,3 +243,42 @@ def test_stream_iterator_is_continuous():
     with open_loopback(emu2.radios[0], rx_chunk_bytes=CHUNK) as sdr:
         whole = sdr.rx(12000)
     assert np.array_equal(np.concatenate(blocks, axis=1), whole)
+
+
+def test_timeout_before_any_data_is_a_timeout_and_writes_nothing(emu, tmp_path):
+    """#16: a timeout inside the stale first buffer raised "cannot mmap an empty file" and
+    left a 0-byte .sigmf-data without its .sigmf-meta."""
+    emu.radios[0].faults.read_timeout_after_bytes = 100_000
+    with HackRF.open(backend=emu.backend) as sdr:
+        with pytest.raises(UsbTimeoutError, match="no capture was saved") as ei:
+            sdr.rx(500_000, save_to=tmp_path / "cap")
+    assert ei.value.capture.shape == (1, 0) and ei.value.sigmf_path is None
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "name, error", [("rx-timeout", UsbTimeoutError), ("unplug", DisconnectedError)]
+)
+def test_named_fault_stops_after_exactly_that_many_samples(emu, tmp_path, name, error):
+    emu.radios[0].faults = Faults.named(name, after_samples=1000)
+    sdr = HackRF.open(backend=emu.backend, rx_chunk_bytes=CHUNK)
+    with pytest.raises(error) as ei:
+        sdr.rx(10 * CHUNK, save_to=tmp_path / "cap")
+    sdr.close()
+    assert ei.value.capture.shape == (1, 1000)
+    assert read_sigmf(ei.value.sigmf_path).samples.shape == (1000,)
+
+
+def test_overrun_beyond_the_limit_keeps_the_capture(emu, tmp_path):
+    emu.radios[0].faults = Faults.named("overrun")
+    with HackRF.open(backend=emu.backend, rx_chunk_bytes=CHUNK) as sdr:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with pytest.raises(StreamError, match="3 overruns") as ei:
+                sdr.rx(CHUNK, max_shortfalls=0, save_to=tmp_path / "cap")
+    assert read_sigmf(ei.value.sigmf_path).samples.shape == (CHUNK,)
+
+
+def test_unknown_fault_name_lists_the_known_ones():
+    with pytest.raises(KeyError, match="rx-timeout"):
+        Faults.named("meteor")

@@ -131,6 +131,83 @@ def test_bad_arguments_exit_2(tmp_path, images):
     assert not (tmp_path / "o.json").exists()
 
 
+@pytest.mark.parametrize(
+    "flag, value, match",
+    [
+        ("--snr-db", "nan", "argument --snr-db: must be a number in [-30, 100] dB"),
+        ("--ppm", "1000,0", "--ppm must be two numbers 'TX,RX' in [-200, 200] ppm"),
+        ("--delay-us", "-5", "argument --delay-us: must be a number in [0, 1e+06] us"),
+        ("--center-freq-hz", "1e12", "argument --center-freq-hz: must be a number in"),
+        ("--max-papr-db", "50", "--max-papr-db must be in [3, 20] dB"),
+        ("--seed", "-1", "argument --seed: must be an integer"),
+        ("--mcs", "qpsk-9/10", "argument --mcs: invalid choice"),
+    ],
+)
+def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
+    tmp_path, images, capsys, monkeypatch, flag, value, match
+):
+    """#16: these were refused after ~4.5 s of encoding, in internal names (delay_s ...)."""
+    import osnerf.commands.ota as ota_cmd
+
+    def no_work(*a, **k):
+        raise AssertionError("images were loaded before the flags were checked")
+
+    monkeypatch.setattr(ota_cmd, "load_images", no_work)
+    out = tmp_path / "o.json"
+    argv = ["ota", "--scheme", "digital", "--images", str(images), "--out", str(out)]
+    assert main(argv + [flag, value]) == 2
+    err = capsys.readouterr().err.strip()
+    assert match in err and len(err.splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_corrupt_image_is_bad_input(tmp_path, capsys):
+    """#16: a corrupt image exited 1 in ota (2 in eval-codec)."""
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    (folder / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    argv = [
+        "ota",
+        "--scheme",
+        "digital",
+        "--images",
+        str(folder),
+        "--out",
+        str(tmp_path / "o.json"),
+    ]
+    assert main(argv) == 2
+    assert "x.png: not a readable image" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "fault, error",
+    [
+        ("rx-timeout", "UsbTimeoutError: receive: USB transfer timed out"),
+        ("unplug", "DisconnectedError: receive: the device is gone"),
+        ("overrun", "StreamError: receive: 3 overruns (allowed 0)"),
+        ("stall", "StallError: set frequency: the device stalled the request"),
+    ],
+)
+def test_fault_exits_1_in_one_line_and_keeps_the_capture(tmp_path, images, capsys, fault, error):
+    import sigmf
+
+    out = tmp_path / "ota.json"
+    argv = ["ota", "--scheme", "digital", "--snr-db", "15", "--images", str(images)]
+    argv += ["--out", str(out), "--size", "32", "--symbols-per-frame", "1024", "--fault", fault]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"osnerf ota: failed: {error}") and not out.exists()
+    partial = tmp_path / "ota_sigmf" / "ota_rx_partial.sigmf-meta"
+    if fault == "stall":  # refused while configuring: nothing was received, nothing written
+        assert "nothing was received" in err[-1] and not partial.exists()
+        return
+    assert f"capture so far saved to {partial}" in err[-1]
+    rec = sigmf.fromfile(str(partial))  # checks the SHA-512 against the data file
+    rec.validate()
+    samples = rec.read_samples()
+    assert rec.get_global_field("core:datatype") == "ci8" and len(samples) > 50_000
+
+
 def test_decode_received_shrinks_only_symbols_noisier_than_nominal_for_version_1():
     """A version-1 codec (trained on AWGN symbols as received): at the nominal noise every
     symbol goes in unchanged; a noisier one is scaled by (1 + nominal) / (1 + noise_var)."""

@@ -84,3 +84,17 @@ def test_replay_through_the_receive_interface(tmp_path):
         a, b = src.rx(300), src.rx(300)
     assert a.shape == (1, 300) and np.array_equal(a[0], x[:300])
     assert np.array_equal(b[0, :200], x[300:]) and np.all(b[0, 200:] == 0)
+
+
+def test_data_file_one_byte_short_blames_the_data_file(tmp_path):
+    write_sigmf(tmp_path / "s", to_int8_iq(samples()), sample_rate_hz=2e6)
+    data = tmp_path / "s.sigmf-data"
+    data.write_bytes(data.read_bytes()[:-1])
+    with pytest.raises(SigmfError, match=r"s\.sigmf-data: .*the data file is damaged"):
+        read_sigmf(tmp_path / "s")
+
+
+def test_empty_recording_is_refused_and_writes_nothing(tmp_path):
+    with pytest.raises(ValueError, match="at least one sample"):
+        write_sigmf(tmp_path / "e", np.zeros(0, np.int8), sample_rate_hz=2e6)
+    assert list(tmp_path.iterdir()) == []

@@ -8,7 +8,7 @@ import torch
 
 import phy
 from osnerf.collect import CollectorConfig, Demand, collect, masked_images
-from osnerf.scenes import Intrinsics, SceneViews
+from osnerf.scenes import SceneViews, intrinsics_from_fov
 from osnerf.scu import (
     KnowledgeBaseError,
     RatePolicy,
@@ -40,7 +40,7 @@ def synthetic_views(visible_hydrant, visible_tree, n_test=2, size=8):
         folder=Path("."),
         images=images,
         poses=np.tile(np.eye(4), (n, 1, 1)),
-        intrinsics=Intrinsics.from_fov(40, size, size),
+        intrinsics=intrinsics_from_fov(40, size, size),
         split=split,
         masks=masks,
         visible_fraction=vis,

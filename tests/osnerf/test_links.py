@@ -5,7 +5,9 @@ import pytest
 import torch
 
 import phy
-from osnerf.pipeline import PerPositionChannel, combine_repetitions, received_snr_db
+from osnerf.schemes import received_snr_db
+from phy import combine_repetitions
+from phy.raytrace import PerPositionChannel
 
 
 def test_mrc_of_two_zf_copies_adds_their_snrs():

@@ -109,3 +109,109 @@ def test_bad_arguments_exit_2(run_dir, sphere_dataset, tmp_path, capsys):
     )
     assert "mp4, gif, none" in capsys.readouterr().err
     assert not (tmp_path / "o" / "metrics.json").exists()
+
+
+def _render(run, out, *extra):
+    return main(["render", "--run", str(run), "--out", str(out), "--num-views", "2", *extra])
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+def test_render_names_an_unusable_model_file_and_says_what_to_do(run_dir, tmp_path, capsys):
+    """#16: a corrupt model.pt printed PyTorch's loader text asking to "file an issue"; a
+    torch file with other keys printed "error: aabb"; NaN density rendered black frames
+    with exit 0."""
+    import torch
+
+    out = tmp_path / "r"
+    corrupt = tmp_path / "corrupt.pt"
+    corrupt.write_bytes((run_dir / "model.pt").read_bytes()[:300])
+    assert _render(corrupt, out) == 2
+    err = _one_line(capsys)
+    assert "corrupt.pt: not a readable model file" in err and "osnerf train-nerf" in err
+    other = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(3)}, other)
+    assert _render(other, out) == 2
+    assert "other.pt: not a model saved by save_model (no entry 'aabb')" in _one_line(capsys)
+    payload = torch.load(run_dir / "model.pt", weights_only=True)
+    payload["state_dict"]["field.density_grid"].fill_(float("nan"))
+    nan = tmp_path / "nan.pt"
+    torch.save(payload, nan)
+    assert _render(nan, out) == 2
+    assert "field.density_grid holds NaN or infinite values" in _one_line(capsys)
+    assert not out.exists()
+
+
+def test_render_path_with_a_singular_pose_names_the_frame(run_dir, tmp_path, capsys):
+    """#16: an all-zero transform_matrix printed an SVD error without the frame."""
+    eye = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]
+    path = tmp_path / "path.json"
+    path.write_text(
+        json.dumps({"frames": [{"transform_matrix": eye}, {"transform_matrix": [[0] * 4] * 4}]})
+    )
+    assert _render(run_dir, tmp_path / "r", "--path", str(path)) == 2
+    assert "frames[1].transform_matrix is singular" in _one_line(capsys)
+    assert not (tmp_path / "r").exists()
+
+
+def test_dataset_with_an_all_zero_pose_names_the_frame(sphere_dataset, tmp_path, capsys):
+    import shutil
+
+    data = tmp_path / "data"
+    shutil.copytree(sphere_dataset, data)
+    meta = json.loads((data / "transforms_train.json").read_text())
+    meta["frames"][2]["transform_matrix"] = [[0.0] * 4] * 4
+    (data / "transforms_train.json").write_text(json.dumps(meta))
+    argv = ["train-nerf", "--data", str(data), "--out", str(tmp_path / "o"), "--max-seconds", "1"]
+    assert main(argv) == 2
+    assert "transforms_train.json: frames[2].transform_matrix is singular" in _one_line(capsys)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (
+            ["--resolution", "30000"],
+            "argument --resolution: must be an integer of pixels in [16, 512]",
+        ),
+        (["--threads", "0"], "argument --threads: must be an integer in [1, 256]"),
+        (["--seed", "-1"], "argument --seed: must be an integer in [0, "),
+    ],
+)
+def test_train_nerf_refuses_bad_values_at_parse_time(
+    sphere_dataset, tmp_path, capsys, monkeypatch, extra, match
+):
+    """#16: --resolution had no upper bound (30000 tried to allocate 14.4 GB); --threads 0
+    and --seed -1 were accepted silently."""
+    import renderer
+
+    def refuse(*a, **k):  # a late check fails the test instead of allocating gigabytes
+        raise AssertionError("loaded the dataset before checking the arguments")
+
+    monkeypatch.setattr(renderer, "load_dataset", refuse)
+    argv = ["train-nerf", "--data", str(sphere_dataset), "--out", str(tmp_path / "o"), *extra]
+    assert main(argv) == 2
+    assert match in _one_line(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_train_nerf_checks_its_output_folder_before_training(
+    sphere_dataset, tmp_path, capsys, monkeypatch
+):
+    """#16: --out naming an existing file trained for the whole budget, then failed."""
+    import renderer
+
+    def no_training(*a, **k):
+        raise AssertionError("trained before checking --out")
+
+    monkeypatch.setattr(renderer, "train", no_training)
+    a_file = tmp_path / "taken"
+    a_file.write_text("keep me")
+    argv = ["train-nerf", "--data", str(sphere_dataset), "--out", str(a_file)]
+    assert main(argv) == 2
+    assert "--out" in _one_line(capsys) and a_file.read_text() == "keep me"

@@ -66,3 +66,38 @@ def test_shipped_default_loads_offline():
     assert "data_sha256" in card["training"]
     side = json.loads((codec.path.parent / "default.card.json").read_text())
     assert side["sha256"] == codec.sha256
+
+
+def test_knowledge_base_versions(tmp_path):
+    """v2 models (reliability input) save as format 2 and load; an unknown version is refused
+    with a message naming the file and the versions this code reads; v1 stays loadable."""
+    import json
+
+    from safetensors.torch import load_file, save_file
+
+    from semcodec import load_checkpoint
+
+    torch.manual_seed(0)
+    v2 = make_model("adjscc_s4_w96_rel")
+    p = tmp_path / "v2.safetensors"
+    save_checkpoint(p, v2, {"name": "v2"})
+    model, card = load_checkpoint(p)
+    assert card["format_version"] == "2" and model.cfg.decoder_reliability
+    assert model.decoder.inp.in_channels == 3 * model.cfg.num_complex_channels
+    v1 = tmp_path / "v1.safetensors"
+    save_checkpoint(v1, make_model("adjscc_s4_w64"), {"name": "v1"})
+    assert load_checkpoint(v1)[1]["format_version"] == "1"
+    # a future version
+    from safetensors import safe_open
+
+    with safe_open(str(p), framework="pt") as f:
+        meta = dict(f.metadata())
+    c = json.loads(meta["model_card"])
+    c["format_version"] = "9"
+    bad = tmp_path / "v9.safetensors"
+    save_file(load_file(str(p)), str(bad), metadata={"model_card": json.dumps(c)})
+    with pytest.raises(
+        ValueError,
+        match=r"v9.safetensors is knowledge-base version 9; this osnerf reads versions 1, 2",
+    ):
+        load_checkpoint(bad)

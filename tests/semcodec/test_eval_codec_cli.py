@@ -1,12 +1,17 @@
 """The eval-codec and train-codec contracts, in-process, on a few small images."""
 
 import json
+import os
 
 import numpy as np
 import pytest
 from PIL import Image
 
 from osnerf.cli import main
+from renderer import lpips_weights_path
+
+# LPIPS needs the weights `make lpips` converts; without them (and unless required) skip it.
+WITH_LPIPS = lpips_weights_path().is_file() or bool(os.environ.get("OSNERF_REQUIRE_LPIPS"))
 
 
 @pytest.fixture(scope="module")
@@ -38,6 +43,7 @@ def test_eval_codec_contract(image_dir, tmp_path):
             str(out),
             "--plot",
             str(tmp_path / "eval.png"),
+            *([] if WITH_LPIPS else ["--no-lpips"]),
         ]
     )
     assert rc == 0
@@ -51,6 +57,12 @@ def test_eval_codec_contract(image_dir, tmp_path):
         assert r["cbr"] == 0.0625 and r["num_images"] == 2
         assert r["psnr"] == pytest.approx(np.mean(r["psnr_per_image"]))
         assert 0 < r["ssim"] <= 1 and 5 < r["psnr"] < 60
+        # a lost image (mid-grey) scores about 1; LPIPS-AlexNet stays below ~1.5 in practice
+        assert (0 < r["lpips"] < 1.5) if WITH_LPIPS else r["lpips"] is None
+    assert doc["config"]["lpips"] == WITH_LPIPS
+    if WITH_LPIPS:  # better links look better: at 10 dB each scheme beats itself at 4 dB
+        by = {(r["scheme"], r["snr_db"]): r["lpips"] for r in doc["results"]}
+        assert all(by[s, 10.0] <= by[s, 4.0] for s in ("jscc", "digital", "ideal")), by
     assert (tmp_path / "eval.png").stat().st_size > 1000
 
 
@@ -67,7 +79,7 @@ def test_bad_input_one_line_errors(image_dir, tmp_path, capsys):
     d.mkdir()
     (d / "x.png").write_bytes(b"not an image")
     _bad(tmp_path, images=d)
-    assert "cannot read x.png" in capsys.readouterr().err
+    assert "x.png: not a readable image" in capsys.readouterr().err
     g = tmp_path / "grey"
     g.mkdir()
     Image.fromarray(np.zeros((32, 32), np.uint8)).save(g / "g.png")

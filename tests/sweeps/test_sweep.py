@@ -341,6 +341,19 @@ def test_cli_reports_failed_points_with_exit_1(tmp_path, capsys):
     assert len(read_results(out)) == 1
 
 
+def _sweep_process(yml: Path, out: Path, *extra: str, stderr=subprocess.DEVNULL):
+    """`osnerf sweep YML --out OUT --no-progress EXTRA...` with the fake command, in a new process."""
+    argv = ["sweep", str(yml), "--out", str(out), "--no-progress", *extra]
+    driver = (
+        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
+        f"sys.exit(osnerf.cli.main({argv!r}))"
+    )
+    env = dict(
+        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
+    )
+    return subprocess.Popen([sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=stderr)
+
+
 def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     spec_d = {
         "command": "fake",
@@ -350,17 +363,7 @@ def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     }
     yml = _write_yaml(tmp_path / "s.yaml", spec_d)
     out = tmp_path / "r.jsonl"
-    driver = (
-        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
-        f"sys.exit(osnerf.cli.main(['sweep', {str(yml)!r}, '--out', {str(out)!r}, "
-        "'--executor', 'serial', '--no-progress']))"
-    )
-    env = dict(
-        os.environ, PYTHONPATH=os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])
-    )
-    proc = subprocess.Popen(
-        [sys.executable, "-c", driver], env=env, cwd=ROOT, stderr=subprocess.PIPE
-    )
+    proc = _sweep_process(yml, out, "--executor", "serial", stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         if out.exists() and len(out.read_bytes().splitlines()) >= 2:
@@ -379,6 +382,73 @@ def test_a_sweep_killed_mid_way_resumes_with_every_point_exactly_once(tmp_path):
     calls = _calls(tmp_path)
     assert set(calls) == {(f"{s}.0", "a", "0") for s in range(6)}
     assert sum(calls.values()) <= 7  # at most the point being run when killed ran twice
+
+
+def _children(pid: int) -> set[int]:
+    """Every live descendant of ``pid`` (from /proc; zombies count as dead)."""
+    parents = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            state, ppid = stat.rpartition(")")[2].split()[:2]
+            if state != "Z":
+                parents.setdefault(int(ppid), []).append(int(d.name))
+    out, todo = set(), [pid]
+    while todo:
+        for c in parents.get(todo.pop(), []):
+            out.add(c)
+            todo.append(c)
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
+def test_a_pool_sweep_killed_with_sigkill_takes_its_workers_along(tmp_path):
+    """#16: after kill -9 of `osnerf sweep`, its pool workers ran on (and then blocked on a
+    pipe holding their result), and a resource_tracker was left too."""
+    log = tmp_path / "calls.log"
+    spec_d = {
+        "command": "fake",
+        "fixed": {"log": str(log), "sleep_s": 1.5},
+        "axes": {"snr_db": [0, 1, 2, 3, 4, 5]},
+        "seeds": [0],
+    }
+    yml = _write_yaml(tmp_path / "s.yaml", spec_d)
+    out = tmp_path / "r.jsonl"
+    proc = _sweep_process(yml, out, "--executor", "local", "--workers", "2")
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # both workers are inside a point
+        if log.exists() and len(log.read_text().splitlines()) >= 2:
+            break
+        assert proc.poll() is None, "the sweep ended before it was killed"
+        time.sleep(0.05)
+    family = _children(proc.pid)
+    workers = {int(line.split()[3]) for line in log.read_text().splitlines()}
+    assert workers <= family and len(workers) == 2
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    deadline = time.monotonic() + 20
+    while any(_alive(p) for p in family) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [p for p in family if _alive(p)]
+    for p in left:  # do not leave them to the machine when the test fails
+        os.kill(p, signal.SIGKILL)
+    assert not left, "processes of the killed sweep still run 20 s later"
+    n_before = len(read_results(out)) if out.exists() else 0
+    assert n_before < 6, "the kill must land mid-sweep"
+    spec = load_spec(yml)
+    summary = run_sweep(spec, out, executor="serial", progress=False)
+    assert summary.finished == 6 - n_before and not summary.failed
+    _check_complete(out, spec)
 
 
 def test_ctrl_c_stops_the_sweep_and_keeps_the_finished_points(tmp_path):

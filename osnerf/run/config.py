@@ -1,0 +1,137 @@
+"""The configuration of one ``osnerf run`` (validated before any heavy work)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass
+
+import phy
+from osnerf.collect import Demand
+from osnerf.ota_link import DEVICES as OTA_DEVICES
+from osnerf.scenes import DEFAULT_SCENE, RenderConfig, check_demand, get_scene
+
+OTA = "ota"
+RUN_CHANNELS = (*phy.CHANNELS, OTA)
+"""``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
+raytraced per drone position) plus the over-the-air link."""
+CACHE_VERSION = 5
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One pipeline run.
+
+    Attributes:
+        scene: built-in scene name (``osnerf scenes`` lists them).
+        demand: ``OBJECT[:WEIGHT][,OBJECT...]``; None = the scene's default demand.
+        channel: a name of ``phy.CHANNELS`` ("rayleigh" = block fading, one h per view and
+            copy; flat channels with perfect CSI; "tdl"/"cdl" over OFDM with LS estimates;
+            "raytraced": each drone position's ray-traced channel) or "ota" (over the air
+            between two HackRFs: emulated boards 20 ppm apart with multipath at ``snr_db``, or
+            real ones; see ``ota_device``).
+        snr_db: Es/N0 in dB (for "raytraced": at the median drone position).
+        schemes: names in ``osnerf.schemes.SCHEMES``.
+        seed: seeds every random draw (each scheme's from the seed and its name).
+        max_seconds: NeRF training budget per scheme, seconds (> 0).
+        resolution_px: drone image size (16..512).
+        num_train_views, num_test_views: drone views captured and held out.
+        symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
+        codec, receiver_codec: codec checkpoints (None = semcodec's default; the same).
+        mcs: digital baseline MCS: "envelope" or a phy.digital.MCS_TABLE name.
+        image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).
+        render_spp: Mitsuba samples per pixel.
+        nerf_clock: what ``max_seconds`` counts: "wall" or "cpu".
+        nerf_steps: optional cap on NeRF optimiser steps per scheme (>= 1).
+        ota_device: for channel "ota": "emulated" or "hackrf".
+    """
+
+    scene: str = DEFAULT_SCENE
+    demand: str | None = None
+    channel: str = "rayleigh"
+    snr_db: float = 0.0
+    schemes: tuple[str, ...] = ("jscc", "digital", "full", "gt")
+    seed: int = 0
+    max_seconds: float = 60.0
+    resolution_px: int = 80
+    num_train_views: int = 24
+    num_test_views: int = 8
+    symbol_rate_hz: float = 1e6
+    codec: str | None = None
+    receiver_codec: str | None = None
+    mcs: str = "envelope"
+    image_codec: str = "avif"
+    render_spp: int = 32
+    nerf_clock: str = "wall"
+    ota_device: str = "emulated"
+    nerf_steps: int | None = None
+
+    def __post_init__(self):
+        from osnerf.schemes import load_entry_points
+
+        get_scene(self.scene)
+        if self.channel not in RUN_CHANNELS:
+            raise ValueError(
+                f"channel must be one of {', '.join(RUN_CHANNELS)}, got {self.channel!r}"
+            )
+        known = load_entry_points()
+        if not self.schemes:
+            raise ValueError(f"schemes must name at least one of {', '.join(known)}")
+        for s in self.schemes:
+            if s not in known:
+                raise ValueError(f"schemes must be a subset of {','.join(known)}, got {s!r}")
+        if len(set(self.schemes)) != len(self.schemes):
+            raise ValueError(f"schemes must not repeat a name, got {','.join(self.schemes)}")
+        if not math.isfinite(self.snr_db):
+            raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
+        if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
+            raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
+        if self.nerf_steps is not None and not (
+            isinstance(self.nerf_steps, int) and self.nerf_steps >= 1
+        ):
+            raise ValueError(f"nerf_steps must be an integer >= 1, got {self.nerf_steps!r}")
+        if self.ota_device not in OTA_DEVICES:
+            raise ValueError(
+                f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
+            )
+        if self.nerf_clock not in ("wall", "cpu"):
+            raise ValueError(f"nerf_clock must be 'wall' or 'cpu', got {self.nerf_clock!r}")
+        if not self.symbol_rate_hz > 0:
+            raise ValueError(f"symbol_rate_hz must be > 0, got {self.symbol_rate_hz!r}")
+        self._check_digital()
+        self.render_config()  # validates the view settings
+
+    def _check_digital(self) -> None:
+        from phy.digital import MCS_TABLE
+        from semcodec.image_codecs import IMAGE_CODECS
+
+        if self.mcs != "envelope" and self.mcs not in MCS_TABLE:
+            raise ValueError(
+                f"mcs must be 'envelope' or one of {', '.join(MCS_TABLE)}, got {self.mcs!r}"
+            )
+        if self.image_codec not in IMAGE_CODECS:
+            raise ValueError(
+                f"image_codec must be one of {', '.join(IMAGE_CODECS)}, got {self.image_codec!r}"
+            )
+
+    def render_config(self) -> RenderConfig:
+        return RenderConfig(
+            resolution_px=self.resolution_px,
+            num_train_views=self.num_train_views,
+            num_test_views=self.num_test_views,
+            spp=self.render_spp,
+        )
+
+    def demand_obj(self) -> Demand:
+        text = self.demand or ",".join(get_scene(self.scene).default_demand)
+        d = Demand.parse(text)
+        check_demand(self.scene, d.objects)
+        return d
+
+    def key(self) -> str:
+        """Hash of everything that changes any scheme's results (the cache key). The list of
+        schemes is not part of it: each scheme's stages are cached under its own name."""
+        d = {k: v for k, v in asdict(self).items() if k != "schemes"}
+        blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]

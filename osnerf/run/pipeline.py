@@ -1,0 +1,365 @@
+"""``osnerf run`` as stages, in the order of DESIGN.md's data flow:
+
+scene -> on-demand collector -> SCU plan per view -> each scheme transmits its views ->
+a radiance field per scheme on what arrived (in memory) -> scores -> :class:`Report`.
+
+Stages are cached under ``RUN_DIR/cache/<config key>/`` (the plan once, each scheme's
+transmission and reconstruction under its own name), so an interrupted run resumes and a
+scheme's results do not depend on which other schemes run.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from osnerf.collect import Collection, Demand, collect
+from osnerf.report import Report, SchemeReport
+from osnerf.run.cache import StageCache
+from osnerf.run.config import RunConfig
+from osnerf.run.links import RunLinks, build_links
+from osnerf.run.reconstruct import Reconstruction, received_dataset, reconstruct, view_metrics
+from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
+from osnerf.schemes import RunContext, Scheme, Transmission, get_scheme, scheme_seed
+from osnerf.scu import RatePolicy, RunPlan, SemanticControlUnit, measure_snr_db
+
+METRIC_NOTES = (
+    "psnr/ssim/lpips: mean over held-out views of per-view values on the whole view "
+    "(object-routed schemes: against the demanded objects on the background colour, since "
+    "they never send the rest of the scene); lpips: AlexNet LPIPS (lower is better); "
+    "psnr_object: PSNR over the demanded objects' visible pixels (mask > 0.5) of held-out "
+    "views showing them; mask_iou: rendered opacity > 0.5 vs the objects' mask (object-routed "
+    "schemes only); air = symbols_sent / symbol_rate_hz; seconds.nerf follows --nerf-clock; "
+    "object-routed separate schemes get the on-demand plan's symbol budget per view; "
+    "schemes marked (bound) are not real systems; nerf_curve: psnr_object on the held-out "
+    "views during NeRF training; comparisons.processing_jscc_over_full_at_equal_psnr_object: "
+    "jscc's encode + decode + NeRF seconds until its curve first reaches full's final "
+    "psnr_object, over full's processing_seconds (None: never reached)."
+)
+
+
+def _log(msg: str) -> None:
+    print(f"[osnerf run] {msg}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class Prepared:
+    """What the cheap checks produce before any heavy work."""
+
+    demand: Demand
+    schemes: dict[str, Scheme]
+    codec: object | None
+    rx_codec: object | None
+    scu: SemanticControlUnit
+
+
+def prepare(cfg: RunConfig) -> Prepared:
+    """Names, the SNR against the codec's range and the knowledge base (cheap)."""
+    demand = cfg.demand_obj()
+    schemes = {name: get_scheme(name) for name in cfg.schemes}
+    scu = SemanticControlUnit(demand, rate_policy=RatePolicy())
+    codec = rx = None
+    if any(s.needs_codec for s in schemes.values()):
+        import semcodec
+
+        codec = semcodec.load_codec(cfg.codec)
+        lo, hi = (float(v) for v in codec.snr_range_db)
+        if not lo <= cfg.snr_db <= hi:
+            raise ValueError(
+                f"--snr-db {cfg.snr_db:g} is outside the codec's range [{lo:g}, {hi:g}] dB"
+            )
+        rx = semcodec.load_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
+        scu.check_knowledge_base(codec.sha256, rx.sha256)
+    return Prepared(demand, schemes, codec, rx, scu)
+
+
+def plan_views(
+    cfg: RunConfig, prep: Prepared, views: SceneViews, col: Collection, links: RunLinks, cache
+) -> tuple[RunPlan, Collection]:
+    """The SCU's plan (measured SNR -> CBR, repetitions, focus, oversampling) and the
+    collection without views in outage."""
+    sent = [int(v) for v in col.indices if int(v) not in links.outage]
+    if not sent:
+        raise ValueError(
+            "every view showing the demanded objects is in outage: nothing can be sent"
+        )
+    col = col.subset(np.isin(col.indices, sent))
+    cached = cache.load("plan")
+    if cached is not None:
+        return RunPlan.from_dict(cached[1]), col
+    whole = [int(v) for v in col.candidates if int(v) not in links.outage]
+    gen = torch.Generator().manual_seed(scheme_seed(cfg.seed, "scu", "measure"))
+    measured = measure_snr_db(
+        [links.links[v] for v in whole], [links.snr_db[v] for v in whole], gen
+    )
+    codec = prep.codec
+    plan = prep.scu.plan(
+        col.candidates,
+        sent,
+        links.snr_db,
+        dict(zip(whole, measured.tolist())),
+        links.outage,
+        col.masks,
+        tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6),
+        tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
+        views.intrinsics.height,
+        views.intrinsics.width,
+    )
+    cache.save("plan", {}, plan.to_dict())
+    return plan, col
+
+
+def transmit(
+    scheme: Scheme, ctx: RunContext, views: SceneViews, col: Collection, cache
+) -> Transmission:
+    """The scheme's views through the links (cached under its name)."""
+    plans = ctx.plan.on_demand() if scheme.object_routed else ctx.plan.whole()
+    cached = cache.load(f"{scheme.name}_tx")
+    if cached is None:
+        _log(
+            f"{scheme.name}: sending {len(plans)} views over {ctx.config.channel} at {ctx.config.snr_db:g} dB"
+        )
+        pixels = col.images if scheme.object_routed else views.images[[p.view for p in plans]]
+        images = torch.from_numpy(np.ascontiguousarray(pixels)).permute(0, 3, 1, 2).float()
+        gen = torch.Generator().manual_seed(scheme_seed(ctx.config.seed, scheme.name))
+        tx = scheme.transmit(ctx, plans, images, gen)
+        arrays = {"images": tx.images.numpy(), "symbols": tx.symbols}
+        if tx.rx_masks is not None:
+            arrays["rx_masks"] = tx.rx_masks
+        cache.save(f"{scheme.name}_tx", arrays, {"seconds": tx.seconds, "info": tx.info})
+        return tx
+    a, info = cached
+    return Transmission(
+        torch.from_numpy(a["images"]),
+        a["symbols"],
+        a.get("rx_masks"),
+        info["seconds"],
+        info["info"],
+    )
+
+
+def reconstruct_and_score(
+    scheme: Scheme, tx: Transmission, ctx: RunContext, prep: Prepared, views, col, cache, out_dir
+) -> tuple[SchemeReport, Reconstruction]:
+    """A radiance field on the received views (in memory), scored on the held-out views."""
+    plans = ctx.plan.on_demand() if scheme.object_routed else ctx.plan.whole()
+    ids = [p.view for p in plans]
+    aabb = prep.scu.route(scheme.name, scheme.object_routed, ids, views.meta)
+    ds = received_dataset(
+        tx.images, views.poses[ids], views.intrinsics, views.background, aabb, tx.rx_masks
+    )
+    export_views(Path(out_dir) / "received" / scheme.name, ds)
+    cached = cache.load(f"{scheme.name}_nerf")
+    if cached is None:
+        _log(f"{scheme.name}: training the radiance field ({ctx.config.max_seconds:g} s)")
+        union = np.stack([views.masks[o][views.indices("test")] for o in prep.demand.objects]).max(
+            0
+        )
+        seed = scheme_seed(ctx.config.seed, scheme.name, "nerf")
+        rec = reconstruct(ds, views, union, ctx.config, seed, scheme.object_routed)
+        cache.save(f"{scheme.name}_nerf", {"rgb": rec.rgb, "opacity": rec.opacity}, rec.metrics)
+    else:
+        rec = Reconstruction(cached[1], cached[0]["rgb"], cached[0]["opacity"])
+    m = dict(rec.metrics)
+    n_sym = int(np.sum(tx.symbols))
+    seconds = {
+        "encode": float(tx.seconds.get("encode", 0.0)),
+        "air": n_sym / ctx.config.symbol_rate_hz,
+        "decode": float(tx.seconds.get("decode", 0.0)),
+        "nerf": float(m.pop("nerf_seconds")),
+        **{
+            k: float(v)
+            for k, v in tx.seconds.items()
+            if k in ("encode_cpu", "decode_cpu", "codec_and_ldpc")
+        },
+    }
+    sent = col.images if scheme.object_routed else views.images[ids]
+    received = tx.images.permute(0, 2, 3, 1).numpy()
+    report = SchemeReport(
+        symbols_sent=n_sym,
+        views_sent=len(ids),
+        seconds=seconds,
+        processing_seconds=seconds["encode"]
+        + seconds["decode"]
+        + seconds["nerf"]
+        + seconds.get("codec_and_ldpc", 0.0),
+        side_info_bits=int(tx.info.get("side_info_bits", 0)),
+        views_lost=tx.info.get("views_lost"),
+        failed_codewords=tx.info.get("failed_codewords"),
+        bound=scheme.bound,
+        help=scheme.help,
+        training_bounds="demanded objects" if scheme.object_routed else "whole scene",
+        **view_metrics(received, sent, col.masks if scheme.object_routed else None),
+        **m,
+    )
+    return report, rec
+
+
+def export_views(folder: Path, ds) -> None:
+    """The views a scheme received, as a nerfstudio folder (for people and other tools)."""
+    from PIL import Image
+
+    import renderer
+
+    (folder / "images").mkdir(parents=True, exist_ok=True)
+    names = []
+    for k in range(ds.num_views):
+        names.append(f"images/r_{k:03d}.png")
+        Image.fromarray(renderer.to_uint8(ds.images[k])).save(folder / names[-1])
+    renderer.write_transforms(
+        folder / "transforms.json",
+        ds.poses,
+        ds.intrinsics,
+        names,
+        ds.aabb,
+        {"background": list(ds.background)},
+    )
+
+
+def run_pipeline(
+    cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None
+) -> tuple[Report, dict]:
+    """Run every stage (resuming cached ones); returns the :class:`Report` and the pictures."""
+    t_run = time.perf_counter()
+    prep = prepare(cfg)
+    cache = StageCache(Path(out_dir) / "cache" / cfg.key())
+    t = time.perf_counter()
+    folder = build_scene_dataset(
+        cfg.scene, prep.demand.objects, cfg.render_config(), cache_dir=cache_dir
+    )
+    views = load_scene_views(folder)
+    scene_seconds = time.perf_counter() - t
+    _log(f"scene {cfg.scene}: {len(views.images)} views in {folder} ({scene_seconds:.1f} s)")
+    col = collect(views, prep.demand, prep.scu.collector_settings())
+    for v, why in sorted(col.reasons.items()):
+        prep.scu.log("collector", f"view {v}: not sent", view=v, reason=why)
+    prep.scu.log(
+        "collector",
+        f"send {col.num_sent} of {len(col.candidates)} views",
+        views=col.indices.tolist(),
+    )
+    links = build_links(cfg, views, col.candidates)
+    try:
+        plan, col = plan_views(cfg, prep, views, col, links, cache)
+        ctx = RunContext(
+            cfg,
+            links.links,
+            plan,
+            prep.codec,
+            prep.rx_codec,
+            np.asarray(views.background, np.float32),
+            prep.scu.feature_routing(col),
+        )
+        results, received, renders = {}, {}, {}
+        for name, scheme in prep.schemes.items():
+            tx = transmit(scheme, ctx, views, col, cache)
+            results[name], rec = reconstruct_and_score(
+                scheme, tx, ctx, prep, views, col, cache, out_dir
+            )
+            received[name], renders[name] = tx.images.permute(0, 2, 3, 1).numpy(), rec.rgb
+            _log(
+                f"{name}: psnr_object {results[name].psnr_object}, symbols {results[name].symbols_sent}"
+            )
+    finally:
+        links.close()
+    test = views.indices("test")
+    report = Report(
+        scene={
+            "name": cfg.scene,
+            "folder": str(folder),
+            "objects": list(views.objects),
+            "num_train_views": int(len(col.candidates)),
+            "num_test_views": int(len(test)),
+            "resolution_px": [views.intrinsics.height, views.intrinsics.width],
+            "render_seconds": views.meta.get("render_seconds"),
+            "ground_station_m": views.meta["ground_station_m"],
+        },
+        demand={"objects": list(prep.demand.objects), "weights": list(prep.demand.weights)},
+        link=links.info,
+        snr_db=cfg.snr_db,
+        symbol_rate_hz=cfg.symbol_rate_hz,
+        codec=None
+        if prep.codec is None
+        else {
+            "sha256": prep.codec.sha256,
+            "name": prep.codec.name,
+            "cbr_range": list(prep.codec.cbr_range),
+            "snr_range_db": list(prep.codec.snr_range_db),
+        },
+        views=views_summary(plan, col),
+        schemes=results,
+        comparisons=comparisons(results, prep.schemes),
+        scu_decisions=prep.scu.decisions,
+        metric_notes=METRIC_NOTES,
+        seconds_total=time.perf_counter() - t_run,
+        scene_seconds=scene_seconds,
+    )
+    gt_masks = np.stack([views.masks[o][test] for o in prep.demand.objects]).max(0)
+    return report, {
+        "gt": views.images[test],
+        "gt_masks": gt_masks,
+        "received": received,
+        "renders": renders,
+    }
+
+
+def views_summary(plan: RunPlan, col: Collection) -> dict:
+    """The per-view plan as the report shows it (keys are view ids as strings)."""
+    whole, sent = plan.whole(), plan.on_demand()
+    return {
+        "candidates": [int(v) for v in col.candidates],
+        "sent_on_demand": [p.view for p in sent],
+        "not_sent": {str(k): v for k, v in sorted(col.reasons.items())},
+        "outage": [p.view for p in plan.views if p.outage],
+        "link_snr_db": {str(p.view): p.snr_db for p in whole},
+        "measured_snr_db": {str(p.view): p.measured_snr_db for p in whole},
+        "cbr": {str(p.view): p.cbr for p in whole},
+        "cbr_on_demand": {str(p.view): p.focus_cbr for p in sent},
+        "repetitions": {str(p.view): p.repetitions for p in whole},
+        "object_oversampling": plan.oversampling,
+        "full_scene_symbols": plan.full_scene_symbols,
+        "plan": [asdict(p) for p in plan.views],
+    }
+
+
+def comparisons(results: dict[str, SchemeReport], schemes: dict[str, Scheme]) -> dict:
+    """The headline numbers: the headline scheme (jscc) minus every other scheme in object
+    PSNR; against the first whole-view scheme (full) its symbols, processing time and the
+    paper's claim (processing time to the same object PSNR)."""
+    out = {}
+    subject = next((n for n, s in schemes.items() if s.headline), None)
+    j = results.get(subject)
+    if j is None or j.psnr_object is None:
+        return out
+    for other, o in results.items():
+        if other != subject and o.psnr_object is not None:
+            out[f"{subject}_minus_{other}_psnr_object_db"] = j.psnr_object - o.psnr_object
+    whole = next((n for n, s in schemes.items() if not s.object_routed), None)
+    f = results.get(whole)
+    if f is None:
+        return out
+    if f.symbols_sent:
+        out[f"symbols_{subject}_over_{whole}"] = j.symbols_sent / f.symbols_sent
+    if j.processing_seconds and f.processing_seconds:
+        out[f"processing_{subject}_over_{whole}"] = j.processing_seconds / f.processing_seconds
+        if f.psnr_object is not None and j.nerf_curve:
+            reached = [
+                c
+                for c in j.nerf_curve
+                if c.get("psnr_object") is not None and c["psnr_object"] >= f.psnr_object
+            ]
+            at = (
+                reached[0]["seconds"] + j.seconds["encode"] + j.seconds["decode"]
+                if reached
+                else None
+            )
+            out[f"{subject}_processing_seconds_to_{whole}_psnr_object"] = at
+            out[f"processing_{subject}_over_{whole}_at_equal_psnr_object"] = (
+                None if at is None else at / f.processing_seconds
+            )
+    return out

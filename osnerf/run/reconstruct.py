@@ -1,0 +1,157 @@
+"""Reconstruction and scoring: a radiance field per scheme, trained on its received views in
+memory, scored on held-out views against the ground-truth renders."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+import renderer
+
+
+@dataclass
+class Reconstruction:
+    """A scheme's field, scored.
+
+    Attributes:
+        metrics: psnr, ssim, lpips (whole view; object-routed schemes against the demanded
+            objects on the background), psnr_object, mask_iou, nerf_steps, nerf_curve,
+            nerf_seconds, nerf_wall_seconds, num_test_views, num_test_views_with_object.
+        rgb: [num_test, height, width, 3] float32 renders; opacity: [num_test, height, width].
+    """
+
+    metrics: dict
+    rgb: np.ndarray
+    opacity: np.ndarray
+
+
+def received_dataset(images: torch.Tensor, poses, intrinsics, background, aabb, masks=None):
+    """The views a scheme received as a ``renderer.Dataset`` (no disk round trip).
+
+    Args:
+        images: [num_views, 3, height, width] float32 in [0, 1]; poses: [num_views, 4, 4].
+        masks: [num_views, height, width] what the receiver knows was sent, or None.
+    """
+    return renderer.Dataset(
+        images=images.detach().clamp(0, 1).permute(0, 2, 3, 1).contiguous().float(),
+        poses=torch.as_tensor(np.asarray(poses), dtype=torch.float32),
+        intrinsics=intrinsics,
+        background=tuple(float(c) for c in background),
+        aabb=torch.as_tensor(np.asarray(aabb), dtype=torch.float32),
+        masks=None if masks is None else torch.as_tensor(np.asarray(masks), dtype=torch.float32),
+    )
+
+
+def mask_iou(opacity: np.ndarray, mask: np.ndarray, threshold: float = 0.5) -> float:
+    """Intersection over union of ``opacity > t`` and ``mask > t`` (1.0 when both are empty)."""
+    a, b = opacity > threshold, mask > threshold
+    union = np.logical_or(a, b).sum()
+    return float(np.logical_and(a, b).sum() / union) if union else 1.0
+
+
+def lpips_mean(pred: np.ndarray, ref: np.ndarray) -> float | None:
+    """Mean LPIPS (AlexNet) over views [n, h, w, 3], None where the weights are not set up."""
+    fn = getattr(renderer, "lpips", None)
+    if fn is None:
+        return None
+    try:
+        return float(np.mean(np.asarray(fn(pred, ref), np.float64)))
+    except (FileNotFoundError, ValueError):  # weights not set up, or views under 31 px
+        return None
+
+
+def reconstruct(
+    ds, views, union: np.ndarray, config, seed: int, object_routed: bool
+) -> Reconstruction:
+    """Train the renderer on ``ds`` and score it on the held-out views of ``views``.
+
+    Args:
+        union: [num_test, height, width] union mask of the demanded objects on the test views.
+    """
+    test = views.indices("test")
+    gt = views.images[test]
+    ref = gt
+    if object_routed:
+        bg = np.asarray(views.background, np.float32)
+        ref = gt * union[..., None] + bg * (1.0 - union[..., None])
+    seen = [k for k in range(len(test)) if (union[k] > 0.5).sum() >= 4]
+    curve_masks = np.zeros_like(union)
+    curve_masks[seen] = union[seen] > 0.5
+    held_out = renderer.Dataset(
+        images=torch.from_numpy(np.ascontiguousarray(gt, np.float32)),
+        poses=torch.as_tensor(views.poses[test], dtype=torch.float32),
+        intrinsics=ds.intrinsics,
+        background=ds.background,
+        aabb=ds.aabb,
+        masks=torch.from_numpy(curve_masks.astype(np.float32)),
+    )
+    tc = renderer.TrainConfig(
+        max_seconds=float(config.max_seconds),
+        max_steps=config.nerf_steps,
+        clock=config.nerf_clock,
+        progress=False,
+        eval_every_seconds=max(float(config.max_seconds) / 12, 0.5),
+        eval_views=len(test),
+    )
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+    t = time.perf_counter()
+    result = renderer.train(
+        ds, tc, generator=torch.Generator().manual_seed(seed), eval_dataset=held_out
+    )
+    wall = time.perf_counter() - t
+    with torch.no_grad():
+        out = renderer.render_views(
+            result.model,
+            held_out.poses,
+            ds.intrinsics,
+            views.intrinsics.height,
+            views.intrinsics.width,
+        )
+    rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
+    op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
+    n = len(test)
+    metrics = {
+        "psnr": float(np.mean([renderer.psnr(rgb[k], ref[k]) for k in range(n)])),
+        "ssim": float(np.mean([renderer.ssim(rgb[k], ref[k]) for k in range(n)])),
+        "lpips": lpips_mean(rgb, ref),
+        "psnr_object": float(
+            np.mean([renderer.masked_psnr(rgb[k], gt[k], union[k] > 0.5) for k in seen])
+        )
+        if seen
+        else None,
+        "mask_iou": float(np.mean([mask_iou(op[k], union[k]) for k in seen]))
+        if seen and object_routed
+        else None,
+        "num_test_views": int(n),
+        "num_test_views_with_object": len(seen),
+        "nerf_steps": int(result.steps),
+        "nerf_curve": [
+            {"seconds": c["seconds"], "step": c["step"], "psnr_object": c.get("masked_psnr")}
+            for c in result.curve
+        ],
+        "nerf_seconds": float(result.seconds),
+        "nerf_wall_seconds": wall,
+    }
+    return Reconstruction(metrics, rgb, op)
+
+
+def view_metrics(received: np.ndarray, sent: np.ndarray, masks: np.ndarray | None) -> dict:
+    """PSNR of the received views against what was sent (mean of per-view PSNR), whole and
+    over the demanded objects; None for a scheme that sent nothing over a channel."""
+    if np.array_equal(received, sent):
+        return {"psnr_received": None, "psnr_received_object": None}
+    out = {
+        "psnr_received": float(np.mean([renderer.psnr(r, s) for r, s in zip(received, sent)])),
+        "psnr_received_object": None,
+    }
+    if masks is not None:
+        obj = [
+            renderer.masked_psnr(received[k], sent[k], masks[k] > 0.5)
+            for k in range(len(sent))
+            if (masks[k] > 0.5).sum() > 0
+        ]
+        out["psnr_received_object"] = float(np.mean(obj)) if obj else None
+    return out

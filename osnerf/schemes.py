@@ -1,0 +1,378 @@
+"""The schemes of ``osnerf run``: one table, :data:`SCHEMES`, name -> scheme class.
+
+A scheme takes the views the SCU planned (:class:`osnerf.scu.ViewPlan`) and their pixels,
+sends them over the run's links and returns what the receiver reconstructed
+(:class:`Transmission`). Everything else (collection, plan, links, reconstruction, scoring,
+report) is shared, so adding a scheme is one class and one line::
+
+    @register("mine")
+    class Mine(Scheme):
+        object_routed = True          # sends the on-demand views (masked to the objects)
+
+        def transmit(self, ctx, plans, images, generator):
+            ...
+            return Transmission(received, symbols)
+
+Schemes of other packages register through the ``osnerf.schemes`` entry-point group
+(``name = "package.module:Class"``; the class must subclass :class:`Scheme`). Each scheme's
+randomness comes from the run seed and its own name (:func:`scheme_seed`), so its results do
+not depend on which other schemes run or in which order.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import ClassVar
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+ENTRY_POINT_GROUP = "osnerf.schemes"
+
+
+@dataclass
+class Transmission:
+    """What one scheme's receiver holds after sending its views.
+
+    Attributes:
+        images: [num_views, 3, height, width] float32 in [0, 1], the received views.
+        symbols: [num_views] int64 channel symbols spent per view (repetitions included).
+        rx_masks: [num_views, height, width] float32: pixels the receiver knows were sent
+            (focus box or positions), or None for whole views.
+        seconds: ``encode``, ``decode`` (and ``encode_cpu``, ``decode_cpu``, ``channel``, or
+            ``codec_and_ldpc`` for separate schemes), wall seconds over all views.
+        info: JSON-able details for the report (``failed_codewords``, ``views_lost``, ...).
+    """
+
+    images: torch.Tensor
+    symbols: np.ndarray
+    rx_masks: np.ndarray | None = None
+    seconds: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class RunContext:
+    """What every scheme may use: the run's config, codec, links and plan.
+
+    Attributes:
+        config: the :class:`osnerf.run.RunConfig`.
+        links: view -> ``phy.Link`` (unbiased ZF receivers with perfect or estimated CSI).
+        plan: the SCU's :class:`osnerf.scu.RunPlan`.
+        codec, rx_codec: transmitter's and receiver's codecs (None when no scheme needs one).
+        background: [3] float32 background colour of the scene.
+        routing: (object masks [n_on_demand, K, h, w] tensor, K demand weights) for focus mode.
+    """
+
+    config: object
+    links: dict
+    plan: object
+    codec: object | None
+    rx_codec: object | None
+    background: np.ndarray
+    routing: tuple | None = None
+
+
+class Scheme:
+    """Base class. Subclasses set the class attributes and implement :meth:`transmit`.
+
+    Class attributes:
+        name: the table key (set by :func:`register`).
+        object_routed: True: sends the on-demand views masked to the demanded objects and
+            its renderer trains inside the objects' box; False: every candidate view whole.
+        needs_codec: loads the semantic codec (checked against the knowledge base).
+        bound: None, or what the scheme bounds ("ceiling: nothing crosses the channel");
+            bounds are labelled as such in help and reports.
+        help: one line for ``--help`` and reports.
+        headline: the scheme the report's comparisons are about (the others are its baselines).
+    """
+
+    name: ClassVar[str] = ""
+    headline: ClassVar[bool] = False
+    object_routed: ClassVar[bool] = True
+    needs_codec: ClassVar[bool] = False
+    bound: ClassVar[str | None] = None
+    help: ClassVar[str] = ""
+
+    def transmit(
+        self, ctx: RunContext, plans: list, images: torch.Tensor, generator: torch.Generator
+    ) -> Transmission:
+        """Send ``images`` [num_views, 3, h, w] (the views of ``plans``) and receive them."""
+        raise NotImplementedError
+
+
+SCHEMES: dict[str, type[Scheme]] = {}
+
+
+def register(name: str):
+    """Class decorator: ``SCHEMES[name] = cls`` (one line per scheme)."""
+
+    def deco(cls: type[Scheme]) -> type[Scheme]:
+        if not (isinstance(cls, type) and issubclass(cls, Scheme)):
+            raise TypeError(f"scheme {name!r} must subclass osnerf.schemes.Scheme, got {cls!r}")
+        cls.name = name
+        SCHEMES[name] = cls
+        return cls
+
+    return deco
+
+
+_loaded_entry_points = False
+
+
+def load_entry_points() -> dict[str, type[Scheme]]:
+    """Add the schemes registered by other packages (``osnerf.schemes`` entry points)."""
+    global _loaded_entry_points
+    if not _loaded_entry_points:
+        _loaded_entry_points = True
+        for ep in entry_points(group=ENTRY_POINT_GROUP):
+            if ep.name in SCHEMES:
+                continue
+            try:
+                cls = ep.load()
+            except Exception as e:  # a broken plugin must not break the built-ins
+                raise ValueError(
+                    f"scheme entry point {ep.name} = {ep.value} failed to load ({type(e).__name__}: {e})"
+                ) from None
+            register(ep.name)(cls)
+    return SCHEMES
+
+
+def get_scheme(name: str) -> Scheme:
+    """An instance of the scheme ``name``; ValueError listing the known ones otherwise."""
+    load_entry_points()
+    if name not in SCHEMES:
+        raise ValueError(f"unknown scheme {name!r}; known: {', '.join(SCHEMES)}")
+    return SCHEMES[name]()
+
+
+def parse_schemes(text: str) -> tuple[str, ...]:
+    """``"jscc,gt"`` -> names, each in :data:`SCHEMES` (argparse ``type=``: a bad name is
+    refused while parsing, so ``osnerf sweep`` rejects it before the first point)."""
+    import argparse
+
+    known = load_entry_points()
+    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
+    bad = [n for n in names if n not in known]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(
+            f"schemes must be a subset of {','.join(known)}, got {text!r}"
+        )
+    return names
+
+
+def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
+    """A seed that depends on the run seed, the scheme's name and the stage only."""
+    h = hashlib.sha256(f"{int(run_seed)}/{name}/{stage}".encode()).digest()
+    return int.from_bytes(h[:8], "little") & (2**62 - 1)
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def received_snr_db(noise_var: torch.Tensor, snr_range_db) -> float:
+    """The receiver's SNR for the decoder's AF modules: ``1 / mean(noise_var)`` of unbiased
+    (ZF/MRC) symbols, in dB, clamped to the codec's range."""
+    snr = -10.0 * float(torch.log10(noise_var.mean().clamp_min(1e-12)))
+    return float(np.clip(snr, *snr_range_db))
+
+
+def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, generator):
+    """``repetitions`` copies of a [1, n] block through ``link``, MRC-combined."""
+    from phy import combine_repetitions
+
+    out = link(symbols.expand(repetitions, -1).contiguous(), snr_db, generator=generator)
+    return combine_repetitions(out.x_hat, out.noise_var)
+
+
+def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> Transmission:
+    """Each view through the semantic codec and its link (unbiased receiver, MRC of copies).
+
+    On demand (focus mode) each view and its object masks are upsampled by the plan's
+    oversampling s before encoding and the decoded image averaged back over s x s pixels;
+    outside the sent box the receiver shows the background.
+    """
+    from semcodec import receiver_mask
+
+    codec, rx = ctx.codec, ctx.rx_codec
+    s_up = ctx.plan.oversampling if on_demand else 1
+    snr_range = tuple(float(x) for x in rx.snr_range_db)
+    n, _, h, w = images.shape
+    bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]
+    out, symbols, rx_masks, side, rx_snr = [], [], [], [], []
+    sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0, "encode_cpu": 0.0, "decode_cpu": 0.0}
+    for k, p in enumerate(plans):
+        x = images[k : k + 1]
+        kw = {}
+        if on_demand:
+            kw = {"mask": ctx.routing[0][k : k + 1], "demand_weights": list(ctx.routing[1])}
+        if s_up > 1:
+            x = F.interpolate(x, scale_factor=s_up, mode="bicubic", align_corners=False).clamp(0, 1)
+            if kw:
+                kw["mask"] = F.interpolate(kw["mask"], scale_factor=s_up, mode="nearest")
+        cbr = p.focus_cbr if on_demand else p.cbr
+        t, c = time.perf_counter(), time.process_time()
+        with torch.no_grad():
+            enc = codec.encode(x, p.encoder_snr_db, cbr, **kw)
+        sec["encode"] += time.perf_counter() - t
+        sec["encode_cpu"] += time.process_time() - c
+        t = time.perf_counter()
+        with torch.no_grad():
+            x_hat, nv = _send_blocks(
+                ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, generator
+            )
+        sec["channel"] += time.perf_counter() - t
+        snr_rx = received_snr_db(nv, snr_range)
+        t, c = time.perf_counter(), time.process_time()
+        with torch.no_grad():  # the receiver's average SNR; the per-symbol noise in nv
+            img = rx.decode(
+                x_hat, enc.meta, p.encoder_snr_db, expected_sha256=codec.sha256, noise_var=nv
+            )
+            if s_up > 1:
+                img = F.avg_pool2d(img, s_up)
+        sec["decode"] += time.perf_counter() - t
+        sec["decode_cpu"] += time.process_time() - c
+        img = img[0]
+        m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
+        if m is not None:
+            if s_up > 1:
+                m = m.reshape(h, s_up, w, s_up).max(axis=(1, 3))
+            rx_masks.append(m)
+            mt = torch.from_numpy(m)[None]
+            img = img * mt + bg * (1.0 - mt)
+        out.append(img)
+        symbols.append(p.repetitions * int(enc.symbols.shape[-1]))
+        rx_snr.append(snr_rx)
+        side.append(int(enc.meta.side_info_bits()))
+    return Transmission(
+        torch.stack(out),
+        np.asarray(symbols, np.int64),
+        np.stack(rx_masks) if rx_masks else None,
+        sec,
+        {"rx_snr_db": rx_snr, "side_info_bits": int(sum(side)) if on_demand else 0},
+    )
+
+
+# ----------------------------------------------------------------------------- built-ins
+
+
+@register("jscc")
+class OnDemandJSCC(Scheme):
+    """The semantic link on demand: only views showing the demanded objects, through the
+    codec in focus mode (the feature positions touching the objects, all channels)."""
+
+    object_routed = True
+    needs_codec = True
+    headline = True
+    help = "on-demand semantic JSCC (focus mode on the demanded objects)"
+
+    def transmit(self, ctx, plans, images, generator):
+        return _jscc_views(ctx, plans, images, generator, on_demand=self.object_routed)
+
+
+@register("digital")
+class Digital(Scheme):
+    """The same views and the same symbol budget per view as the on-demand plan, through an
+    image codec + CRC + 5G LDPC + QAM (``semcodec.transmit_digital``)."""
+
+    object_routed = True
+    help = "separate source and channel coding: image codec + 5G LDPC + QAM, same budget"
+
+    def transmit(self, ctx, plans, images, generator):
+        import semcodec
+
+        cfg = ctx.config
+        out, per_view, failed = [], [], 0
+        lost = {"budget": 0, "channel": 0}
+        t = time.perf_counter()
+        for k, p in enumerate(plans):
+            res = semcodec.transmit_digital(
+                images[k : k + 1],
+                ctx.links[p.view],
+                p.snr_db,
+                int(p.budget_symbols),
+                mcs=cfg.mcs,
+                image_codec=cfg.image_codec,
+                generator=generator,
+            )
+            out.append(res.images[0])
+            st = res.stats
+            failed += int(st.get("failed_codewords", 0))
+            if st.get("lost_images", 0):
+                lost["budget" if not st.get("bits") else "channel"] += 1
+            per_view.append(
+                {k2: v for k2, v in st.items() if isinstance(v, (int, float, str, bool))}
+            )
+        return Transmission(
+            torch.stack(out),
+            np.asarray([p.budget_symbols for p in plans], np.int64),
+            None,
+            {"codec_and_ldpc": time.perf_counter() - t},
+            {"failed_codewords": failed, "views_lost": lost, "per_view": per_view},
+        )
+
+
+@register("analog")
+class Analog(Scheme):
+    """Uncoded pixels linearly mapped to symbols (LMMSE at the receiver), on-demand views,
+    the same symbol budget per view as the on-demand plan."""
+
+    object_routed = True
+    help = "uncoded analog pixels, same views and budget as jscc"
+
+    def transmit(self, ctx, plans, images, generator):
+        import semcodec
+
+        out = []
+        t = time.perf_counter()
+        for k, p in enumerate(plans):
+            n = max(1, int(p.budget_symbols) // max(p.repetitions, 1))
+            res = semcodec.transmit_analog(
+                images[k : k + 1], ctx.links[p.view], p.snr_db, n, generator=generator
+            )
+            out.append(res.images[0])
+        return Transmission(
+            torch.stack(out),
+            np.asarray([p.budget_symbols for p in plans], np.int64),
+            None,
+            {"encode": 0.0, "decode": time.perf_counter() - t},
+        )
+
+
+@register("full")
+class FullScene(OnDemandJSCC):
+    """Every candidate view, whole, through the semantic codec (no on-demand selection), CBR
+    per view from its measured SNR."""
+
+    object_routed = False
+    headline = False
+    help = "every drone view whole through the semantic codec (no on-demand selection)"
+
+
+@register("gt")
+class GroundTruth(Scheme):
+    """The on-demand views undistorted: nothing crosses the channel (the ceiling)."""
+
+    object_routed = True
+    bound = "ceiling: the on-demand views undistorted, nothing crosses the channel"
+    help = "bound: the on-demand views undistorted (ceiling)"
+
+    def transmit(self, ctx, plans, images, generator):
+        from osnerf.scu import focus_pixel_masks
+
+        masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None
+        rx = None
+        if masks is not None:  # what jscc's receiver would know over a perfect channel
+            rx = focus_pixel_masks(masks, oversampling=ctx.plan.oversampling)
+        return Transmission(
+            images.clone(), np.zeros(len(plans), np.int64), rx, {"encode": 0.0, "decode": 0.0}
+        )
+
+
+BUILTIN = tuple(SCHEMES)
+"""The built-in schemes, in the order ``osnerf run`` uses by default (analog is opt-in)."""
+DEFAULT_SCHEMES = ("jscc", "digital", "full", "gt")

@@ -1,0 +1,23 @@
+"""Shared fixtures of the ``osnerf run`` tests: a codec (the shipped default if present, else an
+untrained registered architecture), a second codec for knowledge-base refusals, a scene cache."""
+
+import pytest
+import torch
+
+import semcodec
+
+
+def _checkpoint(path, seed):
+    torch.manual_seed(seed)
+    model = semcodec.make_model(sorted(semcodec.MODELS)[0])
+    semcodec.save_checkpoint(path, model, {"name": f"untrained-{seed}"})
+    return str(path)
+
+
+@pytest.fixture(scope="session")
+def env(tmp_path_factory):
+    root = tmp_path_factory.mktemp("run")
+    default = semcodec.DEFAULT_CHECKPOINT
+    codec = str(default) if default.exists() else _checkpoint(root / "a.safetensors", 0)
+    other = _checkpoint(root / "b.safetensors", 1)
+    return {"root": root, "codec": codec, "other": other, "cache": str(root / "cache")}
