@@ -1,6 +1,6 @@
 """phy throughput: channel simulation rate per channel (with sionna's AWGN side by side),
 OFDM link rate, and the over-the-air receiver chain (detection + sync + OFDM demodulation +
-estimation + equalisation) in samples/s against real time at 4 and 20 MS/s.
+estimation + equalisation) in samples/s against real time at 20 MS/s.
 
 Timings are wall-clock medians on a shared machine: read ratios, not absolute numbers.
 """
@@ -30,6 +30,12 @@ def _timed(fn, repeats: int = REPEATS) -> tuple[float, float]:
 
     On a shared machine the CPU time says what the code costs; the wall time what it got.
     """
+    wall, cpu, _ = _timed_best(fn, repeats)
+    return wall, cpu
+
+
+def _timed_best(fn, repeats: int = REPEATS) -> tuple[float, float, float]:
+    """:func:`_timed` plus the fastest wall time of the repeats (the least disturbed run)."""
     fn()  # warm-up (lazy imports, caches)
     times = []
     cpu0 = time.process_time()
@@ -37,7 +43,7 @@ def _timed(fn, repeats: int = REPEATS) -> tuple[float, float]:
         t0 = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
-    return statistics.median(times), (time.process_time() - cpu0) / repeats
+    return statistics.median(times), (time.process_time() - cpu0) / repeats, min(times)
 
 
 def _channels(gen: torch.Generator) -> dict:
@@ -80,48 +86,65 @@ def _links(gen: torch.Generator) -> dict:
     return out
 
 
-def _receiver(rng: np.random.Generator) -> dict:
-    cfg = phy.FrameConfig()
-    n = 12_000  # payload symbols: about 25k samples per frame
+def _frame_capture(rng, cfg, n: int, snr_db: float, cfo: float) -> tuple[np.ndarray, np.ndarray]:
+    """(payload [n] QPSK, capture [2000 + frame + 2000] complex64): multipath, CFO, AWGN."""
     bits = rng.integers(0, 2, size=(n, 2))
     x = (((1 - 2 * bits[:, 0]) + 1j * (1 - 2 * bits[:, 1])) / math.sqrt(2)).astype(np.complex64)
     t = phy.build_frame(x, cfg)
     s = np.r_[np.zeros(2000), t, np.zeros(2000)].astype(np.complex128)
     s = np.convolve(s, [1, 0, 0.4j, 0, 0.2])[: s.size] * np.exp(
-        2j * np.pi * 3.3 * np.arange(s.size) / cfg.fft_size
+        2j * np.pi * cfo * np.arange(s.size) / cfg.fft_size
     )
-    nv = np.mean(np.abs(t) ** 2) * 10 ** (-20 / 10)
-    r = (
-        s + math.sqrt(nv / 2) * (rng.standard_normal(s.size) + 1j * rng.standard_normal(s.size))
-    ).astype(np.complex64)
-    sec, cpu = _timed(lambda: phy.receive_frame(r, cfg, n))
-    res = phy.receive_frame(r, cfg, n)
+    nv = np.mean(np.abs(t) ** 2) * 10 ** (-snr_db / 10)
+    r = s + math.sqrt(nv / 2) * (rng.standard_normal(s.size) + 1j * rng.standard_normal(s.size))
+    return x, r.astype(np.complex64)
+
+
+def _receiver(rng: np.random.Generator) -> dict:
+    """The receiver chain at 20 MS/s (HackRF's top rate; 20 ppm at 2.45 GHz is 0.16
+    subcarriers there): one long frame at 20 dB and at -10 dB, and the frame search over a
+    capture of 8 frames. Real-time factors from wall time and from this process's CPU time
+    (the machine is shared: CPU time says what the code costs on one core)."""
+    cfg = phy.FrameConfig(sample_rate_hz=20e6)  # no clock lock: the capture has CFO, no SCO
+    n = 12_000  # payload symbols: about 26k samples per frame
+    x, r = _frame_capture(rng, cfg, n, 20.0, 0.157)
+    sec, cpu, best = _timed_best(lambda: phy.receive_frame(r, cfg, n, equalizer="zf"), 15)
+    res = phy.receive_frame(r, cfg, n, equalizer="zf")
     mse = float(np.mean(np.abs(res.symbols.numpy() - x) ** 2))
-    rate = r.size / sec
+    x_low, r_low = _frame_capture(rng, cfg, n, -10.0, 0.157)
+    low = phy.receive_frame(r_low, cfg, n, equalizer="zf")
     capture = np.concatenate([r] * 8)  # 8 frames: detection only over a longer capture
-    sec_find = _median_seconds(lambda: phy.find_frames(capture, cfg), 3)
+    sec_find, cpu_find, best_find = _timed_best(lambda: phy.find_frames(capture, cfg), 7)
     return {
+        "sample_rate_hz": cfg.sample_rate_hz,
         "frame_samples": int(r.size),
         "receive_frame_seconds": sec,
-        "receive_frame_samples_per_s": rate,
-        "realtime_factor_at_4msps": rate / 4e6,
-        "realtime_factor_at_20msps": rate / 20e6,
+        "receive_frame_samples_per_s": r.size / sec,
+        "realtime_factor_at_20msps": r.size / sec / 20e6,
         "receive_frame_cpu_seconds": cpu,
-        "cpu_samples_per_s": r.size / cpu,
-        "cpu_realtime_factor_at_4msps": r.size / cpu / 4e6,
         "cpu_realtime_factor_at_20msps": r.size / cpu / 20e6,
+        "best_wall_realtime_factor_at_20msps": r.size / best / 20e6,
         "find_frames_samples_per_s": capture.size / sec_find,
         "find_frames_realtime_factor_at_20msps": capture.size / sec_find / 20e6,
+        "find_frames_cpu_realtime_factor_at_20msps": capture.size / cpu_find / 20e6,
+        "find_frames_best_wall_realtime_factor_at_20msps": capture.size / best_find / 20e6,
         "frames_found": len(phy.find_frames(capture, cfg)),
         "detected": res.detected,
-        "cfo_error_subcarriers": abs(res.cfo_subcarriers - 3.3),
+        "cfo_error_subcarriers": abs(res.cfo_subcarriers - 0.157),
         "payload_mse": mse,
         "reported_noise_var": float(res.noise_var.mean()),
+        "at_minus_10_db": {
+            "detected": low.detected,
+            "start_error_samples": int(low.start_index - 2000),
+            "cfo_error_subcarriers": abs(low.cfo_subcarriers - 0.157),
+            "payload_mse": float(np.mean(np.abs(low.symbols.numpy() - x_low) ** 2)),
+            "reported_noise_var": float(low.noise_var.mean()),
+        },
     }
 
 
 def run(out_dir: Path) -> dict:
-    torch.set_num_threads(min(2, torch.get_num_threads()))
+    torch.set_num_threads(1)  # the real-time target is per core
     gen = torch.Generator().manual_seed(0)
     return {
         "note": "wall-clock medians on a shared 2-core machine; realtime_factor > 1 means faster than real time",

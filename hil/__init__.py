@@ -8,6 +8,7 @@ May import ``phy`` only. Public names::
     open_loopback, loopback_pair  the same driver without USB
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
+    decode_capture                a recorded capture decoded again, offline
     HilError and subclasses
 """
 
@@ -39,6 +40,7 @@ from hil.ota import (
     FrameReport,
     OtaConfig,
     PhyFrames,
+    decode_capture,
     save_partial_capture,
     save_sigmf,
     send_blocks,
@@ -54,6 +56,7 @@ __all__ = [
     "PhyFrames",
     "save_partial_capture",
     "save_sigmf",
+    "decode_capture",
     "send_blocks",
     "Annotation",
     "ControlRequest",

@@ -3,8 +3,12 @@
 :class:`OtaLink` has the interface of ``phy``'s links (``link(x, snr_db, generator) ->
 phy.LinkOutput``), so every scheme of ``osnerf run`` can cross the air: each call sends
 the batch's blocks as one burst of ``phy`` OFDM frames through ``hil.send_blocks`` and
-returns the equalised symbols with the receiver's own per-symbol noise variance (lost
-frames come back erased: zero symbols with a huge noise variance).
+returns zero-forced (unbiased) symbols with the receiver's own per-symbol effective noise
+variance, the codec's convention (lost frames come back erased: zero symbols with noise
+variance ``hil.ota.ERASED_NOISE_VAR``). A decoder should get that variance
+(``codec.decode(x_hat, meta, snr_db, noise_var=out.noise_var)``) and, as its SNR, the
+receiver's measured one (``snr_db_measured``) rather than ``1 / mean(noise_var)``, which
+one erased frame dominates.
 """
 
 from __future__ import annotations

@@ -1,25 +1,31 @@
 """The over-the-air receiver: find frames in a capture and recover their symbols.
 
-Acquisition (per candidate): Schmidl-Cox plateau -> fractional CFO -> even integer CFO from
-the first long training symbol -> first-path timing by cross-correlation -> confirmation by
-both long training symbols. Demodulation: DC removal, one CFO rotation (fine CFO from the
-two long training symbols), channel estimate (their average), per-symbol pilot tracking of
-timing drift (a line fit; the FFT window moves when it passes half a sample) and common
-phase, noise from pilot residuals, one-tap ZF/MMSE. See :mod:`phy.frame` for the waveform.
+Acquisition (:mod:`phy.detection`): differential search over the sync preamble's segments,
+coherent confirmation over CFO hypotheses, fine CFO, first-path timing. Demodulation
+(:mod:`phy.estimation`): DC removal, one CFO rotation, FFT of every OFDM symbol with the
+window following the sampling-clock drift, then estimates pooled over the whole frame:
+common phase (residual CFO line, smoothed residual), timing drift (from the CFO when both
+radios share one crystal, else from the pilots), the channel from both training symbols
+and every pilot by weighted least squares with its taps inside the cyclic prefix, and the
+noise variance from the residuals of every known value. One-tap ZF (unbiased, the codec's
+convention) or MMSE with each symbol's effective noise variance; the payload is
+de-interleaved. See :mod:`phy.frame` for the waveform.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 import torch
 
-from phy import sync
-from phy.frame import FrameConfig, _as_complex_1d, _preamble, _time_body
-from phy.ofdm.equalization import EQUALIZERS, equalize
-from phy.ofdm.resource_grid import extract_data
+from phy import estimation, sync
+from phy.detection import find_preambles
+from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
+from phy.ofdm.equalization import EQUALIZERS
 
 
 @dataclass
@@ -35,8 +41,9 @@ class FrameResult:
         sco_ppm: estimated sampling-clock offset (positive: the frame arrives stretched).
         snr_db_estimate: mean |H|^2 / N0 on the used carriers in dB, N0 from the difference
             of the two long training symbols: the SNR of random noise alone.
-        effective_snr_db: the same with the noise the data saw (pilot residuals: noise plus
-            quantisation, I/Q image, ISI/ICI); what ``noise_var`` is based on.
+        effective_snr_db: the same with the noise the data saw (the residuals of every
+            training and pilot value against the fitted model: noise plus quantisation,
+            I/Q image, ISI/ICI); what ``noise_var`` is based on.
         detected: whether a complete frame was found.
     """
 
@@ -53,53 +60,9 @@ class FrameResult:
 
 def _without_dc(r: np.ndarray) -> np.ndarray:
     """Remove the capture's mean (an SDR's DC offset would make silence look periodic)."""
-    return (r - r.mean()).astype(np.complex64) if r.size else r
-
-
-def _acquire(r: np.ndarray, cfg: FrameConfig) -> list[tuple[int, float]]:
-    """Every frame start in ``r`` with its CFO (subcarriers): [(start_index, cfo)]."""
-    n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
-    metric, p = sync.schmidl_cox_metric(r, n // 2)
-    if metric.size == 0:
-        return []
-    w = max(1, cp // 2)
-    smooth = sync.sliding_sum(metric, w) / w if metric.size >= w else metric
-    runs = sync.detect_plateaus(smooth, cfg.detection_threshold, max(1, cp // 4), merge_gap=cp)
-    sc_freq, lts_freq = _preamble(cfg)
-    lts_t = _time_body(lts_freq)
-    used = cfg.data_grid(1).used_subcarriers
-    found: list[tuple[int, float]] = []
-    for first, last in runs:
-        centre = sync.plateau_centre(metric, first, min(last + w - 1, metric.size - 1))
-        frac = sync.fractional_cfo(p[centre])
-        lts1 = centre + cp // 2 + s  # estimated first sample of the first LTS body
-        lo, hi = lts1 - cp - n // 4, lts1 + cp + n // 4
-        if lo < 0 or hi + n + s > r.size:
-            continue
-        seg_start = lo
-        seg = sync.correct_cfo(r[seg_start : hi + n + s], frac, n, start=0)
-        a = lts1 - cp // 2 - seg_start
-        y = np.fft.fftshift(np.fft.fft(seg[a : a + n], norm="ortho"))
-        max_shift = int(math.ceil(cfg.max_cfo_subcarriers)) + 1
-        g = sync.integer_cfo(y, lts_freq, used, max_shift, step=2)
-        cfo = frac + g
-        if abs(cfo) > cfg.max_cfo_subcarriers + 1:
-            continue
-        seg = sync.correct_cfo(r[seg_start : hi + n + s], cfo, n, start=0)
-        corr = sync.cross_correlation(seg, lts_t, 0, hi - lo)
-        if corr.size == 0 or corr.max() < 0.2:
-            continue  # a false alarm: no long training symbol where it should be
-        lts1_fine = seg_start + sync.first_path(corr, 0.5, lookback=cp)
-        a, b = r[lts1_fine : lts1_fine + n], r[lts1_fine + s : lts1_fine + s + n]
-        if abs(np.vdot(a, b)) < 0.3 * np.linalg.norm(a) * np.linalg.norm(b):
-            continue  # the two long training symbols must repeat (whatever the channel)
-        k2 = lts1_fine + s - seg_start
-        if sync.cross_correlation(seg, lts_t, k2, k2 + 1).max(initial=0.0) < 0.2:
-            continue  # and the second one must be there too
-        start = lts1_fine - n - 2 * cp
-        if start >= 0 and (not found or start - found[-1][0] > s):
-            found.append((int(start), float(cfo)))
-    return found
+    if not r.size:
+        return r
+    return r - np.complex64(_sum(r) / r.size)
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
@@ -108,22 +71,99 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     Args:
         iq: [num_samples] complex64 (numpy or torch).
     """
-    return [start for start, _ in _acquire(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
+    return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
 
 
-def _windows(
-    rc: np.ndarray, body_starts: np.ndarray, shifts: np.ndarray, cfg: FrameConfig
-) -> np.ndarray:
-    """FFT of each OFDM symbol; window starts ``backoff - shift`` samples early, ramp removed.
+def _windows(rc: np.ndarray, starts: np.ndarray, fft_size: int) -> np.ndarray:
+    """FFT of the windows ``rc[start : start + fft_size]``: [num_windows, fft_size] complex64
+    in natural (FFT) order; the window's early start is a delay the caller's model removes."""
+    frames = np.lib.stride_tricks.sliding_window_view(rc, fft_size)[starts]
+    return scipy.fft.fft(frames, axis=-1, norm="ortho", overwrite_x=True)
 
-    Returns [num_windows, fft_size] complex128 in centred order.
-    """
-    n, b = cfg.fft_size, cfg.backoff
-    starts = body_starts - b + shifts
-    idx = starts[:, None] + np.arange(n)[None, :]
-    y = np.fft.fftshift(np.fft.fft(rc[idx], axis=-1, norm="ortho"), axes=-1)
-    k = np.arange(n) - n // 2
-    return y * np.exp(2j * np.pi * k[None, :] * (b - shifts)[:, None] / n)
+
+@dataclass(frozen=True)
+class _Layout:
+    """Index arrays of one frame length (cached): rows are the two training symbols, then
+    the data OFDM symbols; ``known`` entries (training carriers, pilots) row-major."""
+
+    rows: int
+    body: np.ndarray  # [rows] body start of each row, samples from the frame start
+    times: np.ndarray  # [rows] centre of each row's body, samples
+    k_row: np.ndarray  # [num_known] row of each known value
+    k_col: np.ndarray  # [num_known] carrier (centred order)
+    k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
+    x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
+    counts: np.ndarray  # [num_used] observations per used carrier
+    smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
+    # [num_models, num_used], dofs [num_models]): the candidate channel models, shortest
+    # delay window first, per-carrier LS last
+    smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
+    pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
+    d_row: np.ndarray  # [num_data_elements] row of each data element (row-major)
+    d_col: np.ndarray  # [num_data_elements] carrier of each data element
+    d_flat: np.ndarray  # [num_data_elements] row * fft_size + FFT bin (natural order)
+    used: np.ndarray  # used carriers (centred order)
+    used_nat: np.ndarray  # their FFT bins (natural order)
+    pilots: np.ndarray  # pilot carriers (centred order)
+    pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
+    num_training_values: int  # known entries of the two training rows (come first)
+    fft_size: int
+    perm: np.ndarray | None  # the interleaver, None when off
+
+
+@functools.lru_cache(maxsize=32)
+def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
+    grid = cfg.data_grid(num_symbols)
+    n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
+    used, pk = grid.used_subcarriers, grid.pilot_subcarriers
+    rows = 2 + grid.num_ofdm_symbols
+    body = cfg.sync_length + cp + s * np.arange(rows)
+    x = np.zeros((rows, n), np.complex64)  # [rows, fft_size]
+    x[:2, used] = _lts(cfg)[used]
+    x[2:, pk] = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
+    k_row, k_col = np.nonzero(x)
+    data = np.zeros((rows, n), bool)
+    data[2:] = grid.data_mask.numpy()
+    d_row, d_col = np.nonzero(data)
+    # candidate channel models: taps from backoff samples before the detected first path,
+    # as many as the comb has pilots per symbol (more are ill-determined between pilots at
+    # low SNR), the whole prefix, and per-carrier LS (no smoothing: high SNR, long channels)
+    counts = np.bincount(k_col, minlength=n)[used].astype(np.float64)
+    smoothers = []
+    for num_taps in sorted({min(cp, pk.size), cp}):
+        basis = estimation.delay_basis(used, n, np.arange(num_taps) - cfg.backoff)
+        p_mat, factor = estimation.channel_smoother(counts, basis)
+        smoothers.append((p_mat.astype(np.complex64), factor, num_taps))
+    smoothers.append((np.diag(1.0 / counts).astype(np.complex64), 1.0 / counts, used.size))
+    short = estimation.delay_basis(used, n, np.arange(min(cp, pk.size)) - cfg.backoff)
+    smoother_training, _ = estimation.channel_smoother(np.full(used.size, 2.0), short)
+    return _Layout(
+        rows=rows,
+        body=body,
+        times=(body + n / 2).astype(np.float64),
+        k_row=k_row,
+        k_col=k_col,
+        k_flat=k_row * n + (k_col + n // 2) % n,
+        x_known=x[k_row, k_col],
+        counts=counts,
+        smoothers=(
+            np.stack([m[0] for m in smoothers]),
+            np.stack([m[1] for m in smoothers]),
+            np.array([m[2] for m in smoothers], np.float64),
+        ),
+        smoother_training=smoother_training.astype(np.complex64),
+        pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
+        d_row=d_row,
+        d_col=d_col,
+        d_flat=d_row * n + (d_col + n // 2) % n,
+        used=used,
+        used_nat=(used + n // 2) % n,
+        pilots=pk,
+        pilot_in_used=np.searchsorted(used, pk),
+        num_training_values=2 * used.size,
+        fft_size=n,
+        perm=interleaver(grid.num_data_symbols) if cfg.interleave else None,
+    )
 
 
 def _not_detected(num_symbols: int) -> FrameResult:
@@ -164,13 +204,19 @@ def receive_frame(
         raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
     if not isinstance(search_from, int) or not 0 <= search_from < max(1, raw.size):
         raise ValueError(f"search_from must be an integer in [0, {raw.size}), got {search_from!r}")
-    grid = cfg.data_grid(num_symbols)
     length = cfg.num_samples(num_symbols)
-    for start, cfo in _acquire(_without_dc(raw[search_from:]), cfg):
-        start += search_from
-        if start + length <= raw.size:
-            r = raw - _dc_estimate(raw, start, length)
-            return _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length)
+    # a complete frame starts no later than raw.size - length: search only there, and from
+    # one preamble before search_from, so that a preamble cut by search_from is found as
+    # itself (and skipped) rather than through its sidelobes
+    first = max(0, search_from - cfg.sync_length)
+    region = raw[first : max(first, raw.size - length + cfg.sync_length)]
+    for det in find_preambles(_without_dc(region), cfg):
+        start, cfo = det.start + first, det.cfo
+        if search_from <= start and start + length <= raw.size:
+            frame = raw[start : start + length] - _dc_estimate(raw, start, length)
+            res = _demodulate(frame.astype(np.complex64), cfo, num_symbols, cfg, equalizer)
+            res.start_index = int(start)
+            return res
     return _not_detected(num_symbols)
 
 
@@ -180,81 +226,152 @@ def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
     the mean of everything."""
     outside = r.size - length
     if outside >= 256:
-        return complex((r[:start].sum() + r[start + length :].sum()) / outside)
-    return complex(r.mean())
+        total = _sum(r[:start]) + _sum(r[start + length :])
+        return total / outside
+    return _sum(r) / max(r.size, 1)
 
 
-def _demodulate(r, start, cfo, grid, num_symbols, cfg, equalizer, length) -> FrameResult:
+def _sum(r: np.ndarray) -> complex:
+    """Sum of a complex64 array, accumulated in complex128."""
+    return complex(r.sum(dtype=np.complex128)) if r.size else 0j
+
+
+def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
+    """Recover the payload of ``frame`` [length] complex64 (DC removed, starting at the
+    sync preamble's first sample) whose CFO is about ``cfo`` subcarriers."""
+    lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
-    k = np.arange(n) - n // 2
-    _, lts = _preamble(cfg)
-    used = grid.used_subcarriers
-    pad = cp + s  # room for windows that drift late
-    body = np.arange(3 + grid.num_ofdm_symbols) * s + cp  # [num_ofdm_symbols + 3]
-    no_shift = np.zeros(2, dtype=np.int64)
-
-    # fine CFO from the two long training symbols (preamble only), then one rotation of
-    # the whole frame, then the channel estimate (their average)
-    pre = sync.correct_cfo(r[start : start + cfg.preamble_length], cfo, n)
-    y1, y2 = _windows(pre, body[1:3], no_shift, cfg)
-    cfo += float(np.angle(np.sum(y2[used] * np.conj(y1[used])))) * n / (2 * np.pi * s)
-    rc = np.concatenate(
-        [sync.correct_cfo(r[start : start + length], cfo, n), np.zeros(pad, np.complex64)]
-    )
-    y1, y2 = _windows(rc, body[1:3], no_shift, cfg)
-    h = np.zeros(n, dtype=np.complex128)
-    h[used] = (y1[used] + y2[used]) / (2 * lts[used])
-    # their difference sees the random noise only (distortions repeat in both copies)
-    lts_noise_var = max(float(np.mean(np.abs(y1[used] - y2[used]) ** 2)) / 2, 1e-10)
-
-    # data symbols: pilots -> per-symbol timing drift (line fit) and common phase
-    pk = grid.pilot_subcarriers
-    pilots = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
-    spacing = cfg.pilot_subcarrier_spacing
-    pairs = np.flatnonzero(np.diff(pk) == spacing)
-    idx = np.arange(grid.num_ofdm_symbols)
-    shifts = np.zeros(grid.num_ofdm_symbols, dtype=np.int64)
-    for _ in range(2):
-        y = _windows(rc, body[3:], shifts, cfg)  # [num_ofdm_symbols, fft_size]
-        z = y[:, pk] / (h[pk][None, :] * pilots)
-        slope = np.angle(np.sum(z[:, pairs + 1] * np.conj(z[:, pairs]), axis=1)) / spacing
-        tau = -slope * n / (2 * np.pi)  # [num_ofdm_symbols] samples
-        if grid.num_ofdm_symbols > 1:
-            b, a = np.polyfit(idx, tau, 1)
-        else:
-            b, a = 0.0, float(tau[0])
-        tau_fit = a + b * idx
-        new = np.round(tau_fit).astype(np.int64)
-        if np.array_equal(new, shifts) or np.any(np.abs(new) >= cp - cfg.backoff):
+    k = (np.fft.fftfreq(n) * n).astype(np.float32)  # frequency index of each FFT bin
+    used, pk = lay.used, lay.pilots
+    kr, kc = lay.k_row, lay.k_col
+    x_conj = np.conj(lay.x_known)
+    rc = np.concatenate([sync.correct_cfo(frame, cfo, n), np.zeros(cp + s, np.complex64)])
+    locked = cfg.carrier_freq_hz is not None
+    eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
+    h, slope_hint = None, None
+    for _ in range(4):  # timing-drift iterations (one when it comes from the CFO)
+        tau = eps * lay.times  # [rows] samples of drift
+        shifts = np.clip(np.round(tau), -(cp - cfg.backoff - 1), cfg.backoff).astype(np.int64)
+        y = _windows(rc, lay.body - cfg.backoff + shifts, n).reshape(-1)  # [rows * fft_size]
+        delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
+        # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
+        ramp = _phasor(np.outer(delay, k) * np.float32(-2 * np.pi / n)).reshape(-1)
+        yx = y[lay.k_flat] * x_conj * np.conj(ramp[lay.k_flat])  # observations of h e^{j phi}
+        if h is None:  # first look: the two training symbols
+            first = kr < 2
+            h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
+            y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
+            diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
+            noise_var = lts_noise_var = max(float(np.mean(np.abs(diff) ** 2)) / 2, 1e-12)
+        for _ in range(2):
+            a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
+            snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
+            phi, slope = estimation.track_phase(a, snr_row, slope_hint)
+            slope_hint = slope
+            rot = _phasor(-phi)  # [rows]
+            obs = yx * rot[kr]
+            sums = _carrier_sums(obs, lay)
+            # Cp's noise level from the richest model (per-carrier means): unbiased whichever
+            # model is right, so a low training-difference estimate cannot pick a noisy model
+            scatter = float(np.vdot(obs, obs).real) - float(np.sum(np.abs(sums) ** 2 / lay.counts))
+            cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
+            h, factor, taps = _best_channel(sums, lay, cp_noise)
+            dof = max(kr.size - taps - lay.rows, 1)
+            e = obs - h[kc]
+            noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
+        if locked:
             break
-        shifts = new
-    ramp = np.exp(-2j * np.pi * np.outer(tau_fit, k) / n)  # [num_ofdm_symbols, fft_size]
-    theta = np.angle(np.sum(z * np.conj(ramp[:, pk]), axis=1))
-    h_all = h[None, :] * ramp * np.exp(1j * theta)[:, None]
+        data_rows = kr >= 2
+        z = (obs[data_rows] * np.conj(h[kc[data_rows]])).reshape(lay.rows - 2, -1)
+        d_eps = estimation.track_delay(
+            z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
+        )
+        eps += d_eps
+        if abs(d_eps) * lay.times[-1] < 0.02:
+            break
 
-    # noise seen by the data: pilot residuals (random noise plus distortions that differ
-    # from symbol to symbol: quantisation, I/Q image, ICI), less the channel-estimate error
-    # they include, corrected for the one phase fitted per symbol
-    resid = float(np.mean(np.abs(y[:, pk] - h_all[:, pk] * pilots) ** 2)) / (1 - 1 / pk.size)
-    noise_var = max(lts_noise_var, resid - lts_noise_var / 2)
-    x_hat, nv = equalize(
-        torch.from_numpy(y.astype(np.complex64))[None],
-        torch.from_numpy(h_all.astype(np.complex64))[None],
-        noise_var,
-        equalizer,
-        estimation_error_var=lts_noise_var / 2,
-    )
-    symbols = extract_data(x_hat, grid)[0, :num_symbols].contiguous()
-    nv = extract_data(nv, grid)[0, :num_symbols].contiguous()
-    signal = float(np.mean(np.abs(h[used]) ** 2))
+    mse = np.zeros(n, np.float32)
+    mse[used] = noise_var * factor
+    h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
+    model = (h_nat[None, :] * np.conj(rot)[:, None]).reshape(-1) * ramp
+    h_d, y_d = model[lay.d_flat], y[lay.d_flat]  # [num_data_elements]
+    s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
+    gain = h_d.real * h_d.real + h_d.imag * h_d.imag
+    if equalizer == "zf":
+        x_hat = y_d / np.where(gain > 1e-24, h_d, np.complex64(1e-12))
+        nv = s_eff / np.maximum(gain, 1e-24)
+    else:
+        x_hat = y_d * np.conj(h_d) / (gain + s_eff)
+        nv = s_eff / (gain + s_eff)
+    if lay.perm is not None:
+        px, pn = np.empty_like(x_hat), np.empty_like(nv)
+        px[lay.perm], pn[lay.perm] = x_hat, nv
+        x_hat, nv = px, pn
+    x_hat, nv = x_hat[:num_symbols], nv[:num_symbols]
+    signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
+    cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
-        symbols=symbols,
-        noise_var=nv,
-        start_index=int(start),
-        cfo_hz=cfo * cfg.subcarrier_spacing_hz,
-        cfo_subcarriers=float(cfo),
-        sco_ppm=float(b / s * 1e6),
+        symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
+        noise_var=torch.from_numpy(np.ascontiguousarray(nv, np.float32)),
+        start_index=-1,
+        cfo_hz=cfo_total * cfg.subcarrier_spacing_hz,
+        cfo_subcarriers=float(cfo_total),
+        sco_ppm=float(eps * 1e6),
         snr_db_estimate=10 * math.log10(signal / lts_noise_var),
-        effective_snr_db=10 * math.log10(signal / noise_var),
         detected=True,
+        effective_snr_db=10 * math.log10(signal / noise_var),
     )
+
+
+def _phasor(angle: np.ndarray) -> np.ndarray:
+    """exp(1j * angle) as complex64 from float32 sine and cosine (vectorised, fast)."""
+    a = np.asarray(angle, np.float32)
+    out = np.empty(a.shape, np.complex64)
+    out.real, out.imag = np.cos(a), np.sin(a)
+    return out
+
+
+def _row_sums(v: np.ndarray, lay: _Layout) -> np.ndarray:
+    """[rows] complex sums of known-value entries ``v`` [num_known] by row (the training
+    rows come first, then the data rows with the same number of pilots each)."""
+    nt = lay.num_training_values
+    head = v[:nt].reshape(2, -1).sum(axis=1)
+    tail = v[nt:].reshape(lay.rows - 2, -1).sum(axis=1)
+    return np.concatenate([head, tail])
+
+
+def _carrier_sums(obs: np.ndarray, lay: _Layout, training_only: bool = False) -> np.ndarray:
+    """[num_used] complex sums per used carrier of observations ``obs`` [num_known] (the
+    training rows' alone when ``training_only``)."""
+    nt = lay.num_training_values
+    sums = obs[:nt].reshape(2, -1).sum(axis=0)  # training rows cover every used carrier
+    if not training_only:
+        sums[lay.pilot_in_used] += obs[nt:].reshape(lay.rows - 2, -1).sum(axis=0)
+    return sums
+
+
+def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
+    """The candidate channel model with the least Mallows' Cp, ``sum_k c_k |o_k - h_k|^2 +
+    2 noise_var dof`` (``o_k`` the mean observation of carrier k, ``c_k`` their count): an
+    unbiased estimate of the count-weighted estimation error, so a short delay window wins
+    at low SNR and longer models win when truncation bias exceeds noise.
+
+    Returns:
+        (h [fft_size] complex64 centred order, mse factor [num_used], dof).
+    """
+    mean = sums / lay.counts
+    p_mats, factors, dofs = lay.smoothers
+    h_used = p_mats @ sums.astype(np.complex64)  # [num_models, num_used]
+    cp = np.sum(lay.counts * np.abs(mean[None, :] - h_used) ** 2, axis=1) + 2 * noise_var * dofs
+    i = int(np.argmin(cp))
+    h = np.zeros(lay.fft_size, np.complex64)
+    h[lay.used] = h_used[i]
+    return h, factors[i], int(dofs[i])
+
+
+def _channel(obs: np.ndarray, lay: _Layout, smoother, training_only: bool = False) -> np.ndarray:
+    """Smoothed channel [fft_size] complex64 (centred order) from observations ``obs`` of
+    ``h`` at the known entries (the training rows' alone when ``training_only``)."""
+    h = np.zeros(lay.fft_size, np.complex64)
+    h[lay.used] = smoother @ _carrier_sums(obs, lay, training_only).astype(np.complex64)
+    return h

