@@ -352,23 +352,14 @@ def jscc_blocks(images, args):
 
 
 def decode_received(codec, x_hat: np.ndarray, noise_var: np.ndarray, meta, snr_db: float):
-    """Zero-forced symbols [num_symbols] with their effective noise variance -> [1, 3, H, W].
-
-    A version-2 codec takes each symbol's noise variance (its reliability input). Version 1
-    was trained on AWGN symbols as received at its SNR: a symbol noisier than that (a faded
-    carrier, a lost frame) goes in shrunk by its LMMSE factor relative to the nominal one,
-    ``(1 + nv_nominal) / (1 + nv)`` (measured at 0 dB over the emulated 3-path air: about
-    1 dB above symbols as received, 1-2 dB above absolute LMMSE).
-    """
+    """Zero-forced symbols [num_symbols] with their effective noise variance -> [1, 3, H, W]
+    (the codec's one receiver convention, ``semcodec.Codec.decode`` with ``noise_var``: a
+    version-2 codec sees each symbol's reliability, a version-1 codec AWGN-like symbols)."""
     import torch
 
     x = torch.from_numpy(np.asarray(x_hat, np.complex64))[None]
     nv = torch.from_numpy(np.asarray(noise_var, np.float32))[None]
-    if getattr(codec.model.cfg, "decoder_reliability", False):
-        return codec.decode(x, meta, snr_db, noise_var=nv)
-    nominal = 10.0 ** (-snr_db / 10.0)
-    x = x * ((1.0 + nominal) / (1.0 + nv.clamp(0.0, 1e6))).to(torch.complex64)
-    return codec.decode(x, meta, snr_db)
+    return codec.decode(x, meta, snr_db, noise_var=nv)
 
 
 def jscc_receive(result, encs, codec, images):
