@@ -22,6 +22,8 @@ import math
 import sys
 import time
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -339,7 +341,7 @@ def digital_receive(result, chunks, images, args, cfg):
     return out
 
 
-def jscc_blocks(images, args):
+def jscc_blocks(images, args, cfg=None):
     import torch
 
     from phy import parse_cbr
@@ -348,7 +350,7 @@ def jscc_blocks(images, args):
     codec = load_codec(args.codec)
     cbr = parse_cbr(args.cbr)
     encs = [codec.encode(torch.from_numpy(img)[None], args.snr_db, cbr) for img in images]
-    return [e.symbols[0].numpy() for e in encs], encs, codec
+    return [e.symbols[0].numpy() for e in encs], (encs, codec)
 
 
 def decode_received(codec, x_hat: np.ndarray, noise_var: np.ndarray, meta, snr_db: float):
@@ -362,7 +364,8 @@ def decode_received(codec, x_hat: np.ndarray, noise_var: np.ndarray, meta, snr_d
     return codec.decode(x, meta, snr_db, noise_var=nv)
 
 
-def jscc_receive(result, encs, codec, images):
+def jscc_receive(result, state, images, args=None, cfg=None):
+    encs, codec = state
 
     out = []
     for b, (enc, img) in enumerate(zip(encs, images)):
@@ -379,6 +382,28 @@ def jscc_receive(result, encs, codec, images):
             }
         )
     return out
+
+
+@dataclass(frozen=True)
+class OtaTransceiver:
+    """How one kind of link-level scheme crosses the air: ``send(images, args, cfg) ->
+    (blocks, state)`` and ``receive(result, state, images, args, cfg) -> per-image stats``."""
+
+    send: Callable
+    receive: Callable
+    uses_cbr: bool
+
+
+TRANSCEIVERS = {  # keyed by semcodec's LinkScheme.kind, for the schemes marked over_the_air
+    "digital": OtaTransceiver(digital_blocks, digital_receive, uses_cbr=False),
+    "jscc": OtaTransceiver(jscc_blocks, jscc_receive, uses_cbr=True),
+}
+
+
+def transceiver(scheme: str) -> OtaTransceiver:
+    from semcodec.evaluation import SCHEMES
+
+    return TRANSCEIVERS[SCHEMES[scheme].kind]
 
 
 # ----------------------------------------------------------------------------- run
@@ -403,7 +428,8 @@ def run(args: argparse.Namespace) -> int:
     device_kinds(args)
     parse_ppm(args.ppm)
     parse_multipath(args.multipath)
-    if args.scheme == "jscc":
+    trx = transceiver(args.scheme)
+    if trx.uses_cbr:
         try:
             parse_cbr(args.cbr)
         except ValueError as e:
@@ -424,10 +450,7 @@ def run(args: argparse.Namespace) -> int:
     checks.output_dir(sigmf_dir, "--sigmf-dir")
     names, images = load_images(args.images, args.size, args.max_images)
     t0 = time.perf_counter()
-    if args.scheme == "digital":
-        blocks, state = digital_blocks(images, args, cfg)
-    else:
-        blocks, state, codec = jscc_blocks(images, args)
+    blocks, state = trx.send(images, args, cfg)
     print(
         f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {args.scheme}",
         file=sys.stderr,
@@ -447,10 +470,7 @@ def run(args: argparse.Namespace) -> int:
         rx.close()
     for w in caught:  # one line each, not a Python warning with its source line
         print(f"ota: warning: {w.message}", file=sys.stderr)
-    if args.scheme == "digital":
-        per_image = digital_receive(result, state, images, args, cfg)
-    else:
-        per_image = jscc_receive(result, state, codec, images)
+    per_image = trx.receive(result, state, images, args, cfg)
     sigmf_paths = save_sigmf(result, sigmf_dir / "ota", cfg, hw=hw)
     results = []
     for b, (name, stats) in enumerate(zip(names, per_image)):
