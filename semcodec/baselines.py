@@ -221,8 +221,11 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
     )
 
 
-def _psnr(a: Tensor, b: Tensor) -> float:
-    return float(-10.0 * torch.log10(((a - b) ** 2).mean().clamp_min(1e-12)))
+def psnr(x: Tensor, y: Tensor) -> float:
+    """PSNR in dB (peak 1.0) of one image pair, ``x`` clamped to [0, 1] (semcodec's one PSNR;
+    ``renderer.psnr`` is the rest of the project's, on [height, width, 3] arrays)."""
+    mse = float(((x.clamp(0, 1) - y) ** 2).mean())
+    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
 
 
 def _genie(img, start: int, names, link, snr_db, n, image_codec, seed):
@@ -250,7 +253,7 @@ def _genie(img, start: int, names, link, snr_db, n, image_codec, seed):
         why = "budget" if all(t[2]["lost"] == "budget" for t in tries.values()) else "channel"
         rec, ok, info = _lost(img, None, why, failed)
     else:
-        _, (rec, ok, info) = max(good, key=lambda kt: (_psnr(kt[1][0], img), kt[0]))
+        _, (rec, ok, info) = max(good, key=lambda kt: (psnr(kt[1][0], img), kt[0]))
         info = {**info, "failed_codewords": failed}
     info["tries"] = len(tries)
     return rec, ok, info

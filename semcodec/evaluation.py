@@ -214,12 +214,6 @@ def load_image_folder(folder: str | Path) -> tuple[list[str], list[torch.Tensor]
     return names, images
 
 
-def psnr(x: torch.Tensor, y: torch.Tensor) -> float:
-    """PSNR in dB with peak 1.0 of one image pair [1, 3, H, W]."""
-    mse = float(((x.clamp(0, 1) - y) ** 2).mean())
-    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
-
-
 def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
     """SSIM (scikit-image, Gaussian weights as Wang et al.) of one image pair [1, 3, H, W]."""
     from skimage.metrics import structural_similarity

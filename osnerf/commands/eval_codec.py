@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.provenance import result_header, write_json_atomic
     from phy import parse_cbr
     from renderer import LPIPS_MIN_SIDE_PX, lpips, lpips_weights
+    from semcodec.baselines import psnr
     from semcodec.codec import load_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
@@ -112,7 +113,6 @@ def run(args: argparse.Namespace) -> int:
         eval_channels,
         load_image_folder,
         parse_schemes,
-        psnr,
         ssim,
     )
 

@@ -18,7 +18,6 @@ capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 import warnings
@@ -222,11 +221,6 @@ def load_images(folder: str, size: int, max_images: int) -> tuple[list[str], np.
     return [f.name for f in files], np.stack(out)
 
 
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
-    return float("inf") if mse == 0 else 10 * math.log10(1.0 / mse)
-
-
 def encode_image_bytes(image: np.ndarray, codec: str, quality: int) -> bytes:
     """[3, H, W] float in [0, 1] -> the codec's wire bytes (``semcodec.IMAGE_CODECS``, the
     baseline's settings, container stripped)."""
@@ -310,6 +304,7 @@ def digital_blocks(images, args, cfg):
 
 def digital_receive(result, chunks, images, args, cfg):
     import phy.digital as dig
+    import renderer
 
     out = []
     for b, (parts, img) in enumerate(zip(chunks, images)):
@@ -332,7 +327,7 @@ def digital_receive(result, chunks, images, args, cfg):
         shown = decoded if decoded is not None else np.full_like(img, 0.5)
         out.append(
             {
-                "psnr": psnr(shown, img),
+                "psnr": renderer.psnr(shown, img),
                 "decoded": decoded is not None,
                 "bytes": sum(len(c) for c in parts),
                 "frames_crc_failed": failed,
@@ -365,6 +360,8 @@ def decode_received(codec, x_hat: np.ndarray, noise_var: np.ndarray, meta, snr_d
 
 
 def jscc_receive(result, state, images, args=None, cfg=None):
+    import renderer
+
     encs, codec = state
 
     out = []
@@ -375,7 +372,7 @@ def jscc_receive(result, state, images, args=None, cfg=None):
         rec = decode_received(codec, x_hat, nv, enc.meta, snr_in)[0].numpy()
         out.append(
             {
-                "psnr": psnr(rec, img),
+                "psnr": renderer.psnr(rec, img),
                 "decoded": True,
                 "num_symbols": int(enc.meta.num_symbols),
                 "cbr": float(enc.meta.cbr),

@@ -97,7 +97,8 @@ def test_jscc_at_15_db_matches_the_simulated_link(tmp_path, images):
     r = d["results"][0]
     assert r["frames_lost"] == 0
     # the same codec over a simulated AWGN link at the SNR the pilots measured
-    from osnerf.commands.ota import load_images, psnr
+    from osnerf.commands.ota import load_images
+    from renderer import psnr
 
     _, imgs = load_images(str(images), 48, 1)
     codec = semcodec.load_codec()

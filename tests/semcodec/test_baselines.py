@@ -16,7 +16,8 @@ from semcodec import (
     transmit_digital,
     transmit_ideal,
 )
-from semcodec.evaluation import EvalContext, psnr
+from semcodec.baselines import psnr
+from semcodec.evaluation import EvalContext
 
 
 def _img(seed=0, h=48, w=64):

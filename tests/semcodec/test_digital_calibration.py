@@ -11,13 +11,13 @@ from scipy.integrate import quad
 import phy
 from phy.digital import MCS_TABLE, codeword_layout
 from semcodec import IMAGE_CODECS, transmit_digital
+from semcodec.baselines import psnr
 from semcodec.digital_calibration import (
     MEASURED,
     fade_grid,
     fit_probit,
     load_calibration,
 )
-from semcodec.evaluation import psnr
 
 
 @pytest.fixture(scope="module")
