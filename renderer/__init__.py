@@ -25,9 +25,19 @@ Training and rendering
     "num_views", "psnr_per_view", "seconds_per_view"[, "masked_psnr"]}`` (means of per-view
     values); ``save_model(model, path)`` / ``load_model(path)``.
 
+Renderers (one table)
+    ``RENDERERS``: name ("full", "lightweight") -> builder; ``make_renderer(name, model,
+    dataset=None, config=None) -> (renderer, stats)``; every renderer has
+    ``render_path(poses, intrinsics) -> {"rgb", "seconds_per_view", ...}`` and ``settings()``.
+    ``score_renderers(model, test_dataset, train_dataset=None) -> {name: {"psnr", "ssim",
+    "seconds_per_view", "setup_seconds", "num_views", "settings"[, "speedup_vs_full"]}}``.
+
 Lightweight renderer (§3.3)
-    ``train_lightweight(model, dataset, LightweightConfig(...)) -> (LightweightRenderer, stats)``;
-    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view"}``;
+    ``train_lightweight(model, dataset=None, LightweightConfig(...)) -> (LightweightRenderer,
+    stats)`` (None: around the cameras the field stores, :func:`stored_cameras`);
+    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view",
+    "keyframes", "empty_fraction", "rerendered_fraction"}``; :func:`empty_pixels` (what the
+    low-resolution pass shows empty);
     :func:`reproject` warps a previous frame into the current view by depth;
     :func:`surface_points` and :func:`splat_depth` carry a frame's depth into another view.
 
@@ -53,10 +63,13 @@ from renderer.lightweight import (
     LightweightConfig,
     LightweightRenderer,
     UNetDecoder,
+    empty_pixels,
+    stored_cameras,
     train_lightweight,
 )
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
+from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
 from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
@@ -73,7 +86,9 @@ from renderer.volume import (
 
 __all__ = [
     "FIELDS",
+    "RENDERERS",
     "Dataset",
+    "FullRenderer",
     "GridField",
     "Intrinsics",
     "LightweightConfig",
@@ -89,6 +104,7 @@ __all__ = [
     "camera_rays",
     "composite",
     "default_aabb",
+    "empty_pixels",
     "evaluate",
     "expected_depth",
     "image_metrics",
@@ -96,6 +112,7 @@ __all__ = [
     "load_dataset",
     "load_model",
     "look_at",
+    "make_renderer",
     "masked_psnr",
     "normalized_depth",
     "orbit_path",
@@ -112,7 +129,9 @@ __all__ = [
     "rotate_pose_about",
     "sample_along_rays",
     "save_model",
+    "score_renderers",
     "ssim",
+    "stored_cameras",
     "to_uint8",
     "write_transforms",
     "train",

@@ -146,19 +146,29 @@ def save_model(model: RadianceField, path) -> Path:
 
 
 def load_model(path) -> RadianceField:
-    """Load a model written by :func:`save_model`."""
+    """Load a model written by :func:`save_model`.
+
+    Raises:
+        FileNotFoundError: no such file; ValueError: the file is not such a model.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: model file not found")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    aabb = torch.tensor(payload["aabb"])
-    spec = json.loads(json.dumps(payload["spec"]))
-    field = build_field(spec, aabb)
-    state = payload["state_dict"]
-    if isinstance(field, GridField):  # grids may have been upsampled since construction
-        field.density_grid = nn.Parameter(torch.empty_like(state["field.density_grid"]))
-        field.color_grid = nn.Parameter(torch.empty_like(state["field.color_grid"]))
-    occ = OccupancyGrid(aabb, tuple(payload["occupancy_cells"]))
-    model = RadianceField(field, occ, payload["step_m"], tuple(payload["background"]), spec)
-    model.load_state_dict(state)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+        aabb = torch.tensor(payload["aabb"])
+        spec = json.loads(json.dumps(payload["spec"]))
+        field = build_field(spec, aabb)
+        state = payload["state_dict"]
+        if isinstance(field, GridField):  # grids may have been upsampled since construction
+            field.density_grid = nn.Parameter(torch.empty_like(state["field.density_grid"]))
+            field.color_grid = nn.Parameter(torch.empty_like(state["field.color_grid"]))
+        occ = OccupancyGrid(aabb, tuple(payload["occupancy_cells"]))
+        model = RadianceField(field, occ, payload["step_m"], tuple(payload["background"]), spec)
+        model.load_state_dict(state)
+    except Exception as e:  # noqa: BLE001 - any failure means: not a file of save_model
+        reason = (str(e).splitlines() or [""])[0][:200]
+        raise ValueError(
+            f"{path}: not a radiance field saved by save_model ({type(e).__name__}: {reason})"
+        ) from e
     return model
