@@ -44,10 +44,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from renderer.cameras import Intrinsics, camera_rays, look_at
+from renderer.cameras import Intrinsics, camera_rays, intersect_aabb, look_at
 from renderer.dataset import Dataset
 from renderer.model import RadianceField, render_views
 from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
+from renderer.volume import normalized_depth
 
 FEATURES = 4  # rgb + opacity
 
@@ -58,6 +59,10 @@ class LightweightConfig:
 
     downsample: int = 4
     """Low-resolution factor per axis (volume rendering at height/downsample), >= 1."""
+    empty_downsample: int | None = None
+    """When set (> downsample): a pass this much coarser first finds the empty pixels
+    (:func:`empty_pixels`), and the low-resolution pass marches only the others (with
+    ``downsample = 1``: a full-resolution coarse-step pass of the object alone)."""
     low_res_step_factor: float = 2.0
     """Marching step of the low-resolution render relative to the field's own, >= 1
     (its pixels are ``downsample`` times wider, so fewer samples per ray suffice)."""
@@ -116,6 +121,11 @@ class LightweightConfig:
         for name in ("low_res_step_factor", "rerender_step_factor"):
             if not getattr(self, name) >= 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.empty_downsample is not None and not self.empty_downsample > self.downsample:
+            raise ValueError(
+                f"empty_downsample must be > downsample ({self.downsample}) or None, "
+                f"got {self.empty_downsample}"
+            )
         if not 0 < self.empty_opacity < 1:
             raise ValueError(f"empty_opacity must be in (0, 1), got {self.empty_opacity}")
         if self.max_disagreement is not None and not self.max_disagreement >= 0:
@@ -215,14 +225,42 @@ class LightweightRenderer(nn.Module):
 
     def low_res(self, pose: Tensor, intrinsics: Intrinsics) -> tuple[Tensor, Tensor, Tensor]:
         """The low-resolution pass: ([4, H, W] rgb + opacity and [H, W] depth, both
-        upsampled bilinearly to full size, and the [H / downsample, W / downsample]
-        opacity itself)."""
+        upsampled bilinearly to full size, and the opacity that decides which pixels are
+        empty: [H / downsample, W / downsample], or [H / empty_downsample, W /
+        empty_downsample] from a coarser pass first, when set)."""
+        cfg = self.config
         h, w = intrinsics.height, intrinsics.width
-        lh, lw = max(1, h // self.config.downsample), max(1, w // self.config.downsample)
-        step_m = self.model.step_m * self.config.low_res_step_factor
-        out = render_views(self.model, pose[None], intrinsics, lh, lw, step_m=step_m)
-        feats = torch.cat([out["rgb"][0].permute(2, 0, 1), out["opacity"][0][None]], dim=0)
-        return _upsample(feats, h, w), _upsample(out["depth"][0][None], h, w)[0], out["opacity"][0]
+        lh, lw = max(1, h // cfg.downsample), max(1, w // cfg.downsample)
+        step_m = self.model.step_m * cfg.low_res_step_factor
+        if cfg.empty_downsample is None:
+            out = render_views(self.model, pose[None], intrinsics, lh, lw, step_m=step_m)
+            rgb, opacity, depth = out["rgb"][0], out["opacity"][0], out["depth"][0]
+            empty_opacity = opacity
+        else:
+            eh, ew = max(1, h // cfg.empty_downsample), max(1, w // cfg.empty_downsample)
+            coarse = render_views(self.model, pose[None], intrinsics, eh, ew, step_m=step_m)
+            empty_opacity = coarse["opacity"][0]
+            live = ~empty_pixels(empty_opacity, lh, lw, cfg.empty_opacity)  # [lh, lw]
+            low = intrinsics.resized(lh, lw)
+            o, d = camera_rays(pose[None], low)
+            o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+            idx = live.reshape(-1).nonzero()[:, 0]
+            rgb = self.model.background.repeat(lh * lw, 1)  # [lh * lw, 3]
+            opacity = torch.zeros(lh * lw)
+            _, t_far = intersect_aabb(o, d, self.model.aabb)
+            depth = torch.full((lh * lw,), float(t_far.max().clamp_min(0.0)))
+            if idx.numel():
+                out = self.model.render_rays(o[idx], d[idx], step_m=step_m)
+                rgb[idx] = out["rgb"].clamp(0, 1)
+                opacity[idx] = out["opacity"]
+                depth[idx] = normalized_depth(out["depth"], out["opacity"], float(depth[0]))
+            rgb, opacity, depth = (
+                rgb.reshape(lh, lw, 3),
+                opacity.reshape(lh, lw),
+                depth.reshape(lh, lw),
+            )
+        feats = torch.cat([rgb.permute(2, 0, 1), opacity[None]], dim=0)
+        return _upsample(feats, h, w), _upsample(depth[None], h, w)[0], empty_opacity
 
     def reprojections(
         self, depth: Tensor, pose: Tensor, buffer: list, intrinsics: Intrinsics
@@ -367,7 +405,7 @@ class LightweightRenderer(nn.Module):
                 empty += int(out["empty"].sum())
                 rerendered += int(out["rerendered"].sum())
                 counted += out["empty"].numel()
-                if not keys:
+                if not keys and cfg.buffer_frames:
                     points = surface_points(out["depth"], out["opacity"], pose, intrinsics)
                     buffer = (buffer + [(rgb, out["depth"], points, pose)])[-keep:]
             last = max((k for k in keys if k <= i), default=-1)

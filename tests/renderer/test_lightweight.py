@@ -78,11 +78,18 @@ def test_reprojection_of_a_known_point():
     assert torch.allclose(warped[:, 4, 2], frame[:, 4, 4], atol=1e-6)
 
 
-def test_skipped_pixels_are_exactly_those_the_low_res_pass_shows_empty(sphere_model):
+@pytest.mark.parametrize("downsample, empty_downsample", [(4, None), (1, 4)])
+def test_skipped_pixels_are_exactly_those_the_low_res_pass_shows_empty(
+    sphere_model, downsample, empty_downsample
+):
+    """(4, None): the low-res pass itself decides; (1, 4): a 4x coarser pass decides and a
+    full-resolution coarse-step pass marches only the rest."""
     from renderer import LightweightRenderer
 
     model, train_set = sphere_model
-    cfg = LightweightConfig(downsample=4, progress=False)
+    cfg = LightweightConfig(
+        downsample=downsample, empty_downsample=empty_downsample, progress=False
+    )
     lw = LightweightRenderer(model, cfg, torch.Generator().manual_seed(0))
     intr = train_set.intrinsics
     pose = orbit_path(1, 2.5, 10.0, start_azimuth_deg=33.0)[0]
@@ -102,6 +109,13 @@ def test_skipped_pixels_are_exactly_those_the_low_res_pass_shows_empty(sphere_mo
     # and the full render there is the background too
     full = render_views(model, pose[None], intr)["rgb"][0].permute(2, 0, 1)
     assert (full[:, expected] - bg).abs().max() < 0.02
+    if downsample == 1:  # the features elsewhere: the full-resolution coarse-step render
+        coarse = render_views(model, pose[None], intr, step_m=model.step_m * 2.0)
+        feats, _, _ = lw.low_res(pose, intr)
+        live = ~expected
+        assert torch.allclose(
+            feats[:3, live], coarse["rgb"][0].permute(2, 0, 1)[:, live], atol=1e-5
+        )
 
 
 def test_lightweight_output_is_the_full_render_where_it_rerenders(sphere_model):
