@@ -35,6 +35,7 @@ Renderers (one table)
 Lightweight renderer (§3.3)
     ``train_lightweight(model, dataset=None, LightweightConfig(...)) -> (LightweightRenderer,
     stats)`` (None: around the cameras the field stores, :func:`stored_cameras`);
+    ``LIGHTWEIGHT_PRESETS`` ("keyframes", the default; "coarse_step");
     ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view",
     "keyframes", "empty_fraction", "rerendered_fraction"}``; :func:`empty_pixels` (what the
     low-resolution pass shows empty);
@@ -60,6 +61,7 @@ from renderer.cameras import (
 from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
 from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lightweight import (
+    LIGHTWEIGHT_PRESETS,
     LightweightConfig,
     LightweightRenderer,
     UNetDecoder,
@@ -86,6 +88,7 @@ from renderer.volume import (
 
 __all__ = [
     "FIELDS",
+    "LIGHTWEIGHT_PRESETS",
     "RENDERERS",
     "Dataset",
     "FullRenderer",

@@ -13,6 +13,7 @@ renderer's settings).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -61,6 +62,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="a renderer of renderer.RENDERERS: full (default) or lightweight",
     )
     p.add_argument(
+        "--lightweight-preset",
+        default="keyframes",
+        help="lightweight renderer: settings of renderer.LIGHTWEIGHT_PRESETS: keyframes "
+        "(default, fastest) or coarse_step (closest to the full render)",
+    )
+    p.add_argument(
         "--lightweight-seconds",
         type=float,
         default=60.0,
@@ -100,9 +107,9 @@ def run(args: argparse.Namespace) -> int:
 
     from osnerf.provenance import result_header, write_json_atomic
     from renderer import (
+        LIGHTWEIGHT_PRESETS,
         RENDERERS,
         Intrinsics,
-        LightweightConfig,
         load_model,
         make_renderer,
         orbit_path,
@@ -111,6 +118,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.renderer not in RENDERERS:
         raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
+    if args.lightweight_preset not in LIGHTWEIGHT_PRESETS:
+        raise UsageError(
+            f"--lightweight-preset must be one of {', '.join(LIGHTWEIGHT_PRESETS)}, "
+            f"got {args.lightweight_preset!r}"
+        )
     if not args.lightweight_seconds > 0:
         raise UsageError(f"--lightweight-seconds must be > 0, got {args.lightweight_seconds}")
     if args.video not in VIDEOS:
@@ -152,7 +164,11 @@ def run(args: argparse.Namespace) -> int:
 
     config = None
     if args.renderer == "lightweight":
-        config = LightweightConfig(train_seconds=args.lightweight_seconds, progress=True)
+        config = dataclasses.replace(
+            LIGHTWEIGHT_PRESETS[args.lightweight_preset],
+            train_seconds=args.lightweight_seconds,
+            progress=True,
+        )
     t0 = time.perf_counter()
     rend, _ = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)

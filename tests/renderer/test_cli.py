@@ -125,7 +125,12 @@ def test_render_with_the_lightweight_renderer_along_a_path(run_dir, tmp_path):
     r = json.loads((out / "render.json").read_text())
     assert r["num_views"] == 4 and r["seconds_per_view"] > 0 and r["setup_seconds"] > 0
     assert r["renderer"]["renderer"] == "lightweight" and r["keyframes"] == [0]
-    assert r["renderer"]["downsample"] >= 1
+    assert r["renderer"]["downsample"] == 4
+    out2 = tmp_path / "coarse"
+    args[4] = str(out2)
+    assert main(args + ["--lightweight-preset", "coarse_step", "--threads", "1"]) == 0
+    r = json.loads((out2 / "render.json").read_text())
+    assert r["keyframes"] == [] and r["renderer"]["downsample"] == 1
 
 
 def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, capsys):
@@ -137,6 +142,7 @@ def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, caps
         assert not out.exists()
 
     fails(["--renderer", "fast"], "full, lightweight")
+    fails(["--renderer", "lightweight", "--lightweight-preset", "x"], "keyframes, coarse_step")
     no_frames = tmp_path / "no_frames.json"
     no_frames.write_text(json.dumps({"camera_angle_x": 0.7}))
     fails(["--path", str(no_frames)], "frames")

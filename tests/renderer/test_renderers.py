@@ -5,6 +5,7 @@ import torch
 from sphere_scene import exact_sphere_field
 
 from renderer import (
+    LIGHTWEIGHT_PRESETS,
     RENDERERS,
     LightweightConfig,
     load_dataset,
@@ -44,3 +45,17 @@ def test_score_renderers_reports_each_against_the_images(sphere_dataset):
         assert r["num_views"] == 4 and r["seconds_per_view"] > 0 and r["psnr"] > 20
     assert res["lightweight"]["speedup_vs_full"] > 0
     assert res["lightweight"]["settings"]["keyframe_every"] == config.keyframe_every
+
+
+@pytest.mark.parametrize("preset", list(LIGHTWEIGHT_PRESETS))
+def test_every_lightweight_preset_renders_a_path(preset, sphere_dataset):
+    import dataclasses
+
+    train_set = load_dataset(sphere_dataset, "train", resolution=None)
+    model = exact_sphere_field(train_set)
+    config = dataclasses.replace(
+        LIGHTWEIGHT_PRESETS[preset], train_seconds=1, num_sequences=2, progress=False
+    )
+    r, _ = make_renderer("lightweight", model, train_set, config)
+    out = r.render_path(train_set.poses[:3], train_set.intrinsics)
+    assert out["rgb"].shape == (3, 32, 32, 3) and out["rgb"].isfinite().all()
