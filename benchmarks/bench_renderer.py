@@ -3,10 +3,11 @@
 * grid field: PSNR-vs-time curve on held-out test views within a 120 s budget;
 * vanilla NeRF MLP on the same budget, sampler and renderer;
 * the time each needs to reach the MLP's best PSNR (goal: grid >= 10x faster);
-* the lightweight renderer along two camera paths: time per view and PSNR against
-  full-resolution volume rendering of the same field and (on lego's test views, which
-  form a path) against ground truth, beside bilinear upsampling of the low-resolution
-  render (goal: >= 5x faster, <= 1 dB loss).
+* the renderers of ``renderer.RENDERERS`` side by side in this one run along two camera
+  paths: time per view and PSNR of the lightweight renderer against full-resolution
+  volume rendering of the same field and (on lego's first 64 test views, which form a
+  path) against ground truth, beside bilinear upsampling of the low-resolution render
+  (goal: >= 5x faster, <= 1 dB under the full render against ground truth).
 
 The machine is shared: the budget clock is ``cpu`` (process CPU seconds / 2 threads, the
 wall time the same work takes on two idle cores; optimistic for single-threaded Python
@@ -14,11 +15,17 @@ parts) unless OSNERF_BENCH_CLOCK=wall. Wall seconds and the load average are rec
 beside it. Environment: OSNERF_BENCH_SECONDS (default 120), OSNERF_LIGHTWEIGHT_SECONDS
 (default 60), OSNERF_LIGHTWEIGHT_SEQUENCES (default 96), OSNERF_BENCH_THREADS (default 2;
 on an oversubscribed machine 1 thread is many times faster because OpenMP threads wait on
-each other).
+each other), OSNERF_BENCH_FIELDS (default "grid,mlp"; "grid" skips the MLP baseline),
+OSNERF_LIGHTWEIGHT_VARIANTS (JSON list of LightweightConfig overrides measured beside the
+default on the test path, e.g. '[{"downsample": 2}]'; default none), OSNERF_BENCH_MODEL
+(a field saved by `osnerf train-nerf` on lego 100 px: the renderers are measured on it and
+no field is trained; OSNERF_BENCH_FIELDS is then ignored).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import os
 import time
@@ -28,11 +35,13 @@ import torch
 
 from osnerf.paths import shared_data_dir
 from renderer import (
+    FullRenderer,
     LightweightConfig,
     TrainConfig,
     evaluate,
     image_metrics,
     load_dataset,
+    load_model,
     orbit_path,
     render_views,
     train,
@@ -62,10 +71,10 @@ def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | Non
     """Time per view and PSNRs of the lightweight renderer, the full render and bilinear
     upsampling of the low-resolution render along ``path`` [num_views, 4, 4]."""
     model, cfg = lw.model, lw.config
-    render_views(model, path[:2], intr)  # warm-up
-    t0 = time.perf_counter()
-    full = render_views(model, path, intr)["rgb"]
-    full_spv = (time.perf_counter() - t0) / path.shape[0]
+    full_renderer = FullRenderer(model)
+    full_renderer.render_path(path[:2], intr)  # warm-up
+    full_out = full_renderer.render_path(path, intr)
+    full, full_spv = full_out["rgb"], full_out["seconds_per_view"]
     lw.render_path(path[:2], intr)  # warm-up
     out = lw.render_path(path, intr)
     low = render_views(
@@ -81,8 +90,7 @@ def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | Non
         .permute(0, 2, 3, 1)
         .clamp(0, 1)
     )
-    k = cfg.keyframe_every
-    key = [i for i in range(path.shape[0]) if k and i % k == 0]
+    key = out["keyframes"]
     rest = [i for i in range(path.shape[0]) if i not in key]
     bilinear_keyed = bilinear.clone()
     bilinear_keyed[key] = full[key]  # bilinear with the same keyframes: same cost minus the decoder
@@ -92,6 +100,8 @@ def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | Non
         "full_seconds_per_view": full_spv,
         "lightweight_seconds_per_view": out["seconds_per_view"],
         "speedup": full_spv / out["seconds_per_view"],
+        "empty_fraction": out["empty_fraction"],
+        "rerendered_fraction": out["rerendered_fraction"],
     }
     refs = {"vs_full": full} if truth is None else {"vs_full": full, "vs_truth": truth}
     for ref_name, ref in refs.items():
@@ -103,10 +113,14 @@ def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | Non
             "bilinear_with_same_keyframes_pooled": _pooled_psnr(bilinear_keyed, ref),
         }
         if ref_name == "vs_truth":
+            r[f"psnr_{ref_name}"]["lightweight"] = image_metrics(out["rgb"], ref)["psnr"]
             r[f"psnr_{ref_name}"]["full_render"] = image_metrics(full, ref)["psnr"]
             r[f"psnr_{ref_name}"]["full_render_non_keyframes"] = image_metrics(
                 full[rest], ref[rest]
             )["psnr"]
+            r["lightweight_db_under_full_vs_truth"] = (
+                r[f"psnr_{ref_name}"]["full_render"] - r[f"psnr_{ref_name}"]["lightweight"]
+            )
     return r
 
 
@@ -149,7 +163,13 @@ def run(out_dir: Path) -> dict:
         "threads": torch.get_num_threads(),
     }
     curves = {}
-    for name, interval in (("grid", budget / 20), ("mlp", budget / 6)):
+    fields = os.environ.get("OSNERF_BENCH_FIELDS", "grid,mlp").split(",")
+    if os.environ.get("OSNERF_BENCH_MODEL"):
+        fields = []
+        grid_model = load_model(os.environ["OSNERF_BENCH_MODEL"])
+        results["field_loaded_from"] = os.environ["OSNERF_BENCH_MODEL"]
+    intervals = {"grid": budget / 20, "mlp": budget / 6}
+    for name, interval in ((f, intervals[f]) for f in fields):
         cfg = TrainConfig(field=name, max_seconds=budget, clock=clock, eval_every_seconds=interval)
         w0, c0 = time.perf_counter(), time.process_time()
         res = train(train_set, cfg, torch.Generator().manual_seed(0), eval_dataset=test_set)
@@ -171,15 +191,18 @@ def run(out_dir: Path) -> dict:
         }
         if name == "grid":
             grid_model = res.model
-    mlp_best = max(p["psnr"] for p in curves["mlp"])
-    t_mlp = _time_to_reach(curves["mlp"], mlp_best)
-    t_grid = _time_to_reach(curves["grid"], mlp_best)
-    results["mlp_best_psnr"] = mlp_best
-    results["seconds_to_mlp_best"] = {"grid": t_grid, "mlp": t_mlp}
-    results["grid_speedup_to_mlp_best"] = (t_mlp / t_grid) if t_grid and t_mlp else None
-    results["grid_goal_26db_met"] = results["grid"]["test_psnr"] >= 26.0
+    if "mlp" in curves:
+        mlp_best = max(p["psnr"] for p in curves["mlp"])
+        t_mlp = _time_to_reach(curves["mlp"], mlp_best)
+        t_grid = _time_to_reach(curves["grid"], mlp_best)
+        results["mlp_best_psnr"] = mlp_best
+        results["seconds_to_mlp_best"] = {"grid": t_grid, "mlp": t_mlp}
+        results["grid_speedup_to_mlp_best"] = (t_mlp / t_grid) if t_grid and t_mlp else None
+    if "grid" in results:
+        results["grid_goal_26db_met"] = results["grid"]["test_psnr"] >= 26.0
     out_dir.mkdir(parents=True, exist_ok=True)
-    _plot(curves, out_dir / "renderer_curve.png")
+    if curves:
+        _plot(curves, out_dir / "renderer_curve.png")
 
     # lightweight renderer along an orbit of 3-degree steps and along the test views
     lw_cfg = LightweightConfig(
@@ -191,7 +214,7 @@ def run(out_dir: Path) -> dict:
     orbit = orbit_path(
         30, radius, 30.0, train_set.aabb.mean(0), start_azimuth_deg=20.0, arc_deg=90.0
     )
-    test_path = load_dataset(root, "test", 100, aabb=train_set.aabb).subset(range(48))
+    test_path = load_dataset(root, "test", 100, aabb=train_set.aabb).subset(range(64))
     results["lightweight"] = {
         "config": lw_cfg.as_dict(),
         "train_stats": stats,
@@ -200,10 +223,25 @@ def run(out_dir: Path) -> dict:
             lw, test_path.poses, test_path.intrinsics, test_path.images
         ),
         "note": "orbit: 30 views 3 deg apart at 30 deg elevation, no ground truth; test_path: "
-        "lego test views 0-47 (2.45 deg apart) with ground truth. 'vs_full': against the "
+        "lego test views 0-63 (2.45 deg apart) with ground truth. 'vs_full': against the "
         "same field's full-resolution volume rendering. Keyframes are full renders (their "
         "time is in the lightweight time per view); *_non_keyframes excludes them, "
-        "*_pooled is the PSNR of the MSE over all frames.",
+        "*_pooled is the PSNR of the MSE over all frames; vs_truth.lightweight and "
+        "full_render are means of per-view PSNR over all 64 views.",
     }
+    variants = []
+    for overrides in json.loads(os.environ.get("OSNERF_LIGHTWEIGHT_VARIANTS", "[]")):
+        cfg = dataclasses.replace(lw_cfg, **overrides)
+        v, v_stats = train_lightweight(grid_model, train_set, cfg, torch.Generator().manual_seed(0))
+        variants.append(
+            {
+                "overrides": overrides,
+                "train_stats": v_stats,
+                "test_path": _lightweight_on_path(
+                    v, test_path.poses, test_path.intrinsics, test_path.images
+                ),
+            }
+        )
+    results["lightweight"]["variants"] = variants
     results["loadavg_end"] = os.getloadavg()
     return results

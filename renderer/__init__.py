@@ -25,9 +25,20 @@ Training and rendering
     "num_views", "psnr_per_view", "seconds_per_view"[, "masked_psnr"]}`` (means of per-view
     values); ``save_model(model, path)`` / ``load_model(path)``.
 
+Renderers (one table)
+    ``RENDERERS``: name ("full", "lightweight") -> builder; ``make_renderer(name, model,
+    dataset=None, config=None) -> (renderer, stats)``; every renderer has
+    ``render_path(poses, intrinsics) -> {"rgb", "seconds_per_view", ...}`` and ``settings()``.
+    ``score_renderers(model, test_dataset, train_dataset=None) -> {name: {"psnr", "ssim",
+    "seconds_per_view", "setup_seconds", "num_views", "settings"[, "speedup_vs_full"]}}``.
+
 Lightweight renderer (§3.3)
-    ``train_lightweight(model, dataset, LightweightConfig(...)) -> (LightweightRenderer, stats)``;
-    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view"}``;
+    ``train_lightweight(model, dataset=None, LightweightConfig(...)) -> (LightweightRenderer,
+    stats)`` (None: around the cameras the field stores, :func:`stored_cameras`);
+    ``LIGHTWEIGHT_PRESETS`` ("keyframes", the default; "coarse_step");
+    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view",
+    "keyframes", "empty_fraction", "rerendered_fraction"}``; :func:`empty_pixels` (what the
+    low-resolution pass shows empty);
     :func:`reproject` warps a previous frame into the current view by depth;
     :func:`surface_points` and :func:`splat_depth` carry a frame's depth into another view.
 
@@ -55,15 +66,19 @@ from renderer.cameras import (
 from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
 from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lightweight import (
+    LIGHTWEIGHT_PRESETS,
     LightweightConfig,
     LightweightRenderer,
     UNetDecoder,
+    empty_pixels,
+    stored_cameras,
     train_lightweight,
 )
 from renderer.lpips_weights import lpips_weights_path
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
 from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
+from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
 from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
@@ -81,7 +96,10 @@ from renderer.volume import (
 __all__ = [
     "FIELDS",
     "LPIPS_MIN_SIDE_PX",
+    "LIGHTWEIGHT_PRESETS",
+    "RENDERERS",
     "Dataset",
+    "FullRenderer",
     "GridField",
     "Intrinsics",
     "LightweightConfig",
@@ -98,6 +116,7 @@ __all__ = [
     "camera_rays",
     "composite",
     "default_aabb",
+    "empty_pixels",
     "evaluate",
     "expected_depth",
     "image_metrics",
@@ -108,6 +127,7 @@ __all__ = [
     "lpips",
     "lpips_weights",
     "lpips_weights_path",
+    "make_renderer",
     "masked_psnr",
     "normalized_depth",
     "orbit_path",
@@ -124,7 +144,9 @@ __all__ = [
     "rotate_pose_about",
     "sample_along_rays",
     "save_model",
+    "score_renderers",
     "ssim",
+    "stored_cameras",
     "to_uint8",
     "write_transforms",
     "train",

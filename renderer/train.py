@@ -253,6 +253,7 @@ def train(
         "center": centre.tolist(),
         "radius_m": (dataset.poses[:, :3, 3] - centre).norm(dim=-1).mean().item(),
         "up": torch.nn.functional.normalize(dataset.poses[:, :3, 1].mean(0), dim=0).tolist(),
+        "poses": dataset.poses.tolist(),  # the lightweight renderer trains around them
     }
     model = RadianceField(field_, occupancy, step_m, background, spec)
 

@@ -76,3 +76,23 @@ class one_thread:
 
     def __exit__(self, *exc):
         torch.set_num_threads(self.before)
+
+
+def exact_sphere_field(train_set):
+    """The exact sphere written into a grid field (no training needed): a
+    ``renderer.RadianceField`` over ``train_set``'s box, on its background."""
+    from renderer import GridField, OccupancyGrid, RadianceField
+
+    field = GridField(train_set.aabb, resolution=49, step_m=0.04)
+    nx, ny, nz = field.resolution
+    axes = [torch.linspace(-1, 1, n) for n in (nz, ny, nx)]
+    z, y, x = torch.meshgrid(*axes, indexing="ij")
+    r = torch.sqrt(x**2 + y**2 + z**2)
+    with torch.no_grad():
+        field.density_grid[0, 0] = torch.where(r < RADIUS_M, 60.0, -30.0)
+        colour = 0.5 + 0.5 * torch.stack([x, y, z]) / r.clamp_min(1e-6)
+        field.color_grid[0] = torch.logit(colour.clamp(0.02, 0.98))
+    occ = OccupancyGrid.for_grid_field(field)
+    occ.update(field.density, 0.04, vertex_density=field.vertex_density())
+    spec = {"field": "grid", "resolution": 49, "step_m": 0.04}
+    return RadianceField(field, occ, 0.04, train_set.background, spec)

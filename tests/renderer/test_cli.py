@@ -215,3 +215,50 @@ def test_train_nerf_checks_its_output_folder_before_training(
     argv = ["train-nerf", "--data", str(sphere_dataset), "--out", str(a_file)]
     assert main(argv) == 2
     assert "--out" in _one_line(capsys) and a_file.read_text() == "keep me"
+
+
+def test_render_with_the_lightweight_renderer_along_a_path(run_dir, tmp_path):
+    from renderer import orbit_path
+
+    path = tmp_path / "path.json"
+    poses = orbit_path(4, 2.5, 20.0, start_azimuth_deg=5.0, arc_deg=12.0)
+    path.write_text(json.dumps({"frames": [{"transform_matrix": p.tolist()} for p in poses]}))
+    out = tmp_path / "lw"
+    args = ["render", "--run", str(run_dir), "--out", str(out), "--path", str(path)]
+    args += ["--renderer", "lightweight", "--lightweight-seconds", "1", "--video", "none"]
+    assert main(args + ["--threads", "1"]) == 0
+    assert len(sorted((out / "frames").glob("*.png"))) == 4
+    r = json.loads((out / "render.json").read_text())
+    assert r["num_views"] == 4 and r["seconds_per_view"] > 0 and r["setup_seconds"] > 0
+    assert r["renderer"]["renderer"] == "lightweight" and r["keyframes"] == [0]
+    assert r["renderer"]["downsample"] == 4
+    out2 = tmp_path / "coarse"
+    args[4] = str(out2)
+    assert main(args + ["--lightweight-preset", "coarse_step", "--threads", "1"]) == 0
+    r = json.loads((out2 / "render.json").read_text())
+    assert r["keyframes"] == [] and r["renderer"]["downsample"] == 1
+
+
+def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, capsys):
+    def fails(extra, text):
+        out = tmp_path / "never"
+        assert main(["render", "--run", str(run_dir), "--out", str(out), *extra]) == 2
+        err = capsys.readouterr().err
+        assert text in err and len(err.strip().splitlines()) == 1
+        assert not out.exists()
+
+    fails(["--renderer", "fast"], "full, lightweight")
+    fails(["--renderer", "lightweight", "--lightweight-preset", "x"], "keyframes, coarse_step")
+    no_frames = tmp_path / "no_frames.json"
+    no_frames.write_text(json.dumps({"camera_angle_x": 0.7}))
+    fails(["--path", str(no_frames)], "frames")
+    empty = tmp_path / "empty.json"
+    empty.write_text(json.dumps({"frames": []}))
+    fails(["--path", str(empty)], "frames")
+    not_a_field = tmp_path / "model.pt"
+    not_a_field.write_bytes(b"this is not a radiance field")
+    out = tmp_path / "never"
+    assert main(["render", "--run", str(not_a_field), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "not a readable model file" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()

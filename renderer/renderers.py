@@ -1,0 +1,125 @@
+"""The renderers a trained field is viewed with: one table, one interface, one scorer.
+
+``RENDERERS[name](model, dataset=None, config=None, generator=None) -> (renderer, stats)``
+builds a renderer (the lightweight one trains its decoder first; ``dataset`` gives the
+training cameras, None the cameras the field stores). Every renderer has
+``render_path(poses [num_views, 4, 4], intrinsics) -> {"rgb": [num_views, height, width,
+3] float32, "seconds_per_view": float, ...}`` and ``settings() -> dict``.
+:func:`score_renderers` renders held-out views with each and compares them with the images.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import torch
+from torch import Tensor
+
+from renderer.cameras import Intrinsics
+from renderer.dataset import Dataset
+from renderer.lightweight import LightweightConfig, train_lightweight
+from renderer.metrics import image_metrics
+from renderer.model import RadianceField, render_views
+
+
+class FullRenderer:
+    """Volume rendering of every pixel at the field's own marching step (eq. 4)."""
+
+    name = "full"
+
+    def __init__(self, model: RadianceField):
+        self.model = model
+
+    def settings(self) -> dict:
+        return {"renderer": self.name, "step_m": self.model.step_m}
+
+    @torch.no_grad()
+    def render_path(self, poses: Tensor, intrinsics: Intrinsics) -> dict:
+        """{"rgb": [num_views, height, width, 3] float32, "seconds_per_view": float}."""
+        t0 = time.perf_counter()
+        rgb = render_views(self.model, poses, intrinsics)["rgb"]
+        seconds = (time.perf_counter() - t0) / max(poses.shape[0], 1)
+        return {"rgb": rgb, "seconds_per_view": seconds}
+
+
+def _full(model, dataset=None, config=None, generator=None):
+    if config is not None:
+        raise ValueError("the full renderer takes no config")
+    return FullRenderer(model), {}
+
+
+def _lightweight(model, dataset=None, config=None, generator=None):
+    config = LightweightConfig(progress=False) if config is None else config
+    return train_lightweight(model, dataset, config, generator)
+
+
+RENDERERS: dict[str, Callable] = {"full": _full, "lightweight": _lightweight}
+"""name -> builder ``(model, dataset=None, config=None, generator=None) -> (renderer,
+stats)``: the one table of renderers (the CLI's ``--renderer`` choices)."""
+
+
+def make_renderer(
+    name: str,
+    model: RadianceField,
+    dataset: Dataset | None = None,
+    config=None,
+    generator: torch.Generator | None = None,
+):
+    """Build the renderer ``name`` of :data:`RENDERERS`: ``(renderer, stats)``.
+
+    Raises:
+        KeyError: unknown name (the message lists the known ones).
+    """
+    if name not in RENDERERS:
+        raise KeyError(f"unknown renderer {name!r}; known: {list(RENDERERS)}")
+    return RENDERERS[name](model, dataset, config, generator)
+
+
+def score_renderers(
+    model: RadianceField,
+    test_dataset: Dataset,
+    train_dataset: Dataset | None = None,
+    names: list[str] | None = None,
+    configs: dict | None = None,
+    generator: torch.Generator | None = None,
+) -> dict:
+    """Render ``test_dataset``'s views in their order (a camera path: the lightweight
+    renderer reuses keyframes) with each renderer and compare with its images.
+
+    Args:
+        train_dataset: the cameras the lightweight decoder trains around (None: the
+            cameras the field stores).
+        names: renderers to score (default: all of :data:`RENDERERS`).
+        configs: name -> config (e.g. ``{"lightweight": LightweightConfig(...)}``).
+    Returns:
+        {name: {"psnr", "ssim" (means of per-view values against the images),
+        "seconds_per_view" (keyframes included, after one warm-up view), "setup_seconds"
+        (building it: the decoder's training), "num_views", "settings"[, "masked_psnr"]
+        [, "speedup_vs_full"]}}.
+    """
+    if generator is None:
+        generator = torch.Generator().manual_seed(0)
+    results: dict = {}
+    for name in names or list(RENDERERS):
+        t0 = time.perf_counter()
+        r, _ = make_renderer(name, model, train_dataset, (configs or {}).get(name), generator)
+        setup = time.perf_counter() - t0
+        r.render_path(test_dataset.poses[:1], test_dataset.intrinsics)  # warm-up
+        out = r.render_path(test_dataset.poses, test_dataset.intrinsics)
+        m = image_metrics(out["rgb"], test_dataset.images, test_dataset.masks)
+        results[name] = {
+            "psnr": m["psnr"],
+            "ssim": m["ssim"],
+            "seconds_per_view": out["seconds_per_view"],
+            "setup_seconds": setup,
+            "num_views": m["num_views"],
+            "settings": r.settings(),
+        }
+        if "masked_psnr" in m:
+            results[name]["masked_psnr"] = m["masked_psnr"]
+    if "full" in results:
+        for name, r in results.items():
+            if name != "full":
+                r["speedup_vs_full"] = results["full"]["seconds_per_view"] / r["seconds_per_view"]
+    return results
