@@ -28,7 +28,11 @@ def run(out_dir: Path) -> dict:
     wall = time.perf_counter() - t
     if rc != 0:
         raise RuntimeError(f"osnerf run exited with {rc}")
-    report = json.loads((run_dir / "report.json").read_text())
+    from dataclasses import asdict
+
+    from osnerf.report import Report
+
+    report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
     return {
         "command": "osnerf run --channel rayleigh --snr-db 0 --seed 0 (default scene and demand)",
         "wall_seconds": wall,
@@ -37,7 +41,7 @@ def run(out_dir: Path) -> dict:
         "loadavg_before": load_before,
         "loadavg_after": os.getloadavg(),
         "cpu_count": os.cpu_count(),
-        "scene_seconds": report.get("scene_seconds"),
+        "scene_seconds": report.scene_seconds,
         "schemes": {
             name: {
                 k: s.get(k)
@@ -45,7 +49,10 @@ def run(out_dir: Path) -> dict:
                     "psnr",
                     "psnr_object",
                     "ssim",
+                    "lpips",
                     "mask_iou",
+                    "views_lost",
+                    "bound",
                     "symbols_sent",
                     "views_sent",
                     "seconds",
@@ -53,9 +60,9 @@ def run(out_dir: Path) -> dict:
                     "nerf_steps",
                 )
             }
-            for name, s in report["schemes"].items()
+            for name, s in ((n, asdict(r)) for n, r in report.schemes.items())
         },
-        "comparisons": report.get("comparisons", {}),
+        "comparisons": report.comparisons,
         "report": str(run_dir / "report.json"),
         "note": "reused cached stages if run_dir already held them; delete it for a cold run",
     }
