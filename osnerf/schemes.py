@@ -397,6 +397,5 @@ class GroundTruth(Scheme):
         )
 
 
-BUILTIN = tuple(SCHEMES)
-"""The built-in schemes, in the order ``osnerf run`` uses by default (analog is opt-in)."""
 DEFAULT_SCHEMES = ("jscc", "digital", "full", "gt")
+"""What ``osnerf run`` sends by default (analog and the digital genie are opt-in)."""

@@ -72,6 +72,10 @@ class RunPlan:
         """Every candidate view not in outage (what a full-scene scheme sends)."""
         return [p for p in self.views if not p.outage]
 
+    def for_scheme(self, object_routed: bool) -> list[ViewPlan]:
+        """The views a scheme sends: on demand when it is object-routed, else every one."""
+        return self.on_demand() if object_routed else self.whole()
+
     @property
     def full_scene_symbols(self) -> int:
         return int(sum(p.full_symbols for p in self.whole()))

@@ -11,6 +11,7 @@ import phy
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
 from osnerf.scenes import DEFAULT_SCENE, RenderConfig, check_demand, get_scene
+from osnerf.schemes import DEFAULT_SCHEMES
 
 OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
@@ -52,7 +53,7 @@ class RunConfig:
     demand: str | None = None
     channel: str = "rayleigh"
     snr_db: float = 0.0
-    schemes: tuple[str, ...] = ("jscc", "digital", "full", "gt")
+    schemes: tuple[str, ...] = DEFAULT_SCHEMES
     seed: int = 0
     max_seconds: float = 60.0
     resolution_px: int = 80

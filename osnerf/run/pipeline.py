@@ -118,7 +118,7 @@ def transmit(
     scheme: Scheme, ctx: RunContext, views: SceneViews, col: Collection, cache
 ) -> Transmission:
     """The scheme's views through the links (cached under its name)."""
-    plans = ctx.plan.on_demand() if scheme.object_routed else ctx.plan.whole()
+    plans = ctx.plan.for_scheme(scheme.object_routed)
     cached = cache.load(f"{scheme.name}_tx")
     if cached is None:
         _log(
@@ -148,15 +148,15 @@ def reconstruct_and_score(
     scheme: Scheme, tx: Transmission, ctx: RunContext, prep: Prepared, views, col, cache, out_dir
 ) -> tuple[SchemeReport, Reconstruction]:
     """A radiance field on the received views (in memory), scored on the held-out views."""
-    plans = ctx.plan.on_demand() if scheme.object_routed else ctx.plan.whole()
+    plans = ctx.plan.for_scheme(scheme.object_routed)
     ids = [p.view for p in plans]
     aabb = prep.scu.route(scheme.name, scheme.object_routed, ids, views.meta)
     ds = received_dataset(
         tx.images, views.poses[ids], views.intrinsics, views.background, aabb, tx.rx_masks
     )
-    export_views(Path(out_dir) / "received" / scheme.name, ds)
     cached = cache.load(f"{scheme.name}_nerf")
     if cached is None:
+        export_views(Path(out_dir) / "received" / scheme.name, ds)
         _log(f"{scheme.name}: training the radiance field ({ctx.config.max_seconds:g} s)")
         union = np.stack([views.masks[o][views.indices("test")] for o in prep.demand.objects]).max(
             0

@@ -54,11 +54,8 @@ def mask_iou(opacity: np.ndarray, mask: np.ndarray, threshold: float = 0.5) -> f
 
 def lpips_mean(pred: np.ndarray, ref: np.ndarray) -> float | None:
     """Mean LPIPS (AlexNet) over views [n, h, w, 3], None where the weights are not set up."""
-    fn = getattr(renderer, "lpips", None)
-    if fn is None:
-        return None
     try:
-        return float(np.mean(np.asarray(fn(pred, ref), np.float64)))
+        return float(np.mean(np.asarray(renderer.lpips(pred, ref), np.float64)))
     except (FileNotFoundError, ValueError):  # weights not set up, or views under 31 px
         return None
 
