@@ -41,6 +41,11 @@ class SchemeReport:
         nerf_steps, nerf_curve, nerf_wall_seconds: the radiance field's training.
         bound: None, or what this scheme bounds (not a real system).
         training_bounds: "demanded objects" or "whole scene".
+        renderers: None (skipped), or per renderer of ``renderer.RENDERERS`` ("full",
+            "lightweight") on the held-out views in order: psnr_object (as above),
+            seconds_per_view (keyframes included), setup_seconds (the lightweight decoder's
+            training), speedup_vs_full, settings; psnr and ssim (against the ground-truth
+            views) for whole-scene schemes only.
     """
 
     psnr: float
@@ -65,6 +70,7 @@ class SchemeReport:
     bound: str | None = None
     training_bounds: str = "demanded objects"
     help: str = ""
+    renderers: dict | None = None
 
 
 @dataclass

@@ -176,13 +176,6 @@ def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
 # ----------------------------------------------------------------------------- helpers
 
 
-def received_snr_db(noise_var: torch.Tensor, snr_range_db) -> float:
-    """The receiver's SNR for the decoder's AF modules: ``1 / mean(noise_var)`` of unbiased
-    (ZF/MRC) symbols, in dB, clamped to the codec's range."""
-    snr = -10.0 * float(torch.log10(noise_var.mean().clamp_min(1e-12)))
-    return float(np.clip(snr, *snr_range_db))
-
-
 def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, generator):
     """``repetitions`` copies of a [1, n] block through ``link``, MRC-combined."""
     from phy import combine_repetitions
@@ -202,10 +195,9 @@ def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> T
 
     codec, rx = ctx.codec, ctx.rx_codec
     s_up = ctx.plan.oversampling if on_demand else 1
-    snr_range = tuple(float(x) for x in rx.snr_range_db)
     n, _, h, w = images.shape
     bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]
-    out, symbols, rx_masks, side, rx_snr = [], [], [], [], []
+    out, symbols, rx_masks, side = [], [], [], []
     sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0, "encode_cpu": 0.0, "decode_cpu": 0.0}
     for k, p in enumerate(plans):
         x = images[k : k + 1]
@@ -228,9 +220,8 @@ def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> T
                 ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, generator
             )
         sec["channel"] += time.perf_counter() - t
-        snr_rx = received_snr_db(nv, snr_range)
         t, c = time.perf_counter(), time.process_time()
-        with torch.no_grad():  # the receiver's average SNR; the per-symbol noise in nv
+        with torch.no_grad():  # the average SNR after combining; per-symbol noise in nv
             img = rx.decode(
                 x_hat, enc.meta, p.encoder_snr_db, expected_sha256=codec.sha256, noise_var=nv
             )
@@ -248,14 +239,13 @@ def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> T
             img = img * mt + bg * (1.0 - mt)
         out.append(img)
         symbols.append(p.repetitions * int(enc.symbols.shape[-1]))
-        rx_snr.append(snr_rx)
         side.append(int(enc.meta.side_info_bits()))
     return Transmission(
         torch.stack(out),
         np.asarray(symbols, np.int64),
         np.stack(rx_masks) if rx_masks else None,
         sec,
-        {"rx_snr_db": rx_snr, "side_info_bits": int(sum(side)) if on_demand else 0},
+        {"side_info_bits": int(sum(side)) if on_demand else 0},
     )
 
 

@@ -23,9 +23,14 @@ class ViewPlan:
 
     Attributes:
         view: index in ``SceneViews``.
-        snr_db: the SNR its link runs at (Es/N0, dB).
-        measured_snr_db: post-equalisation SNR measured with pilot blocks (what the rate uses).
-        encoder_snr_db: the SNR the encoder is told (measured, clamped to the codec's range).
+        snr_db: the SNR its link runs at (Es/N0, dB); None in outage.
+        measured_snr_db: post-equalisation SNR measured with pilot blocks (what the rate
+            uses); None in outage.
+        encoder_snr_db: the SNR the codec is told: the average SNR of the symbols after the
+            receiver combines the copies, ``measured + 10 log10(repetitions)`` (MRC of r
+            copies adds their SNRs), clamped to the codec's range; None in outage. Telling
+            the encoder the single-copy SNR instead cost 0.67 dB of received object PSNR on
+            the default scene (block Rayleigh, 0 dB, 2 copies, mean of 6 seeds).
         cbr: whole-view CBR from the measured SNR.
         repetitions: copies of each block (MRC-combined at the receiver).
         on_demand: the view shows the demanded objects well enough to be sent on demand.
@@ -37,9 +42,9 @@ class ViewPlan:
     """
 
     view: int
-    snr_db: float
-    measured_snr_db: float
-    encoder_snr_db: float
+    snr_db: float | None
+    measured_snr_db: float | None
+    encoder_snr_db: float | None
     cbr: float
     repetitions: int
     on_demand: bool
@@ -342,11 +347,7 @@ class SemanticControlUnit:
         plans = []
         for v in (int(v) for v in candidates):
             if v in outage:
-                plans.append(
-                    ViewPlan(
-                        v, float("nan"), float("nan"), float("nan"), 0.0, 0, False, None, 0, 0, True
-                    )
-                )
+                plans.append(ViewPlan(v, None, None, None, 0.0, 0, False, None, 0, 0, True))
                 continue
             f = focus.get(v)
             budget = int(round(f * (s * height) * (s * width) * 3)) * int(reps[v]) if f else 0
@@ -355,7 +356,7 @@ class SemanticControlUnit:
                     view=v,
                     snr_db=float(link_snr_db[v]),
                     measured_snr_db=float(measured_snr_db[v]),
-                    encoder_snr_db=float(np.clip(measured_snr_db[v], *snr_range_db)),
+                    encoder_snr_db=combined_snr_db(measured_snr_db[v], reps[v], snr_range_db),
                     cbr=float(cbrs[v]),
                     repetitions=int(reps[v]),
                     on_demand=f is not None,
@@ -384,6 +385,13 @@ class SemanticControlUnit:
             bounds="demanded objects" if object_routed else "whole scene",
         )
         return aabb
+
+
+def combined_snr_db(measured_snr_db: float, repetitions: int, snr_range_db) -> float:
+    """The average SNR after MRC of ``repetitions`` copies (their SNRs add), clamped to the
+    codec's range: what the encoder is told and the decoder's AF modules see."""
+    snr = float(measured_snr_db) + 10.0 * math.log10(max(int(repetitions), 1))
+    return float(np.clip(snr, *snr_range_db))
 
 
 def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:

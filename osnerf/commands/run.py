@@ -15,7 +15,6 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from osnerf.cli import UsageError
 from osnerf.commands import args as checks
 
 
@@ -115,31 +114,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="what --max-seconds counts: wall, or cpu (CPU s / threads; for shared machines)",
     )
     p.add_argument(
+        "--lightweight-seconds",
+        type=float,
+        default=20.0,
+        help="the lightweight renderer (paper 3.3) renders the held-out views beside the full "
+        "render of each scheme's field after this many seconds of decoder training; the "
+        "report gives both one's time per view and PSNR (default 20; 0: skip)",
+    )
+    p.add_argument(
         "--cache-dir",
         default=None,
         help="rendered-scene cache (default $OSNERF_CACHE or ~/.cache/osnerf)",
     )
-
-
-def check_stage_cache(folder: Path) -> None:
-    """Refuse a run folder whose cached stages are unreadable, before any work.
-
-    Raises:
-        UsageError: naming the corrupt file and saying how to clear it.
-    """
-    import zipfile
-
-    for npz in sorted(folder.glob("*.npz")) if folder.is_dir() else ():
-        try:
-            with zipfile.ZipFile(npz) as z:
-                bad = z.testzip()
-        except (zipfile.BadZipFile, OSError, EOFError) as e:
-            bad = f"{type(e).__name__}: {e}"
-        if bad is not None:
-            raise UsageError(
-                f"--out: cached stage {npz} is corrupt or truncated ({bad}); delete it "
-                f"(or the folder {folder}) and run again to recompute it"
-            )
 
 
 def run_config(args: argparse.Namespace):
@@ -165,18 +151,20 @@ def run_config(args: argparse.Namespace):
         nerf_clock=args.nerf_clock,
         ota_device=args.ota_device,
         nerf_steps=args.nerf_steps,
+        lightweight_seconds=args.lightweight_seconds,
     )
 
 
 def run(args: argparse.Namespace) -> int:
     from osnerf.report import write_report
     from osnerf.run import run_pipeline
+    from osnerf.run.cache import check_stage_files
 
     cfg = run_config(args)
     out = checks.output_dir(args.out, "--out")
     if args.cache_dir:
         checks.output_dir(args.cache_dir, "--cache-dir")
-    check_stage_cache(out / "cache" / cfg.key())
+    check_stage_files(out / "cache" / cfg.key())
     report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
     )
@@ -191,5 +179,13 @@ def run(args: argparse.Namespace) -> int:
             f"symbols {s.symbols_sent}{tag}",
             file=sys.stderr,
         )
+        for rname, r in (s.renderers or {}).items():
+            speed = f"  {r['speedup_vs_full']:.1f}x full" if "speedup_vs_full" in r else ""
+            rpo = "n/a" if r.get("psnr_object") is None else f"{r['psnr_object']:.2f}"
+            print(
+                f"{'':8s}  {rname} render: {1e3 * r['seconds_per_view']:.0f} ms/view  "
+                f"psnr_object {rpo} dB{speed}",
+                file=sys.stderr,
+            )
     print(f"report: {out / 'report.json'} and {out / 'report.html'}", file=sys.stderr)
     return 0

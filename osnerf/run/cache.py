@@ -9,6 +9,34 @@ from pathlib import Path
 import numpy as np
 
 
+class StageCacheError(ValueError):
+    """A cached stage that cannot be read (the message names the file and how to clear it)."""
+
+
+def _unreadable(npz: Path, why: str) -> StageCacheError:
+    return StageCacheError(
+        f"cached stage {npz} is corrupt or truncated ({why}); delete it (or the folder "
+        f"{npz.parent}) and run again to recompute it"
+    )
+
+
+def check_stage_files(folder: Path) -> None:
+    """Refuse a cache folder holding an unreadable stage, before any work (creates nothing).
+
+    Raises:
+        StageCacheError: naming the first corrupt file.
+    """
+    folder = Path(folder)
+    for npz in sorted(folder.glob("*.npz")) if folder.is_dir() else ():
+        try:
+            with zipfile.ZipFile(npz) as z:
+                bad = z.testzip()
+        except (zipfile.BadZipFile, OSError, EOFError) as e:
+            bad = f"{type(e).__name__}: {e}"
+        if bad is not None:
+            raise _unreadable(npz, str(bad))
+
+
 class StageCache:
     """Each stage's arrays and JSON info; an interrupted run resumes from what is here."""
 
@@ -26,9 +54,7 @@ class StageCache:
                 arrays = {k: f[k] for k in f.files}
             info = json.loads(js.read_text())
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-            raise RuntimeError(
-                f"stage cache {npz} is unreadable ({type(e).__name__}); delete {self.root} to recompute"
-            ) from None
+            raise _unreadable(npz, type(e).__name__) from None
         return arrays, info
 
     def save(self, stage: str, arrays: dict, info: dict) -> None:

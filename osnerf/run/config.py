@@ -17,7 +17,7 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
-CACHE_VERSION = 5
+CACHE_VERSION = 6
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,9 @@ class RunConfig:
         nerf_clock: what ``max_seconds`` counts: "wall" or "cpu".
         nerf_steps: optional cap on NeRF optimiser steps per scheme (>= 1).
         ota_device: for channel "ota": "emulated" or "hackrf".
+        lightweight_seconds: decoder training budget (s) of the lightweight renderer, which
+            renders the held-out views beside the full render of each scheme's field (time
+            per view and PSNR of both in the report); 0 skips it.
     """
 
     scene: str = DEFAULT_SCENE
@@ -68,6 +71,7 @@ class RunConfig:
     nerf_clock: str = "wall"
     ota_device: str = "emulated"
     nerf_steps: int | None = None
+    lightweight_seconds: float = 20.0
 
     def __post_init__(self):
         from osnerf.schemes import load_entry_points
@@ -93,6 +97,10 @@ class RunConfig:
             isinstance(self.nerf_steps, int) and self.nerf_steps >= 1
         ):
             raise ValueError(f"nerf_steps must be an integer >= 1, got {self.nerf_steps!r}")
+        if not (self.lightweight_seconds >= 0 and math.isfinite(self.lightweight_seconds)):
+            raise ValueError(
+                f"lightweight_seconds must be >= 0 (0: skip), got {self.lightweight_seconds!r}"
+            )
         if self.ota_device not in OTA_DEVICES:
             raise ValueError(
                 f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"

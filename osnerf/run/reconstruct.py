@@ -107,6 +107,9 @@ def reconstruct(
             views.intrinsics.height,
             views.intrinsics.width,
         )
+    renderers = None
+    if config.lightweight_seconds > 0:
+        renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
     rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
     op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
     n = len(test)
@@ -131,8 +134,34 @@ def reconstruct(
         ],
         "nerf_seconds": float(result.seconds),
         "nerf_wall_seconds": wall,
+        "renderers": renderers,
     }
     return Reconstruction(metrics, rgb, op)
+
+
+def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool) -> dict:
+    """The full and the lightweight renderer on the held-out views (in their order):
+    psnr_object exactly as the scheme's (against the ground-truth views over the objects'
+    pixels of the views showing them), and for whole-scene schemes psnr and ssim of the
+    whole view. The lightweight decoder trains around the received views' cameras for
+    ``config.lightweight_seconds``."""
+    light = renderer.LightweightConfig(
+        train_seconds=float(config.lightweight_seconds), num_sequences=32, progress=False
+    )
+    out = renderer.score_renderers(
+        model,
+        held_out,
+        ds,
+        configs={"lightweight": light},
+        generator=torch.Generator().manual_seed(seed),
+    )
+    for r in out.values():
+        po = r.pop("masked_psnr", None)
+        r["psnr_object"] = None if po is None or not np.isfinite(po) else float(po)
+        if object_routed:  # the background was never sent: whole-view scores mean nothing
+            r.pop("psnr")
+            r.pop("ssim")
+    return out
 
 
 def view_metrics(received: np.ndarray, sent: np.ndarray, masks: np.ndarray | None) -> dict:

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 import phy
-from osnerf.schemes import received_snr_db
+from osnerf.scu import combined_snr_db
 from phy import combine_repetitions
 from phy.raytrace import PerPositionChannel
 
@@ -25,9 +25,21 @@ def test_mrc_of_two_zf_copies_adds_their_snrs():
     assert float(nv[0, 0]) <= float(out.noise_var[:, 0].min())  # never worse than the best copy
 
 
-def test_received_snr_is_clamped_to_the_codec_range():
-    assert received_snr_db(torch.full((1, 4), 0.1), (-5.0, 20.0)) == pytest.approx(10.0)
-    assert received_snr_db(torch.full((1, 4), 1e3), (-5.0, 20.0)) == -5.0
+def test_codec_is_told_the_average_snr_after_combining_the_copies():
+    """MRC of r block-faded copies adds their SNRs, so its mean is r times one copy's: the
+    SNR the SCU tells the codec is measured + 10 log10(r), clamped to the codec's range."""
+    gen = torch.Generator().manual_seed(2)
+    link = phy.FlatLink(phy.make_channel("rayleigh"), csi="perfect", equalizer="zf")
+    x = phy.power_normalize(torch.randn(1, 4, dtype=torch.complex64, generator=gen))
+    snr = []
+    for _ in range(4000):
+        out = link(x.expand(2, -1).contiguous(), 3.0, generator=gen)
+        snr.append(float(1.0 / combine_repetitions(out.x_hat, out.noise_var)[1][0, 0]))
+    mean_db = 10 * np.log10(np.mean(snr))
+    assert mean_db == pytest.approx(combined_snr_db(3.0, 2, (-10.0, 20.0)), abs=0.15)
+    assert combined_snr_db(3.0, 2, (-10.0, 20.0)) == pytest.approx(3.0 + 10 * np.log10(2))
+    assert combined_snr_db(3.0, 1, (-10.0, 20.0)) == 3.0
+    assert combined_snr_db(19.0, 2, (-10.0, 20.0)) == 20.0  # clamped
 
 
 def test_per_position_channel_is_normalised_and_frequency_selective():

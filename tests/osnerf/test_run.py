@@ -12,6 +12,7 @@ import pytest
 from osnerf.cli import main
 
 SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--max-seconds", "2"]
+SMALL += ["--lightweight-seconds", "0"]  # scored in the report-structure test only
 
 
 def _run(env, out, *extra):
@@ -43,6 +44,7 @@ def _run(env, out, *extra):
         (["--image-codec", "bmp"], "invalid choice: 'bmp'"),
         (["--snr-db", "55"], "outside the codec's range"),
         (["--nerf-steps", "0"], "nerf_steps must be an integer >= 1"),
+        (["--lightweight-seconds", "-1"], "lightweight_seconds must be >= 0"),
     ],
 )
 def test_bad_input_is_one_clear_line_and_no_report(env, tmp_path, capsys, args, message):
@@ -71,10 +73,9 @@ def test_knowledge_base_mismatch_is_refused(env, tmp_path, capsys):
 def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     out = tmp_path / "tiny"
     schemes = "jscc,digital,digital_genie,full,gt"
-    assert (
-        _run(env, out, "--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3")
-        == 0
-    )
+    args = ["--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3"]
+    args += ["--lightweight-seconds", "1"]
+    assert _run(env, out, *args) == 0
     report = json.loads((out / "report.json").read_text())
     for key in (
         "config",
@@ -105,6 +106,19 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         assert curve[-1]["seconds"] == pytest.approx(s["seconds"]["nerf"], abs=1e-3)
         if s["psnr_object"] is not None:
             assert curve[-1]["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-3)
+        # both renderers on the held-out views: the full one is the render scored above
+        full, light = s["renderers"]["full"], s["renderers"]["lightweight"]
+        if s["psnr_object"] is not None:
+            assert full["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-4), name
+        if s["training_bounds"] == "whole scene":
+            assert full["psnr"] == pytest.approx(s["psnr"], abs=1e-4), name
+        else:
+            assert "psnr" not in full
+        assert full["seconds_per_view"] > 0 and light["seconds_per_view"] > 0
+        assert light["speedup_vs_full"] == pytest.approx(
+            full["seconds_per_view"] / light["seconds_per_view"]
+        )
+        assert light["settings"]["train_seconds"] == 1.0
     sch = report["schemes"]
     comp = report["comparisons"]
     assert comp["symbols_jscc_over_full"] == pytest.approx(
@@ -151,10 +165,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     # resume: the same command reuses every cached stage and reports the same numbers
     caches = sorted((out / "cache").rglob("*.npz"))
     stamps = [p.stat().st_mtime_ns for p in caches]
-    assert (
-        _run(env, out, "--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3")
-        == 0
-    )
+    assert _run(env, out, *args) == 0
     again = json.loads((out / "report.json").read_text())
     assert [p.stat().st_mtime_ns for p in caches] == stamps
     for name in sch:

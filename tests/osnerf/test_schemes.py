@@ -17,6 +17,7 @@ from osnerf.run import run_pipeline
 from osnerf.schemes import SCHEMES, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
+TINY += ["--lightweight-seconds", "0"]
 STEPS = ["--max-seconds", "600", "--nerf-steps", "40"]  # step-limited: deterministic
 
 
