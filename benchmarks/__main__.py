@@ -15,9 +15,11 @@ HERE = Path(__file__).resolve().parent
 
 
 def main(argv: list[str] | None = None) -> int:
-    names = sorted(p.stem[len("bench_"):] for p in HERE.glob("bench_*.py"))
+    names = sorted(p.stem[len("bench_") :] for p in HERE.glob("bench_*.py"))
     parser = argparse.ArgumentParser(prog="python -m benchmarks")
-    parser.add_argument("names", nargs="*", help=f"benchmarks to run (default all): {', '.join(names)}")
+    parser.add_argument(
+        "names", nargs="*", help=f"benchmarks to run (default all): {', '.join(names)}"
+    )
     parser.add_argument("--out", default="bench-results", help="output folder")
     args = parser.parse_args(argv)
     unknown = sorted(set(args.names) - set(names))

@@ -7,7 +7,9 @@
   paths: time per view and PSNR of the lightweight renderer against full-resolution
   volume rendering of the same field and (on lego's first 64 test views, which form a
   path) against ground truth, beside bilinear upsampling of the low-resolution render
-  (goal: >= 5x faster, <= 1 dB under the full render against ground truth).
+  (goal: >= 5x faster, <= 1 dB under the full render against ground truth);
+* the feature renderer (a learned feature field + decoder, :mod:`renderer.features`) on the
+  same test path beside the full render (OSNERF_FEATURES_SECONDS of training, default 180).
 
 The machine is shared: the budget clock is ``cpu`` (process CPU seconds / 2 threads, the
 wall time the same work takes on two idle cores; optimistic for single-threaded Python
@@ -35,6 +37,7 @@ import torch
 
 from osnerf.paths import shared_data_dir
 from renderer import (
+    FeatureConfig,
     FullRenderer,
     LightweightConfig,
     TrainConfig,
@@ -45,6 +48,7 @@ from renderer import (
     orbit_path,
     render_views,
     train,
+    train_features,
     train_lightweight,
 )
 
@@ -122,6 +126,29 @@ def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | Non
                 r[f"psnr_{ref_name}"]["full_render"] - r[f"psnr_{ref_name}"]["lightweight"]
             )
     return r
+
+
+def _renderer_on_path(rend, model, path: torch.Tensor, intr, truth: torch.Tensor) -> dict:
+    """Time per view and PSNR of ``rend`` beside the full render of ``model`` along ``path``
+    (measured back to back in this process), against the full render and ground truth."""
+    full_renderer = FullRenderer(model)
+    full_renderer.render_path(path[:2], intr)  # warm-up
+    full_out = full_renderer.render_path(path, intr)
+    rend.render_path(path[:2], intr)  # warm-up
+    out = rend.render_path(path, intr)
+    full_psnr = image_metrics(full_out["rgb"], truth)["psnr"]
+    psnr = image_metrics(out["rgb"], truth)["psnr"]
+    return {
+        "num_views": path.shape[0],
+        "full_seconds_per_view": full_out["seconds_per_view"],
+        "seconds_per_view": out["seconds_per_view"],
+        "speedup": full_out["seconds_per_view"] / out["seconds_per_view"],
+        "psnr_vs_truth": {"renderer": psnr, "full_render": full_psnr},
+        "psnr_vs_full": image_metrics(out["rgb"], full_out["rgb"].clamp(0, 1))["psnr"],
+        "db_under_full_vs_truth": full_psnr - psnr,
+        "goal_5x_within_1db_met": full_out["seconds_per_view"] / out["seconds_per_view"] >= 5
+        and full_psnr - psnr <= 1.0,
+    }
 
 
 def _plot(curves: dict, path: Path) -> None:
@@ -243,5 +270,20 @@ def run(out_dir: Path) -> dict:
             }
         )
     results["lightweight"]["variants"] = variants
+
+    # the feature renderer (a learned feature field + decoder) on the same test path
+    feat_cfg = FeatureConfig(
+        train_seconds=float(os.environ.get("OSNERF_FEATURES_SECONDS", "180")), progress=False
+    )
+    feat, feat_stats = train_features(
+        grid_model, train_set, feat_cfg, torch.Generator().manual_seed(0)
+    )
+    results["features"] = {
+        "config": feat_cfg.as_dict(),
+        "train_stats": feat_stats,
+        "test_path": _renderer_on_path(
+            feat, grid_model, test_path.poses, test_path.intrinsics, test_path.images
+        ),
+    }
     results["loadavg_end"] = os.getloadavg()
     return results

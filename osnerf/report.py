@@ -42,9 +42,9 @@ class SchemeReport:
         bound: None, or what this scheme bounds (not a real system).
         training_bounds: "demanded objects" or "whole scene".
         renderers: None (skipped), or per renderer of ``renderer.RENDERERS`` ("full",
-            "lightweight") on the held-out views in order: psnr_object (as above),
-            seconds_per_view (keyframes included), setup_seconds (the lightweight decoder's
-            training), speedup_vs_full, settings; psnr and ssim (against the ground-truth
+            "lightweight", "features") on the held-out views in order: psnr_object (as above),
+            seconds_per_view (keyframes included), setup_seconds (training a learned
+            renderer), speedup_vs_full, settings; psnr and ssim (against the ground-truth
             views) for whole-scene schemes only.
     """
 

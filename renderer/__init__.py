@@ -26,7 +26,7 @@ Training and rendering
     values); ``save_model(model, path)`` / ``load_model(path)``.
 
 Renderers (one table)
-    ``RENDERERS``: name ("full", "lightweight") -> builder; ``make_renderer(name, model,
+    ``RENDERERS``: name ("full", "lightweight", "features") -> builder; ``make_renderer(name, model,
     dataset=None, config=None) -> (renderer, stats)``; every renderer has
     ``render_path(poses, intrinsics) -> {"rgb", "seconds_per_view", ...}`` and ``settings()``.
     ``score_renderers(model, test_dataset, train_dataset=None) -> {name: {"psnr", "ssim",
@@ -41,6 +41,11 @@ Lightweight renderer (§3.3)
     low-resolution pass shows empty);
     :func:`reproject` warps a previous frame into the current view by depth;
     :func:`surface_points` and :func:`splat_depth` carry a frame's depth into another view.
+
+Feature renderer (§3.3, eq. 5)
+    ``train_features(model, dataset=None, FeatureConfig(...)) -> (FeatureRenderer, stats)``:
+    a K-channel feature grid (the field's density kept) rendered at low resolution and a
+    decoder with sub-pixel upsampling, both distilled from the field's own renders.
 
 Metrics
     :func:`psnr`, :func:`ssim` (scikit-image, data_range=1.0), :func:`masked_psnr`,
@@ -64,6 +69,7 @@ from renderer.cameras import (
     project_points,
 )
 from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
+from renderer.features import FeatureConfig, FeatureRenderer, train_features
 from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lightweight import (
     LIGHTWEIGHT_PRESETS,
@@ -99,6 +105,8 @@ __all__ = [
     "LIGHTWEIGHT_PRESETS",
     "RENDERERS",
     "Dataset",
+    "FeatureConfig",
+    "FeatureRenderer",
     "FullRenderer",
     "GridField",
     "Intrinsics",
@@ -150,6 +158,7 @@ __all__ = [
     "to_uint8",
     "write_transforms",
     "train",
+    "train_features",
     "train_lightweight",
     "transmittance",
 ]

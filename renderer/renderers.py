@@ -18,6 +18,7 @@ from torch import Tensor
 
 from renderer.cameras import Intrinsics
 from renderer.dataset import Dataset
+from renderer.features import FeatureConfig, train_features
 from renderer.lightweight import LightweightConfig, train_lightweight
 from renderer.metrics import image_metrics
 from renderer.model import RadianceField, render_views
@@ -54,9 +55,21 @@ def _lightweight(model, dataset=None, config=None, generator=None):
     return train_lightweight(model, dataset, config, generator)
 
 
-RENDERERS: dict[str, Callable] = {"full": _full, "lightweight": _lightweight}
+def _features(model, dataset=None, config=None, generator=None):
+    config = FeatureConfig(progress=False) if config is None else config
+    return train_features(model, dataset, config, generator)
+
+
+RENDERERS: dict[str, Callable] = {
+    "full": _full,
+    "lightweight": _lightweight,
+    "features": _features,
+}
 """name -> builder ``(model, dataset=None, config=None, generator=None) -> (renderer,
-stats)``: the one table of renderers (the CLI's ``--renderer`` choices)."""
+stats)``: the one table of renderers (the CLI's ``--renderer`` choices). ``full``: volume
+rendering of every pixel; ``lightweight``: low-resolution colour, reprojected keyframes and
+a U-Net (:mod:`renderer.lightweight`); ``features``: a learned feature field rendered at
+low resolution and decoded (:mod:`renderer.features`, the paper's eq. 5)."""
 
 
 def make_renderer(

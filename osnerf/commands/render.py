@@ -2,9 +2,10 @@
 
 The path is an orbit around the scene centre (radius, up axis and intrinsics default to
 the training cameras') or the ``frames[].transform_matrix`` of a JSON file (``--path``).
-``--renderer`` names one of ``renderer.RENDERERS``: ``full`` volume rendering or the
-``lightweight`` renderer (its decoder is trained first, around the cameras the field
-stores; that time is ``setup_seconds``, not part of the time per view).
+``--renderer`` names one of ``renderer.RENDERERS``: ``full`` volume rendering, the
+``lightweight`` renderer (keyframes reprojected + U-Net) or ``features`` (a learned feature
+field at low resolution + decoder); the learned ones train first, around the cameras the
+field stores; that time is ``setup_seconds``, not part of the time per view.
 Writes ``OUT/frames/NNN.png``, ``OUT/path.mp4`` or ``OUT/path.gif`` (OpenCV), and
 ``OUT/render.json`` (config, ``seconds_per_view`` with keyframe renders included, the
 renderer's settings).
@@ -60,7 +61,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--renderer",
         default="full",
-        help="a renderer of renderer.RENDERERS: full (default) or lightweight",
+        help="a renderer of renderer.RENDERERS: full (default), lightweight (keyframes "
+        "reprojected + U-Net) or features (learned feature field at low resolution + decoder)",
     )
     p.add_argument(
         "--lightweight-preset",
@@ -71,10 +73,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--lightweight-seconds",
         type=float,
-        default=60.0,
-        help="lightweight renderer: decoder training budget in seconds (default 60)",
+        default=None,
+        help="lightweight and features renderers: training budget in seconds (default: "
+        "the renderer's own, 60 and 180)",
     )
-    p.add_argument("--seed", type=int, default=0, help="lightweight decoder seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="learned renderers' seed (default 0)")
     p.add_argument(
         "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
     )
@@ -113,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     from renderer import (
         LIGHTWEIGHT_PRESETS,
         RENDERERS,
+        FeatureConfig,
         Intrinsics,
         load_model,
         make_renderer,
@@ -127,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             f"--lightweight-preset must be one of {', '.join(LIGHTWEIGHT_PRESETS)}, "
             f"got {args.lightweight_preset!r}"
         )
-    if not args.lightweight_seconds > 0:
+    if args.lightweight_seconds is not None and not args.lightweight_seconds > 0:
         raise UsageError(f"--lightweight-seconds must be > 0, got {args.lightweight_seconds}")
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
@@ -169,12 +173,13 @@ def run(args: argparse.Namespace) -> int:
         )
 
     config = None
+    budget = {} if args.lightweight_seconds is None else {"train_seconds": args.lightweight_seconds}
     if args.renderer == "lightweight":
         config = dataclasses.replace(
-            LIGHTWEIGHT_PRESETS[args.lightweight_preset],
-            train_seconds=args.lightweight_seconds,
-            progress=True,
+            LIGHTWEIGHT_PRESETS[args.lightweight_preset], progress=True, **budget
         )
+    elif args.renderer == "features":
+        config = FeatureConfig(progress=True, **budget)
     t0 = time.perf_counter()
     rend, _ = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)

@@ -47,9 +47,10 @@ class RunConfig:
         nerf_clock: what ``max_seconds`` counts: "wall" or "cpu".
         nerf_steps: optional cap on NeRF optimiser steps per scheme (>= 1).
         ota_device: for channel "ota": "emulated" or "hackrf".
-        lightweight_seconds: decoder training budget (s) of the lightweight renderer, which
-            renders the held-out views beside the full render of each scheme's field (time
-            per view and PSNR of both in the report); 0 skips it.
+        lightweight_seconds: training budget (s) of each learned renderer of
+            ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
+            beside the full render of each scheme's field (time per view and PSNR of each in
+            the report); 0 skips them.
     """
 
     scene: str = DEFAULT_SCENE

@@ -140,20 +140,20 @@ def reconstruct(
 
 
 def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool) -> dict:
-    """The full and the lightweight renderer on the held-out views (in their order):
+    """Every renderer of ``renderer.RENDERERS`` on the held-out views (in their order):
     psnr_object exactly as the scheme's (against the ground-truth views over the objects'
     pixels of the views showing them), and for whole-scene schemes psnr and ssim of the
-    whole view. The lightweight decoder trains around the received views' cameras for
-    ``config.lightweight_seconds``."""
-    light = renderer.LightweightConfig(
-        train_seconds=float(config.lightweight_seconds), num_sequences=32, progress=False
-    )
+    whole view. The learned renderers train around the received views' cameras for
+    ``config.lightweight_seconds`` each."""
+    budget = float(config.lightweight_seconds)
+    configs = {
+        "lightweight": renderer.LightweightConfig(
+            train_seconds=budget, num_sequences=32, progress=False
+        ),
+        "features": renderer.FeatureConfig(train_seconds=budget, extra_views=64, progress=False),
+    }
     out = renderer.score_renderers(
-        model,
-        held_out,
-        ds,
-        configs={"lightweight": light},
-        generator=torch.Generator().manual_seed(seed),
+        model, held_out, ds, configs=configs, generator=torch.Generator().manual_seed(seed)
     )
     for r in out.values():
         po = r.pop("masked_psnr", None)

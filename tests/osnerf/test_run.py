@@ -107,6 +107,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         if s["psnr_object"] is not None:
             assert curve[-1]["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-3)
         # both renderers on the held-out views: the full one is the render scored above
+        assert set(s["renderers"]) == {"full", "lightweight", "features"}
         full, light = s["renderers"]["full"], s["renderers"]["lightweight"]
         if s["psnr_object"] is not None:
             assert full["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-4), name
@@ -119,6 +120,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
             full["seconds_per_view"] / light["seconds_per_view"]
         )
         assert light["settings"]["train_seconds"] == 1.0
+        assert s["renderers"]["features"]["settings"]["train_seconds"] == 1.0
     sch = report["schemes"]
     comp = report["comparisons"]
     assert comp["symbols_jscc_over_full"] == pytest.approx(

@@ -14,6 +14,17 @@ def sphere_dataset(tmp_path_factory) -> Path:
     return write_sphere_dataset(tmp_path_factory.mktemp("sphere"))
 
 
+@pytest.fixture(scope="module")
+def sphere_model(sphere_dataset):
+    """(the exact sphere written into a grid field, no training needed; its train split)."""
+    from sphere_scene import exact_sphere_field
+
+    from renderer import load_dataset
+
+    train_set = load_dataset(sphere_dataset, "train", resolution=None)
+    return exact_sphere_field(train_set), train_set
+
+
 @pytest.fixture(autouse=True)
 def one_torch_thread():
     """One intra-op thread: on a shared, oversubscribed machine two OpenMP threads wait

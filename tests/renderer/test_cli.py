@@ -239,6 +239,15 @@ def test_render_with_the_lightweight_renderer_along_a_path(run_dir, tmp_path):
     assert r["keyframes"] == [] and r["renderer"]["downsample"] == 1
 
 
+def test_render_with_the_feature_renderer(run_dir, tmp_path):
+    out = tmp_path / "feat"
+    assert _render(run_dir, out, "--renderer", "features", "--lightweight-seconds", "1") == 0
+    r = json.loads((out / "render.json").read_text())
+    assert len(sorted((out / "frames").glob("*.png"))) == 2 == r["num_views"]
+    assert r["renderer"]["renderer"] == "features" and r["renderer"]["train_seconds"] == 1.0
+    assert r["setup_seconds"] > 1.0 and r["seconds_per_view"] > 0
+
+
 def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, capsys):
     def fails(extra, text):
         out = tmp_path / "never"

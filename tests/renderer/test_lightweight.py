@@ -7,20 +7,10 @@ import torch
 from renderer import (
     LightweightConfig,
     image_metrics,
-    load_dataset,
     orbit_path,
     render_views,
     train_lightweight,
 )
-
-
-@pytest.fixture(scope="module")
-def sphere_model(sphere_dataset):
-    """The exact sphere written into a grid field (no training needed)."""
-    from sphere_scene import exact_sphere_field
-
-    train_set = load_dataset(sphere_dataset, "train", resolution=None)
-    return exact_sphere_field(train_set), train_set
 
 
 def test_lightweight_learns_and_renders_a_path(sphere_model):

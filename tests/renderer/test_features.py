@@ -1,0 +1,112 @@
+"""The feature renderer (eq. 5): features composited with the field's own weights, a decoder
+that starts as bilinear upsampling and learns to approach the full render."""
+
+import math
+
+import pytest
+import torch
+
+from renderer import (
+    FeatureConfig,
+    FeatureRenderer,
+    Intrinsics,
+    image_metrics,
+    orbit_path,
+    render_views,
+    train_features,
+)
+from renderer.features import jittered_poses, low_res_intrinsics
+
+
+def test_composite_uses_the_fields_weights(sphere_model):
+    """F = sum_i w_i f_i + (1 - sum_i w_i) f_bg with the eq. 4 weights of the low-resolution
+    pass: with a constant feature v it is opacity * v + (1 - opacity) * bg, and the opacity
+    plane is the field's own low-resolution opacity at the coarse step."""
+    model, train_set = sphere_model
+    cfg = FeatureConfig(channels=5, downsample=2, step_factor=2.0, weight_threshold=0.0)
+    rend = FeatureRenderer(model, cfg)
+    v = torch.tensor([0.3, -1.0, 2.0, 0.5, 4.0])
+    with torch.no_grad():
+        rend.grid.copy_(v.reshape(1, 5, 1, 1, 1).expand_as(rend.grid))
+        rend.background.copy_(torch.tensor([1.0, 0.0, -2.0, 0.0, 0.0]))
+    pose, intr = train_set.poses[3], train_set.intrinsics
+    with torch.no_grad():
+        f = rend.features(rend.low_res_pass(pose, intr))[0]  # [6, 16, 16]
+    ref = render_views(model, pose[None], intr, 16, 16, step_m=model.step_m * 2.0)["opacity"][0]
+    assert torch.allclose(f[5], ref, atol=1e-5)
+    assert 0.05 < float((ref > 0.99).float().mean()) < 0.8  # the sphere and the background
+    expected = ref[None] * v[:, None, None] + (1 - ref[None]) * rend.background[:, None, None]
+    assert torch.allclose(f[:5], expected, atol=1e-4)
+    # dropping samples under the threshold loses at most their weight
+    rend.config = FeatureConfig(channels=5, downsample=2, step_factor=2.0, weight_threshold=1e-3)
+    with torch.no_grad():
+        p = rend.low_res_pass(pose, intr)
+        g = rend.features(p)[0]
+    assert p.weights.min() > 1e-3
+    assert torch.allclose(g[5], f[5])
+    assert float((g[:5] - f[:5]).abs().max()) <= 0.05 * float(v.abs().max())
+
+
+def test_starts_as_bilinear_and_learns_toward_the_full_render(sphere_model):
+    model, train_set = sphere_model
+    cfg = FeatureConfig(
+        channels=8, downsample=2, extra_views=8, train_seconds=4, batch_size=2, progress=False
+    )
+    rend, stats = train_features(model, train_set, cfg, torch.Generator().manual_seed(0))
+    assert stats["steps"] > 5 and stats["teacher_views"] == train_set.num_views + 8
+    path = orbit_path(5, 2.5, 12.0, start_azimuth_deg=7.0, arc_deg=20.0)
+    intr = train_set.intrinsics
+    out = rend.render_path(path, intr)
+    assert out["rgb"].shape == (5, 32, 32, 3) and out["seconds_per_view"] > 0
+    full = render_views(model, path, intr)["rgb"].clamp(0, 1)
+    start = FeatureRenderer(model, cfg)  # zero last layer: bilinear of the colour logits
+    with torch.no_grad():
+        planes = torch.cat([start.features(start.low_res_pass(p, intr)) for p in path])
+    bilinear = torch.sigmoid(
+        torch.nn.functional.interpolate(planes[:, :3], scale_factor=2, mode="bilinear")
+    ).permute(0, 2, 3, 1)
+    plain = start.render_path(path, intr)["rgb"]
+    assert torch.allclose(plain, bilinear, atol=1e-5)
+    assert image_metrics(out["rgb"], full)["psnr"] > image_metrics(plain, full)["psnr"] + 1.0
+
+
+def test_sizes_the_downsample_does_not_divide(sphere_model):
+    model, _ = sphere_model
+    intr = Intrinsics(30.0, 30.0, 16.5, 15.5, 33, 31)
+    lo = low_res_intrinsics(intr, 2)
+    assert (lo.height, lo.width) == (17, 16) and lo.fx == 15.0 and lo.cx == 8.25
+    rend = FeatureRenderer(model, FeatureConfig(channels=4, downsample=2, progress=False))
+    out = rend.render_path(orbit_path(2, 2.5, 10.0), intr)
+    assert out["rgb"].shape == (2, 33, 31, 3)
+
+
+def test_jittered_cameras_keep_their_distance_and_stay_within_the_jitter(sphere_model):
+    _, train_set = sphere_model
+    up, center = torch.tensor([0.0, 0.0, 1.0]), torch.zeros(3)
+    poses = train_set.poses[:4]
+    out = jittered_poses(poses, up, center, 12, 10.0, torch.Generator().manual_seed(0))
+    assert out.shape == (12, 4, 4)
+    for j, p in enumerate(out):
+        src = poses[j % 4]
+        assert float((p[:3, 3] - center).norm()) == pytest.approx(
+            float((src[:3, 3] - center).norm()), rel=1e-5
+        )
+        rot = src[:3, :3].t() @ p[:3, :3]  # relative rotation, at most 10 + 5 degrees
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, (float(rot.trace()) - 1) / 2))))
+        assert angle <= 15.0 + 1e-3
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("channels", 2),
+        ("downsample", 0),
+        ("step_factor", 0.5),
+        ("weight_threshold", 1.0),
+        ("extra_views", -1),
+        ("train_seconds", 0.0),
+    ],
+)
+def test_config_validation_names_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        FeatureConfig(**{field: value})
