@@ -116,11 +116,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--lightweight-seconds",
         type=float,
-        default=20.0,
+        default=15.0,
         help="the learned renderers of renderer.RENDERERS (lightweight: keyframes + U-Net; "
         "features: a feature field + decoder, paper 3.3) render the held-out views beside the "
         "full render of each scheme's field after this many seconds of training each; the "
-        "report gives each one's time per view and PSNR (default 20; 0: skip)",
+        "report gives each one's time per view and PSNR (default 15; 0: skip)",
     )
     p.add_argument(
         "--cache-dir",

@@ -72,7 +72,7 @@ class RunConfig:
     nerf_clock: str = "wall"
     ota_device: str = "emulated"
     nerf_steps: int | None = None
-    lightweight_seconds: float = 20.0
+    lightweight_seconds: float = 15.0
 
     def __post_init__(self):
         from osnerf.schemes import load_entry_points
