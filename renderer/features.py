@@ -14,7 +14,8 @@ about 2): K = 12, downsample 2, step factor 2.5, 300 jittered teacher views, 180
 training: 7.1x faster per view, 1.9 dB under the full render against ground truth (26.02 vs
 27.91 dB; the keyframe renderer of :mod:`renderer.lightweight` in the same run: 4.9x, 4.6 dB
 under). Not yet the goal of 5x within 1 dB. A deeper decoder (a second, half-resolution
-level) did not help; more teachers and time keep helping (prototype, same field: 600
+level) did not help, nor did a feature grid twice as fine as the field's (2.2 dB worse at
+180 s, 4.6x: eight times the parameters, fewer steps); more teachers and time keep helping (prototype, same field: 600
 jittered views and 300 s: 1.85 dB under, 6.2x; 1200 views and 480 s: 1.6 dB under, 7.7x).
 """
 
