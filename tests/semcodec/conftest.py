@@ -1,9 +1,14 @@
-"""Fixtures of the semcodec tests."""
+"""Fixtures of the semcodec tests (test images: smooth_images.py, beside this file)."""
 
-import pytest
-import torch
+import sys
+from pathlib import Path
 
-from semcodec import load_codec, make_model, save_checkpoint
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # smooth_images, beside this file
+
+import pytest  # noqa: E402
+import torch  # noqa: E402
+
+from semcodec import load_codec, make_model, save_checkpoint  # noqa: E402
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -4,6 +4,7 @@ import math
 
 import pytest
 import torch
+from smooth_images import smooth_image
 
 import phy
 from semcodec import (
@@ -20,17 +21,9 @@ from semcodec.baselines import psnr
 from semcodec.evaluation import EvalContext
 
 
-def _img(seed=0, h=48, w=64):
-    g = torch.Generator().manual_seed(seed)
-    base = torch.rand(1, 3, h // 8, w // 8, generator=g)
-    return torch.nn.functional.interpolate(
-        base, size=(h, w), mode="bilinear", align_corners=False
-    ).clamp(0, 1)
-
-
 @pytest.mark.parametrize("codec", sorted(IMAGE_CODECS))
 def test_budget_bisection_is_maximal(codec):
-    x = _img()[0]
+    x = smooth_image(0, 48, 64)[0]
     budget = 600
     data, q = encode_to_budget(x, budget, codec)
     assert data is not None and len(data) <= budget
@@ -41,7 +34,7 @@ def test_budget_bisection_is_maximal(codec):
 
 
 def test_ideal_budget_is_capacity():
-    x = _img()
+    x = smooth_image(0, 48, 64)
     n = 300
     res = transmit_ideal(x, 10.0, n)
     assert res.stats["budget_bits"] == math.floor(n * math.log2(11.0))
@@ -49,7 +42,7 @@ def test_ideal_budget_is_capacity():
 
 
 def test_analog_is_exact_at_high_snr_and_noisy_at_low():
-    x = _img()
+    x = smooth_image(0, 48, 64)
     link = phy.FlatLink(phy.make_channel("awgn"))
     g = torch.Generator().manual_seed(0)
     assert psnr(transmit_analog(x, link, 50.0, generator=g).images, x) > 45
@@ -58,7 +51,7 @@ def test_analog_is_exact_at_high_snr_and_noisy_at_low():
 
 
 def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
-    x = _img(1, 64, 64)
+    x = smooth_image(1, 64, 64)
     n = round(64 * 64 * 3 / 6)
     link = phy.FlatLink(phy.make_channel("awgn"), equalizer="zf")
     bad = transmit_digital(
@@ -79,7 +72,7 @@ def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
 
 def test_scheme_registry_runs_every_name(tiny_codec):
     ctx = EvalContext(channel="awgn", codec=tiny_codec)
-    x = _img(2, 32, 32)
+    x = smooth_image(2, 32, 32)
     for name, fn in SCHEMES.items():
         res = fn(ctx, x, 20.0, 1 / 6, torch.Generator().manual_seed(0))
         assert res.images.shape == x.shape, name

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 from scipy.integrate import quad
+from smooth_images import smooth_image
 
 import phy
 from phy.digital import MCS_TABLE, codeword_layout
@@ -23,14 +24,6 @@ from semcodec.digital_calibration import (
 @pytest.fixture(scope="module")
 def cal():
     return load_calibration()
-
-
-def _img(seed=0, h=32, w=32):
-    g = torch.Generator().manual_seed(seed)
-    base = torch.rand(1, 3, h // 8, w // 8, generator=g)
-    return torch.nn.functional.interpolate(
-        base, size=(h, w), mode="bilinear", align_corners=False
-    ).clamp(0, 1)
 
 
 def test_table_covers_every_mcs_measured_channel_and_codec(cal):
@@ -120,7 +113,7 @@ def _link(name):
 
 
 def test_honest_digital_never_peeks_at_the_draw_and_the_genie_is_never_below_it():
-    x = _img(3, 32, 32)
+    x = smooth_image(3, 32, 32)
     n = 32 * 32 * 3 // 4
     link = _link("rayleigh")
     honest, genie = [], []
@@ -143,7 +136,7 @@ def test_honest_digital_never_peeks_at_the_draw_and_the_genie_is_never_below_it(
 
 
 def test_budget_loss_is_told_apart_from_channel_loss():
-    x = _img(4, 32, 32)
+    x = smooth_image(4, 32, 32)
     res = transmit_digital(x, _link("awgn"), 20.0, 30, mcs="qpsk-1/3")
     assert res.stats["views_lost"] == {"budget": 1, "channel": 0}
     res = transmit_digital(x, _link("awgn"), -5.0, 768, mcs="64qam-5/6")
@@ -151,7 +144,7 @@ def test_budget_loss_is_told_apart_from_channel_loss():
 
 
 def test_envelope_is_the_genie_and_unknown_modes_list_the_known_ones():
-    x = _img(5, 32, 32)
+    x = smooth_image(5, 32, 32)
     res = transmit_digital(x, _link("awgn"), 10.0, 768, mcs="envelope")
     assert res.stats["mcs_choice"] == "genie (bound)"
     with pytest.raises(KeyError, match="auto.*genie.*qpsk-1/3"):
@@ -163,7 +156,7 @@ def test_honest_digital_needs_the_channel_kind_the_genie_does_not():
         pass
 
     link = phy.FlatLink(Opaque(), csi="perfect", equalizer="zf")
-    x = _img(8, 32, 32)
+    x = smooth_image(8, 32, 32)
     with pytest.raises(KeyError, match="pass channel="):
         transmit_digital(x, link, 10.0, 768, mcs="auto")
     assert (

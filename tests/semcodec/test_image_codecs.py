@@ -2,19 +2,11 @@
 
 import numpy as np
 import pytest
-import torch
 from PIL import Image
+from smooth_images import smooth_image
 
 from semcodec import IMAGE_CODECS
 from semcodec.image_codecs import decode_image, decode_wire, encode_image, get_image_codec
-
-
-def _img(seed=0, h=32, w=32):
-    g = torch.Generator().manual_seed(seed)
-    base = torch.rand(1, 3, h // 8, w // 8, generator=g)
-    return torch.nn.functional.interpolate(
-        base, size=(h, w), mode="bilinear", align_corners=False
-    ).clamp(0, 1)
 
 
 def test_unknown_codec_lists_the_known_ones():
@@ -26,7 +18,7 @@ def test_unknown_codec_lists_the_known_ones():
 @pytest.mark.parametrize("size", [(80, 80), (47, 61)])
 def test_wire_bytes_round_trip_bit_exact(codec, size):
     """Stripping the container and rebuilding it from the size gives the very file back."""
-    x = _img(6, *size)[0]
+    x = smooth_image(6, *size)[0]
     pixels = Image.fromarray((x.permute(1, 2, 0).numpy() * 255).round().astype(np.uint8))
     lo, hi = IMAGE_CODECS[codec].quality_range
     for q in (lo, 40, hi):
