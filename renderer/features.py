@@ -173,9 +173,6 @@ class FeatureRenderer:
     def settings(self) -> dict:
         return {"renderer": self.name, **self.config.as_dict()}
 
-    def parameters(self) -> list[Tensor]:
-        return [self.grid, self.background, *self.decoder.parameters()]
-
     @torch.no_grad()
     def low_res_pass(self, pose: Tensor, intrinsics: Intrinsics) -> LowResPass:
         """Eq. 4 weights of the low-resolution view at the coarse step; samples below the

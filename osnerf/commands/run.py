@@ -20,7 +20,7 @@ from osnerf.commands import args as checks
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
-    from osnerf.run.config import RUN_CHANNELS
+    from osnerf.run.config import RUN_CHANNELS, RunConfig
     from osnerf.scenes import DEFAULT_SCENE
     from osnerf.schemes import DEFAULT_SCHEMES, load_entry_points, parse_schemes
     from phy.digital import MCS_TABLE
@@ -116,11 +116,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--lightweight-seconds",
         type=float,
-        default=15.0,
+        default=RunConfig.lightweight_seconds,
         help="the learned renderers of renderer.RENDERERS (lightweight: keyframes + U-Net; "
         "features: a feature field + decoder, paper 3.3) render the held-out views beside the "
         "full render of each scheme's field after this many seconds of training each; the "
-        "report gives each one's time per view and PSNR (default 15; 0: skip)",
+        f"report gives each one's time per view and PSNR (default {RunConfig.lightweight_seconds:g}; "
+        "0: skip)",
     )
     p.add_argument(
         "--cache-dir",
