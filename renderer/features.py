@@ -32,6 +32,7 @@ from torch import Tensor, nn
 
 from renderer.cameras import Intrinsics, camera_rays
 from renderer.dataset import Dataset
+from renderer.fields import trilinear
 from renderer.lightweight import scene_up_and_center, stored_cameras
 from renderer.model import RadianceField, render_views
 from renderer.reprojection import rotate_pose_about
@@ -136,7 +137,7 @@ class FeatureDecoder(nn.Module):
 class LowResPass:
     """The weighted samples of one low-resolution view (the field's density, fixed)."""
 
-    coords: Tensor  # [num_kept, 3] grid_sample coordinates in [-1, 1] of the kept samples
+    positions: Tensor  # [num_kept, 3] world points of the kept samples
     weights: Tensor  # [num_kept] eq. 4 weights
     rays: Tensor  # [num_kept] int64 ray (low-resolution pixel) index
     opacity: Tensor  # [num_rays] sum of all weights
@@ -186,21 +187,16 @@ class FeatureRenderer:
         w, _ = packed_weights(sigma, s.deltas, s.ray_indices, o.shape[0])
         opacity = packed_sum(w, s.ray_indices, o.shape[0])
         keep = w > cfg.weight_threshold
-        coords = (s.positions[keep] - m.aabb[0]) / (m.aabb[1] - m.aabb[0]) * 2.0 - 1.0
-        return LowResPass(coords, w[keep], s.ray_indices[keep], opacity, (lo.height, lo.width))
+        return LowResPass(
+            s.positions[keep], w[keep], s.ray_indices[keep], opacity, (lo.height, lo.width)
+        )
 
     def features(self, p: LowResPass) -> Tensor:
         """[1, K + 1, h, w]: the composited feature planes (background where transparent)
         and the opacity."""
         k = self.config.channels
-        f = F.grid_sample(
-            self.grid,
-            p.coords.reshape(1, 1, 1, -1, 3),
-            mode="bilinear",
-            align_corners=True,
-            padding_mode="border",
-        ).reshape(k, -1)
-        img = packed_sum(p.weights[:, None] * f.t(), p.rays, p.opacity.shape[0])
+        f = trilinear(self.grid, self.model.aabb, p.positions)  # [num_kept, K]
+        img = packed_sum(p.weights[:, None] * f, p.rays, p.opacity.shape[0])
         img = img + (1.0 - p.opacity)[:, None] * self.background
         h, w = p.size
         return torch.cat([img, p.opacity[:, None]], 1).t().reshape(1, k + 1, h, w)

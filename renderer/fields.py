@@ -25,6 +25,54 @@ def _normalize(points: Tensor, aabb: Tensor) -> Tensor:
     return (points - aabb[0]) / (aabb[1] - aabb[0]) * 2.0 - 1.0
 
 
+def trilinear_corners(aabb: Tensor, shape, points: Tensor) -> tuple[Tensor, Tensor]:
+    """The eight vertices around each point of a vertex grid over ``aabb`` and their
+    trilinear weights, with ``F.grid_sample``'s ``align_corners=True,
+    padding_mode="border"`` (points outside the box read the border).
+
+    Args:
+        aabb: [2, 3] the box the grid's corner vertices sit on.
+        shape: the grid's (z, y, x) vertex counts, each >= 2.
+        points: [num_points, 3] world points (x, y, z).
+    Returns:
+        (index [num_points * 8] int64 into the flattened (z, y, x) grid,
+        weights [num_points, 8] float32 summing to 1 per point).
+    """
+    nz, ny, nx = (int(n) for n in shape)
+    size = torch.tensor([nx, ny, nz], dtype=points.dtype, device=points.device)
+    u = ((points - aabb[0]) / (aabb[1] - aabb[0]) * (size - 1)).clamp(min=0).minimum(size - 1)
+    base = u.floor().minimum(size - 2)  # lower corner, so that u - base is in [0, 1]
+    wx, wy, wz = (torch.stack([1 - f, f], -1) for f in (u - base).unbind(-1))  # [n, 2] each
+    weights = (wz[:, :, None, None] * wy[:, None, :, None] * wx[:, None, None, :]).flatten(1)
+    b = base.long()
+    first = (b[:, 2] * ny + b[:, 1]) * nx + b[:, 0]  # [num_points]
+    offsets = torch.tensor(
+        [z + y + x for z in (0, nx * ny) for y in (0, nx) for x in (0, 1)], device=points.device
+    )
+    return (first[:, None] + offsets).reshape(-1), weights
+
+
+def read_corners(grid: Tensor, index: Tensor, weights: Tensor) -> Tensor:
+    """Trilinear reads of ``grid`` [1, channels, z, y, x] at the corners of
+    :func:`trilinear_corners`: [num_points, channels]. A gather, so the backward pass is
+    one ``index_add`` instead of ``grid_sample``'s 3-D backward."""
+    c = grid.shape[1]
+    values = grid.reshape(c, -1).index_select(1, index).reshape(c, -1, 8)
+    return (values * weights).sum(-1).t()
+
+
+def trilinear(grid: Tensor, aabb: Tensor, points: Tensor) -> Tensor:
+    """``F.grid_sample(grid, points, align_corners=True, padding_mode="border")`` at world
+    points, as gathers: [num_points, channels] from ``grid`` [1, channels, z, y, x] over
+    ``aabb`` [2, 3] (at least 2 vertices per axis).
+
+    On one CPU thread this is about twice as fast as ``grid_sample`` forward and backward
+    together (lego's field, 54k samples, 13 channels: 37 against 82 ms), whose 3-D backward
+    was the largest single cost of a training step.
+    """
+    return read_corners(grid, *trilinear_corners(aabb, grid.shape[2:], points))
+
+
 def grid_resolution(aabb: Tensor, resolution: int) -> tuple[int, int, int]:
     """Vertices per axis (x, y, z): ``resolution`` on the longest axis, equal voxel sizes."""
     extent = aabb[1] - aabb[0]
@@ -126,16 +174,9 @@ class GridField(nn.Module):
         d = self.density_grid.shape
         return (d[4], d[3], d[2])
 
-    def _sample(self, grid: Tensor, points: Tensor) -> Tensor:
-        coords = _normalize(points, self.aabb).reshape(1, 1, 1, -1, 3)
-        out = F.grid_sample(
-            grid, coords, mode="bilinear", align_corners=True, padding_mode="border"
-        )
-        return out.reshape(grid.shape[1], -1).t()  # [num_points, channels]
-
     def density(self, points: Tensor) -> Tensor:
         """sigma (1/m) at points [num_points, 3] -> [num_points]."""
-        return F.softplus(self._sample(self.density_grid, points)[:, 0] + self.density_bias)
+        return F.softplus(trilinear(self.density_grid, self.aabb, points)[:, 0] + self.density_bias)
 
     def vertex_density(self) -> Tensor:
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
@@ -149,7 +190,7 @@ class GridField(nn.Module):
     @torch.no_grad()
     def set_sh_degree(self, degree: int) -> None:
         """Make the colour view-dependent up to SH ``degree`` (0, 1 or 2); new coefficients
-        start at zero, so the field renders exactly as before."""
+        start at zero, so the field renders as before (up to float rounding)."""
         self.color_grid = nn.Parameter(expand_sh(self.color_grid.data, degree))
 
     def forward(self, points: Tensor, directions: Tensor | None = None) -> tuple[Tensor, Tensor]:
@@ -158,8 +199,9 @@ class GridField(nn.Module):
 
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
-        sigma = self.density(points)
-        coef = self._sample(self.color_grid, points)  # [num_points, 3 * K]
+        corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
+        sigma = F.softplus(read_corners(self.density_grid, *corners)[:, 0] + self.density_bias)
+        coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
         k = coef.shape[1] // 3
         if k == 1 or directions is None:
             return sigma, torch.sigmoid(coef[:, ::k])

@@ -161,14 +161,12 @@ class OccupancyGrid(nn.Module):
         corner2 = max(abs(intrinsics.cy), abs(h - intrinsics.cy)) / intrinsics.fy
         rho_m = focal * radius_m * (1.0 + corner**2 + corner2**2)
         # background-only maps, one per dilation radius r = 1..max_radius_px
-        soft = masks.float()[:, None]  # [views, 1, h, w]
-        dilated = torch.stack(
-            [
-                F.max_pool2d(soft, kernel_size=2 * r + 1, stride=1, padding=r)[:, 0] < threshold
-                for r in range(1, max_radius_px + 1)
-            ],
-            dim=1,
-        ).reshape(masks.shape[0], -1)  # [views, radii * h * w]
+        # (the max over a (2r+1)^2 square is r nested 3 x 3 maxima: one cheap pool per radius)
+        pooled, maps = masks.float()[:, None], []  # [views, 1, h, w]
+        for _ in range(max_radius_px):
+            pooled = F.max_pool2d(pooled, kernel_size=3, stride=1, padding=1)
+            maps.append(pooled[:, 0] < threshold)
+        dilated = torch.stack(maps, dim=1).reshape(masks.shape[0], -1)  # [views, radii*h*w]
         free = self.free.reshape(-1).clone()
         for k in range(poses.shape[0]):
             todo = (~free).nonzero()[:, 0]

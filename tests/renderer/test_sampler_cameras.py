@@ -205,7 +205,7 @@ def test_adding_view_dependence_keeps_the_field_and_then_depends_on_direction():
     field.set_sh_degree(1)
     assert field.sh_degree == 1 and field.color_grid.shape[1] == 12
     _, after = field(pts, dirs)
-    assert torch.equal(before, after)
+    assert torch.allclose(before, after, rtol=0.0, atol=1e-6)  # float rounding of the reads
     with torch.no_grad():
         field.color_grid[:, 1:4] = 1.0  # red's degree-1 coefficients (channels are [3, K])
     _, a = field(pts, dirs)
@@ -237,3 +237,30 @@ def test_splatted_depth_of_a_plane_matches_the_analytic_depth():
     # a frame's own points splat back onto its own depth
     own = splat_depth(points, prev, intr)
     assert torch.allclose(own, plane_depth(prev), rtol=1e-4)
+
+
+def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
+    """The field's reads are grid_sample's (align_corners, border) up to rounding: inside
+    the box, on its faces and corners, and outside it (clamped), for grids of 2 vertices."""
+    from renderer.fields import _normalize, trilinear
+
+    g = torch.Generator().manual_seed(0)
+    aabb = torch.tensor([[-1.0, -0.5, 0.2], [1.5, 0.7, 1.0]])
+    for shape in ((2, 2, 2), (5, 7, 3), (17, 9, 12)):
+        grid = torch.randn(1, 4, *shape, generator=g)
+        pts = aabb[0] + (aabb[1] - aabb[0]) * (torch.rand(3000, 3, generator=g) * 1.4 - 0.2)
+        pts[:2] = aabb  # the two corners
+        a = grid.clone().requires_grad_(True)
+        b = grid.clone().requires_grad_(True)
+        ref = torch.nn.functional.grid_sample(
+            a,
+            _normalize(pts, aabb).reshape(1, 1, 1, -1, 3),
+            align_corners=True,
+            padding_mode="border",
+        ).reshape(4, -1).t()
+        out = trilinear(b, aabb, pts)
+        assert torch.allclose(out, ref, atol=1e-5)
+        upstream = torch.randn(out.shape, generator=g)
+        (ref * upstream).sum().backward()
+        (out * upstream).sum().backward()
+        assert torch.allclose(b.grad, a.grad, atol=1e-4)
