@@ -34,6 +34,8 @@ import numpy as np
 import scipy.fft
 from scipy import stats
 
+from phy.sync import correct_cfo
+
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
 # a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
@@ -235,11 +237,12 @@ def coherent_metric(
         lags: [num_lags] int preamble starts (indices into ``c``).
         cover: [K] the cover code; seg: L.
     Returns:
-        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex),
+        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex64),
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
     k = cover.size
-    v = c[lags[:, None] + seg * np.arange(k)[None, :]] * cover[None, :]  # [num_lags, K]
+    v = c[lags[:, None] + seg * np.arange(k)[None, :]]  # [num_lags, K]
+    v *= cover.astype(np.float32)
     spec = scipy.fft.fft(v, _OVERSAMPLE * k, axis=-1)
     q = (spec.real**2 + spec.imag**2) / (k * seg * np.maximum(energy, 1e-30))[:, None]
     return q, spec
@@ -323,8 +326,8 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # strongest path is looked for again there)
     early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
     region = x[early[0] : early[-1] + n]
-    rot = np.exp(-2j * np.pi * f * np.arange(region.size)).astype(np.complex64)
-    c_f = segment_correlation(region * rot, _search_plan(cfg)[0])  # timing on the grid
+    region = correct_cfo(region, f * cfg.fft_size, cfg.fft_size)
+    c_f = segment_correlation(region, _search_plan(cfg)[0])  # timing on the grid
     qf = np.abs(_segment_sums(c_f, early - early[0], cover, seg, 0.0).sum(axis=1)) ** 2
     qf /= n * np.maximum(energy[early - lo], 1e-30)
     near = np.abs(early - peak) <= 2
