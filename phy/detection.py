@@ -28,12 +28,13 @@ path) within the prefix before the strongest one whose Q is a fair share of the 
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
 from scipy import stats
+
+from phy.sync import correct_cfo
 
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
 # a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
@@ -41,6 +42,9 @@ _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
 _SPAN = 4  # lags either side of the search peak where Q is evaluated
 _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
 _POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
+_ROWS_PER_PRODUCT = 2048  # segments per matrix product of the segment correlation
+_COMB_BLOCK = 1024  # segments per overlap-save block of the search's comb correlation
+_COMB_BLOCKS_PER_PASS = 2  # overlap-save blocks per FFT call (keeps the temporaries in cache)
 _QUICK = 0.25  # the quick look needs this share of the detection threshold
 _HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
@@ -100,8 +104,11 @@ def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
     rows = r[: q * seg].reshape(q, seg)
     out = np.empty(r.size - seg + 1, np.complex64)
     head = out[: (q - 1) * seg].reshape(q - 1, seg)
-    np.matmul(rows[:-1], m[:seg], out=head)
-    head += rows[1:] @ m[seg:]
+    tmp = np.empty((min(q - 1, _ROWS_PER_PRODUCT), seg), np.complex64)
+    for i in range(0, q - 1, _ROWS_PER_PRODUCT):  # cache-sized products
+        j = min(i + _ROWS_PER_PRODUCT, q - 1)
+        np.matmul(rows[i:j], m[:seg], out=head[i:j])
+        head[i:j] += np.matmul(rows[i + 1 : j + 1], m[seg:], out=tmp[: j - i])
     out[(q - 1) * seg :] = np.correlate(r[(q - 1) * seg :], b64, mode="valid")
     return out
 
@@ -118,38 +125,53 @@ def _shift_matrix(base_bytes: bytes) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """(base [L] complex64, cover [K], comb spectrum [block] complex64, block): the
-    differential comb ``g[kL] = s_k s_{k+1}`` in the frequency domain for overlap-save."""
+def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(base [L] complex64, cover [K] float64, comb [K - 1] complex64): the differential
+    comb ``g[k] = s_k s_{k+1}``, one tap per segment."""
     from phy.frame import sync_sequence
 
     base, cover = sync_sequence(cfg)
-    seg, k = cfg.sync_segment_length, cfg.num_sync_segments
-    g = np.zeros((k - 2) * seg + 1)
-    g[::seg] = cover[1:] * cover[:-1]
-    block = 1 << max(13, math.ceil(math.log2(4 * g.size)))
-    spec = np.conj(scipy.fft.fft(g.astype(np.complex64), block))
-    return base.astype(np.complex64), cover, spec.astype(np.complex64), block
+    return base.astype(np.complex64), cover, (cover[1:] * cover[:-1]).astype(np.complex64)
 
 
-def _comb_correlate(w: np.ndarray, spec: np.ndarray, block: int, taps: int) -> np.ndarray:
-    """``out[d] = sum_j w[d + j] g[j]`` (valid part) by overlap-save; ``spec = conj(FFT(g))``."""
+@functools.lru_cache(maxsize=16)
+def _comb_spectrum(comb_bytes: bytes, block: int) -> np.ndarray:
+    """[block] complex64: conj(FFT(comb)) zero-padded to ``block``."""
+    comb = np.frombuffer(comb_bytes, np.complex64)
+    return np.conj(scipy.fft.fft(comb, block)).astype(np.complex64)
+
+
+def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
+    """``out[d] = sum_k comb[k] w[d + k seg]``, valid part: [num_w] -> [num_w - (T - 1) seg]
+    complex64 for T taps.
+
+    The taps sit one segment apart, so with ``w`` as rows of ``seg`` samples each column
+    (one phase within the segment) is correlated with T dense taps: overlap-save FFTs of
+    ``_COMB_BLOCK`` rows (fewer for a short ``w``), all columns at once.
+    """
+    taps = comb.size
+    nout = w.size - (taps - 1) * seg
+    q = -(-nout // seg)  # output rows
+    block = min(_COMB_BLOCK, scipy.fft.next_fast_len(q + taps - 1))
     hop = block - taps + 1
-    nout = w.size - taps + 1
-    nb = -(-nout // hop)
-    full = max(0, min(nb, (w.size - block) // hop + 1))  # blocks that lie inside w
-    parts = [np.lib.stride_tricks.sliding_window_view(w, block)[::hop][:full]] if full else []
-    if full < nb:
-        tail = np.zeros(((nb - full - 1) * hop + block), np.complex64)
-        rest = w[full * hop :]
-        tail[: rest.size] = rest
-        parts.append(np.lib.stride_tricks.sliding_window_view(tail, block)[::hop][: nb - full])
-    out = []
-    for frames in parts:  # [num_blocks, block]
-        spec_w = scipy.fft.fft(frames, axis=-1)
-        spec_w *= spec[None, :]
-        out.append(scipy.fft.ifft(spec_w, axis=-1, overwrite_x=True)[:, :hop].reshape(-1))
-    return np.concatenate(out)[:nout] if len(out) > 1 else out[0][:nout]
+    nb = -(-q // hop)
+    whole = w.size // seg
+    w_rows = w[: whole * seg].reshape(whole, seg)
+    g = _comb_spectrum(comb.tobytes(), block)
+    out = np.empty((nb, hop, seg), np.complex64)
+    for b0 in range(0, nb, _COMB_BLOCKS_PER_PASS):  # a few blocks at a time: cache-sized
+        b1 = min(b0 + _COMB_BLOCKS_PER_PASS, nb)
+        r0, r1 = b0 * hop, (b1 - 1) * hop + block  # rows of w these blocks read
+        wt = np.zeros((seg, r1 - r0), np.complex64)  # [seg, rows]: w by column
+        wt[:, : max(0, min(r1, whole) - r0)] = w_rows[r0:r1].T
+        if r0 <= whole < r1:
+            wt[: w.size - whole * seg, whole - r0] = w[whole * seg :]
+        frames = np.lib.stride_tricks.sliding_window_view(wt, block, axis=-1)[:, ::hop]
+        spec = scipy.fft.fft(frames, axis=-1)  # [seg, blocks, block]
+        spec *= g
+        spec = scipy.fft.ifft(spec, axis=-1, overwrite_x=True)
+        out[b0:b1] = spec[:, :, :hop].transpose(1, 2, 0)
+    return out.reshape(-1)[:nout]
 
 
 def search_metric(r: np.ndarray, cfg) -> np.ndarray:
@@ -172,7 +194,7 @@ def search_metric(r: np.ndarray, cfg) -> np.ndarray:
 def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(c [num_samples - L + 1], |D|^2 [num_samples - N + 1], noise-only variance of D per
     block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)])."""
-    base, cover, spec, block = _search_plan(cfg)
+    base, cover, comb = _search_plan(cfg)
     seg, k = base.size, cover.size
     n = seg * k
     c = segment_correlation(r, base)
@@ -180,7 +202,7 @@ def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return c, np.zeros(0, np.float32), np.ones(0, np.float32)
     w = np.conj(c[:-seg])
     w *= c[seg:]  # [num_samples - 2L + 1]: neighbouring segments
-    d = _comb_correlate(w, spec, block, (k - 2) * seg + 1)  # [num_samples - N + 1]
+    d = _comb_correlate(w, comb, seg)  # [num_samples - N + 1]
     sq = d.view(np.float32).reshape(-1, 2)
     np.square(sq, out=sq)
     power = sq[:, 0] + sq[:, 1]
@@ -215,11 +237,12 @@ def coherent_metric(
         lags: [num_lags] int preamble starts (indices into ``c``).
         cover: [K] the cover code; seg: L.
     Returns:
-        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex),
+        (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex64),
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
     k = cover.size
-    v = c[lags[:, None] + seg * np.arange(k)[None, :]] * cover[None, :]  # [num_lags, K]
+    v = c[lags[:, None] + seg * np.arange(k)[None, :]]  # [num_lags, K]
+    v *= cover.astype(np.float32)
     spec = scipy.fft.fft(v, _OVERSAMPLE * k, axis=-1)
     q = (spec.real**2 + spec.imag**2) / (k * seg * np.maximum(energy, 1e-30))[:, None]
     return q, spec
@@ -269,24 +292,20 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     cs = np.concatenate([[0.0], np.cumsum(e.real.astype(np.float64) ** 2 + e.imag**2)])
     energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
     lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
-    # a quick look at the search peak and its neighbours first: most noise candidates stop
-    # here (a frame's Q there is within a few dB of its peak, noise's far below threshold)
-    near = lags[np.abs(lags - d1) <= 1]
-    if (
-        coherent_metric(c, energy[near - lo], near, cover, seg)[0].max()
-        < _QUICK * cfg.detection_threshold
-    ):
-        return None
     q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    # a quick look at the search peak and its neighbours: most noise candidates stop here
+    # (a frame's Q there is within a few dB of its peak, noise's far below threshold)
+    if q[np.abs(lags - d1) <= 1].max() < _QUICK * cfg.detection_threshold:
+        return None
     # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
     # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
     # each Beta(1, N - 1) in noise
+    c_at = 0  # c[i] belongs to lag i + c_at
     if q.max() < 2 * cfg.detection_threshold:  # only where the 1.3 dB can matter
         c_half = segment_correlation(x[lo : hi + n], _half_sample_base(cfg))
         q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
         if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
-            q, spec = q_h, spec_h
-            c = np.concatenate([np.zeros(lo, np.complex64), c_half])  # index by lag again
+            q, spec, c, c_at = q_h, spec_h, c_half, lo
     i, j = np.unravel_index(int(np.argmax(q)), q.shape)
     q_peak = float(q[i, j])
     if q_peak <= cfg.detection_threshold:
@@ -294,7 +313,7 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     peak = int(lags[i])
     f = _cfo_cycles(spec[i], int(j), seg)
     # fine CFO: the phase between the preamble's halves once the coarse f is removed
-    v = _segment_sums(c, np.array([peak]), cover, seg, f)[0]
+    v = _segment_sums(c, np.array([peak - c_at]), cover, seg, f)[0]
     h = k // 2
     f += float(np.angle(v[h : 2 * h].sum() * np.conj(v[:h].sum()))) / (2 * np.pi * h * seg)
     cfo = f * cfg.fft_size
@@ -307,8 +326,8 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # strongest path is looked for again there)
     early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
     region = x[early[0] : early[-1] + n]
-    rot = np.exp(-2j * np.pi * f * np.arange(region.size)).astype(np.complex64)
-    c_f = segment_correlation(region * rot, _search_plan(cfg)[0])  # timing on the grid
+    region = correct_cfo(region, f * cfg.fft_size, cfg.fft_size)
+    c_f = segment_correlation(region, _search_plan(cfg)[0])  # timing on the grid
     qf = np.abs(_segment_sums(c_f, early - early[0], cover, seg, 0.0).sum(axis=1)) ** 2
     qf /= n * np.maximum(energy[early - lo], 1e-30)
     near = np.abs(early - peak) <= 2
@@ -342,7 +361,7 @@ def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
     Returns:
         list of :class:`Detection`; starts at least ``cfg.sync_length`` apart.
     """
-    _, cover, _, _ = _search_plan(cfg)
+    _, cover, _ = _search_plan(cfg)
     n = cfg.sync_length
     margin = _SPAN + cfg.cp_length
     found: list[Detection] = []

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from phy import estimation, sync
+from phy import estimation
 from phy.detection import find_preambles
 from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
 from phy.ofdm.equalization import EQUALIZERS
@@ -74,11 +74,16 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
 
 
-def _windows(rc: np.ndarray, starts: np.ndarray, fft_size: int) -> np.ndarray:
-    """FFT of the windows ``rc[start : start + fft_size]``: [num_windows, fft_size] complex64
-    in natural (FFT) order; the window's early start is a delay the caller's model removes."""
-    frames = np.lib.stride_tricks.sliding_window_view(rc, fft_size)[starts]
-    return scipy.fft.fft(frames, axis=-1, norm="ortho", overwrite_x=True)
+def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -> np.ndarray:
+    """FFT of the windows ``frame[start : start + fft_size]`` with a CFO of ``cfo`` carriers
+    removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these samples
+    only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
+    start is a delay the caller's model removes."""
+    w = -2 * np.pi * cfo / fft_size
+    win = np.lib.stride_tricks.sliding_window_view(frame, fft_size)[starts]  # a copy
+    win *= np.exp(1j * w * starts).astype(np.complex64)[:, None]
+    win *= np.exp(1j * w * np.arange(fft_size)).astype(np.complex64)
+    return scipy.fft.fft(win, axis=-1, norm="ortho", overwrite_x=True)
 
 
 @dataclass(frozen=True)
@@ -99,16 +104,14 @@ class _Layout:
     # delay window first, per-carrier LS last
     smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
     pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
-    d_row: np.ndarray  # [num_data_elements] row of each data element (row-major)
-    d_col: np.ndarray  # [num_data_elements] carrier of each data element
-    d_flat: np.ndarray  # [num_data_elements] row * fft_size + FFT bin (natural order)
+    d_col: np.ndarray  # [num_symbols] carrier of each payload symbol's data element
+    d_flat: np.ndarray  # [num_symbols] its row * fft_size + FFT bin (natural order)
     used: np.ndarray  # used carriers (centred order)
     used_nat: np.ndarray  # their FFT bins (natural order)
     pilots: np.ndarray  # pilot carriers (centred order)
     pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
     num_training_values: int  # known entries of the two training rows (come first)
     fft_size: int
-    perm: np.ndarray | None  # the interleaver, None when off
 
 
 @functools.lru_cache(maxsize=32)
@@ -124,7 +127,10 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
     k_row, k_col = np.nonzero(x)
     data = np.zeros((rows, n), bool)
     data[2:] = grid.data_mask.numpy()
-    d_row, d_col = np.nonzero(data)
+    d_row, d_col = np.nonzero(data)  # row-major: resource element j
+    # payload symbol i sits on resource element perm^-1[i]
+    order = np.argsort(interleaver(d_row.size)) if cfg.interleave else np.arange(d_row.size)
+    d_row, d_col = d_row[order[:num_symbols]], d_col[order[:num_symbols]]
     # candidate channel models: taps from backoff samples before the detected first path,
     # as many as the comb has pilots per symbol (more are ill-determined between pilots at
     # low SNR), the whole prefix, and per-carrier LS (no smoothing: high SNR, long channels)
@@ -153,7 +159,6 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         ),
         smoother_training=smoother_training.astype(np.complex64),
         pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
-        d_row=d_row,
         d_col=d_col,
         d_flat=d_row * n + (d_col + n // 2) % n,
         used=used,
@@ -162,7 +167,6 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         pilot_in_used=np.searchsorted(used, pk),
         num_training_values=2 * used.size,
         fft_size=n,
-        perm=interleaver(grid.num_data_symbols) if cfg.interleave else None,
     )
 
 
@@ -214,7 +218,7 @@ def receive_frame(
         start, cfo = det.start + first, det.cfo
         if search_from <= start and start + length <= raw.size:
             frame = raw[start : start + length] - _dc_estimate(raw, start, length)
-            res = _demodulate(frame.astype(np.complex64), cfo, num_symbols, cfg, equalizer)
+            res = _demodulate(frame, cfo, num_symbols, cfg, equalizer)
             res.start_index = int(start)
             return res
     return _not_detected(num_symbols)
@@ -245,14 +249,13 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     used, pk = lay.used, lay.pilots
     kr, kc = lay.k_row, lay.k_col
     x_conj = np.conj(lay.x_known)
-    rc = np.concatenate([sync.correct_cfo(frame, cfo, n), np.zeros(cp + s, np.complex64)])
     locked = cfg.carrier_freq_hz is not None
     eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
     h, slope_hint = None, None
     for _ in range(4):  # timing-drift iterations (one when it comes from the CFO)
         tau = eps * lay.times  # [rows] samples of drift
         shifts = np.clip(np.round(tau), -(cp - cfg.backoff - 1), cfg.backoff).astype(np.int64)
-        y = _windows(rc, lay.body - cfg.backoff + shifts, n).reshape(-1)  # [rows * fft_size]
+        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
         ramp = _phasor(np.outer(delay, k) * np.float32(-2 * np.pi / n)).reshape(-1)
@@ -294,7 +297,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse[used] = noise_var * factor
     h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
     model = (h_nat[None, :] * np.conj(rot)[:, None]).reshape(-1) * ramp
-    h_d, y_d = model[lay.d_flat], y[lay.d_flat]  # [num_data_elements]
+    h_d, y_d = model[lay.d_flat], y[lay.d_flat]  # [num_symbols] in payload order
     s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
     if equalizer == "zf":
@@ -303,11 +306,6 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     else:
         x_hat = y_d * np.conj(h_d) / (gain + s_eff)
         nv = s_eff / (gain + s_eff)
-    if lay.perm is not None:
-        px, pn = np.empty_like(x_hat), np.empty_like(nv)
-        px[lay.perm], pn[lay.perm] = x_hat, nv
-        x_hat, nv = px, pn
-    x_hat, nv = x_hat[:num_symbols], nv[:num_symbols]
     signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
