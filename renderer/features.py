@@ -32,7 +32,7 @@ from torch import Tensor, nn
 
 from renderer.cameras import Intrinsics, camera_rays
 from renderer.dataset import Dataset
-from renderer.fields import trilinear
+from renderer.fields import GridField, sh_basis, trilinear
 from renderer.lightweight import scene_up_and_center, stored_cameras
 from renderer.model import RadianceField, render_views
 from renderer.reprojection import rotate_pose_about
@@ -45,7 +45,9 @@ class FeatureConfig:
     """How the feature renderer renders and trains."""
 
     channels: int = 12
-    """K: feature channels of the grid (the first three start as the field's colour logits), >= 3."""
+    """K: feature channels of the grid, >= 3 (the first ``3 (d + 1)^2`` start as the colour
+    coefficients of a grid field of SH degree d, and stay view-dependent; a vanilla MLP
+    field's colour logits start the first three)."""
     downsample: int = 2
     """Low-resolution factor per axis, >= 1 (the decoder upsamples by sub-pixel shuffle)."""
     step_factor: float = 2.5
@@ -108,11 +110,11 @@ def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
 
 
 class FeatureDecoder(nn.Module):
-    """[batch, K + 1, h, w] features and opacity -> [batch, 3, s h, s w] colour.
+    """[batch, C + 1, h, w] planes (the first three: colour logits) and opacity ->
+    [batch, 3, s h, s w] colour.
 
     The output is ``sigmoid(bilinear(f[:3]) + shuffle(residual))``: with the last layer at
-    zero (its start) it is the bilinear upsampling of the colour held in the first three
-    feature channels."""
+    zero (its start) it is the bilinear upsampling of the colour logits."""
 
     def __init__(self, channels: int, downsample: int, hidden: int = 32):
         super().__init__()
@@ -138,6 +140,7 @@ class LowResPass:
     """The weighted samples of one low-resolution view (the field's density, fixed)."""
 
     positions: Tensor  # [num_kept, 3] world points of the kept samples
+    basis: Tensor  # [num_rays, (d + 1)^2] SH basis of each ray's direction (d: the colour's degree)
     weights: Tensor  # [num_kept] eq. 4 weights
     rays: Tensor  # [num_kept] int64 ray (low-resolution pixel) index
     opacity: Tensor  # [num_rays] sum of all weights
@@ -154,7 +157,16 @@ class FeatureRenderer:
         self.config = config
         aabb = model.aabb
         nx, ny, nz = (int(c) + 1 for c in model.occupancy.cells)
-        # the field's colour at the grid vertices starts the first three channels (logits)
+        # the field's colour at the grid vertices starts the first channels: a grid field's
+        # SH coefficients [3, (d + 1)^2] (logits), else the colour logits
+        field = model.field
+        self.sh_degree = field.sh_degree if isinstance(field, GridField) else 0
+        kc = (self.sh_degree + 1) ** 2
+        if config.channels < 3 * kc:
+            raise ValueError(
+                f"channels must be >= {3 * kc} to hold the field's colour (SH degree "
+                f"{self.sh_degree}), got {config.channels}"
+            )
         axes = [
             torch.linspace(float(aabb[0, a]), float(aabb[1, a]), n)
             for a, n in enumerate((nx, ny, nz))
@@ -162,14 +174,19 @@ class FeatureRenderer:
         zz, yy, xx = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
         points = torch.stack([xx, yy, zz], -1).reshape(-1, 3)
         with torch.no_grad():
-            rgb = torch.cat([model.field(p, None)[1] for p in points.split(65536)])
+            if isinstance(field, GridField):
+                coef = torch.cat([trilinear(field.color_grid, field.aabb, p) for p in points.split(65536)])
+            else:
+                rgb = torch.cat([field(p, None)[1] for p in points.split(65536)])
+                coef = torch.logit(rgb.clamp(1e-3, 1 - 1e-3))
         grid = torch.zeros(1, config.channels, nz, ny, nx)
-        grid[0, :3] = torch.logit(rgb.clamp(1e-3, 1 - 1e-3)).t().reshape(3, nz, ny, nx)
+        grid[0, : 3 * kc] = coef.t().reshape(3 * kc, nz, ny, nx)
         self.grid = nn.Parameter(grid)
         bg = torch.zeros(config.channels)
-        bg[:3] = torch.logit(model.background.clamp(1e-3, 1 - 1e-3))
+        bg[0 : 3 * kc : kc] = torch.logit(model.background.clamp(1e-3, 1 - 1e-3))
         self.background = nn.Parameter(bg)
-        self.decoder = FeatureDecoder(config.channels, config.downsample, config.hidden_channels)
+        # decoder input: the view-dependent colour logits, the K planes, the opacity
+        self.decoder = FeatureDecoder(config.channels + 3, config.downsample, config.hidden_channels)
 
     def settings(self) -> dict:
         return {"renderer": self.name, **self.config.as_dict()}
@@ -187,23 +204,41 @@ class FeatureRenderer:
         w, _ = packed_weights(sigma, s.deltas, s.ray_indices, o.shape[0])
         opacity = packed_sum(w, s.ray_indices, o.shape[0])
         keep = w > cfg.weight_threshold
+        basis = sh_basis(d, self.sh_degree)
         return LowResPass(
-            s.positions[keep], w[keep], s.ray_indices[keep], opacity, (lo.height, lo.width)
+            s.positions[keep], basis, w[keep], s.ray_indices[keep], opacity, (lo.height, lo.width)
         )
 
-    def features(self, p: LowResPass) -> Tensor:
+    def features(self, p: LowResPass, values: Tensor | None = None) -> Tensor:
         """[1, K + 1, h, w]: the composited feature planes (background where transparent)
-        and the opacity."""
+        and the opacity. ``values``: the grid read at ``p.positions`` [num_kept, K] when
+        already done (:meth:`decode` reads a batch's samples at once)."""
         k = self.config.channels
-        f = trilinear(self.grid, self.model.aabb, p.positions)  # [num_kept, K]
-        img = packed_sum(p.weights[:, None] * f, p.rays, p.opacity.shape[0])
+        if values is None:
+            values = trilinear(self.grid, self.model.aabb, p.positions)  # [num_kept, K]
+        img = packed_sum(p.weights[:, None] * values, p.rays, p.opacity.shape[0])
         img = img + (1.0 - p.opacity)[:, None] * self.background
         h, w = p.size
         return torch.cat([img, p.opacity[:, None]], 1).t().reshape(1, k + 1, h, w)
 
+    def planes(self, p: LowResPass, values: Tensor | None = None) -> Tensor:
+        """[1, 3 + K + 1, h, w]: the decoder's input, the colour logits seen along each
+        pixel's ray (the composited SH coefficients times the ray's basis: the ray's
+        direction is the same at all its samples, so this equals compositing the
+        view-dependent colour sample by sample), then :meth:`features`."""
+        f = self.features(p, values)
+        kc = p.basis.shape[1]
+        h, w = p.size
+        coef = f[0, : 3 * kc].reshape(3, kc, h * w)
+        colour = (coef * p.basis.t()[None]).sum(1).reshape(1, 3, h, w)
+        return torch.cat([colour, f], 1)
+
     def decode(self, passes: list[LowResPass], height: int, width: int) -> Tensor:
         """[num_views, height, width, 3] from low-resolution passes of one size."""
-        x = torch.cat([self.features(p) for p in passes])
+        # one read for the whole batch: one gradient of the grid, not one per view
+        values = trilinear(self.grid, self.model.aabb, torch.cat([p.positions for p in passes]))
+        parts = values.split([p.positions.shape[0] for p in passes])
+        x = torch.cat([self.planes(p, v) for p, v in zip(passes, parts)])
         return self.decoder(x)[:, :, :height, :width].permute(0, 2, 3, 1)
 
     @torch.no_grad()
@@ -269,7 +304,8 @@ def train_features(
         [
             {"params": [rend.grid, rend.background], "lr": config.grid_lr},
             {"params": list(rend.decoder.parameters()), "lr": config.decoder_lr},
-        ]
+        ],
+        fused=True,  # one pass over the 8M-value grid instead of five: 40 % of a step before
     )
     steps, loss = 0, float("nan")
     t0 = time.perf_counter()

@@ -70,6 +70,41 @@ def test_starts_as_bilinear_and_learns_toward_the_full_render(sphere_model):
     assert image_metrics(out["rgb"], full)["psnr"] > image_metrics(plain, full)["psnr"] + 1.0
 
 
+def test_view_dependent_colour_starts_as_the_fields(sphere_model):
+    """With an SH degree-1 colour the first 12 channels hold the field's coefficients and
+    the decoder's base is their composite times each ray's basis: at full resolution and the
+    field's own step, opaque pixels start exactly at the field's view-dependent colour
+    (every sample of a ray has the same colour here), seen differently from opposite sides."""
+    import copy
+
+    model, train_set = sphere_model
+    model = copy.deepcopy(model)
+    model.field.set_sh_degree(1)
+    with torch.no_grad():
+        coef = model.field.color_grid.reshape(3, 4, *model.field.color_grid.shape[2:])
+        coef[:, 0] = torch.tensor([0.2, -0.3, 0.5])[:, None, None, None]  # uniform colour
+        coef[:, 1:] = torch.tensor([[1.5, 0.0, -1.0], [0.0, 2.0, 0.0], [-1.0, 0.5, 1.0]])[
+            :, :, None, None, None
+        ]
+    cfg = FeatureConfig(channels=14, downsample=1, step_factor=1.0, weight_threshold=0.0)
+    rend = FeatureRenderer(model, cfg)
+    assert rend.sh_degree == 1
+    intr = train_set.intrinsics
+    colours = []
+    for pose in train_set.poses[[0, 5]]:
+        with torch.no_grad():
+            p = rend.low_res_pass(pose, intr)
+            out = rend.decode([p], intr.height, intr.width)[0]
+        ref = render_views(model, pose[None], intr)
+        opaque = ref["opacity"][0] > 0.9999  # background logits weigh < 1e-4
+        assert int(opaque.sum()) > 20
+        assert torch.allclose(out[opaque], ref["rgb"][0][opaque], atol=5e-4)
+        colours.append(out[opaque].mean(0))
+    assert float((colours[0] - colours[1]).abs().max()) > 0.05
+    with pytest.raises(ValueError, match="channels must be >= 12"):
+        FeatureRenderer(model, FeatureConfig(channels=8))
+
+
 def test_sizes_the_downsample_does_not_divide(sphere_model):
     model, _ = sphere_model
     intr = Intrinsics(30.0, 30.0, 16.5, 15.5, 33, 31)
