@@ -40,8 +40,11 @@ class TrainConfig:
     """Fraction of the budget at which each stage starts (first must be 0, increasing)."""
     step_voxels: float = 0.85
     """Ray-marching step in voxels of the current stage (grid field), > 0."""
-    batch_rays: int = 4096
-    """Rays per optimiser step (grid field; the first stage uses half), >= 1."""
+    batch_rays: int = 2048
+    """Rays per optimiser step (grid field; the first stage uses half), >= 1. Most rays of
+    an object scene see only carved space and cost nothing; more steps beat bigger ones
+    here (lego 100 px, 120 CPU s, one thread on a loaded machine: 1024 -> 28.20 dB, 2048 ->
+    28.33, 4096 -> 28.02, 8192 -> 27.30)."""
     lr: float = 0.2
     """Adam learning rate on the grids (decays exponentially to lr_final_ratio * lr)."""
     lr_final_ratio: float = 0.1
