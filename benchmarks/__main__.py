@@ -9,7 +9,7 @@ import time
 import traceback
 from pathlib import Path
 
-from osnerf import result_header, write_json_atomic
+from osnerf import result_header, tune_malloc, write_json_atomic
 
 HERE = Path(__file__).resolve().parent
 
@@ -27,6 +27,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unknown benchmark(s) {unknown}; known: {names}", file=sys.stderr)
         return 2
     out = Path(args.out)
+    malloc_tuned = tune_malloc()
     failed = []
     for name in args.names or names:
         print(f"== benchmark {name}", file=sys.stderr)
@@ -38,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
             failed.append(name)
             continue
-        record = result_header({"benchmark": name}, None)
+        record = result_header({"benchmark": name, "malloc_tuned": malloc_tuned}, None)
         record.update({"seconds": time.perf_counter() - t0, "results": results})
         path = write_json_atomic(out / f"{name}.json", record)
         print(f"   wrote {path}", file=sys.stderr)

@@ -9,7 +9,8 @@
   path) against ground truth, beside bilinear upsampling of the low-resolution render
   (goal: >= 5x faster, <= 1 dB under the full render against ground truth);
 * the feature renderer (a learned feature field + decoder, :mod:`renderer.features`) on the
-  same test path beside the full render (OSNERF_FEATURES_SECONDS of training, default 180).
+  same test path beside the full render (OSNERF_FEATURES_SECONDS of training, default the
+  renderer's own).
 
 The machine is shared: the budget clock is ``cpu`` (process CPU seconds / 2 threads, the
 wall time the same work takes on two idle cores; optimistic for single-threaded Python
@@ -272,9 +273,10 @@ def run(out_dir: Path) -> dict:
     results["lightweight"]["variants"] = variants
 
     # the feature renderer (a learned feature field + decoder) on the same test path
-    feat_cfg = FeatureConfig(
-        train_seconds=float(os.environ.get("OSNERF_FEATURES_SECONDS", "180")), progress=False
-    )
+    feat_seconds = os.environ.get("OSNERF_FEATURES_SECONDS")
+    feat_cfg = FeatureConfig(progress=False)
+    if feat_seconds:
+        feat_cfg = dataclasses.replace(feat_cfg, train_seconds=float(feat_seconds))
     feat, feat_stats = train_features(
         grid_model, train_set, feat_cfg, torch.Generator().manual_seed(0)
     )

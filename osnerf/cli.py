@@ -13,6 +13,8 @@ import importlib
 import re
 import sys
 
+from osnerf.runtime import tune_malloc
+
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
 COMMANDS: dict[str, tuple[str, str]] = {
     "ber": ("osnerf.commands.ber", "uncoded BER vs SNR over AWGN or Rayleigh, against theory"),
@@ -82,6 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:  # argparse already printed its message
         return int(e.code or 0)
     module = importlib.import_module(COMMANDS[args.command][0])
+    tune_malloc()
     try:
         return int(module.run(args) or 0)
     except (UsageError, ValueError, KeyError, FileNotFoundError) as e:

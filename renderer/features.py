@@ -175,7 +175,9 @@ class FeatureRenderer:
         points = torch.stack([xx, yy, zz], -1).reshape(-1, 3)
         with torch.no_grad():
             if isinstance(field, GridField):
-                coef = torch.cat([trilinear(field.color_grid, field.aabb, p) for p in points.split(65536)])
+                coef = torch.cat(
+                    [trilinear(field.color_grid, field.aabb, p) for p in points.split(65536)]
+                )
             else:
                 rgb = torch.cat([field(p, None)[1] for p in points.split(65536)])
                 coef = torch.logit(rgb.clamp(1e-3, 1 - 1e-3))
@@ -186,7 +188,9 @@ class FeatureRenderer:
         bg[0 : 3 * kc : kc] = torch.logit(model.background.clamp(1e-3, 1 - 1e-3))
         self.background = nn.Parameter(bg)
         # decoder input: the view-dependent colour logits, the K planes, the opacity
-        self.decoder = FeatureDecoder(config.channels + 3, config.downsample, config.hidden_channels)
+        self.decoder = FeatureDecoder(
+            config.channels + 3, config.downsample, config.hidden_channels
+        )
 
     def settings(self) -> dict:
         return {"renderer": self.name, **self.config.as_dict()}
