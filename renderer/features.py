@@ -70,6 +70,9 @@ class FeatureConfig:
     """Adam learning rate of the feature grid, > 0."""
     decoder_lr: float = 3e-3
     """Adam learning rate of the decoder, > 0."""
+    lr_final_ratio: float = 0.1
+    """Both learning rates decay exponentially to this fraction at the end of the budget,
+    in (0, 1]."""
     progress: bool = True
     """Progress bar on stderr."""
 
@@ -87,6 +90,8 @@ class FeatureConfig:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
         if not 0 <= self.weight_threshold < 1:
             raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
+        if not 0 < self.lr_final_ratio <= 1:
+            raise ValueError(f"lr_final_ratio must be in (0, 1], got {self.lr_final_ratio}")
         for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -320,7 +325,11 @@ def train_features(
         bar = tqdm(
             total=int(config.train_seconds), desc="train features", unit="s", file=sys.stderr
         )
-    while time.perf_counter() - t0 < config.train_seconds:
+    base_lr = [g["lr"] for g in opt.param_groups]
+    while (elapsed := time.perf_counter() - t0) < config.train_seconds:
+        decay = config.lr_final_ratio ** (elapsed / config.train_seconds)
+        for g, lr in zip(opt.param_groups, base_lr):
+            g["lr"] = lr * decay
         idx = torch.randint(len(passes), (config.batch_size,), generator=generator).tolist()
         out = rend.decode([passes[i] for i in idx], intr.height, intr.width)
         err = F.mse_loss(out, teacher[idx])

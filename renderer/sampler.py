@@ -216,7 +216,7 @@ class OccupancyGrid(nn.Module):
         inside = (rel.amin(dim=-1) >= 0) & ((rel - size).amax(dim=-1) <= 0)
         cell = torch.minimum(rel.clamp_min(0.0), size - 1).floor_()  # [n, 3] (x, y, z)
         flat = (cell @ torch.tensor([1.0, nx, nx * ny])).long()  # exact below 2^24 cells
-        return inside & self.occupied.reshape(-1)[flat]
+        return inside & self.occupied.reshape(-1).index_select(0, flat)
 
 
 @dataclass(frozen=True)
@@ -279,13 +279,20 @@ def sample_along_rays(
             empty,
             torch.zeros(0, dtype=torch.long),
         )
+    # (index_select rather than [] indexing throughout: the same gathers, several times faster)
     ray_idx = torch.repeat_interleave(torch.arange(num_rays), counts)  # [total]
     first = torch.cumsum(counts, 0) - counts  # [num_rays] index of each ray's first sample
-    k = torch.arange(total) - first[ray_idx]  # [total] step number along its ray
-    t = t_near[ray_idx] + (k.float() + u[ray_idx]) * step_m  # [total]
-    pos = origins[ray_idx] + t[:, None] * directions[ray_idx]  # [total, 3]
-    live = t < t_far[ray_idx]
+    k = torch.arange(total) - first.index_select(0, ray_idx)  # [total] step number on its ray
+    t = t_near.index_select(0, ray_idx) + (k.float() + u.index_select(0, ray_idx)) * step_m
+    live = t < t_far.index_select(0, ray_idx)
+    pos = origins.index_select(0, ray_idx) + t[:, None] * directions.index_select(0, ray_idx)
     if occupancy is not None:
         live &= occupancy.query(pos)
-    ray_idx, t, pos = ray_idx[live], t[live], pos[live]
-    return RaySamples(pos, directions[ray_idx], t, torch.full_like(t, step_m), ray_idx)
+    keep = live.nonzero()[:, 0]
+    ray_idx, t, pos = (
+        ray_idx.index_select(0, keep),
+        t.index_select(0, keep),
+        pos.index_select(0, keep),
+    )
+    d = directions.index_select(0, ray_idx)
+    return RaySamples(pos, d, t, torch.full_like(t, step_m), ray_idx)

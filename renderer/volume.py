@@ -121,7 +121,7 @@ def packed_weights(
     positions = torch.arange(sigma.numel(), device=sigma.device)
     first = torch.full((num_rays,), sigma.numel(), dtype=torch.long, device=sigma.device)
     first = first.scatter_reduce(0, ray_indices, positions, reduce="amin")
-    base = exclusive[first[ray_indices]]
+    base = exclusive.index_select(0, first.index_select(0, ray_indices))
     trans = torch.exp(-(exclusive - base)).to(sigma.dtype)
     weights = trans * alpha_from_density(sigma, deltas)
     return weights, trans

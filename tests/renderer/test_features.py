@@ -140,6 +140,7 @@ def test_jittered_cameras_keep_their_distance_and_stay_within_the_jitter(sphere_
         ("weight_threshold", 1.0),
         ("extra_views", -1),
         ("train_seconds", 0.0),
+        ("lr_final_ratio", 0.0),
     ],
 )
 def test_config_validation_names_the_field(field, value):
