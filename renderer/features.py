@@ -8,15 +8,23 @@ plus opacity to the full-resolution image (sub-pixel shuffle). The feature grid 
 decoder are distilled from the field itself: teacher renders at full resolution of the
 training cameras and of jittered copies of them (no images are needed).
 
+The first ``3 (d + 1)^2`` channels start as the field's colour coefficients (SH degree d)
+and stay view-dependent: the ray's direction is the same at every sample, so compositing
+the coefficients and applying each pixel's SH basis afterwards equals compositing the
+view-dependent colour sample by sample. The other channels are free features.
+
 ``python -m benchmarks renderer`` on lego's first 64 test views at 100 px, a field at 27.91 dB
-against ground truth (120 s, one thread), side by side with its full render in one run (load
-about 2): K = 12, downsample 2, step factor 2.5, 300 jittered teacher views, 180 s of
-training: 7.1x faster per view, 1.9 dB under the full render against ground truth (26.02 vs
-27.91 dB; the keyframe renderer of :mod:`renderer.lightweight` in the same run: 4.9x, 4.6 dB
-under). Not yet the goal of 5x within 1 dB. A deeper decoder (a second, half-resolution
-level) did not help, nor did a feature grid twice as fine as the field's (2.2 dB worse at
-180 s, 4.6x: eight times the parameters, fewer steps); more teachers and time keep helping (prototype, same field: 600
-jittered views and 300 s: 1.85 dB under, 6.2x; 1200 views and 480 s: 1.6 dB under, 7.7x).
+against ground truth (120 s, one thread), side by side with its full render in one run
+(idle machine, one thread), defaults (K = 16, downsample 2, step factor 1.5, decoder width
+48, 1900 jittered teachers, 300 s of training after 312 s of teacher renders): **0.94 dB
+under the full render** against ground truth (26.96 vs 27.91 dB), 21 ms per view against
+89 ms, **4.2x faster** (the keyframe renderer of :mod:`renderer.lightweight` in the same run:
+5.6x, 4.6 dB under). The full render's time per view varies between processes (85-147 ms
+on the same field: large temporaries are page-faulted unless the heap is warm), and
+speed-ups measured against a cold full render (7.2-7.5x for the same renderer) overstate
+it. Measured on the way (same field, dB under the full render): 300 teachers at step 2.5,
+2.0; 1900 at step 2.5, 1.35; 1900 at step 1.5, 1.18 with 12 channels and width 32, 0.97
+with 16 and 48. Not tried: a cheaper low-resolution pass (it is half of the time per view).
 """
 
 from __future__ import annotations

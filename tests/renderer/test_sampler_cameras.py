@@ -242,7 +242,7 @@ def test_splatted_depth_of_a_plane_matches_the_analytic_depth():
 def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
     """The field's reads are grid_sample's (align_corners, border) up to rounding: inside
     the box, on its faces and corners, and outside it (clamped), for grids of 2 vertices."""
-    from renderer.fields import _normalize, trilinear
+    from renderer.fields import trilinear
 
     g = torch.Generator().manual_seed(0)
     aabb = torch.tensor([[-1.0, -0.5, 0.2], [1.5, 0.7, 1.0]])
@@ -254,7 +254,7 @@ def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
         b = grid.clone().requires_grad_(True)
         ref = torch.nn.functional.grid_sample(
             a,
-            _normalize(pts, aabb).reshape(1, 1, 1, -1, 3),
+            ((pts - aabb[0]) / (aabb[1] - aabb[0]) * 2 - 1).reshape(1, 1, 1, -1, 3),
             align_corners=True,
             padding_mode="border",
         ).reshape(4, -1).t()
