@@ -174,9 +174,13 @@ class GridField(nn.Module):
         d = self.density_grid.shape
         return (d[4], d[3], d[2])
 
+    def _sigma(self, raw: Tensor) -> Tensor:
+        """Post-activation: sigma = softplus(grid value + bias) from [num_points, 1] reads."""
+        return F.softplus(raw[:, 0] + self.density_bias)
+
     def density(self, points: Tensor) -> Tensor:
         """sigma (1/m) at points [num_points, 3] -> [num_points]."""
-        return F.softplus(trilinear(self.density_grid, self.aabb, points)[:, 0] + self.density_bias)
+        return self._sigma(trilinear(self.density_grid, self.aabb, points))
 
     def vertex_density(self) -> Tensor:
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
@@ -200,7 +204,7 @@ class GridField(nn.Module):
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        sigma = F.softplus(read_corners(self.density_grid, *corners)[:, 0] + self.density_bias)
+        sigma = self._sigma(read_corners(self.density_grid, *corners))
         coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
         k = coef.shape[1] // 3
         if k == 1 or directions is None:
