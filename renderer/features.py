@@ -41,7 +41,14 @@ from torch import Tensor, nn
 
 from renderer.cameras import Intrinsics, camera_rays
 from renderer.dataset import Dataset
-from renderer.fields import GridField, sh_basis, trilinear, trilinear_corners
+from renderer.fields import (
+    GridField,
+    VertexRows,
+    read_rows,
+    sh_basis,
+    trilinear,
+    trilinear_corners,
+)
 from renderer.lightweight import scene_up_and_center, stored_cameras
 from renderer.model import RadianceField, render_views
 from renderer.reprojection import rotate_pose_about
@@ -198,7 +205,7 @@ class FeatureRenderer:
         grid = torch.zeros(1, config.channels, nz, ny, nx)
         grid[0, : 3 * kc] = coef.t().reshape(3 * kc, nz, ny, nx)
         self.grid = nn.Parameter(grid)
-        self._rows, self._rows_version = None, None  # vertex-major copy for inference (read)
+        self._rows = VertexRows()  # the grid's vertex-major copy for inference (read)
         bg = torch.zeros(config.channels)
         bg[0 : 3 * kc : kc] = torch.logit(model.background.clamp(1e-3, 1 - 1e-3))
         self.background = nn.Parameter(bg)
@@ -233,18 +240,11 @@ class FeatureRenderer:
 
         Training reads the channel-major grid (its backward is one ``index_add``). Without
         gradients the grid is read from a vertex-major copy, rebuilt whenever the grid
-        changes: each corner is then one contiguous row of K values (about twice as fast
-        per view on lego)."""
+        changes, by :func:`~renderer.fields.read_rows` (lego, per view: 4.5 -> 1.7 ms)."""
         if torch.is_grad_enabled():
             return trilinear(self.grid, self.model.aabb, positions)
-        key = (id(self.grid), self.grid._version)
-        if self._rows is None or self._rows_version != key:
-            k = self.grid.shape[1]
-            self._rows = self.grid.detach()[0].permute(1, 2, 3, 0).reshape(-1, k).contiguous()
-            self._rows_version = key
         index, weights = trilinear_corners(self.model.aabb, self.grid.shape[2:], positions)
-        corners = self._rows.index_select(0, index).view(-1, 8, self._rows.shape[1])
-        return (corners * weights[:, :, None]).sum(1)
+        return read_rows(self._rows(self.grid), index, weights)
 
     def features(self, p: LowResPass, values: Tensor | None = None) -> Tensor:
         """[1, K + 1, h, w]: the composited feature planes (background where transparent)

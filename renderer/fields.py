@@ -39,13 +39,21 @@ def trilinear_corners(aabb: Tensor, shape, points: Tensor) -> tuple[Tensor, Tens
         weights [num_points, 8] float32 summing to 1 per point).
     """
     nz, ny, nx = (int(n) for n in shape)
-    size = torch.tensor([nx, ny, nz], dtype=points.dtype, device=points.device)
-    u = ((points - aabb[0]) / (aabb[1] - aabb[0]) * (size - 1)).clamp(min=0).minimum(size - 1)
-    base = u.floor().minimum(size - 2)  # lower corner, so that u - base is in [0, 1]
-    wx, wy, wz = (torch.stack([1 - f, f], -1) for f in (u - base).unbind(-1))  # [n, 2] each
-    weights = (wz[:, :, None, None] * wy[:, None, :, None] * wx[:, None, None, :]).flatten(1)
-    b = base.long()
-    first = (b[:, 2] * ny + b[:, 1]) * nx + b[:, 0]  # [num_points]
+    # axis by axis on contiguous rows of [3, n]: about three times faster than the same
+    # arithmetic on [n, 3] with broadcast outer products (lego, 24k points: 2.4 -> 0.8 ms)
+    pt = points.t()
+    lows, fracs, bases = aabb[0].tolist(), [], []
+    for a, n in enumerate((nx, ny, nz)):
+        scale = (n - 1) / float(aabb[1, a] - aabb[0, a])
+        u = (pt[a] - lows[a]).mul_(scale).clamp_(0.0, n - 1)
+        b = u.floor().clamp_(max=n - 2)  # lower corner, so that u - b is in [0, 1]
+        f = u.sub_(b)
+        fracs.append((1 - f, f))
+        bases.append(b.long())
+    (gx, fx), (gy, fy), (gz, fz) = fracs
+    zy = (gz * gy, gz * fy, fz * gy, fz * fy)
+    weights = torch.stack([q * x for q in zy for x in (gx, fx)], 1)  # [n, 8], (z, y, x) order
+    first = (bases[2] * ny + bases[1]) * nx + bases[0]  # [num_points]
     offsets = torch.tensor(
         [z + y + x for z in (0, nx * ny) for y in (0, nx) for x in (0, 1)], device=points.device
     )
@@ -59,6 +67,35 @@ def read_corners(grid: Tensor, index: Tensor, weights: Tensor) -> Tensor:
     c = grid.shape[1]
     values = grid.reshape(c, -1).index_select(1, index).reshape(c, -1, 8)
     return (values * weights).sum(-1).t()
+
+
+def read_rows(rows: Tensor, index: Tensor, weights: Tensor) -> Tensor:
+    """Trilinear reads of a vertex-major table ``rows`` [num_vertices, channels] at the
+    corners of :func:`trilinear_corners`: [num_points, channels].
+
+    One ``F.embedding_bag`` (weighted sum of eight rows per point): for inference. On one
+    CPU thread it reads lego's 12 colour channels at 100k points in about 10 ms against
+    25-70 ms for :func:`read_corners`; its backward is slower, so training keeps
+    :func:`read_corners`."""
+    return F.embedding_bag(index.view(-1, 8), rows, per_sample_weights=weights, mode="sum")
+
+
+class VertexRows:
+    """A vertex-major copy [num_vertices, channels] of a grid [1, channels, z, y, x] for
+    :func:`read_rows`, rebuilt when the grid is replaced or changed in place (its version
+    counter moves). A one-channel grid needs no copy."""
+
+    def __init__(self):
+        self._grid, self._version, self._rows = None, None, None
+
+    def __call__(self, grid: Tensor) -> Tensor:
+        c = grid.shape[1]
+        if c == 1:
+            return grid.detach().reshape(-1, 1)
+        if self._grid is not grid or self._version != grid._version:
+            self._rows = grid.detach()[0].permute(1, 2, 3, 0).reshape(-1, c).contiguous()
+            self._grid, self._version = grid, grid._version
+        return self._rows
 
 
 def trilinear(grid: Tensor, aabb: Tensor, points: Tensor) -> Tensor:
@@ -167,6 +204,7 @@ class GridField(nn.Module):
         self.density_bias = math.log(math.expm1(sigma0))
         self.density_grid = nn.Parameter(torch.zeros(1, 1, nz, ny, nx))  # [1, 1, z, y, x]
         self.color_grid = nn.Parameter(torch.zeros(1, 3, nz, ny, nx))  # [1, 3, z, y, x]
+        self._rows = VertexRows()  # the colour grid's vertex-major copy for inference
 
     @property
     def resolution(self) -> tuple[int, int, int]:
@@ -180,7 +218,10 @@ class GridField(nn.Module):
 
     def density(self, points: Tensor) -> Tensor:
         """sigma (1/m) at points [num_points, 3] -> [num_points]."""
-        return self._sigma(trilinear(self.density_grid, self.aabb, points))
+        if torch.is_grad_enabled():
+            return self._sigma(trilinear(self.density_grid, self.aabb, points))
+        corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
+        return self._sigma(read_rows(self._rows(self.density_grid), *corners))
 
     def vertex_density(self) -> Tensor:
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
@@ -204,8 +245,12 @@ class GridField(nn.Module):
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        sigma = self._sigma(read_corners(self.density_grid, *corners))
-        coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
+        if torch.is_grad_enabled():
+            sigma = self._sigma(read_corners(self.density_grid, *corners))
+            coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
+        else:  # inference: vertex-major rows (read_rows)
+            sigma = self._sigma(read_rows(self._rows(self.density_grid), *corners))
+            coef = read_rows(self._rows(self.color_grid), *corners)
         k = coef.shape[1] // 3
         if k == 1 or directions is None:
             return sigma, torch.sigmoid(coef[:, ::k])

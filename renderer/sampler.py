@@ -218,6 +218,32 @@ class OccupancyGrid(nn.Module):
         flat = (cell @ torch.tensor([1.0, nx, nx * ny])).long()  # exact below 2^24 cells
         return inside & self.occupied.reshape(-1).index_select(0, flat)
 
+    def query_along(
+        self, origins: Tensor, directions: Tensor, ray_idx: Tensor, t: Tensor, inside_only: bool
+    ) -> Tensor:
+        """Indices of the points ``origins[ray_idx] + t * directions[ray_idx]`` that lie in
+        occupied cells: [k] int64. The points are never formed in world units: each ray is
+        moved into cell units once. ``inside_only``: the caller guarantees every point lies
+        in the box (up to rounding, which the clamp absorbs), so the box test is skipped.
+        """
+        nx, ny, nz = self.cells
+        size = torch.tensor([nx, ny, nz], dtype=torch.float32)
+        scale = size / (self.aabb[1] - self.aabb[0])
+        oc = ((origins - self.aabb[0]) * scale).t().contiguous()  # [3, num_rays] in cells
+        dc = (directions * scale).t().contiguous()
+        flat, inside = None, None
+        for a, stride in enumerate((1.0, float(nx), float(nx * ny))):
+            c = torch.addcmul(oc[a].index_select(0, ray_idx), t, dc[a].index_select(0, ray_idx))
+            if not inside_only:
+                ok = (c >= 0) & (c <= size[a])
+                inside = ok if inside is None else inside & ok
+            c = c.floor_().clamp_(0.0, float(size[a] - 1))
+            flat = c.mul_(stride) if flat is None else flat.add_(c, alpha=stride)
+        occ = self.occupied.reshape(-1).index_select(0, flat.long())  # exact below 2^24 cells
+        if inside is not None:
+            occ &= inside
+        return occ.nonzero()[:, 0]
+
 
 @dataclass(frozen=True)
 class RaySamples:
@@ -279,21 +305,26 @@ def sample_along_rays(
             empty,
             torch.zeros(0, dtype=torch.long),
         )
-    # (index_select rather than [] indexing throughout: the same gathers; the feature
-    # renderer's low-resolution pass on lego went from 20.5 to 11.3 ms per view)
+    # Every candidate is generated in cell units and only the survivors get world points:
+    # candidates outnumber occupied samples about 4 to 1 (lego), so per-candidate work is
+    # what this function costs. t is formed in float64 from a per-ray offset (exact for
+    # millions of samples) and counts make every t fall before t_far, so no test against
+    # it is needed. (index_select rather than [] indexing: the same gathers, faster.)
     ray_idx = torch.repeat_interleave(torch.arange(num_rays), counts)  # [total]
     first = torch.cumsum(counts, 0) - counts  # [num_rays] index of each ray's first sample
-    k = torch.arange(total) - first.index_select(0, ray_idx)  # [total] step number on its ray
-    t = t_near.index_select(0, ray_idx) + (k.float() + u.index_select(0, ray_idx)) * step_m
-    live = t < t_far.index_select(0, ray_idx)
-    pos = origins.index_select(0, ray_idx) + t[:, None] * directions.index_select(0, ray_idx)
+    offset = t_near.double() + (u.double() - first.double()) * step_m  # [num_rays]
+    t64 = offset.index_select(0, ray_idx) + torch.arange(total, dtype=torch.float64) * step_m
+    t = t64.float()
     if occupancy is not None:
-        live &= occupancy.query(pos)
-    keep = live.nonzero()[:, 0]
-    ray_idx, t, pos = (
-        ray_idx.index_select(0, keep),
-        t.index_select(0, keep),
-        pos.index_select(0, keep),
-    )
+        keep = occupancy.query_along(
+            origins, directions, ray_idx, t, inside_only=_inside(aabb, occupancy.aabb)
+        )
+        ray_idx, t = ray_idx.index_select(0, keep), t.index_select(0, keep)
+    pos = origins.index_select(0, ray_idx) + t[:, None] * directions.index_select(0, ray_idx)
     d = directions.index_select(0, ray_idx)
     return RaySamples(pos, d, t, torch.full_like(t, step_m), ray_idx)
+
+
+def _inside(box: Tensor, outer: Tensor) -> bool:
+    """Whether ``box`` lies within ``outer`` (both [2, 3])."""
+    return bool((box[0] >= outer[0]).all() and (box[1] <= outer[1]).all())

@@ -264,3 +264,60 @@ def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
         (ref * upstream).sum().backward()
         (out * upstream).sum().backward()
         assert torch.allclose(b.grad, a.grad, atol=1e-4)
+
+
+def test_inference_reads_of_vertex_rows_equal_the_training_reads_and_follow_updates():
+    """read_rows (embedding_bag over a vertex-major copy) gives read_corners' values; the
+    copy is rebuilt after an in-place update and after the grid is replaced; a field
+    renders the same with and without gradients."""
+    from renderer.fields import VertexRows, read_corners, read_rows, trilinear_corners
+
+    g = torch.Generator().manual_seed(1)
+    aabb = torch.tensor([[-1.0, -0.5, 0.2], [1.5, 0.7, 1.0]])
+    grid = torch.nn.Parameter(torch.randn(1, 6, 7, 5, 9, generator=g))
+    pts = aabb[0] + (aabb[1] - aabb[0]) * torch.rand(500, 3, generator=g)
+    corners = trilinear_corners(aabb, grid.shape[2:], pts)
+    rows = VertexRows()
+    assert torch.allclose(read_rows(rows(grid), *corners), read_corners(grid, *corners), atol=1e-5)
+    with torch.no_grad():
+        grid.mul_(-2.0)  # in place, as an optimiser step does
+    assert torch.allclose(read_rows(rows(grid), *corners), read_corners(grid, *corners), atol=1e-5)
+    other = torch.randn(1, 6, 7, 5, 9, generator=g)
+    assert torch.allclose(
+        read_rows(rows(other), *corners), read_corners(other, *corners), atol=1e-5
+    )
+    one = torch.randn(1, 1, 7, 5, 9, generator=g)  # one channel: the grid itself, no copy
+    assert rows(one).data_ptr() == one.data_ptr()
+
+    field = GridField(AABB, resolution=9)
+    with torch.no_grad():
+        field.density_grid.normal_(generator=g)
+        field.set_sh_degree(1)
+        field.color_grid.normal_(generator=g)
+    p = torch.rand(300, 3, generator=g) * 2 - 1
+    d = torch.nn.functional.normalize(torch.randn(300, 3, generator=g), dim=-1)
+    sigma, rgb = field(p, d)
+    with torch.no_grad():
+        sigma0, rgb0 = field(p, d)
+        dens0 = field.density(p)
+    assert torch.allclose(sigma0, sigma, rtol=1e-5) and torch.allclose(rgb0, rgb, atol=1e-6)
+    assert torch.allclose(dens0, sigma, rtol=1e-5)
+
+
+def test_occupancy_along_rays_equals_the_query_of_the_points():
+    """The sampler's cell-unit test (query_along) keeps exactly the points query keeps,
+    with and without the promise that every point lies in the box."""
+    g = torch.Generator().manual_seed(2)
+    occ = OccupancyGrid(AABB, (6, 5, 7))
+    occ.occupied = torch.rand(occ.occupied.shape, generator=g) > 0.6
+    o = torch.randn(40, 3, generator=g) * 3
+    d = torch.nn.functional.normalize(torch.randn(40, 3, generator=g), dim=-1)
+    ray = torch.randint(0, 40, (4000,), generator=g)
+    t = torch.rand(4000, generator=g) * 6
+    pts = o[ray] + t[:, None] * d[ray]
+    want = occ.query(pts).nonzero()[:, 0]
+    assert torch.equal(occ.query_along(o, d, ray, t, inside_only=False), want)
+    inside = (pts.abs() < 0.999).all(-1)  # away from the faces, where rounding may differ
+    sub = inside.nonzero()[:, 0]
+    got = occ.query_along(o, d, ray[sub], t[sub], inside_only=True)
+    assert torch.equal(sub[got], want[inside[want]])
