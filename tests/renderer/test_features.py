@@ -120,6 +120,28 @@ def test_inference_reads_equal_training_reads_and_follow_grid_updates(sphere_mod
         assert torch.allclose(rend.read(pts), fast + 1.0, atol=1e-5)
 
 
+def test_views_rendered_together_equal_views_rendered_one_by_one(sphere_model):
+    """render_batch changes only how many views share an operation, not the images; a
+    batch that does not divide the path and a view that sees nothing are handled."""
+    model, train_set = sphere_model
+    poses = torch.cat([orbit_path(5, 2.5, 10.0), orbit_path(1, 2.5, 10.0)])
+    poses[-1, :3, 3] = torch.tensor([0.0, 0.0, 50.0])  # far above, looking away: empty
+    poses[-1, :3, :3] = torch.diag(torch.tensor([1.0, -1.0, -1.0])) @ poses[-1, :3, :3]
+    g = torch.Generator().manual_seed(3)
+    renders = []
+    for b in (1, 4):
+        rend = FeatureRenderer(model, FeatureConfig(channels=5, render_batch=b, progress=False))
+        with torch.no_grad():
+            rend.grid.normal_(generator=g.manual_seed(3))
+        renders.append(rend.render_path(poses, train_set.intrinsics)["rgb"])
+    assert torch.allclose(renders[0], renders[1], atol=1e-5)
+    single = rend.low_res_pass(poses[0], train_set.intrinsics)
+    together = rend.low_res_passes(poses[:3], train_set.intrinsics)[0]
+    assert torch.equal(single.rays, together.rays)
+    assert torch.allclose(single.weights, together.weights)
+    assert rend.low_res_passes(poses[-2:], train_set.intrinsics)[1].weights.numel() == 0
+
+
 def test_sizes_the_downsample_does_not_divide(sphere_model):
     model, _ = sphere_model
     intr = Intrinsics(30.0, 30.0, 16.5, 15.5, 33, 31)
