@@ -14,18 +14,19 @@ the coefficients and applying each pixel's SH basis afterwards equals compositin
 view-dependent colour sample by sample. The other channels are free features.
 
 ``python -m benchmarks renderer`` on lego's first 64 test views at 100 px, a field at 27.91 dB
-against ground truth (120 s, one thread), side by side with its full render in one run
-(idle machine, one thread), defaults (K = 16, downsample 2, step factor 1.5, decoder width
-48, 1900 jittered teachers, 300 s of training after 312 s of teacher renders): **0.94 dB
-under the full render** against ground truth (26.96 vs 27.91 dB), 21 ms per view against
-89 ms, **4.2x faster** (the keyframe renderer of :mod:`renderer.lightweight` in the same run:
-5.6x, 4.6 dB under). The full render's time per view varies between processes (85-147 ms
-on the same field: large temporaries are page-faulted unless the heap is warm), and
-speed-ups measured against a cold full render (7.2-7.5x for the same renderer) overstate
-it. Measured on the way (same field, dB under the full render): 300 teachers at step 2.5,
-2.0; 1900 at step 2.5, 1.35; 1900 at step 1.5, 1.18 with 12 channels and width 32, 0.97
-with 16 and 48; step 2.0, weight threshold 3e-3, width 40: 1.12 dB under at 5.4x (so either
-goal is met, not both). Not tried: a cheaper low-resolution pass (half of the time per view).
+against ground truth (120 s, one thread), side by side with its full render in one run (one
+thread; the other core was training the codec), defaults (K = 16, downsample 2, step factor
+1.75, decoder width 32, 3900 jittered teachers, 500 s of training after 170 s of teacher
+renders, 8 views per render call): **0.81 dB under the full render** against ground truth
+(27.09 vs 27.91 dB), 6.5 ms per view against 37.7 ms, **5.8x faster** (the keyframe renderer of
+:mod:`renderer.lightweight` in the same run: 3.2x, 4.7 dB under). Measured on the way (same
+field, dB under the full render): 300 teachers at step 2.5, 2.0; 1900 at step 2.5, 1.35; 1900
+at step 1.5, 1.18 with 12 channels and width 32, 0.97 with 16 and 48; 3900 with width 32 at
+step 1.5: 1.06 after 300 s, 0.75 after 500 s. The speed-up is against a full render that
+became about 3x faster in the same change (120 -> 42 ms per view: the sampler tests
+candidates in cell units, and inference reads are one ``embedding_bag`` over a vertex-major
+copy of the grid, :func:`renderer.fields.read_rows`); the old defaults measure 4.4-4.8x
+against it.
 """
 
 from __future__ import annotations
