@@ -396,6 +396,7 @@ def train_features(
         opt.zero_grad()
         err.backward()
         opt.step()
+        rend._rows.clear()  # the fused step does not move the grid's version counter
         steps, loss = steps + 1, float(err.detach())
         if bar is not None:
             bar.n = min(int(time.perf_counter() - t0), bar.total)

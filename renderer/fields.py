@@ -82,10 +82,17 @@ def read_rows(rows: Tensor, index: Tensor, weights: Tensor) -> Tensor:
 
 class VertexRows:
     """A vertex-major copy [num_vertices, channels] of a grid [1, channels, z, y, x] for
-    :func:`read_rows`, rebuilt when the grid is replaced or changed in place (its version
-    counter moves). A one-channel grid needs no copy."""
+    :func:`read_rows`, rebuilt when the grid is replaced or changed in place by an
+    operation that moves its version counter. **Fused optimisers** (``Adam(fused=True)``)
+    do not move it: code that steps one must call :meth:`clear` (GridField does so on
+    every ``train()`` / ``eval()`` switch and reads rows only in eval mode). A one-channel
+    grid needs no copy."""
 
     def __init__(self):
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the copy (the grid changed in a way its version counter does not show)."""
         self._grid, self._version, self._rows = None, None, None
 
     def __call__(self, grid: Tensor) -> Tensor:
@@ -204,7 +211,13 @@ class GridField(nn.Module):
         self.density_bias = math.log(math.expm1(sigma0))
         self.density_grid = nn.Parameter(torch.zeros(1, 1, nz, ny, nx))  # [1, 1, z, y, x]
         self.color_grid = nn.Parameter(torch.zeros(1, 3, nz, ny, nx))  # [1, 3, z, y, x]
-        self._rows = VertexRows()  # the colour grid's vertex-major copy for inference
+        self._rows = VertexRows()  # the colour grid's vertex-major copy for eval mode
+
+    def train(self, mode: bool = True) -> GridField:
+        """Switch mode; the inference copy of the colour grid is dropped either way (the
+        field's trainer steps a fused optimiser, which :class:`VertexRows` cannot see)."""
+        self._rows.clear()
+        return super().train(mode)
 
     @property
     def resolution(self) -> tuple[int, int, int]:
@@ -218,7 +231,7 @@ class GridField(nn.Module):
 
     def density(self, points: Tensor) -> Tensor:
         """sigma (1/m) at points [num_points, 3] -> [num_points]."""
-        if torch.is_grad_enabled():
+        if self.training or torch.is_grad_enabled():
             return self._sigma(trilinear(self.density_grid, self.aabb, points))
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
         return self._sigma(read_rows(self._rows(self.density_grid), *corners))
@@ -245,10 +258,10 @@ class GridField(nn.Module):
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        if torch.is_grad_enabled():
+        if self.training or torch.is_grad_enabled():
             sigma = self._sigma(read_corners(self.density_grid, *corners))
             coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
-        else:  # inference: vertex-major rows (read_rows)
+        else:  # inference in eval mode: vertex-major rows (read_rows)
             sigma = self._sigma(read_rows(self._rows(self.density_grid), *corners))
             coef = read_rows(self._rows(self.color_grid), *corners)
         k = coef.shape[1] // 3

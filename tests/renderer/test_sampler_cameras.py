@@ -303,6 +303,23 @@ def test_inference_reads_of_vertex_rows_equal_the_training_reads_and_follow_upda
     assert torch.allclose(sigma0, sigma, rtol=1e-5) and torch.allclose(rgb0, rgb, atol=1e-6)
     assert torch.allclose(dens0, sigma, rtol=1e-5)
 
+    # a fused optimiser step does not move the grid's version counter: the copy made in
+    # eval mode must not survive the switch to training and back
+    field.eval()
+    with torch.no_grad():
+        before = field(p, d)[1]
+    field.train()
+    opt = torch.optim.Adam(field.parameters(), lr=0.5, fused=True)
+    field(p, d)[1].sum().backward()
+    opt.step()
+    field.eval()
+    with torch.no_grad():
+        after = field(p, d)[1]
+    with torch.enable_grad():
+        want = field(p, d)[1].detach()
+    assert not torch.allclose(after, before, atol=1e-3)
+    assert torch.allclose(after, want, atol=1e-6)
+
 
 def test_occupancy_along_rays_equals_the_query_of_the_points():
     """The sampler's cell-unit test (query_along) keeps exactly the points query keeps,
