@@ -146,7 +146,7 @@ def save_model(model: RadianceField, path) -> Path:
 
 
 def load_model(path) -> RadianceField:
-    """Load a model written by :func:`save_model`.
+    """Load a model written by :func:`save_model`, in eval mode.
 
     Raises:
         FileNotFoundError: no such file.
@@ -185,4 +185,4 @@ def load_model(path) -> RadianceField:
     for name, t in state.items():
         if torch.is_floating_point(t) and not torch.isfinite(t).all():
             raise ValueError(f"{path}: {name} holds NaN or infinite values (training diverged?)")
-    return model
+    return model.eval()  # for inference: a grid field then reads its vertex-major copy
