@@ -367,9 +367,9 @@ def train(
         bar.close()
     if config.field == "grid":
         model.spec["resolution"] = max(model.field.resolution)
-    model.eval()
     if curve_set is not None:
         record_curve()
+    model.eval()  # (record_curve switches back to training mode)
     return TrainResult(model=model, steps=step, seconds=train_seconds, curve=curve)
 
 
