@@ -369,8 +369,9 @@ def train_features(
     )
     rend = FeatureRenderer(model, config)
     teacher = render_views(model, poses, intr)["rgb"].clamp(0, 1)
+    b = config.render_batch
     passes = [
-        p for i in range(0, len(poses), 16) for p in rend.low_res_passes(poses[i : i + 16], intr)
+        p for i in range(0, len(poses), b) for p in rend.low_res_passes(poses[i : i + b], intr)
     ]
     teacher_seconds = time.perf_counter() - t0
     opt = torch.optim.Adam(

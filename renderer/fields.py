@@ -231,10 +231,15 @@ class GridField(nn.Module):
 
     def density(self, points: Tensor) -> Tensor:
         """sigma (1/m) at points [num_points, 3] -> [num_points]."""
-        if self.training or torch.is_grad_enabled():
-            return self._sigma(trilinear(self.density_grid, self.aabb, points))
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        return self._sigma(read_rows(self._rows(self.density_grid), *corners))
+        return self._sigma(self._read(self.density_grid, corners))
+
+    def _read(self, grid: Tensor, corners: tuple[Tensor, Tensor]) -> Tensor:
+        """``grid`` at the points of ``corners``: the channel-major gathers while training or
+        with gradients, else one read of the vertex-major copy (:func:`read_rows`)."""
+        if self.training or torch.is_grad_enabled():
+            return read_corners(grid, *corners)
+        return read_rows(self._rows(grid), *corners)
 
     def vertex_density(self) -> Tensor:
         """sigma at every vertex: [z, y, x] (the exact maxima of the trilinear field per cell)."""
@@ -258,12 +263,8 @@ class GridField(nn.Module):
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
         corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        if self.training or torch.is_grad_enabled():
-            sigma = self._sigma(read_corners(self.density_grid, *corners))
-            coef = read_corners(self.color_grid, *corners)  # [num_points, 3 * K]
-        else:  # inference in eval mode: vertex-major rows (read_rows)
-            sigma = self._sigma(read_rows(self._rows(self.density_grid), *corners))
-            coef = read_rows(self._rows(self.color_grid), *corners)
+        sigma = self._sigma(self._read(self.density_grid, corners))
+        coef = self._read(self.color_grid, corners)  # [num_points, 3 * K]
         k = coef.shape[1] // 3
         if k == 1 or directions is None:
             return sigma, torch.sigmoid(coef[:, ::k])

@@ -209,14 +209,13 @@ class OccupancyGrid(nn.Module):
 
     def query(self, points: Tensor) -> Tensor:
         """Whether each point lies in an occupied cell: points [n, 3] -> [n] bool
-        (False outside the box)."""
-        nx, ny, nz = self.cells
-        size = torch.tensor([nx, ny, nz], dtype=torch.float32)
-        rel = (points - self.aabb[0]) * (size / (self.aabb[1] - self.aabb[0]))  # [n, 3] in cells
-        inside = (rel.amin(dim=-1) >= 0) & ((rel - size).amax(dim=-1) <= 0)
-        cell = torch.minimum(rel.clamp_min(0.0), size - 1).floor_()  # [n, 3] (x, y, z)
-        flat = (cell @ torch.tensor([1.0, nx, nx * ny])).long()  # exact below 2^24 cells
-        return inside & self.occupied.reshape(-1).index_select(0, flat)
+        (False outside the box). The same lookup as :meth:`query_along`, with each point
+        its own ray at t = 0."""
+        n = points.shape[0]
+        keep = self.query_along(
+            points, torch.zeros_like(points), torch.arange(n), points.new_zeros(n), False
+        )
+        return torch.zeros(n, dtype=torch.bool).index_fill_(0, keep, True)
 
     def query_along(
         self, origins: Tensor, directions: Tensor, ray_idx: Tensor, t: Tensor, inside_only: bool
