@@ -262,15 +262,27 @@ class GridField(nn.Module):
 
         rgb = sigmoid(sum_k c_k Y_k(direction)) with the real SH basis Y_k up to
         :attr:`sh_degree` (Y_0 taken as 1, so a diffuse grid holds logits)."""
-        corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
-        sigma = self._sigma(self._read(self.density_grid, corners))
+        corners = self.corners(points)
+        return self.sigma_at(corners), self.color_at(corners, directions)
+
+    def corners(self, points: Tensor) -> tuple[Tensor, Tensor]:
+        """:func:`trilinear_corners` of ``points`` [num_points, 3] in this field's grids."""
+        return trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
+
+    def sigma_at(self, corners: tuple[Tensor, Tensor]) -> Tensor:
+        """sigma [num_points] at the points of :meth:`corners`."""
+        return self._sigma(self._read(self.density_grid, corners))
+
+    def color_at(self, corners: tuple[Tensor, Tensor], directions: Tensor | None) -> Tensor:
+        """rgb [num_points, 3] at the points of :meth:`corners` seen along unit
+        ``directions`` [num_points, 3] (None: the DC term), as in :meth:`forward`."""
         coef = self._read(self.color_grid, corners)  # [num_points, 3 * K]
         k = coef.shape[1] // 3
         if k == 1 or directions is None:
-            return sigma, torch.sigmoid(coef[:, ::k])
+            return torch.sigmoid(coef[:, ::k])
         basis = sh_basis(directions, self.sh_degree)  # [num_points, K]
         logits = (coef.reshape(-1, 3, k) * basis[:, None, :]).sum(-1)  # [num_points, 3]
-        return sigma, torch.sigmoid(logits)
+        return torch.sigmoid(logits)
 
     @torch.no_grad()
     def resample(self, aabb: Tensor, resolution: int) -> None:

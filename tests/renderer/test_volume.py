@@ -87,3 +87,39 @@ def test_empty_field_renders_the_background():
     assert occ.fraction_occupied == 0.0
     out2 = render_views(model, pose, Intrinsics(20.0, 20.0, 8.0, 8.0, 16, 16))
     assert torch.equal(out2["rgb"], torch.tensor(bg).expand(1, 16, 16, 3))
+
+
+def test_training_renders_skip_only_the_colour_of_negligible_samples():
+    """In training mode a grid field's colour is read only where the weight exceeds
+    TRAIN_COLOR_WEIGHT_MIN: the same as eq. 4 with those samples' colours set to zero
+    (their weights still count in opacity and depth); eval mode uses every sample."""
+    from renderer.model import TRAIN_COLOR_WEIGHT_MIN
+    from renderer.sampler import sample_along_rays
+
+    g = torch.Generator().manual_seed(3)
+    aabb = torch.tensor([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    field = GridField(aabb, resolution=8, step_m=0.1)
+    with torch.no_grad():
+        field.set_sh_degree(1)
+        field.density_grid.normal_(generator=g).mul_(4.0)
+        field.color_grid.normal_(generator=g)
+    occ = OccupancyGrid.for_grid_field(field)
+    bg = torch.tensor([0.1, 0.7, 0.3])
+    model = RadianceField(field, occ, 0.1, tuple(bg.tolist()), {"field": "grid"})
+    origins = torch.tensor([[0.0, -3.0, 0.2]]).expand(16, 3)
+    dirs = torch.nn.functional.normalize(
+        torch.randn(16, 3, generator=g) * 0.2 + torch.tensor([0, 1.0, 0]), dim=-1
+    )
+    s = sample_along_rays(origins, dirs, aabb, 0.1, occ)
+    sigma, rgb = field(s.positions, s.directions)
+    full = packed_render(sigma, rgb, s.t, s.deltas, s.ray_indices, 16, bg)
+    small = full["weights"] <= TRAIN_COLOR_WEIGHT_MIN
+    assert 0 < int(small.sum()) < small.numel()  # the case is exercised
+    expected = packed_render(sigma, rgb * ~small[:, None], s.t, s.deltas, s.ray_indices, 16, bg)
+    model.train()
+    out = model.render_rays(origins, dirs)
+    assert torch.allclose(out["rgb"], expected["rgb"], atol=1e-6)
+    assert torch.allclose(out["opacity"], full["opacity"], atol=1e-6)
+    assert torch.allclose(out["depth"], full["depth"], atol=1e-6)
+    model.eval()
+    assert torch.allclose(model.render_rays(origins, dirs)["rgb"], full["rgb"], atol=1e-6)
