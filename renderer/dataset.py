@@ -54,6 +54,9 @@ class Dataset:
     """[num_views, height, width] float32 in [0, 1] (1 = object), or None."""
     names: tuple[str, ...] = ()
     """The frames' ``file_path`` entries."""
+    composited: bool = False
+    """The images already show only the object on ``background`` (the masks are their
+    RGBA alpha): object-only training uses them as they are."""
 
     @property
     def num_views(self) -> int:
@@ -261,7 +264,7 @@ def load_dataset(
         raise ValueError(f"background must be 3 values in [0, 1], got {background}")
     bg = np.asarray(background, dtype=np.float32)
 
-    images, masks, poses, names = [], [], [], []
+    images, masks, poses, names, alpha_masks = [], [], [], [], []
     stored_size = None
     out_h = out_w = None
     for i, f in enumerate(frames):
@@ -292,11 +295,16 @@ def load_dataset(
                 f"{path}: frames[{i}].file_path {img_path.name} is {size[1]}x{size[0]}, "
                 f"other images are {stored_size[1]}x{stored_size[0]}"
             )
-        img = _resize(img, out_h, out_w)
         mask = None
         if img.shape[2] == 4:
-            mask = img[..., 3]
-            img = img[..., :3] * mask[..., None] + bg * (1.0 - mask[..., None])
+            # composite at the stored resolution, then downsample: resizing straight RGBA
+            # first averages the (often black) colour of transparent pixels into the edges
+            # (lego at 100 px: its edge pixels came out darker than the images' own
+            # downsampled composite)
+            alpha = img[..., 3:]
+            img = img[..., :3] * alpha + bg * (1.0 - alpha)
+            mask = _resize(alpha, out_h, out_w)[..., 0]
+        img = _resize(img, out_h, out_w)
         if "mask_path" in f:
             mpath = _resolve_image(path.parent, f["mask_path"], path, i, "mask_path")
             m = _read_image(mpath)
@@ -307,6 +315,7 @@ def load_dataset(
                 )
             mask = _resize(m, out_h, out_w)[..., 0]
         images.append(np.clip(img, 0.0, 1.0))
+        alpha_masks.append(mask is not None and "mask_path" not in f)
         masks.append(mask)
         poses.append(pose)
         names.append(str(f["file_path"]))
@@ -331,6 +340,7 @@ def load_dataset(
         aabb=aabb_t,
         masks=None if masks[0] is None else torch.from_numpy(np.stack(masks)).float(),
         names=tuple(names),
+        composited=all(alpha_masks),
     )
 
 

@@ -163,8 +163,11 @@ def _voxel_m(aabb: torch.Tensor, resolution: int) -> float:
 
 
 def _targets(dataset: Dataset, use_masks: bool) -> torch.Tensor:
+    """[num_pixels, 3] training colours: with ``use_masks``, the object on the background
+    (images whose masks are their own alpha are that already: compositing them again
+    would square the alpha of edge pixels)."""
     images = dataset.images
-    if use_masks and dataset.masks is not None:
+    if use_masks and dataset.masks is not None and not dataset.composited:
         bg = torch.tensor(dataset.background)
         m = dataset.masks[..., None]
         images = images * m + bg * (1 - m)

@@ -76,7 +76,25 @@ def test_rgba_composited_on_chosen_background_and_mask_path(tmp_path):
     cv2.imwrite(str(root / "m.png"), np.full((8, 12), 255, np.uint8))
     meta["frames"][0]["mask_path"] = "m"
     p.write_text(json.dumps(meta))
-    assert torch.equal(load_dataset(root, split="all", resolution=None).masks, torch.ones(1, 8, 12))
+    ds = load_dataset(root, split="all", resolution=None)
+    assert torch.equal(ds.masks, torch.ones(1, 8, 12))
+    assert not ds.composited  # a separate mask: the object is cut out for training
+
+
+def test_rgba_is_composited_before_downscaling(tmp_path):
+    """A downscaled RGBA pixel half covered by the object is the average of the composited
+    pixels (what the camera would see), not the composite of averaged straight colours,
+    which would mix the transparent pixels' (black) colour into the edge."""
+    root, _, _, _ = _folder(tmp_path, n=1)
+    rgba = np.zeros((8, 12, 4), np.uint8)  # transparent black
+    rgba[:, 0::2] = (0, 0, 255, 255)  # BGRA: opaque red in every other column
+    cv2.imwrite(str(root / "img_0.png"), rgba)
+    ds = load_dataset(root, split="all", resolution=6)
+    # half red, half the white background: (1, 0.5, 0.5), alpha 0.5; averaging first
+    # would give 0.5 * (0.5, 0, 0) + 0.5 * white = (0.75, 0.5, 0.5)
+    assert torch.allclose(ds.images[0], torch.tensor([1.0, 0.5, 0.5]).expand(4, 6, 3), atol=1e-6)
+    assert torch.allclose(ds.masks[0], torch.full((4, 6), 0.5), atol=1e-6)
+    assert ds.composited and ds.subset([0]).composited  # already the object on background
 
 
 def test_split_field_and_holdout(tmp_path):
