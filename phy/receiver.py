@@ -105,7 +105,9 @@ class _Layout:
     smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
     pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
     d_col: np.ndarray  # [num_symbols] carrier of each payload symbol's data element
-    d_flat: np.ndarray  # [num_symbols] its row * fft_size + FFT bin (natural order)
+    d_row: np.ndarray  # [num_symbols] its row
+    d_bin: np.ndarray  # [num_symbols] its FFT bin (natural order)
+    d_flat: np.ndarray  # [num_symbols] row * fft_size + FFT bin (natural order)
     used: np.ndarray  # used carriers (centred order)
     used_nat: np.ndarray  # their FFT bins (natural order)
     pilots: np.ndarray  # pilot carriers (centred order)
@@ -160,6 +162,8 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         smoother_training=smoother_training.astype(np.complex64),
         pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
         d_col=d_col,
+        d_row=d_row,
+        d_bin=(d_col + n // 2) % n,
         d_flat=d_row * n + (d_col + n // 2) % n,
         used=used,
         used_nat=(used + n // 2) % n,
@@ -245,7 +249,6 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     sync preamble's first sample) whose CFO is about ``cfo`` subcarriers."""
     lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
-    k = (np.fft.fftfreq(n) * n).astype(np.float32)  # frequency index of each FFT bin
     used, pk = lay.used, lay.pilots
     kr, kc = lay.k_row, lay.k_col
     x_conj = np.conj(lay.x_known)
@@ -258,8 +261,9 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
-        ramp = _phasor(np.outer(delay, k) * np.float32(-2 * np.pi / n)).reshape(-1)
-        yx = y[lay.k_flat] * x_conj * np.conj(ramp[lay.k_flat])  # observations of h e^{j phi}
+        # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
+        ramp_known = _ramp(delay, kr, kc, n)
+        yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
         if h is None:  # first look: the two training symbols
             first = kr < 2
             h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
@@ -296,16 +300,19 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
-    model = (h_nat[None, :] * np.conj(rot)[:, None]).reshape(-1) * ramp
-    h_d, y_d = model[lay.d_flat], y[lay.d_flat]  # [num_symbols] in payload order
+    # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
+    h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+    y_d = y[lay.d_flat]  # [num_symbols] in payload order
     s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
-    if equalizer == "zf":
-        x_hat = y_d / np.where(gain > 1e-24, h_d, np.complex64(1e-12))
-        nv = s_eff / np.maximum(gain, 1e-24)
+    if equalizer == "zf":  # y / h as y conj(h) / |h|^2 (a real division)
+        inv = 1.0 / np.maximum(gain, np.float32(1e-24))
+        x_hat = y_d * np.conj(h_d) * inv
+        nv = s_eff * inv
     else:
-        x_hat = y_d * np.conj(h_d) / (gain + s_eff)
-        nv = s_eff / (gain + s_eff)
+        inv = 1.0 / (gain + s_eff)
+        x_hat = y_d * np.conj(h_d) * inv
+        nv = s_eff * inv
     signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
@@ -319,6 +326,16 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
     )
+
+
+def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:
+    """The delay ramp exp(-2 pi j delay[row] f / n) of each row's window at the entries
+    (``rows[i]``, carrier ``cols[i]`` in centred order, f = cols - n / 2): [num_entries]
+    complex64. One table of n values when every row has the same delay (no timing drift)."""
+    c = np.float32(-2 * np.pi / n)
+    if delay.size and np.all(delay == delay[0]):
+        return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (delay[0] * c))[cols]
+    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * c)
 
 
 def _phasor(angle: np.ndarray) -> np.ndarray:
