@@ -1,4 +1,10 @@
-"""Training a radiance field on posed views within a wall-clock budget."""
+"""Training a radiance field on posed views within a wall-clock budget.
+
+The lego numbers in :class:`TrainConfig`'s field notes were measured against views loaded
+with dark edge halos (straight RGBA resized before compositing, fixed in the loader): they
+compare settings with each other, and the same settings now score about 2.5 dB higher
+(defaults, 100 px, 120 s on one thread: 31.2 dB, against 28.6 before the fix).
+"""
 
 from __future__ import annotations
 
