@@ -305,14 +305,10 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     y_d = y[lay.d_flat]  # [num_symbols] in payload order
     s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
-    if equalizer == "zf":  # y / h as y conj(h) / |h|^2 (a real division)
-        inv = 1.0 / np.maximum(gain, np.float32(1e-24))
-        x_hat = y_d * np.conj(h_d) * inv
-        nv = s_eff * inv
-    else:
-        inv = 1.0 / (gain + s_eff)
-        x_hat = y_d * np.conj(h_d) * inv
-        nv = s_eff * inv
+    # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
+    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
+    x_hat = y_d * np.conj(h_d) * inv
+    nv = s_eff * inv
     signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
