@@ -25,7 +25,7 @@ from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
-from semcodec.focus import attribution_box, demand_heatmap, select_positions
+from semcodec.focus import attribution_box, demand_heatmap, demand_positions, select_positions
 from semcodec.model import (
     JSCCModel,
     features_to_symbols,
@@ -206,7 +206,9 @@ class Codec:
             with torch.no_grad():
                 feat = self.model.encoder(xp, side_info(snr, c, c, b))
             heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
-            top, left, rows, cols = attribution_box(heat, FOCUS_REL_THRESHOLD)  # feature-grid units
+            # feature-grid units; the demanded objects themselves are always in the box
+            objects = demand_positions(mask, demand_weights, tuple(xp.shape[2:]))
+            top, left, rows, cols = attribution_box(heat, FOCUS_REL_THRESHOLD, objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
             m = min(c, budget // (rows * cols))
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits

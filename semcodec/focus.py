@@ -9,8 +9,10 @@ and the importance of feature position p is its Grad-CAM-style attribution
 ``sum_c f_pc * dS/df_pc``, averaged along the path ``alpha * f`` (alpha in (0, 1], i.e.
 integrated gradients, so the attributions add up to S(f) - S(0)). Positions are ranked by
 it; the transmitter sends the smallest box of the positions with at least 5 % of the peak
-attribution (the object and the rim its reconstruction depends on) at the rate the budget allows, or, when the budget
-is below one channel over that box, the top positions one channel each.
+attribution (the object and the rim its reconstruction depends on) and of every position
+showing a demanded object (a peaky attribution must not cut the object off: version-2
+models concentrate theirs on a part of it), at the rate the budget allows, or, when the
+budget is below one channel over that box, the top positions one channel each.
 """
 
 from __future__ import annotations
@@ -68,6 +70,29 @@ def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int)
     return w
 
 
+def demand_positions(mask, demand_weights, padded: tuple[int, int]) -> Tensor:
+    """[batch, ceil(H / 4), ceil(W / 4)] bool: the feature positions whose 4 x 4 block holds
+    a pixel of a demanded object (mask >= 0.5 of an object with a positive weight).
+
+    Args:
+        mask, demand_weights: as :func:`demand_weight_map`.
+        padded: (height, width) of the padded image, multiples of 4.
+    """
+    m = torch.as_tensor(
+        np.asarray(mask) if not isinstance(mask, Tensor) else mask, dtype=torch.float32
+    )
+    if m.dim() == 3:
+        m = m[:, None]
+    b, k, h, w = m.shape
+    on = torch.ones(b, k, dtype=torch.bool)
+    if demand_weights is not None:
+        lam = torch.as_tensor(np.asarray(demand_weights, dtype=np.float32)).reshape(-1)
+        on = (lam.reshape(1, k) if lam.numel() == k else lam.reshape(b, k)).expand(b, k) > 0
+    obj = ((m >= 0.5) & on[:, :, None, None]).any(dim=1, keepdim=True).float()
+    obj = F.pad(obj, (0, padded[1] - w, 0, padded[0] - h))
+    return F.max_pool2d(obj, 4)[:, 0] > 0
+
+
 def demand_heatmap(
     model: JSCCModel,
     xp: Tensor,
@@ -119,9 +144,12 @@ def select_positions(heat: Tensor, k: int) -> Tensor:
     return flat.topk(k, dim=1).indices.sort(dim=1).values
 
 
-def attribution_box(heat: Tensor, rel_threshold: float = 0.05) -> tuple[int, int, int, int]:
+def attribution_box(
+    heat: Tensor, rel_threshold: float = 0.05, include: Tensor | None = None
+) -> tuple[int, int, int, int]:
     """Smallest axis-aligned box (union over the batch) of the positions whose attribution
-    is at least ``rel_threshold`` times the largest one.
+    is at least ``rel_threshold`` times the largest one, and of the positions ``include``
+    marks (the demanded objects themselves: a peaky attribution must not cut them off).
 
     The AF modules' global pooling spreads a thin tail of attribution over every position;
     a threshold relative to the peak cuts that tail and keeps the object and the rim its
@@ -129,12 +157,15 @@ def attribution_box(heat: Tensor, rel_threshold: float = 0.05) -> tuple[int, int
 
     Args:
         heat: [batch, hf, wf] float32 >= 0.
+        include: optional [batch, hf, wf] bool.
     Returns:
         (top, left, rows, cols) in feature-grid units.
     """
     total = heat.sum(dim=0)  # [hf, wf]
     peak = float(total.max())
     keep = total >= rel_threshold * peak if peak > 0 else torch.ones_like(total, dtype=torch.bool)
+    if include is not None:
+        keep = keep | include.any(dim=0)
     rows = torch.nonzero(keep.any(dim=1)).flatten()
     cols = torch.nonzero(keep.any(dim=0)).flatten()
     top, left = int(rows[0]), int(cols[0])

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from semcodec import demand_weight_map, select_positions
-from semcodec.focus import attribution_box
+from semcodec.focus import attribution_box, demand_positions
 
 
 def test_demand_weight_map_is_lambda_weighted_mean():
@@ -38,6 +38,24 @@ def test_attribution_box_cuts_the_thin_tail():
     assert attribution_box(heat, 0.05) == (1, 2, 4, 5)  # rows 1..4, cols 2..6
     assert attribution_box(heat, 0.5) == (1, 2, 2, 3)
     assert attribution_box(torch.zeros(1, 3, 3), 0.05) == (0, 0, 3, 3)
+
+
+def test_the_box_keeps_every_position_showing_a_demanded_object():
+    # a peaky attribution on the object's lower part must not cut its top off
+    mask = torch.zeros(1, 2, 22, 24)  # padded to 24 x 24: a 6 x 6 feature grid
+    mask[0, 0, 3:12, 9:14] = 1.0  # object 0: rows 3..11 -> positions 0..2, cols 9..13 -> 2..3
+    mask[0, 0, 4, 20] = 0.4  # a soft edge below half: not the object
+    mask[0, 1, 18:22, 0:4] = 1.0  # object 1, weight 0: not demanded
+    pos = demand_positions(mask, [1.0, 0.0], (24, 24))
+    want = torch.zeros(1, 6, 6, dtype=torch.bool)
+    want[0, 0:3, 2:4] = True
+    assert torch.equal(pos, want)
+    heat = torch.zeros(1, 6, 6)
+    heat[0, 2, 2:4] = 1.0
+    assert attribution_box(heat, 0.05) == (2, 2, 1, 2)
+    assert attribution_box(heat, 0.05, pos) == (0, 2, 3, 2)
+    # equal weights: both objects are in
+    assert demand_positions(mask, None, (24, 24))[0, 5, 0]
 
 
 def _object_scene():
