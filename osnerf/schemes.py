@@ -15,8 +15,11 @@ report) is shared, so adding a scheme is one class and one line::
 
 Schemes of other packages register through the ``osnerf.schemes`` entry-point group
 (``name = "package.module:Class"``; the class must subclass :class:`Scheme`). Each scheme's
-randomness comes from the run seed and its own name (:func:`scheme_seed`), so its results do
-not depend on which other schemes run or in which order.
+own randomness comes from the run seed and its name (:func:`scheme_seed`); the channel draws
+of a view come from the run seed and the view (:meth:`RunContext.view_generator`). So a
+scheme's results do not depend on which other schemes run, in which order, or on how many
+symbols its other views took, and schemes that use the link alike meet the same fades on
+the same view (a paired comparison: their difference is not draw luck).
 """
 
 from __future__ import annotations
@@ -75,6 +78,12 @@ class RunContext:
     rx_codec: object | None
     background: np.ndarray
     routing: tuple | None = None
+
+    def view_generator(self, view: int) -> torch.Generator:
+        """The channel draws of one view (fades, noise): from the run seed and the view only."""
+        return torch.Generator().manual_seed(
+            scheme_seed(self.config.seed, f"view {int(view)}", "link")
+        )
 
 
 class Scheme:
@@ -184,7 +193,7 @@ def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, g
     return combine_repetitions(out.x_hat, out.noise_var)
 
 
-def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> Transmission:
+def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission:
     """Each view through the semantic codec and its link (unbiased receiver, MRC of copies).
 
     On demand (focus mode) each view and its object masks are upsampled by the plan's
@@ -217,7 +226,7 @@ def _jscc_views(ctx: RunContext, plans, images, generator, on_demand: bool) -> T
         t = time.perf_counter()
         with torch.no_grad():
             x_hat, nv = _send_blocks(
-                ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, generator
+                ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, ctx.view_generator(p.view)
             )
         sec["channel"] += time.perf_counter() - t
         t, c = time.perf_counter(), time.process_time()
@@ -263,7 +272,7 @@ class OnDemandJSCC(Scheme):
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
     def transmit(self, ctx, plans, images, generator):
-        return _jscc_views(ctx, plans, images, generator, on_demand=self.object_routed)
+        return _jscc_views(ctx, plans, images, on_demand=self.object_routed)
 
 
 @register("digital")
@@ -297,7 +306,7 @@ class Digital(Scheme):
                 int(p.budget_symbols),
                 mcs=self.mcs(cfg),
                 image_codec=cfg.image_codec,
-                generator=generator,
+                generator=ctx.view_generator(p.view),
                 channel=channel,
             )
             out.append(res.images[0])
@@ -346,7 +355,11 @@ class Analog(Scheme):
         for k, p in enumerate(plans):
             n = max(1, int(p.budget_symbols) // max(p.repetitions, 1))
             res = semcodec.transmit_analog(
-                images[k : k + 1], ctx.links[p.view], p.snr_db, n, generator=generator
+                images[k : k + 1],
+                ctx.links[p.view],
+                p.snr_db,
+                n,
+                generator=ctx.view_generator(p.view),
             )
             out.append(res.images[0])
         return Transmission(

@@ -8,13 +8,17 @@ import re
 import sys
 import textwrap
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
+import torch
 
 import osnerf.schemes as schemes_mod
+import phy
 from osnerf.cli import main
 from osnerf.run import run_pipeline
-from osnerf.schemes import SCHEMES, Scheme, get_scheme, scheme_seed
+from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
 TINY += ["--lightweight-seconds", "0"]
@@ -49,6 +53,27 @@ def test_table_holds_the_builtins_as_scheme_classes():
 def test_seed_depends_on_run_seed_and_name_only():
     assert scheme_seed(0, "jscc") == scheme_seed(0, "jscc")
     assert len({scheme_seed(0, "jscc"), scheme_seed(0, "gt"), scheme_seed(1, "jscc")}) == 3
+
+
+def test_a_views_channel_draws_depend_on_the_run_seed_and_the_view_only():
+    # block Rayleigh: view 7's fade and noise are the same whether or not view 3 went first,
+    # whatever it sent, and whichever scheme sends (the scheme's own generator is ignored)
+    link = phy.FlatLink(phy.CHANNELS["rayleigh"]())
+    ctx = RunContext(SimpleNamespace(seed=5), {3: link, 7: link}, None, None, None, np.zeros(3))
+    images = torch.rand(2, 3, 16, 16, generator=torch.Generator().manual_seed(0))
+
+    def plan(view, budget):
+        return SimpleNamespace(view=view, snr_db=0.0, budget_symbols=budget, repetitions=1)
+
+    analog = SCHEMES["analog"]()
+    both = analog.transmit(ctx, [plan(3, 300), plan(7, 200)], images, torch.Generator())
+    alone = analog.transmit(ctx, [plan(7, 200)], images[1:], torch.Generator().manual_seed(9))
+    assert torch.equal(both.images[1], alone.images[0])
+    other = RunContext(SimpleNamespace(seed=6), ctx.links, None, None, None, np.zeros(3))
+    assert not torch.equal(
+        analog.transmit(other, [plan(7, 200)], images[1:], torch.Generator()).images[0],
+        alone.images[0],
+    )
 
 
 def test_results_do_not_depend_on_the_other_schemes(env, tmp_path):
