@@ -47,7 +47,10 @@ class EncodedMeta:
 
     Attributes:
         height, width: original image size in pixels.
-        num_channels: complex channels kept per sent position (m).
+        num_channels: complex channels kept per sent position (m). In focus mode a model
+            whose decoder reads each symbol's reliability also sends channel m + 1 at the
+            box's first ``num_symbols - m * positions`` positions of :func:`centre_first`
+            (the budget's remainder; no side information needed).
         cbr: CBR actually used: num_symbols / (3 * height * width).
         num_symbols: complex symbols per image.
         codec_sha256: hash of the transmitter's codec (knowledge base identity).
@@ -156,6 +159,14 @@ class Codec:
             )
         )
 
+    def _extra_symbols(self, budget: int, m: int, rows: int, cols: int) -> int:
+        """Symbols of channel m + 1 that fill a focus budget's remainder over a box of
+        ``m`` channels: only for models whose decoder reads each symbol's reliability (the
+        positions left out look like erased symbols to it); 0 for the others."""
+        if not self.model.cfg.decoder_reliability or m >= self.model.cfg.num_complex_channels:
+            return 0
+        return budget - m * rows * cols
+
     def _snr(self, snr_db, batch: int) -> Tensor:
         validate_snr_db(snr_db)
         s = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
@@ -214,9 +225,14 @@ class Codec:
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
                 crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
                 xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
+                extra = self._extra_symbols(budget, m, rows, cols)
                 with torch.no_grad():
-                    fc = self.model.encoder(xc, side_info(snr, m, c, b))
-                sym = power_normalize(features_to_symbols(fc, m))
+                    fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
+                sym = features_to_symbols(fc, m)
+                if extra:
+                    part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
+                    sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
+                sym = power_normalize(sym)
             else:  # budget below one channel over the box: the top positions, one channel each
                 m, k = 1, min(budget, hf * wf)
                 positions = select_positions(heat, k)  # [batch, k]
@@ -312,8 +328,17 @@ class Codec:
         with torch.no_grad():
             if meta.crop is not None:
                 t, left, ch, cw = meta.crop
-                z = symbols_to_features(x_hat, m, c, ch // 4, cw // 4)
-                r = reliability_to_features(rel, m, c, ch // 4, cw // 4)
+                rows, cols = ch // 4, cw // 4
+                n = m * rows * cols
+                z = symbols_to_features(x_hat[:, :n], m, c, rows, cols)
+                r = reliability_to_features(rel[:, :n], m, c, rows, cols)
+                if meta.num_symbols > n:  # channel m + 1 at the box's central positions
+                    at = centre_first(rows, cols)[: meta.num_symbols - n]
+                    part = torch.zeros(b, rows * cols, dtype=x_hat.dtype)
+                    part[:, at] = x_hat[:, n:]
+                    z[:, 2 * m : 2 * m + 2] = symbols_to_features(part, 1, 1, rows, cols)
+                    r[:, m].view(b, -1)[:, at] = rel[:, n:]
+                    side = side_info(snr, m + 1, c, b)
                 yc = self.model.decoder(z, side, r)
                 y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
                 y[:, :, t : t + ch, left : left + cw] = yc
@@ -347,6 +372,14 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
 
 BLOCK_PX = 4
 """Pixels per feature position along each axis (the encoder downsamples by 4)."""
+
+
+def centre_first(rows: int, cols: int) -> Tensor:
+    """The positions of a rows x cols box (row-major indices), nearest its centre first
+    (ties in row-major order): where a partial channel goes, known to both ends."""
+    r, c = torch.meshgrid(torch.arange(rows), torch.arange(cols), indexing="ij")
+    d = (2 * r - (rows - 1)) ** 2 + (2 * c - (cols - 1)) ** 2
+    return torch.sort(d.flatten(), stable=True).indices
 
 
 def positions_to_mask(positions, height: int, width: int) -> np.ndarray:

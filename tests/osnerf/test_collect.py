@@ -132,25 +132,34 @@ def test_focus_positions_at_each_oversampling():
 
 
 def test_oversampling_spends_the_saved_symbols_within_the_budget():
-    """An 8 x 8 pixel object in 16 x 16 views: 4 of 16 positions at 1x, 16 of 64 at 2x,
-    so cbr 1/6 * 1/4 both times; symbols = cbr * (s h)(s w) * 3 * repetitions."""
+    """An 8 x 8 pixel object in 16 x 16 views: a quarter of the feature positions at every
+    oversampling s, so the full rate is cbr 1/6 * 1/4 = 1/24 and costs 1/24 * (16 s)^2 * 3
+    symbols per copy: 32, 128, 288 at s = 1, 2, 3; 4 copies in all."""
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0
     reps = np.array([2, 1, 1])
-    at1 = sum(round(1 / 24 * 16 * 16 * 3) * r for r in reps)  # 32 symbols per copy
-    at2 = sum(round(1 / 24 * 32 * 32 * 3) * r for r in reps)  # 128 per copy
-    assert (at1, at2) == (128, 512)
-    scu = SemanticControlUnit(Demand.parse("hydrant"))  # limit: 2/3 of the full scene
-    assert scu.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=768) == 2
-    assert scu.decisions[-1]["symbols_by_oversampling"] == {"2": 512}
-    assert scu.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=767) == 1
-    assert scu.decisions[-1]["symbols_by_oversampling"] == {"1": 128, "2": 512}
+    full = {1: 128, 2: 512, 3: 1152}
+    cbr_range = (1 / 48, 1 / 6)
+    scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, fill >= 1/2
+    # budget 512: s = 3 would get 0.44 of its full rate, s = 2 all of it
+    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=768) == (2, 1.0)
+    assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {"2": 512, "3": 1152}
+    # budget 600: s = 3 at 600 / 1152 of its full rate; the views' CBRs spend the budget
+    s, scale = scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=900)
+    assert (s, scale) == (3, pytest.approx(600 / 1152))
+    cbr = scu.focus_cbr(m, cbr_range, [0, 1, 2], oversampling=s, scale=scale)
+    assert cbr == pytest.approx([600 / 1152 / 24] * 3)
+    assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(600)
+    # budget 200: below half the full rate at s = 2 and 3; s = 1 spends all of it
+    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=300) == (1, 200 / 128)
     one = SemanticControlUnit(
         Demand.parse("hydrant"), rate_policy=RatePolicy(max_object_oversampling=1)
     )
-    assert one.choose_oversampling(m, (1 / 48, 1 / 6), reps, full_scene_symbols=10**6) == 1
+    assert one.choose_oversampling(m, cbr_range, reps, full_scene_symbols=10**6)[0] == 1
     with pytest.raises(ValueError, match="object_budget_fraction must be in"):
         RatePolicy(object_budget_fraction=1.5)
+    with pytest.raises(ValueError, match="min_fill must be in"):
+        RatePolicy(min_fill=0.0)
 
 
 @pytest.mark.parametrize("snr_db", [0.0, 10.0])

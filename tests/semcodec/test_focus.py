@@ -93,3 +93,58 @@ def test_focus_below_one_channel_sends_top_positions(tiny_codec):
     cols = enc.meta.positions[0] % 16
     assert float((cols <= 8).float().mean()) >= 0.75  # chance: 9/16
     assert tiny_codec.decode(enc.symbols, enc.meta, 5.0).shape == x.shape
+
+
+def test_centre_first_orders_a_box_from_its_centre_out():
+    from semcodec.codec import centre_first
+
+    # 3 x 4 box, centre (1, 1.5): the two middle cells, then the four beside them
+    # vertically, then the row ends, then the corners (ties row-major)
+    assert centre_first(3, 4).tolist() == [5, 6, 1, 2, 9, 10, 4, 7, 0, 3, 8, 11]
+
+
+def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
+    """A reliability-aware decoder gets channel m + 1 at the box's central positions (the
+    rest of that channel looks erased to it), so the focus budget is spent to the symbol."""
+    from semcodec import Codec, make_model
+    from semcodec.codec import centre_first
+    from semcodec.model import features_to_symbols, side_info, symbols_to_features
+
+    torch.manual_seed(1)
+    model = make_model("adjscc_s4_w96_rel")
+    codec = Codec(model, {"sha256": "t" * 64, "name": "tiny-v2"})
+    x, mask = _object_scene()
+    cbr, snr = 1 / 16, 5.0
+    budget = round(cbr * 3 * 64 * 64)
+    enc = codec.encode(x, snr, cbr, mask=mask, demand_weights=[1.0])
+    top, left, h, w = enc.meta.crop
+    rows, cols, m = h // 4, w // 4, enc.meta.num_channels
+    n, extra = m * rows * cols, budget - m * rows * cols
+    assert m == budget // (rows * cols) < 8 and extra > 0
+    assert enc.symbols.shape[1] == enc.meta.num_symbols == budget
+    torch.testing.assert_close((enc.symbols.abs() ** 2).mean(), torch.tensor(1.0))
+    # the symbols are the encoder's m + 1 channels of the box, the last at centre_first
+    with torch.no_grad():
+        fc = model.encoder(x[..., top : top + h, left : left + w], side_info(snr, m + 1, 8, 1))
+    raw = torch.cat(
+        [
+            features_to_symbols(fc, m),
+            features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)[:, centre_first(rows, cols)[:extra]],
+        ],
+        1,
+    )
+    k = enc.symbols.abs().pow(2).sum() / raw.abs().pow(2).sum()
+    torch.testing.assert_close(enc.symbols, raw * k.sqrt(), rtol=1e-4, atol=1e-5)
+    # the receiver puts them back there: the same image as the decoder fed by hand
+    y = codec.decode(enc.symbols, enc.meta, snr)
+    rel = 1.0 / (1.0 + 10 ** (-snr / 10))
+    part = torch.zeros(1, rows * cols, dtype=torch.complex64)
+    part[:, centre_first(rows, cols)[:extra]] = enc.symbols[:, n:]
+    z = symbols_to_features(enc.symbols[:, :n] * rel, m, 8, rows, cols)
+    z[:, 2 * m : 2 * m + 2] = symbols_to_features(part * rel, 1, 1, rows, cols)
+    r = torch.zeros(1, 8, rows, cols)
+    r[:, :m] = rel
+    r[:, m].view(1, -1)[:, centre_first(rows, cols)[:extra]] = rel
+    with torch.no_grad():
+        by_hand = model.decoder(z, side_info(snr, m + 1, 8, 1), r).clamp(0, 1)
+    torch.testing.assert_close(y[..., top : top + h, left : left + w], by_hand)
