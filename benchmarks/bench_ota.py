@@ -20,9 +20,9 @@ import phy
 import semcodec
 from osnerf.cli import main as osnerf_main
 from osnerf.commands.ota import load_images
+from osnerf.paths import shared_data_dir
 from renderer import psnr
 
-KODAK = Path(__file__).resolve().parents[2] / "shared" / "data" / "kodak"
 POINTS = ((0.0, (0, 1, 2), 1.5), (-5.0, (0, 1, 2), 2.0), (-10.0, (0, 1), 3.0))
 SIZE, NUM_IMAGES, CBR, DRAWS = 64, 4, "1/16", 16
 
@@ -30,26 +30,26 @@ SIZE, NUM_IMAGES, CBR, DRAWS = 64, 4, "1/16", 16
 def _simulated(codec, images: np.ndarray, snr_db: float) -> np.ndarray:
     """[num_images] mean PSNR over ``DRAWS`` AWGN draws at ``snr_db``."""
     enc = codec.encode(torch.from_numpy(images), snr_db, phy.parse_cbr(CBR))
-    nv = 10.0 ** (-snr_db / 10.0)
+    link = phy.FlatLink(phy.make_channel("awgn"))
     out = []
     for d in range(DRAWS):
-        g = torch.Generator().manual_seed(100 + d)
-        noise = torch.randn(enc.symbols.shape, generator=g, dtype=torch.complex64) * nv**0.5
-        rec = codec.decode(enc.symbols + noise, enc.meta, snr_db).numpy()
+        rx = link(enc.symbols, snr_db, generator=torch.Generator().manual_seed(100 + d))
+        rec = codec.decode(rx.x_hat, enc.meta, snr_db, noise_var=rx.noise_var).numpy()
         out.append([psnr(rec[k], images[k]) for k in range(len(images))])
     return np.mean(out, axis=0)
 
 
 def run(out_dir: Path) -> dict:
     codec = semcodec.load_codec()
-    names, images = load_images(str(KODAK), SIZE, NUM_IMAGES)
+    kodak = shared_data_dir() / "kodak"
+    names, images = load_images(str(kodak), SIZE, NUM_IMAGES)
     rows, met = [], True
     with tempfile.TemporaryDirectory() as tmp:
         for snr, seeds, allowed in POINTS:
             ref = _simulated(codec, images, snr)
             for seed in seeds:
                 path = Path(tmp) / f"ota_{snr:g}_{seed}.json"
-                args = ["ota", "--scheme", "jscc", "--snr-db", f"{snr:g}", "--images", str(KODAK)]
+                args = ["ota", "--scheme", "jscc", "--snr-db", f"{snr:g}", "--images", str(kodak)]
                 args += ["--out", str(path), "--size", str(SIZE), "--cbr", CBR]
                 args += ["--max-images", str(NUM_IMAGES), "--seed", str(seed)]
                 rc = osnerf_main(args)

@@ -218,7 +218,7 @@ class Codec:
                 feat = self.model.encoder(xp, side_info(snr, c, c, b))
             heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
             # feature-grid units; the demanded objects themselves are always in the box
-            objects = demand_positions(mask, demand_weights, tuple(xp.shape[2:]))
+            objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
             top, left, rows, cols = attribution_box(heat, FOCUS_REL_THRESHOLD, objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
             m = min(c, budget // (rows * cols))

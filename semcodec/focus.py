@@ -27,14 +27,8 @@ from semcodec.model import JSCCModel, awgn_reliability, side_info
 PATH_STEPS = (0.25, 0.5, 0.75, 1.0)
 
 
-def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int) -> Tensor:
-    """W = sum_j lambda_j mask_j / sum_j lambda_j: [batch, 1, height, width] float32 in [0, 1].
-
-    Args:
-        mask: [batch, K, height, width], [batch, height, width] or [batch, 1, height, width],
-            values in [0, 1] (tensor or numpy).
-        demand_weights: None (equal), K weights, or [batch, K] (or [batch] when K = 1).
-    """
+def _demand(mask, demand_weights, batch: int, height: int, width: int) -> tuple[Tensor, Tensor]:
+    """The checked demand: (masks [batch, K, height, width] float32, weights [batch, K])."""
     m = torch.as_tensor(
         np.asarray(mask) if not isinstance(mask, Tensor) else mask, dtype=torch.float32
     )
@@ -48,19 +42,30 @@ def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int)
         raise ValueError("mask values must be in [0, 1]")
     k = m.shape[1]
     if demand_weights is None:
-        lam = torch.ones(batch, k)
+        return m, torch.ones(batch, k)
+    lam = torch.as_tensor(np.asarray(demand_weights, dtype=np.float32)).reshape(-1)
+    if lam.numel() == k:
+        lam = lam.reshape(1, k).expand(batch, k)
+    elif lam.numel() == batch * k:
+        lam = lam.reshape(batch, k)
     else:
-        lam = torch.as_tensor(np.asarray(demand_weights, dtype=np.float32)).reshape(-1)
-        if lam.numel() == k:
-            lam = lam.reshape(1, k).expand(batch, k)
-        elif lam.numel() == batch * k:
-            lam = lam.reshape(batch, k)
-        else:
-            raise ValueError(
-                f"demand_weights must have K={k} or batch*K={batch * k} values, got {lam.numel()}"
-            )
-        if not torch.isfinite(lam).all() or (lam < 0).any() or (lam.sum(dim=1) <= 0).any():
-            raise ValueError("demand_weights must be >= 0 with a positive sum per image")
+        raise ValueError(
+            f"demand_weights must have K={k} or batch*K={batch * k} values, got {lam.numel()}"
+        )
+    if not torch.isfinite(lam).all() or (lam < 0).any() or (lam.sum(dim=1) <= 0).any():
+        raise ValueError("demand_weights must be >= 0 with a positive sum per image")
+    return m, lam
+
+
+def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int) -> Tensor:
+    """W = sum_j lambda_j mask_j / sum_j lambda_j: [batch, 1, height, width] float32 in [0, 1].
+
+    Args:
+        mask: [batch, K, height, width], [batch, height, width] or [batch, 1, height, width],
+            values in [0, 1] (tensor or numpy).
+        demand_weights: None (equal), K weights, or [batch, K] (or [batch] when K = 1).
+    """
+    m, lam = _demand(mask, demand_weights, batch, height, width)
     w = (m * lam[:, :, None, None]).sum(dim=1, keepdim=True) / lam.sum(dim=1).reshape(
         batch, 1, 1, 1
     )
@@ -70,26 +75,19 @@ def demand_weight_map(mask, demand_weights, batch: int, height: int, width: int)
     return w
 
 
-def demand_positions(mask, demand_weights, padded: tuple[int, int]) -> Tensor:
-    """[batch, ceil(H / 4), ceil(W / 4)] bool: the feature positions whose 4 x 4 block holds
-    a pixel of a demanded object (mask >= 0.5 of an object with a positive weight).
+def demand_positions(
+    mask, demand_weights, size: tuple[int, int], padded: tuple[int, int]
+) -> Tensor:
+    """[batch, padded H / 4, padded W / 4] bool: the feature positions whose 4 x 4 block
+    holds a pixel of a demanded object (mask >= 0.5 of an object with a positive weight).
 
     Args:
         mask, demand_weights: as :func:`demand_weight_map`.
-        padded: (height, width) of the padded image, multiples of 4.
+        size: (height, width) of the images; padded: their padded size, multiples of 4.
     """
-    m = torch.as_tensor(
-        np.asarray(mask) if not isinstance(mask, Tensor) else mask, dtype=torch.float32
-    )
-    if m.dim() == 3:
-        m = m[:, None]
-    b, k, h, w = m.shape
-    on = torch.ones(b, k, dtype=torch.bool)
-    if demand_weights is not None:
-        lam = torch.as_tensor(np.asarray(demand_weights, dtype=np.float32)).reshape(-1)
-        on = (lam.reshape(1, k) if lam.numel() == k else lam.reshape(b, k)).expand(b, k) > 0
-    obj = ((m >= 0.5) & on[:, :, None, None]).any(dim=1, keepdim=True).float()
-    obj = F.pad(obj, (0, padded[1] - w, 0, padded[0] - h))
+    m, lam = _demand(mask, demand_weights, len(mask), *size)
+    obj = ((m >= 0.5) & (lam > 0)[:, :, None, None]).any(dim=1, keepdim=True).float()
+    obj = F.pad(obj, (0, padded[1] - size[1], 0, padded[0] - size[0]))
     return F.max_pool2d(obj, 4)[:, 0] > 0
 
 

@@ -46,7 +46,7 @@ def test_the_box_keeps_every_position_showing_a_demanded_object():
     mask[0, 0, 3:12, 9:14] = 1.0  # object 0: rows 3..11 -> positions 0..2, cols 9..13 -> 2..3
     mask[0, 0, 4, 20] = 0.4  # a soft edge below half: not the object
     mask[0, 1, 18:22, 0:4] = 1.0  # object 1, weight 0: not demanded
-    pos = demand_positions(mask, [1.0, 0.0], (24, 24))
+    pos = demand_positions(mask, [1.0, 0.0], (22, 24), (24, 24))
     want = torch.zeros(1, 6, 6, dtype=torch.bool)
     want[0, 0:3, 2:4] = True
     assert torch.equal(pos, want)
@@ -55,7 +55,7 @@ def test_the_box_keeps_every_position_showing_a_demanded_object():
     assert attribution_box(heat, 0.05) == (2, 2, 1, 2)
     assert attribution_box(heat, 0.05, pos) == (0, 2, 3, 2)
     # equal weights: both objects are in
-    assert demand_positions(mask, None, (24, 24))[0, 5, 0]
+    assert demand_positions(mask, None, (22, 24), (24, 24))[0, 5, 0]
 
 
 def _object_scene():
