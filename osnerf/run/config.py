@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import phy
 from osnerf.collect import Demand
@@ -144,5 +144,8 @@ class RunConfig:
         """Hash of everything that changes any scheme's results (the cache key). The list of
         schemes is not part of it: each scheme's stages are cached under its own name."""
         d = {k: v for k, v in asdict(self).items() if k != "schemes"}
+        for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
+            if f.type == "float":
+                d[f.name] = float(d[f.name])
         blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]

@@ -173,3 +173,15 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     for name in sch:
         assert again["schemes"][name]["psnr"] == sch[name]["psnr"]
         assert np.isclose(again["schemes"][name]["seconds"]["nerf"], sch[name]["seconds"]["nerf"])
+
+
+def test_cache_key_does_not_depend_on_how_a_number_is_written():
+    """The API takes 60 or 60.0 (the CLI always passes floats): one run, one cache folder,
+    so a run started from the CLI resumes from Python and back; a real change still moves it."""
+    from osnerf.run import RunConfig
+
+    a = RunConfig(snr_db=0, max_seconds=60, lightweight_seconds=0, symbol_rate_hz=1_000_000)
+    b = RunConfig(snr_db=0.0, max_seconds=60.0, lightweight_seconds=0.0, symbol_rate_hz=1e6)
+    assert a.key() == b.key()
+    assert RunConfig(snr_db=1.0).key() != b.key()
+    assert RunConfig(schemes=("jscc",)).key() == RunConfig(schemes=("gt", "jscc")).key()
