@@ -143,7 +143,9 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, fill >= 1/2
     # budget 512: s = 3 would get 0.44 of its full rate, s = 2 all of it
     assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=768) == (2, 1.0)
-    assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {"2": 512, "3": 1152}
+    assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
+        str(k): full[k] for k in (2, 3)
+    }
     # budget 600: s = 3 at 600 / 1152 of its full rate; the views' CBRs spend the budget
     s, scale = scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=900)
     assert (s, scale) == (3, pytest.approx(600 / 1152))
@@ -152,6 +154,9 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(600)
     # budget 200: below half the full rate at s = 2 and 3; s = 1 spends all of it
     assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=300) == (1, 200 / 128)
+    assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
+        str(k): v for k, v in full.items()
+    }
     one = SemanticControlUnit(
         Demand.parse("hydrant"), rate_policy=RatePolicy(max_object_oversampling=1)
     )
