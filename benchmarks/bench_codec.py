@@ -7,7 +7,8 @@
   rayleigh_fast) x SNR 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
   checkpoint), digital (honest: MCS from the calibration table), digital_genie and ideal
   (bounds), mean and 95 % interval, with the published anchors beside each row and checks
-  (jscc above digital, genie never below digital).
+  (jscc above digital, genie never below digital); the same on other photos (BSDS500's
+  test split, block fading: :data:`OTHER_PHOTOS`).
 * On-demand focus on nerf_synthetic lego views (alpha = object mask): object-region PSNR
   at equal symbols and symbols saved.
 
@@ -87,6 +88,10 @@ ANCHORS = {
 }
 CHANNELS = (("awgn", 1), ("rayleigh", 4), ("rayleigh_fast", 1))
 """(channel, draws per image) of the codec table."""
+OTHER_PHOTOS = ("bsds500/test", (("rayleigh", 4),))
+"""Photos other than Kodak (a folder of the shared data, its channels): block fading, where
+the honest digital link must be beaten on more than one image set. Read for evaluation
+only (BSDS500 is the codec's training source: its test split was never trained on)."""
 TABLE_SNRS = (1.0, 4.0, 10.0)
 SEPARATE = ("digital", "digital_genie", "ideal")
 
@@ -109,16 +114,20 @@ def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
     return doc
 
 
-def _codec_table(out_dir: Path) -> dict:
-    """Kodak x channels x SNR: jscc (each checkpoint), digital, digital_genie, ideal, with the
-    anchors beside each row."""
+def _codec_table(
+    out_dir: Path, folder: str | None = None, channels=CHANNELS, prefix: str = ""
+) -> dict:
+    """Images x channels x SNR (default Kodak and :data:`CHANNELS`): jscc (each checkpoint),
+    digital, digital_genie, ideal, with the anchors beside each row. ``prefix`` keeps the
+    eval-codec result files of another image set apart."""
     from osnerf.paths import shared_data_dir
     from semcodec import load_codec
 
     n = int(os.environ.get("OSNERF_BENCH_CODEC_IMAGES", "24"))
     ckpts = [p for p in os.environ.get("OSNERF_BENCH_CODEC_CHECKPOINTS", "").split(os.pathsep) if p]
     ckpts = ckpts or [None]
-    folder = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
+    if folder is None:
+        folder = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
     only = os.environ.get("OSNERF_BENCH_CODEC_ONLY")  # "jscc" or "separate": one half
     common = [
         "--images",
@@ -137,14 +146,18 @@ def _codec_table(out_dir: Path) -> dict:
     rows: dict = {}
     codecs = {}
     pick = [c for c in os.environ.get("OSNERF_BENCH_CODEC_CHANNELS", "").split(",") if c]
-    for channel, draws in CHANNELS:
+    for channel, draws in channels:
         if pick and channel not in pick:
             continue
         base = [*common, "--channel", channel, "--draws", str(draws)]
         docs = []
         if only != "jscc":
             docs.append(
-                _eval(out_dir, f"{channel}_separate", [*base, "--schemes", ",".join(SEPARATE)])
+                _eval(
+                    out_dir,
+                    f"{prefix}{channel}_separate",
+                    [*base, "--schemes", ",".join(SEPARATE)],
+                )
             )
         if only != "separate":
             for ck in ckpts:
@@ -152,7 +165,7 @@ def _codec_table(out_dir: Path) -> dict:
                 label = f"jscc[{codec.name}]"
                 codecs[label] = {"path": ck or "shipped default", "sha256": codec.sha256}
                 args = [*base, "--schemes", "jscc"] + (["--checkpoint", ck] if ck else [])
-                doc = _eval(out_dir, f"{channel}_jscc_{codec.sha256[:12]}", args)
+                doc = _eval(out_dir, f"{prefix}{channel}_jscc_{codec.sha256[:12]}", args)
                 for r in doc["results"]:
                     r["scheme"] = label
                 docs.append(doc)
@@ -171,7 +184,7 @@ def _codec_table(out_dir: Path) -> dict:
                     **({"bound": r["bound"]} if r.get("bound") else {}),
                 }
     table = sorted(
-        rows.values(), key=lambda r: ([c for c, _ in CHANNELS].index(r["channel"]), r["snr_db"])
+        rows.values(), key=lambda r: ([c for c, _ in channels].index(r["channel"]), r["snr_db"])
     )
     for row in table:
         row["anchors"] = {
@@ -258,9 +271,15 @@ def run(out_dir: Path) -> dict:
     torch.set_num_threads(min(2, os.cpu_count() or 1))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    from osnerf.paths import shared_data_dir
+
     codec = load_codec()
+    other, other_channels = OTHER_PHOTOS
     return {
         "speed": _speed(codec),
         "focus": _focus(codec),
         "codec_table": _codec_table(out_dir),
+        "codec_table_other_photos": _codec_table(
+            out_dir, str(shared_data_dir() / other), other_channels, prefix="other_"
+        ),
     }
