@@ -4,6 +4,7 @@ rays and whole views; saving and loading."""
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import torch
@@ -191,6 +192,11 @@ def load_model(path) -> RadianceField:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: model file not found")
+    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive
+        raise ValueError(
+            f"{path}: not a readable model file (not an archive written by torch.save: "
+            "another kind of file, or corrupt or truncated)"
+        )
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file

@@ -99,7 +99,9 @@ def _path_poses(path: Path):
         poses = torch.tensor([f["transform_matrix"] for f in frames], dtype=torch.float32)
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"--path {path}: needs frames[].transform_matrix (4x4 each)") from e
-    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
+    if len(frames) == 0:
+        raise ValueError(f"--path {path}: no frames to render (frames[] is empty)")
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
         raise ValueError(f"--path {path}: frames[].transform_matrix must be 4x4 matrices")
     for i, pose in enumerate(poses):
         problem = pose_problem(pose)

@@ -263,11 +263,12 @@ def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, caps
     fails(["--path", str(no_frames)], "frames")
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"frames": []}))
-    fails(["--path", str(empty)], "frames")
+    fails(["--path", str(empty)], "no frames to render")
     not_a_field = tmp_path / "model.pt"
     not_a_field.write_bytes(b"this is not a radiance field")
     out = tmp_path / "never"
     assert main(["render", "--run", str(not_a_field), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "not a readable model file" in err and len(err.strip().splitlines()) == 1
+    assert "not an archive written by torch.save" in err  # not PyTorch's own (cut) text
     assert not out.exists()
