@@ -197,8 +197,10 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
     """Each view through the semantic codec and its link (unbiased receiver, MRC of copies).
 
     On demand (focus mode) each view and its object masks are upsampled by the plan's
-    oversampling s before encoding and the decoded image averaged back over s x s pixels;
-    outside the sent box the receiver shows the background.
+    oversampling s before encoding; outside the sent box the receiver shows the background,
+    composited at the decoded resolution and then averaged back over s x s pixels (a box
+    edge need not fall on the view's pixel grid: averaging first would mix the decoder's
+    output for the erased positions into the edge pixels, a dark frame around every box).
     """
     from semcodec import receiver_mask
 
@@ -233,19 +235,17 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
         with torch.no_grad():  # the average SNR after combining; per-symbol noise in nv
             img = rx.decode(
                 x_hat, enc.meta, p.encoder_snr_db, expected_sha256=codec.sha256, noise_var=nv
-            )
+            )[0]
+            m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
+            if m is not None:
+                mt = torch.from_numpy(m)[None]
+                img = img * mt + bg * (1.0 - mt)
             if s_up > 1:
-                img = F.avg_pool2d(img, s_up)
+                img = F.avg_pool2d(img[None], s_up)[0]
         sec["decode"] += time.perf_counter() - t
         sec["decode_cpu"] += time.process_time() - c
-        img = img[0]
-        m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
-        if m is not None:
-            if s_up > 1:
-                m = m.reshape(h, s_up, w, s_up).max(axis=(1, 3))
-            rx_masks.append(m)
-            mt = torch.from_numpy(m)[None]
-            img = img * mt + bg * (1.0 - mt)
+        if m is not None:  # the pixels holding anything that was sent
+            rx_masks.append(m.reshape(h, s_up, w, s_up).max(axis=(1, 3)) if s_up > 1 else m)
         out.append(img)
         symbols.append(p.repetitions * int(enc.symbols.shape[-1]))
         side.append(int(enc.meta.side_info_bits()))

@@ -158,3 +158,51 @@ def test_no_scheme_name_is_dispatched_by_string_outside_the_table():
         if pattern.search(line)
     ]
     assert not offenders, offenders
+
+
+def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(env):
+    """Oversampled 3x, a box edge (16 px feature positions at 3x = 5.33 view pixels) falls
+    inside view pixels. The receiver shows the background outside the box at the decoded
+    resolution and then averages 3 x 3 pixels: with the decoder's output black everywhere
+    and a white background, each view pixel is exactly the share of its 9 decoded pixels
+    outside the box. (Averaging first gave those edge pixels the decoder's output for the
+    erased positions: a dark frame around every box, which the NeRF had to explain.)"""
+    import semcodec
+    from semcodec import receiver_mask
+
+    codec = semcodec.load_codec(env["codec"])
+    seen = {}
+    encode = codec.encode
+
+    def spy_encode(x, *args, **kwargs):
+        seen["hw"] = x.shape[-2:]
+        enc = encode(x, *args, **kwargs)
+        seen["meta"] = enc.meta
+        return enc
+
+    codec.encode = spy_encode
+    codec.decode = lambda x_hat, meta, snr, **kw: torch.zeros(1, 3, *seen["hw"])
+    h = w = 64
+    objects = torch.zeros(1, 1, h, w)
+    objects[:, :, 25:39, 27:37] = 1.0
+    ctx = RunContext(
+        SimpleNamespace(seed=0),
+        {0: phy.FlatLink(phy.CHANNELS["awgn"]())},
+        SimpleNamespace(oversampling=3),
+        codec,
+        codec,
+        np.ones(3, np.float32),
+        (objects, [1.0]),
+    )
+    plan = SimpleNamespace(
+        view=0, snr_db=20.0, encoder_snr_db=20.0, focus_cbr=1 / 12, repetitions=1
+    )
+    noise = torch.rand(1, 3, h, w, generator=torch.Generator().manual_seed(0))
+    images = objects * noise + (1 - objects)  # the object on the white background, as sent
+    tx = SCHEMES["jscc"]().transmit(ctx, [plan], images, torch.Generator())
+    box = receiver_mask(seen["meta"], 3 * h, 3 * w)  # at the decoded resolution
+    inside = box.reshape(h, 3, w, 3).mean(axis=(1, 3))
+    assert 0 < inside.sum() < h * w and ((inside > 0) & (inside < 1)).any()  # edges cut pixels
+    for c in range(3):
+        assert np.allclose(tx.images[0, c].numpy(), 1.0 - inside, atol=1e-6)
+    assert np.array_equal(tx.rx_masks[0], (inside > 0).astype(tx.rx_masks.dtype))
