@@ -321,9 +321,11 @@ def test_inference_reads_of_vertex_rows_equal_the_training_reads_and_follow_upda
     assert torch.allclose(after, want, atol=1e-6)
 
 
-def test_occupancy_along_rays_equals_the_query_of_the_points():
-    """The sampler's cell-unit test (query_along) keeps exactly the points query keeps,
-    with and without the promise that every point lies in the box."""
+def test_occupancy_along_rays_equals_a_lookup_by_hand():
+    """The sampler's cell-unit test (query_along) keeps exactly the points whose cell,
+    found by hand in world units (floor of the position over the cell size, nothing
+    outside the box), is occupied, with and without the promise that every point lies in
+    the box; ``query`` (which is built on it) agrees."""
     g = torch.Generator().manual_seed(2)
     occ = OccupancyGrid(AABB, (6, 5, 7))
     occ.occupied = torch.rand(occ.occupied.shape, generator=g) > 0.6
@@ -332,8 +334,17 @@ def test_occupancy_along_rays_equals_the_query_of_the_points():
     ray = torch.randint(0, 40, (4000,), generator=g)
     t = torch.rand(4000, generator=g) * 6
     pts = o[ray] + t[:, None] * d[ray]
-    want = occ.query(pts).nonzero()[:, 0]
+    nx, ny, nz = occ.cells
+    size = torch.tensor([nx, ny, nz], dtype=torch.float32)
+    rel = (pts - AABB[0]) / (AABB[1] - AABB[0]) * size  # cell units, x y z
+    in_box = ((rel >= 0) & (rel < size)).all(-1)
+    cell = rel.floor().long().clamp(min=0)
+    cell = torch.minimum(cell, size.long() - 1)
+    hit = in_box & occ.occupied[cell[:, 2], cell[:, 1], cell[:, 0]]
+    want = hit.nonzero()[:, 0]
+    assert 0 < want.numel() < in_box.sum()  # some points in occupied cells, some in empty
     assert torch.equal(occ.query_along(o, d, ray, t, inside_only=False), want)
+    assert torch.equal(occ.query(pts).nonzero()[:, 0], want)
     inside = (pts.abs() < 0.999).all(-1)  # away from the faces, where rounding may differ
     sub = inside.nonzero()[:, 0]
     got = occ.query_along(o, d, ray[sub], t[sub], inside_only=True)
