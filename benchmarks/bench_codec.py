@@ -115,19 +115,19 @@ def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
 
 
 def _codec_table(
-    out_dir: Path, folder: str | None = None, channels=CHANNELS, prefix: str = ""
+    out_dir: Path, photos: str | None = None, channels=CHANNELS, prefix: str = ""
 ) -> dict:
     """Images x channels x SNR (default Kodak and :data:`CHANNELS`): jscc (each checkpoint),
-    digital, digital_genie, ideal, with the anchors beside each row. ``prefix`` keeps the
-    eval-codec result files of another image set apart."""
+    digital, digital_genie, ideal, with the anchors beside each row. ``photos``: a folder
+    of the shared data instead; ``prefix`` keeps its eval-codec result files apart."""
     from osnerf.paths import shared_data_dir
     from semcodec import load_codec
 
     n = int(os.environ.get("OSNERF_BENCH_CODEC_IMAGES", "24"))
     ckpts = [p for p in os.environ.get("OSNERF_BENCH_CODEC_CHECKPOINTS", "").split(os.pathsep) if p]
     ckpts = ckpts or [None]
-    if folder is None:
-        folder = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
+    default = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
+    folder = str(shared_data_dir() / photos) if photos else default
     only = os.environ.get("OSNERF_BENCH_CODEC_ONLY")  # "jscc" or "separate": one half
     common = [
         "--images",
@@ -271,15 +271,11 @@ def run(out_dir: Path) -> dict:
     torch.set_num_threads(min(2, os.cpu_count() or 1))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    from osnerf.paths import shared_data_dir
-
     codec = load_codec()
     other, other_channels = OTHER_PHOTOS
     return {
         "speed": _speed(codec),
         "focus": _focus(codec),
         "codec_table": _codec_table(out_dir),
-        "codec_table_other_photos": _codec_table(
-            out_dir, str(shared_data_dir() / other), other_channels, prefix="other_"
-        ),
+        "codec_table_other_photos": _codec_table(out_dir, other, other_channels, "other_"),
     }

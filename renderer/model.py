@@ -192,14 +192,14 @@ def load_model(path) -> RadianceField:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: model file not found")
-    if not zipfile.is_zipfile(path):  # torch.save writes a zip archive
-        raise ValueError(
-            f"{path}: not a readable model file (not an archive written by torch.save: "
-            "another kind of file, or corrupt or truncated)"
-        )
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - torch raises many kinds for a bad file
+        if not zipfile.is_zipfile(path):  # what torch.save writes: say so, not torch's text
+            raise ValueError(
+                f"{path}: not a readable model file (not an archive written by torch.save: "
+                "another kind of file, or corrupt or truncated)"
+            ) from None
         first = (str(e).strip().splitlines() or [type(e).__name__])[0]
         raise ValueError(
             f"{path}: not a readable model file (corrupt or truncated? {type(e).__name__}: "
