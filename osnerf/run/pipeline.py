@@ -26,7 +26,13 @@ from osnerf.run.links import RunLinks, build_links
 from osnerf.run.reconstruct import Reconstruction, received_dataset, reconstruct, view_metrics
 from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
 from osnerf.schemes import RunContext, Scheme, Transmission, get_scheme, scheme_seed
-from osnerf.scu import RatePolicy, RunPlan, SemanticControlUnit, measure_snr_db
+from osnerf.scu import (
+    RatePolicy,
+    RunPlan,
+    SemanticControlUnit,
+    measure_copy_fading,
+    measure_snr_db,
+)
 
 METRIC_NOTES = (
     "psnr/ssim/lpips: mean over held-out views of per-view values on the whole view "
@@ -90,11 +96,16 @@ def plan_views(
         )
     col = col.subset(np.isin(col.indices, sent))
     cached = cache.load("plan")
-    if cached is not None:
+    if cached is not None:  # a resumed run reports the plan's decisions as the first did
+        prep.scu.decisions.extend(cached[1].get("decisions", []))
         return RunPlan.from_dict(cached[1]), col
+    logged = len(prep.scu.decisions)
     whole = [int(v) for v in col.candidates if int(v) not in links.outage]
     gen = torch.Generator().manual_seed(scheme_seed(cfg.seed, "scu", "measure"))
     measured = measure_snr_db(
+        [links.links[v] for v in whole], [links.snr_db[v] for v in whole], gen
+    )
+    fading = measure_copy_fading(
         [links.links[v] for v in whole], [links.snr_db[v] for v in whole], gen
     )
     codec = prep.codec
@@ -109,8 +120,9 @@ def plan_views(
         tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
         views.intrinsics.height,
         views.intrinsics.width,
+        copy_fading=fading,
     )
-    cache.save("plan", {}, plan.to_dict())
+    cache.save("plan", {}, {**plan.to_dict(), "decisions": prep.scu.decisions[logged:]})
     return plan, col
 
 
@@ -322,6 +334,7 @@ def views_summary(plan: RunPlan, col: Collection) -> dict:
         "cbr": {str(p.view): p.cbr for p in whole},
         "cbr_on_demand": {str(p.view): p.focus_cbr for p in sent},
         "repetitions": {str(p.view): p.repetitions for p in whole},
+        "repetitions_on_demand": {str(p.view): p.focus_repetitions for p in sent},
         "object_oversampling": plan.oversampling,
         "full_scene_symbols": plan.full_scene_symbols,
         "plan": [asdict(p) for p in plan.views],

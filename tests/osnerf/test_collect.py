@@ -10,11 +10,13 @@ import phy
 from osnerf.collect import CollectorConfig, Demand, collect, masked_images
 from osnerf.scenes import SceneViews, intrinsics_from_fov
 from osnerf.scu import (
+    CopyFading,
     KnowledgeBaseError,
     RatePolicy,
     SemanticControlUnit,
     focus_coverage,
     focus_pixel_masks,
+    measure_copy_fading,
     measure_snr_db,
 )
 
@@ -165,6 +167,65 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
         RatePolicy(object_budget_fraction=1.5)
     with pytest.raises(ValueError, match="min_fill must be in"):
         RatePolicy(min_fill=0.0)
+
+
+class StaticMultipathLink:
+    """A static 3-tap channel seen through OFDM: symbol k sits on subcarrier k mod 64, whose
+    gain |H_k|^2 is the same in every block; the receiver's noise variance carries a 10 %
+    estimation error, drawn per block."""
+
+    def __init__(self):
+        h = np.fft.fft(np.array([1.0, 0, 0.4, 0, 0, 0.2j]), 64)
+        self.gain = torch.from_numpy(np.abs(h) ** 2 / np.mean(np.abs(h) ** 2)).float()
+
+    def __call__(self, x, snr_db, generator=None):
+        g = self.gain.repeat(x.shape[-1] // 64 + 1)[: x.shape[-1]].expand(x.shape[0], -1)
+        nv = 10 ** (-snr_db / 10) / g
+        nv = nv * (1 + 0.1 * torch.randn(x.shape, generator=generator)).clamp_min(0.5)
+        noise = torch.complex(*torch.randn((2, *x.shape), generator=generator)) * (nv / 2).sqrt()
+        return phy.LinkOutput(x + noise, nv.float())
+
+
+def test_copy_fading_tells_independent_fades_from_a_static_channel():
+    """Pilot copies: AWGN has no fades (spread 0); block Rayleigh fades each copy on its own
+    (the dB spread of an exponential |h|^2 is 10/ln10 * pi/sqrt(6) = 5.57 dB, a little less
+    about each view's mean of 8 blocks; the copies uncorrelated); a static multipath channel
+    fades its subcarriers by the same amount in both copies."""
+    gen = torch.Generator().manual_seed(3)
+    policy = RatePolicy()
+    awgn = measure_copy_fading([phy.FlatLink(phy.make_channel("awgn"))] * 4, [0.0] * 4, gen)
+    assert awgn.spread_db == pytest.approx(0.0, abs=1e-6) and not awgn.independent(policy)
+    block = phy.FlatLink(phy.make_channel("rayleigh"), csi="perfect", equalizer="zf")
+    ray = measure_copy_fading([block] * 24, [0.0] * 24, gen)
+    assert 4.0 < ray.spread_db < 6.5 and abs(ray.correlation) < 0.35
+    assert ray.independent(policy)
+    static = measure_copy_fading([StaticMultipathLink()] * 4, [0.0] * 4, gen)
+    assert static.spread_db > 1.5 and static.correlation > 0.9
+    assert not static.independent(policy)
+    with pytest.raises(ValueError, match="max_copy_correlation must be in"):
+        RatePolicy(max_copy_correlation=2.0)
+
+
+def test_on_demand_copies_only_where_they_fade_independently():
+    """The same 8 x 8 object as above in 3 views, each sent twice as a whole view; one copy
+    of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 720 (2/3
+    of 1080): with independent fades the copies stay (s = 3 would fill 720 / 1728 < 1/2 of
+    its full rate, so s = 2 at 720 / 768); on a static channel one copy each buys s = 3 at
+    720 / 864. A budget beyond 864 (one copy at s = 3 cannot take it) keeps the copies."""
+    m = np.zeros((3, 16, 16), np.float32)
+    m[:, 4:12, 4:12] = 1.0
+    reps = np.array([2, 2, 2])
+    cbr_range = (1 / 48, 1 / 6)
+    scu = SemanticControlUnit(Demand.parse("hydrant"))
+    fading, static = CopyFading(5.0, 0.0), CopyFading(3.0, 0.9)
+    kept = scu.choose_focus_repetitions(m, cbr_range, reps, 1080, fading)
+    assert kept.tolist() == [2, 2, 2]
+    assert scu.choose_oversampling(m, cbr_range, kept, 1080) == (2, pytest.approx(720 / 768))
+    one = scu.choose_focus_repetitions(m, cbr_range, reps, 1080, static)
+    assert one.tolist() == [1, 1, 1] and "spend the budget as rate" in scu.decisions[-1]["decision"]
+    assert scu.choose_oversampling(m, cbr_range, one, 1080) == (3, pytest.approx(720 / 864))
+    big = scu.choose_focus_repetitions(m, cbr_range, reps, 1350, static)  # 900 > 864
+    assert big.tolist() == [2, 2, 2] and "cannot take" in scu.decisions[-1]["decision"]
 
 
 @pytest.mark.parametrize("snr_db", [0.0, 10.0])

@@ -170,6 +170,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     assert _run(env, out, *args) == 0
     again = json.loads((out / "report.json").read_text())
     assert [p.stat().st_mtime_ns for p in caches] == stamps
+    assert again["scu_decisions"] == report["scu_decisions"]  # the cached plan's too
     for name in sch:
         assert again["schemes"][name]["psnr"] == sch[name]["psnr"]
         assert np.isclose(again["schemes"][name]["seconds"]["nerf"], sch[name]["seconds"]["nerf"])
