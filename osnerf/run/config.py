@@ -145,7 +145,7 @@ class RunConfig:
         schemes is not part of it: each scheme's stages are cached under its own name."""
         d = {k: v for k, v in asdict(self).items() if k != "schemes"}
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
-            if f.type == "float":
+            if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])
         blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
