@@ -39,8 +39,9 @@ class ViewPlan:
             every object-routed scheme gets the same budget.
         full_symbols: whole-view symbols incl. repetitions.
         outage: no propagation path: never sent.
-        focus_repetitions: copies of the on-demand block (``repetitions`` when the copies
-            fade independently, else 1: the budget is spent as rate); None when not on demand.
+        focus_repetitions: copies of the on-demand block (``repetitions`` where the copies
+            fade independently or the SNR is very low, else 1: the budget is spent as rate;
+            :meth:`SemanticControlUnit.choose_focus_repetitions`); None when not on demand.
         focus_encoder_snr_db: ``encoder_snr_db`` for ``focus_repetitions`` copies.
     """
 
@@ -162,8 +163,15 @@ class RatePolicy:
     view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""
     max_copy_correlation: float = 0.5
     """... and where the two copies' per-symbol SNR deviations correlate less than this (a
-    static multipath channel repeats its frequency fades in every copy: about 0.87 between
-    emulated HackRFs; block, fast and TDL fading about 0)."""
+    static multipath channel repeats its frequency fades in every copy: 0.87 between the
+    emulated HackRFs at 0 dB, 0.67 at -5 dB; block, fast and TDL fading about 0). At -10 dB
+    over the air the receiver's channel estimates are noisy enough to decorrelate the
+    copies' reported reliabilities (0.36), and the copies are kept."""
+    static_repeat_below_db: float = -5.0
+    """Where copies do not fade independently, views measured below this still send copies:
+    near the bottom of the codec's SNR range 3 dB of SNR is worth more than the rate (tiny
+    scene over the air, received object PSNR, two copies at s = 2 against one at s = 3:
+    0 dB -0.20 / -0.08 (seeds 0 / 1), -5 dB +0.02, -10 dB +0.32)."""
     max_object_oversampling: int = 3
     """Largest factor s by which the demanded objects are upsampled before encoding (s^2 times
     the feature positions), >= 1."""
@@ -354,18 +362,21 @@ class SemanticControlUnit:
         masks: np.ndarray,
         cbr_range: tuple[float, float],
         repetitions: np.ndarray,
+        measured_snr_db: np.ndarray,
         full_scene_symbols: int,
         copy_fading: CopyFading,
         block_px: int = BLOCK_PX,
     ) -> np.ndarray:
         """Copies of each on-demand view's block: its whole-view ``repetitions`` where copies
-        fade independently (diversity), else one copy and the budget spent as rate, unless
-        even the largest oversampling at every channel cannot take the budget in one copy
+        fade independently (diversity) or its measured SNR is below
+        ``rate_policy.static_repeat_below_db``; elsewhere one copy, the budget spent as
+        rate, unless the largest oversampling at every channel cannot take the budget so
         (logged).
 
         Args:
             masks: [num_views, height, width] union masks of the on-demand views.
             repetitions: [num_views] whole-view copies of each on-demand view.
+            measured_snr_db: [num_views] their measured SNRs.
         """
         pol = self.rate_policy
         reps = np.asarray(repetitions, np.int64)
@@ -375,25 +386,26 @@ class SemanticControlUnit:
         if copy_fading.independent(pol):
             self.log("rate", "on-demand copies fade independently: send copies", **details)
             return reps
-        one = np.ones_like(reps)
+        out = np.where(np.asarray(measured_snr_db) < pol.static_repeat_below_db, reps, 1)
         s = pol.max_object_oversampling
         budget = pol.object_budget_fraction * full_scene_symbols
-        if budget > full_rate_symbols(masks, cbr_range, one, s, block_px):
+        if budget > full_rate_symbols(masks, cbr_range, out, s, block_px):
             self.log(
                 "rate",
-                f"copies do not fade independently, but one copy at {s}x cannot take the "
+                f"copies do not fade independently, but fewer copies at {s}x cannot take the "
                 "on-demand budget: send copies",
                 **details,
             )
             return reps
         self.log(
             "rate",
-            "copies do not fade independently (spread "
-            f"{copy_fading.spread_db:.1f} dB, correlation {copy_fading.correlation:.2f}): "
-            "send one copy of each on-demand view and spend the budget as rate",
+            f"copies do not fade independently (spread {copy_fading.spread_db:.1f} dB, "
+            f"correlation {copy_fading.correlation:.2f}): one copy of the "
+            f"{int(np.sum((out == 1) & (reps > 1)))} on-demand views measured at or above "
+            f"{pol.static_repeat_below_db:g} dB, the budget spent as rate",
             **details,
         )
-        return one
+        return out
 
     def choose_repetitions(self, measured_snr_db: np.ndarray, views) -> np.ndarray:
         """Copies of each view's block: 2 below ``rate_policy.repeat_below_db``, else 1 (logged)."""
@@ -456,7 +468,12 @@ class SemanticControlUnit:
         reps = dict(zip(whole, self.choose_repetitions(meas, whole)))
         full = {v: int(round(cbrs[v] * height * width * 3)) * int(reps[v]) for v in whole}
         focus_reps = self.choose_focus_repetitions(
-            masks, cbr_range, np.asarray([reps[v] for v in sent]), sum(full.values()), copy_fading
+            masks,
+            cbr_range,
+            np.asarray([reps[v] for v in sent]),
+            np.asarray([measured_snr_db[v] for v in sent]),
+            sum(full.values()),
+            copy_fading,
         )
         focus_reps = dict(zip(sent, focus_reps.tolist()))
         s, scale = self.choose_oversampling(

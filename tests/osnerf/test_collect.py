@@ -211,20 +211,24 @@ def test_on_demand_copies_only_where_they_fade_independently():
     of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 720 (2/3
     of 1080): with independent fades the copies stay (s = 3 would fill 720 / 1728 < 1/2 of
     its full rate, so s = 2 at 720 / 768); on a static channel one copy each buys s = 3 at
-    720 / 864. A budget beyond 864 (one copy at s = 3 cannot take it) keeps the copies."""
+    720 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
+    budget one copy at s = 3 cannot take (beyond 864) keeps them all."""
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0
     reps = np.array([2, 2, 2])
+    snr = np.array([0.0, -1.0, 2.0])
     cbr_range = (1 / 48, 1 / 6)
     scu = SemanticControlUnit(Demand.parse("hydrant"))
     fading, static = CopyFading(5.0, 0.0), CopyFading(3.0, 0.9)
-    kept = scu.choose_focus_repetitions(m, cbr_range, reps, 1080, fading)
+    kept = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1080, fading)
     assert kept.tolist() == [2, 2, 2]
     assert scu.choose_oversampling(m, cbr_range, kept, 1080) == (2, pytest.approx(720 / 768))
-    one = scu.choose_focus_repetitions(m, cbr_range, reps, 1080, static)
-    assert one.tolist() == [1, 1, 1] and "spend the budget as rate" in scu.decisions[-1]["decision"]
+    one = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1080, static)
+    assert one.tolist() == [1, 1, 1] and "spent as rate" in scu.decisions[-1]["decision"]
     assert scu.choose_oversampling(m, cbr_range, one, 1080) == (3, pytest.approx(720 / 864))
-    big = scu.choose_focus_repetitions(m, cbr_range, reps, 1350, static)  # 900 > 864
+    low = scu.choose_focus_repetitions(m, cbr_range, reps, np.array([0.0, -7.0, 2.0]), 1080, static)
+    assert low.tolist() == [1, 2, 1]  # 288 * 4 = 1152 at s = 3 takes the 720
+    big = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1350, static)  # 900 > 864
     assert big.tolist() == [2, 2, 2] and "cannot take" in scu.decisions[-1]["decision"]
 
 
