@@ -464,6 +464,13 @@ class SemanticControlUnit:
         whole = [int(v) for v in candidates if int(v) not in outage]
         sent = [int(v) for v in on_demand if int(v) not in outage]
         meas = np.asarray([measured_snr_db[v] for v in whole])
+        self.log(
+            "link",
+            f"pilot copies: per-symbol SNR spread {copy_fading.spread_db:.2f} dB, correlation "
+            f"between copies {copy_fading.correlation:.2f}",
+            spread_db=copy_fading.spread_db,
+            correlation=copy_fading.correlation,
+        )
         cbrs = dict(zip(whole, self.choose_cbr(meas, cbr_range, whole)))
         reps = dict(zip(whole, self.choose_repetitions(meas, whole)))
         full = {v: int(round(cbrs[v] * height * width * 3)) * int(reps[v]) for v in whole}
@@ -597,6 +604,12 @@ def focus_pixel_masks(
     return px.reshape(n, h, oversampling, w, oversampling).any((2, 4)).astype(np.float32)
 
 
+def qpsk_pilots(num_blocks: int, num_pilots: int, generator: torch.Generator) -> torch.Tensor:
+    """[num_blocks, num_pilots] unit-power QPSK symbols, complex64."""
+    bits = torch.randint(0, 2, (num_blocks, num_pilots, 2), generator=generator)
+    return ((1 - 2 * bits[..., 0]) + 1j * (1 - 2 * bits[..., 1])).to(torch.complex64) / math.sqrt(2)
+
+
 def measure_snr_db(
     links, snr_db, generator: torch.Generator, num_pilots: int = 256, num_blocks: int = 8
 ) -> np.ndarray:
@@ -617,10 +630,7 @@ def measure_snr_db(
     """
     out = []
     for link, s in zip(links, snr_db):
-        bits = torch.randint(0, 2, (num_blocks, num_pilots, 2), generator=generator)
-        x = ((1 - 2 * bits[..., 0]) + 1j * (1 - 2 * bits[..., 1])).to(torch.complex64) / math.sqrt(
-            2
-        )
+        x = qpsk_pilots(num_blocks, num_pilots, generator)
         y = link(x, float(s), generator=generator)
         z = y.x_hat / (1.0 + y.noise_var.clamp(0.0, 1e6))  # LMMSE
         g = (x.conj() * z).sum(-1, keepdim=True) / (x.abs() ** 2).sum(
@@ -646,12 +656,9 @@ def measure_copy_fading(
     """
     first, second = [], []
     for link, s in zip(links, snr_db):
-        bits = torch.randint(0, 2, (num_pairs, num_pilots, 2), generator=generator)
-        x = ((1 - 2 * bits[..., 0]) + 1j * (1 - 2 * bits[..., 1])).to(torch.complex64) / math.sqrt(
-            2
-        )
+        x = qpsk_pilots(num_pairs, num_pilots, generator)
         y = link(x.repeat_interleave(2, dim=0), float(s), generator=generator)
-        db = -10.0 * torch.log10(y.noise_var.double().clamp_min(1e-12))
+        db = -10.0 * torch.log10(y.noise_var.double().clamp(1e-12, 1e12))
         db = db - db.mean()
         first.append(db[0::2].flatten())
         second.append(db[1::2].flatten())
