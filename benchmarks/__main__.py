@@ -9,7 +9,7 @@ import time
 import traceback
 from pathlib import Path
 
-from osnerf import result_header, tune_malloc, write_json_atomic
+from osnerf import git_commit, result_header, tune_malloc, write_json_atomic
 
 HERE = Path(__file__).resolve().parent
 
@@ -28,6 +28,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     out = Path(args.out)
     malloc_tuned = tune_malloc()
+    git_commit()  # read once, now: results name the code the benchmarks started with (cached)
     failed = []
     for name in args.names or names:
         print(f"== benchmark {name}", file=sys.stderr)

@@ -13,6 +13,7 @@ import importlib
 import re
 import sys
 
+from osnerf.provenance import git_commit
 from osnerf.runtime import tune_malloc
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
@@ -85,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(e.code or 0)
     module = importlib.import_module(COMMANDS[args.command][0])
     tune_malloc()
+    git_commit()  # read once, now: results name the code this run started with (cached)
     try:
         return int(module.run(args) or 0)
     except (UsageError, ValueError, KeyError, FileNotFoundError) as e:
