@@ -35,6 +35,8 @@ CASES = {
         (pytest.mark.raytracing,),
     ),
 }
+READS_SHARED_DATA = {"02_psnr_vs_snr_kodak.ipynb"}
+"""Notebooks that read ../shared/data (skipped like every other test of it when it is absent)."""
 
 
 def _missing(needs) -> str | None:
@@ -64,11 +66,13 @@ def test_notebooks_are_stored_without_outputs():
 @pytest.mark.parametrize(
     "name", [pytest.param(n, marks=marks) for n, (_, _, marks) in CASES.items()]
 )
-def test_notebook_runs_small_and_makes_its_figures(name, tmp_path, monkeypatch):
+def test_notebook_runs_small_and_makes_its_figures(name, tmp_path, monkeypatch, request):
     needs, figures, _ = CASES[name]
     reason = _missing(needs)
     if reason:
         pytest.skip(reason)
+    if name in READS_SHARED_DATA:
+        request.getfixturevalue("shared_data")
     from nbclient import NotebookClient
 
     out = tmp_path / "out"
