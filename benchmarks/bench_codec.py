@@ -126,8 +126,10 @@ def _codec_table(
     n = int(os.environ.get("OSNERF_BENCH_CODEC_IMAGES", "24"))
     ckpts = [p for p in os.environ.get("OSNERF_BENCH_CODEC_CHECKPOINTS", "").split(os.pathsep) if p]
     ckpts = ckpts or [None]
-    default = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
-    folder = str(shared_data_dir() / photos) if photos else default
+    if photos:
+        folder = str(shared_data_dir() / photos)
+    else:
+        folder = os.environ.get("OSNERF_BENCH_CODEC_FOLDER") or str(shared_data_dir() / "kodak")
     only = os.environ.get("OSNERF_BENCH_CODEC_ONLY")  # "jscc" or "separate": one half
     common = [
         "--images",

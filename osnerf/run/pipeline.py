@@ -102,12 +102,9 @@ def plan_views(
     logged = len(prep.scu.decisions)
     whole = [int(v) for v in col.candidates if int(v) not in links.outage]
     gen = torch.Generator().manual_seed(scheme_seed(cfg.seed, "scu", "measure"))
-    measured = measure_snr_db(
-        [links.links[v] for v in whole], [links.snr_db[v] for v in whole], gen
-    )
-    fading = measure_copy_fading(
-        [links.links[v] for v in whole], [links.snr_db[v] for v in whole], gen
-    )
+    view_links, view_snr = [links.links[v] for v in whole], [links.snr_db[v] for v in whole]
+    measured = measure_snr_db(view_links, view_snr, gen)
+    fading = measure_copy_fading(view_links, view_snr, gen)  # after: the same SNR draws
     codec = prep.codec
     plan = prep.scu.plan(
         col.candidates,
