@@ -193,6 +193,45 @@ def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, g
     return combine_repetitions(out.x_hat, out.noise_var)
 
 
+_MODEL_LINKS: dict = {}
+
+
+def refine_model_link(channel: str):
+    """The link the jscc transmitter simulates when it refines its symbols
+    (:func:`semcodec.refine_symbols`): a statistical model of the run's channel, drawn from
+    the transmitter's own generator, never the real link. The run's channel when ``phy``
+    simulates it; TDL-A over OFDM with LS estimates for ``raytraced`` (a fixed response per
+    drone position that the transmitter does not know) and ``ota`` (the radio link), as the
+    digital scheme's MCS choice assumes."""
+    import phy
+
+    name = channel if channel in phy.CHANNELS and channel != "raytraced" else "tdl"
+    if name not in _MODEL_LINKS:
+        ch = phy.make_channel(name)
+        if name in ("tdl", "cdl"):
+            link = phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
+        else:
+            link = phy.FlatLink(ch, csi="perfect", equalizer="zf")
+        _MODEL_LINKS[name] = link
+    return _MODEL_LINKS[name]
+
+
+@dataclass
+class _Copies:
+    """``repetitions`` copies through ``link`` at ``snr_db``, MRC-combined, as a link
+    (what :func:`_send_blocks` does to the real symbols)."""
+
+    link: object
+    snr_db: float
+    repetitions: int
+
+    def __call__(self, x, snr_db=None, generator=None):
+        from types import SimpleNamespace
+
+        x_hat, nv = _send_blocks(self.link, x, self.snr_db, self.repetitions, generator)
+        return SimpleNamespace(x_hat=x_hat, noise_var=nv)
+
+
 def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission:
     """Each view through the semantic codec and its link (unbiased receiver, MRC of copies).
 
@@ -202,7 +241,7 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
     edge need not fall on the view's pixel grid: averaging first would mix the decoder's
     output for the erased positions into the edge pixels, a dark frame around every box).
     """
-    from semcodec import receiver_mask
+    from semcodec import receiver_mask, refine_symbols
 
     codec, rx = ctx.codec, ctx.rx_codec
     s_up = ctx.plan.oversampling if on_demand else 1
@@ -223,6 +262,22 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
         t, c = time.perf_counter(), time.process_time()
         with torch.no_grad():
             enc = codec.encode(x, p.encoder_snr_db, cbr, **kw)
+        steps = int(getattr(ctx.config, "refine_steps", 0))
+        if steps:  # transmitter-side refinement against its own model of the channel
+            model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.repetitions)
+            gen = torch.Generator().manual_seed(
+                scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
+            )
+            enc = refine_symbols(
+                codec,
+                x,
+                enc,
+                model,
+                p.snr_db,
+                steps,
+                generator=gen,
+                decoder_snr_db=p.encoder_snr_db,
+            )
         sec["encode"] += time.perf_counter() - t
         sec["encode_cpu"] += time.process_time() - c
         t = time.perf_counter()

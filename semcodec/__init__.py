@@ -7,6 +7,7 @@ Imports only ``phy`` of osnerf.
 from semcodec.baselines import (
     LOST_IMAGE_VALUE,
     TransmitResult,
+    refine_symbols,
     transmit_analog,
     transmit_digital,
     transmit_ideal,
@@ -56,6 +57,7 @@ __all__ = [
     "transmit_analog",
     "transmit_digital",
     "transmit_ideal",
+    "refine_symbols",
     "transmit_jscc",
     "MODELS",
     "BLOCK_PX",

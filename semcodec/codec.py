@@ -297,9 +297,15 @@ class Codec:
             raise ValueError(
                 f"x_hat must have {meta.num_symbols} symbols per image (meta), got {x_hat.shape[1]}"
             )
+        snr = self._snr(snr_db, x_hat.shape[0])
+        with torch.no_grad():
+            return self.decode_differentiable(x_hat, meta, snr, noise_var)
+
+    def decode_differentiable(self, x_hat: Tensor, meta: EncodedMeta, snr: Tensor, noise_var=None):
+        """:meth:`decode` without its checks and with autograd on: the receiver as the
+        transmitter simulates it (:func:`semcodec.baselines.refine_symbols`). ``snr`` [batch]."""
         b = x_hat.shape[0]
         cfg = self.model.cfg
-        snr = self._snr(snr_db, b)
         hf, wf = math.ceil(meta.height / 4), math.ceil(meta.width / 4)
         m = meta.num_channels
         c = cfg.num_complex_channels
@@ -325,38 +331,37 @@ class Codec:
                 f"noise_var must be a float, [batch] or [batch, num_symbols] = [{b}, {meta.num_symbols}]"
             ) from None
         side = side_info(snr, m, c, b)
-        with torch.no_grad():
-            if meta.crop is not None:
-                t, left, ch, cw = meta.crop
-                rows, cols = ch // 4, cw // 4
-                n = m * rows * cols
-                z = symbols_to_features(x_hat[:, :n], m, c, rows, cols)
-                r = reliability_to_features(rel[:, :n], m, c, rows, cols)
-                if meta.num_symbols > n:  # channel m + 1 at the box's central positions
-                    at = centre_first(rows, cols)[: meta.num_symbols - n]
-                    part = torch.zeros(b, rows * cols, dtype=x_hat.dtype)
-                    part[:, at] = x_hat[:, n:]
-                    z[:, 2 * m : 2 * m + 2] = symbols_to_features(part, 1, 1, rows, cols)
-                    r[:, m].view(b, -1)[:, at] = rel[:, n:]
-                    side = side_info(snr, m + 1, c, b)
-                yc = self.model.decoder(z, side, r)
-                y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
-                y[:, :, t : t + ch, left : left + cw] = yc
-                return y[:, :, : meta.height, : meta.width].clamp(0, 1)
-            if meta.positions is None:
-                z = symbols_to_features(x_hat, m, c, hf, wf)
-                r = reliability_to_features(rel, m, c, hf, wf)
-            else:
-                pos = meta.positions
-                k = pos.shape[1]
-                sent = symbols_to_features(x_hat, m, m, k, 1)[:, :, :, 0]  # [b, 2m, k]
-                z = torch.zeros(b, 2 * m, hf * wf)
-                z.scatter_(2, pos[:, None, :].expand(b, 2 * m, k), sent)
-                z = F.pad(z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (c - m)))
-                r = torch.zeros(b, m, hf * wf)
-                r.scatter_(2, pos[:, None, :].expand(b, m, k), rel.reshape(b, m, k))
-                r = F.pad(r.reshape(b, m, hf, wf), (0, 0, 0, 0, 0, c - m))
-            y = self.model.decoder(z, side, r)
+        if meta.crop is not None:
+            t, left, ch, cw = meta.crop
+            rows, cols = ch // 4, cw // 4
+            n = m * rows * cols
+            z = symbols_to_features(x_hat[:, :n], m, c, rows, cols)
+            r = reliability_to_features(rel[:, :n], m, c, rows, cols)
+            if meta.num_symbols > n:  # channel m + 1 at the box's central positions
+                at = centre_first(rows, cols)[: meta.num_symbols - n]
+                part = torch.zeros(b, rows * cols, dtype=x_hat.dtype)
+                part[:, at] = x_hat[:, n:]
+                z[:, 2 * m : 2 * m + 2] = symbols_to_features(part, 1, 1, rows, cols)
+                r[:, m].view(b, -1)[:, at] = rel[:, n:]
+                side = side_info(snr, m + 1, c, b)
+            yc = self.model.decoder(z, side, r)
+            y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
+            y[:, :, t : t + ch, left : left + cw] = yc
+            return y[:, :, : meta.height, : meta.width].clamp(0, 1)
+        if meta.positions is None:
+            z = symbols_to_features(x_hat, m, c, hf, wf)
+            r = reliability_to_features(rel, m, c, hf, wf)
+        else:
+            pos = meta.positions
+            k = pos.shape[1]
+            sent = symbols_to_features(x_hat, m, m, k, 1)[:, :, :, 0]  # [b, 2m, k]
+            z = torch.zeros(b, 2 * m, hf * wf)
+            z.scatter_(2, pos[:, None, :].expand(b, 2 * m, k), sent)
+            z = F.pad(z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (c - m)))
+            r = torch.zeros(b, m, hf * wf)
+            r.scatter_(2, pos[:, None, :].expand(b, m, k), rel.reshape(b, m, k))
+            r = F.pad(r.reshape(b, m, hf, wf), (0, 0, 0, 0, 0, c - m))
+        y = self.model.decoder(z, side, r)
         return y[:, :, : meta.height, : meta.width].clamp(0, 1)
 
 

@@ -18,7 +18,9 @@ from phy import num_symbols_for_cbr
 from semcodec.baselines import (
     AUTO,
     GENIE,
+    REFINE_STEPS,
     TransmitResult,
+    refine_symbols,
     transmit_analog,
     transmit_digital,
     transmit_ideal,
@@ -54,6 +56,10 @@ class EvalContext:
     fixed_mcs: str = DEFAULT_FIXED_MCS
     links: dict = field(default_factory=dict)
     encodings: dict = field(default_factory=dict)  # (id, snr, cbr) -> (image, Encoded), latest
+    refine_steps: int = REFINE_STEPS
+    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.baselines.refine_symbols`)."""
+    refine_seed: int = 0
+    """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
 
     def link(self):
         """The ``phy`` link of ``channel`` (built once)."""
@@ -85,6 +91,18 @@ def _jscc(ctx, img, snr, cbr, gen):
     if key not in ctx.encodings:  # the encoder is deterministic: once for all draws
         ctx.encodings.clear()
         ctx.encodings[key] = (img, ctx.codec.encode(img, snr, cbr))
+    enc = ctx.encodings[key][1]
+    return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
+
+
+def _jscc_refined(ctx, img, snr, cbr, gen):
+    key = (id(img), float(snr), float(cbr), "refined")
+    if key not in ctx.encodings:  # refined once per image and SNR, on the transmitter's draws
+        ctx.encodings.clear()
+        enc = ctx.codec.encode(img, snr, cbr)
+        tx = torch.Generator().manual_seed(ctx.refine_seed)
+        enc = refine_symbols(ctx.codec, img, enc, ctx.link(), snr, ctx.refine_steps, generator=tx)
+        ctx.encodings[key] = (img, enc)
     enc = ctx.encodings[key][1]
     return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
 
@@ -144,6 +162,13 @@ _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
 SCHEMES: dict[str, LinkScheme] = {
     "jscc": LinkScheme(_jscc, "semantic JSCC", "jscc", over_the_air=True),
+    "jscc_refined": LinkScheme(
+        _jscc_refined,
+        "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
+        "expected MSE over its own channel draws (knows the decoder, channel kind and "
+        "average SNR, not the draw)",
+        "jscc",
+    ),
     "digital": LinkScheme(
         _digital("avif"),
         "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",

@@ -43,6 +43,11 @@ def seed(text: str) -> int:
     return _int_in(text, *SEED_RANGE, "")
 
 
+def refine_steps(text: str) -> int:
+    """``--refine-steps``: an integer in [0, 10000]."""
+    return _int_in(text, 0, 10_000, "")
+
+
 def threads(text: str) -> int:
     """``--threads``: torch CPU threads, an integer in [1, 256]."""
     return _int_in(text, *THREADS_RANGE, "")

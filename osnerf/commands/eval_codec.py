@@ -61,6 +61,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
+    from semcodec.baselines import REFINE_STEPS
+
+    p.add_argument(
+        "--refine-steps",
+        type=checks.refine_steps,
+        default=REFINE_STEPS,
+        help=f"Adam steps of jscc_refined per image and SNR (default {REFINE_STEPS}; about one "
+        "CPU second each for a Kodak image)",
+    )
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
@@ -168,7 +177,13 @@ def run(args: argparse.Namespace) -> int:
         except FileNotFoundError as e:
             raise FileNotFoundError(f"{e}, or pass --no-lpips") from None
 
-    ctx = EvalContext(channel=args.channel, codec=codec, fixed_mcs=mcs)
+    ctx = EvalContext(
+        channel=args.channel,
+        codec=codec,
+        fixed_mcs=mcs,
+        refine_steps=args.refine_steps,
+        refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
+    )
     ctx.link()  # builds the channel (bad channel settings fail before any work)
     config = {
         "images": str(args.images),
@@ -182,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
         "cbr": cbr,
         "schemes": schemes,
         "fixed_mcs": mcs,
+        "refine_steps": args.refine_steps if "jscc_refined" in schemes else None,
         "checkpoint": args.checkpoint,
         "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
         "lpips": score_lpips,

@@ -124,6 +124,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "0: skip)",
     )
     p.add_argument(
+        "--refine-steps",
+        type=checks.refine_steps,
+        default=RunConfig.refine_steps,
+        help="the jscc transmitter refines each view's symbols with this many Adam steps on "
+        "the expected distortion over its own model of the channel (knows the decoder, the "
+        "channel kind and the view's SNR, not the draw; default "
+        f"{RunConfig.refine_steps}; 0: the encoder's symbols)",
+    )
+    p.add_argument(
         "--cache-dir",
         default=None,
         help="rendered-scene cache (default $OSNERF_CACHE or ~/.cache/osnerf)",
@@ -154,6 +163,7 @@ def run_config(args: argparse.Namespace):
         ota_device=args.ota_device,
         nerf_steps=args.nerf_steps,
         lightweight_seconds=args.lightweight_seconds,
+        refine_steps=args.refine_steps,
     )
 
 

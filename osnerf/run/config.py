@@ -51,6 +51,9 @@ class RunConfig:
             ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
             beside the full render of each scheme's field (time per view and PSNR of each in
             the report); 0 skips them.
+        refine_steps: the jscc transmitter refines each view's symbols with this many Adam
+            steps against its own model of the channel (:func:`semcodec.refine_symbols`,
+            :func:`osnerf.schemes.refine_model_link`); 0: the encoder's symbols as they are.
     """
 
     scene: str = DEFAULT_SCENE
@@ -73,6 +76,7 @@ class RunConfig:
     ota_device: str = "emulated"
     nerf_steps: int | None = None
     lightweight_seconds: float = 15.0
+    refine_steps: int = 0
 
     def __post_init__(self):
         from osnerf.schemes import load_entry_points
@@ -98,6 +102,10 @@ class RunConfig:
             isinstance(self.nerf_steps, int) and self.nerf_steps >= 1
         ):
             raise ValueError(f"nerf_steps must be an integer >= 1, got {self.nerf_steps!r}")
+        if not (isinstance(self.refine_steps, int) and 0 <= self.refine_steps <= 10_000):
+            raise ValueError(
+                f"refine_steps must be an integer in [0, 10000], got {self.refine_steps!r}"
+            )
         if not (self.lightweight_seconds >= 0 and math.isfinite(self.lightweight_seconds)):
             raise ValueError(
                 f"lightweight_seconds must be >= 0 (0: skip), got {self.lightweight_seconds!r}"

@@ -68,6 +68,7 @@ def test_ber_output_paths_are_checked_before_computing(tmp_path, capsys):
         ("train-codec", ["--threads", "0"]),
         ("run", ["--snr-db", "inf"]),
         ("run", ["--seed", "-1"]),
+        ("run", ["--refine-steps", "-3"]),
     ],
 )
 def test_bad_values_are_refused_while_parsing(tmp_path, capsys, command, extra):

@@ -206,3 +206,35 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     for c in range(3):
         assert np.allclose(tx.images[0, c].numpy(), 1.0 - inside, atol=1e-6)
     assert np.array_equal(tx.rx_masks[0], (inside > 0).astype(tx.rx_masks.dtype))
+
+
+def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
+    """With refine_steps the jscc transmitter refines each view's symbols against its own
+    model of the channel: the same number of unit-power symbols cross the same real draws
+    (the view's generator is untouched), and the received views are closer to what was sent
+    (AWGN 5 dB, four views, mean squared error over them)."""
+    import semcodec
+
+    codec = semcodec.load_codec(env["codec"])
+    g = torch.Generator().manual_seed(3)
+    base = torch.rand(4, 3, 6, 6, generator=g)
+    images = torch.nn.functional.interpolate(base, size=(48, 48), mode="bilinear").clamp(0, 1)
+    link = phy.FlatLink(phy.CHANNELS["awgn"]())
+    plans = [
+        SimpleNamespace(view=v, snr_db=5.0, encoder_snr_db=5.0, cbr=1 / 12, repetitions=2)
+        for v in range(4)
+    ]
+    out = {}
+    for steps in (0, 30):
+        cfg = SimpleNamespace(seed=0, channel="awgn", refine_steps=steps)
+        ctx = RunContext(cfg, dict.fromkeys(range(4), link), None, codec, codec, np.ones(3))
+        out[steps] = SCHEMES["full"]().transmit(ctx, plans, images, torch.Generator())
+    assert np.array_equal(out[0].symbols, out[30].symbols)
+    mse = {k: float(((t.images - images) ** 2).mean()) for k, t in out.items()}
+    assert mse[30] < 0.9 * mse[0], mse
+
+
+def test_the_refining_transmitter_models_links_it_cannot_know_as_tdl():
+    assert isinstance(schemes_mod.refine_model_link("rayleigh"), phy.FlatLink)
+    for name in ("raytraced", "ota", "tdl"):
+        assert isinstance(schemes_mod.refine_model_link(name), phy.OFDMLink), name

@@ -173,6 +173,10 @@ def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeyp
     for n in ("0", "-2"):
         _bad(tmp_path, "--draws", n, images=image_dir)
         assert f"--draws must be >= 1, got {n}" in capsys.readouterr().err
+    for n in ("-1", "1.5", "20000"):
+        _bad(tmp_path, "--refine-steps", n, images=image_dir)
+        err = capsys.readouterr().err
+        assert "--refine-steps" in err and "[0, 10000]" in err and err.count("\n") == 1
 
 
 def test_unknown_channel_lists_the_known_ones(image_dir, tmp_path, capsys):
