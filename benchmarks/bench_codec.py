@@ -5,7 +5,7 @@
   are noisy.
 * The codec table: Kodak x channels (awgn; rayleigh = block fading, 4 draws per image;
   rayleigh_fast) x SNR 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
-  checkpoint), digital (honest: MCS from the calibration table), digital_genie and ideal
+  checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital (honest: MCS from the calibration table), digital_genie and ideal
   (bounds), mean and 95 % interval, with the published anchors beside each row and checks
   (jscc above digital, genie never below digital); the same on other photos (BSDS500's
   test split, block fading: :data:`OTHER_PHOTOS`).
@@ -92,6 +92,10 @@ OTHER_PHOTOS = ("bsds500/test", (("rayleigh", 4),))
 """Photos other than Kodak (a folder of the shared data, its channels): block fading, where
 the honest digital link must be beaten on more than one image set. Read for evaluation
 only (BSDS500 is the codec's training source: its test split was never trained on)."""
+REFINED_CHANNELS = ("rayleigh",)
+"""Channels where the table also has ``jscc_refined`` (the transmitter refines each image's
+symbols, :func:`semcodec.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
+fading, where jscc meets the honest digital link."""
 TABLE_SNRS = (1.0, 4.0, 10.0)
 SEPARATE = ("digital", "digital_genie", "ideal")
 
@@ -171,6 +175,15 @@ def _codec_table(
                 for r in doc["results"]:
                     r["scheme"] = label
                 docs.append(doc)
+                if channel in REFINED_CHANNELS:
+                    label = f"jscc_refined[{codec.name}]"
+                    codecs[label] = codecs[f"jscc[{codec.name}]"]
+                    args[args.index("jscc")] = "jscc_refined"
+                    tag = f"{prefix}{channel}_jscc_refined_{codec.sha256[:12]}"
+                    doc = _eval(out_dir, tag, args)
+                    for r in doc["results"]:
+                        r["scheme"] = label
+                    docs.append(doc)
         for doc in docs:
             for r in doc["results"]:
                 row = rows.setdefault(

@@ -193,6 +193,12 @@ def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, g
     return combine_repetitions(out.x_hat, out.noise_var)
 
 
+REFINE_OUTSIDE_WEIGHT = 0.05
+"""With ``refine_steps``, the weight of an on-demand view's pixels outside the demanded
+objects (inside the sent box) in the refinement's squared error; the objects' pixels weigh
+1 (times their demand weight). Default scene, block Rayleigh 0 dB, 30 steps, object PSNR of
+the field at 6000 steps, seed 0: 20.07 dB unrefined, 20.04 with uniform weights, 20.64 with
+0.2, 20.95 with 0.05."""
 _MODEL_LINKS: dict = {}
 
 
@@ -268,6 +274,11 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
             gen = torch.Generator().manual_seed(
                 scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
             )
+            wts = None
+            if kw:  # the demanded objects' pixels first (their weights), the rest of the box
+                lam = torch.as_tensor(kw["demand_weights"], dtype=torch.float32)
+                obj = (kw["mask"] * lam[None, :, None, None]).sum(1, keepdim=True).clamp(0, 1)
+                wts = REFINE_OUTSIDE_WEIGHT + (1.0 - REFINE_OUTSIDE_WEIGHT) * obj
             enc = refine_symbols(
                 codec,
                 x,
@@ -277,6 +288,7 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
                 steps,
                 generator=gen,
                 decoder_snr_db=p.encoder_snr_db,
+                pixel_weights=wts,
             )
         sec["encode"] += time.perf_counter() - t
         sec["encode_cpu"] += time.process_time() - c

@@ -76,6 +76,7 @@ def refine_symbols(
     lr: float = REFINE_LR,
     generator: torch.Generator | None = None,
     decoder_snr_db=None,
+    pixel_weights: Tensor | None = None,
 ) -> Encoded:
     """Transmitter-side refinement of the JSCC's symbols for this very image.
 
@@ -97,6 +98,8 @@ def refine_symbols(
         snr_db: the average SNR the simulated link runs at.
         steps: Adam steps, >= 0 (0 returns ``encoded``).
         decoder_snr_db: the SNR the receiver's decoder is told (default ``snr_db``).
+        pixel_weights: optional [batch, 1, height, width] weights of the squared error (the
+            demanded objects above the rest); default uniform.
     Returns:
         :class:`Encoded` with the refined unit-power symbols and the same ``meta``.
     """
@@ -120,7 +123,8 @@ def refine_symbols(
             sym = power_normalize(torch.view_as_complex(v))
             x_hat, nv = _run_link(link, sym, snr, generator)
             y = codec.decode_differentiable(x_hat, meta, dec_snr, nv)
-            (v.grad,) = torch.autograd.grad(F.mse_loss(y, x), [v])  # the weights stay as they are
+            err = (y - x) ** 2 if pixel_weights is None else (y - x) ** 2 * pixel_weights
+            (v.grad,) = torch.autograd.grad(err.mean(), [v])  # the weights stay as they are
             opt.step()
     sym = power_normalize(torch.view_as_complex(v.detach()))
     return Encoded(sym.to(torch.complex64), meta)

@@ -153,6 +153,11 @@ class LinkScheme:
     bound: str | None = None
     over_the_air: bool = False
 
+    @property
+    def needs_codec(self) -> bool:
+        """Whether it sends through the semantic codec (``ctx.codec`` must be loaded)."""
+        return self.kind == "jscc"
+
     def __call__(self, ctx, img, snr_db, cbr, generator) -> TransmitResult:
         return self.run(ctx, img, snr_db, cbr, generator)
 

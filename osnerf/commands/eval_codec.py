@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         if mcs not in MCS_TABLE:
             raise KeyError(f"--mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
     codec = None
-    if "jscc" in schemes:
+    if any(SCHEMES[s].needs_codec for s in schemes):
         codec = load_codec(args.checkpoint)
         lo, hi = codec.cbr_range
         try:

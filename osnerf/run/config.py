@@ -51,9 +51,11 @@ class RunConfig:
             ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
             beside the full render of each scheme's field (time per view and PSNR of each in
             the report); 0 skips them.
-        refine_steps: the jscc transmitter refines each view's symbols with this many Adam
-            steps against its own model of the channel (:func:`semcodec.refine_symbols`,
-            :func:`osnerf.schemes.refine_model_link`); 0: the encoder's symbols as they are.
+        refine_steps: the semantic schemes' transmitter (jscc, full) refines each view's
+            symbols with this many Adam steps on the expected squared error over its own
+            model of the channel at the view's measured SNR (:func:`semcodec.refine_symbols`,
+            :func:`osnerf.schemes.refine_model_link`), on demand weighted to the demanded
+            objects (:data:`osnerf.schemes.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
     """
 
     scene: str = DEFAULT_SCENE
@@ -76,7 +78,7 @@ class RunConfig:
     ota_device: str = "emulated"
     nerf_steps: int | None = None
     lightweight_seconds: float = 15.0
-    refine_steps: int = 0
+    refine_steps: int = 30
 
     def __post_init__(self):
         from osnerf.schemes import load_entry_points

@@ -199,3 +199,15 @@ def test_checkpoint_for_another_snr_range_is_refused_naming_both(image_dir, tmp_
     err = capsys.readouterr().err
     assert rc == 2 and not out.exists()
     assert "[1, 10] dB" in err and "[5, 20] dB" in err and "high-snr" in err
+
+
+def test_refined_jscc_runs_alone_and_records_its_steps(image_dir, tmp_path):
+    """jscc_refined loads the codec by its kind (it failed alone: no codec loaded), and the
+    result records how many steps the transmitter took."""
+    out = tmp_path / "refined.json"
+    argv = ["eval-codec", "--images", str(image_dir), "--snr-db", "4", "--no-lpips"]
+    argv += ["--schemes", "jscc_refined", "--refine-steps", "2", "--out", str(out)]
+    assert main(argv) == 0
+    doc = json.loads(out.read_text())
+    assert doc["config"]["refine_steps"] == 2
+    assert [r["scheme"] for r in doc["results"]] == ["jscc_refined"]
