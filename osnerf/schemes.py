@@ -28,6 +28,7 @@ import hashlib
 import time
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
+from types import SimpleNamespace
 from typing import ClassVar
 
 import numpy as np
@@ -210,15 +211,11 @@ def refine_model_link(channel: str):
     drone position that the transmitter does not know) and ``ota`` (the radio link), as the
     digital scheme's MCS choice assumes."""
     import phy
+    from semcodec.evaluation import channel_link
 
     name = channel if channel in phy.CHANNELS and channel != "raytraced" else "tdl"
     if name not in _MODEL_LINKS:
-        ch = phy.make_channel(name)
-        if name in ("tdl", "cdl"):
-            link = phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
-        else:
-            link = phy.FlatLink(ch, csi="perfect", equalizer="zf")
-        _MODEL_LINKS[name] = link
+        _MODEL_LINKS[name] = channel_link(name)
     return _MODEL_LINKS[name]
 
 
@@ -232,8 +229,6 @@ class _Copies:
     repetitions: int
 
     def __call__(self, x, snr_db=None, generator=None):
-        from types import SimpleNamespace
-
         x_hat, nv = _send_blocks(self.link, x, self.snr_db, self.repetitions, generator)
         return SimpleNamespace(x_hat=x_hat, noise_var=nv)
 
@@ -268,7 +263,7 @@ def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission
         t, c = time.perf_counter(), time.process_time()
         with torch.no_grad():
             enc = codec.encode(x, p.encoder_snr_db, cbr, **kw)
-        steps = int(getattr(ctx.config, "refine_steps", 0))
+        steps = int(ctx.config.refine_steps)
         if steps:  # transmitter-side refinement against its own model of the channel
             model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.repetitions)
             gen = torch.Generator().manual_seed(

@@ -42,6 +42,17 @@ def eval_channels() -> list[str]:
     return list(phy.CHANNELS)
 
 
+def channel_link(channel: str):
+    """A ``phy`` link of ``channel`` with an unbiased receiver: one tap with perfect CSI, or
+    OFDM (``phy.ResourceGrid()``) with pilot LS estimates for :data:`OFDM_CHANNELS`."""
+    import phy
+
+    ch = phy.make_channel(channel)
+    if channel in OFDM_CHANNELS:
+        return phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
+    return phy.FlatLink(ch, csi="perfect", equalizer="zf")
+
+
 @dataclass
 class EvalContext:
     """What the schemes share: codec, the channel's link, fixed MCS.
@@ -62,16 +73,9 @@ class EvalContext:
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
 
     def link(self):
-        """The ``phy`` link of ``channel`` (built once)."""
+        """The ``phy`` link of ``channel`` (built once, :func:`channel_link`)."""
         if "zf" not in self.links:
-            import phy
-
-            ch = phy.make_channel(self.channel)
-            if self.channel in OFDM_CHANNELS:
-                link = phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
-            else:
-                link = phy.FlatLink(ch, csi="perfect", equalizer="zf")
-            self.links["zf"] = link
+            self.links["zf"] = channel_link(self.channel)
         return self.links["zf"]
 
     @property
@@ -86,25 +90,22 @@ def _n(img, cbr) -> int:
     return num_symbols_for_cbr(cbr, img.shape[2], img.shape[3])
 
 
-def _jscc(ctx, img, snr, cbr, gen):
-    key = (id(img), float(snr), float(cbr))
-    if key not in ctx.encodings:  # the encoder is deterministic: once for all draws
-        ctx.encodings.clear()
-        ctx.encodings[key] = (img, ctx.codec.encode(img, snr, cbr))
-    enc = ctx.encodings[key][1]
-    return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
+def _send_jscc(refine: bool):
+    def run(ctx, img, snr, cbr, gen):
+        key = (id(img), float(snr), float(cbr), refine)
+        if key not in ctx.encodings:  # the transmitter's symbols: once for all draws
+            ctx.encodings.clear()
+            enc = ctx.codec.encode(img, snr, cbr)
+            if refine:  # on the transmitter's own draws, never the evaluation's
+                tx = torch.Generator().manual_seed(ctx.refine_seed)
+                enc = refine_symbols(
+                    ctx.codec, img, enc, ctx.link(), snr, ctx.refine_steps, generator=tx
+                )
+            ctx.encodings[key] = (img, enc)
+        enc = ctx.encodings[key][1]
+        return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
 
-
-def _jscc_refined(ctx, img, snr, cbr, gen):
-    key = (id(img), float(snr), float(cbr), "refined")
-    if key not in ctx.encodings:  # refined once per image and SNR, on the transmitter's draws
-        ctx.encodings.clear()
-        enc = ctx.codec.encode(img, snr, cbr)
-        tx = torch.Generator().manual_seed(ctx.refine_seed)
-        enc = refine_symbols(ctx.codec, img, enc, ctx.link(), snr, ctx.refine_steps, generator=tx)
-        ctx.encodings[key] = (img, enc)
-    enc = ctx.encodings[key][1]
-    return transmit_jscc(ctx.codec, img, ctx.link(), snr, cbr, generator=gen, encoded=enc)
+    return run
 
 
 def _digital(codec_name, mcs=AUTO):
@@ -166,9 +167,9 @@ _GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on 
 _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
 SCHEMES: dict[str, LinkScheme] = {
-    "jscc": LinkScheme(_jscc, "semantic JSCC", "jscc", over_the_air=True),
+    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", "jscc", over_the_air=True),
     "jscc_refined": LinkScheme(
-        _jscc_refined,
+        _send_jscc(True),
         "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
         "expected MSE over its own channel draws (knows the decoder, channel kind and "
         "average SNR, not the draw)",

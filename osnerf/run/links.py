@@ -14,8 +14,7 @@ import numpy as np
 
 import phy
 from osnerf.run.config import OTA, RunConfig
-
-OFDM_CHANNELS = ("tdl", "cdl")
+from semcodec.evaluation import OFDM_CHANNELS, channel_link
 
 
 @dataclass
@@ -49,12 +48,10 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
         return _ota_links(cfg, idx, snr)
     if cfg.channel == "raytraced":
         return _raytraced_links(cfg, views, idx)
-    channel = phy.make_channel(cfg.channel)
+    link = channel_link(cfg.channel)
     if cfg.channel in OFDM_CHANNELS:
-        link = phy.OFDMLink(phy.ResourceGrid(), channel, csi="ls", equalizer="zf")
         info = {"channel": cfg.channel, "csi": "ls (pilots)", "ofdm": True}
     else:
-        link = phy.FlatLink(channel, csi="perfect", equalizer="zf")
         info = {"channel": cfg.channel, "csi": "perfect"}
     info["equalizer"] = "zf (unbiased) + per-symbol noise variance"
     return RunLinks({i: link for i in idx}, snr, info=info)

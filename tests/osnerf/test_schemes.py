@@ -186,7 +186,7 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     objects = torch.zeros(1, 1, h, w)
     objects[:, :, 25:39, 27:37] = 1.0
     ctx = RunContext(
-        SimpleNamespace(seed=0),
+        SimpleNamespace(seed=0, refine_steps=0),
         {0: phy.FlatLink(phy.CHANNELS["awgn"]())},
         SimpleNamespace(oversampling=3),
         codec,
