@@ -17,7 +17,10 @@ view-dependent colour sample by sample. The other channels are free features.
 correctly (no dark edge halos) and a field at 31.13 dB: 6.6 ms per view against 37.5 ms,
 5.7x faster, but **2.39 dB under** the full render against ground truth (28.73 dB; 2.14
 after 1000 s of training, 2.21 with 24 channels): the half-resolution pass cannot carry the
-detail of the sharper field. Before the loader fix, against views with dark edge halos
+detail of the sharper field. At 200 px (a field on the same 128-vertex grid, 480 s, one
+thread, 29.82 dB on the path; 2000 s of training) it is at the 5x / 1 dB edge: 6.0x and 1.02
+dB under at the defaults, 5.0x and 0.98 with 24 channels, 5.4x and 1.00 with width 48.
+Before the loader fix, against views with dark edge halos
 (numbers below): a field at 27.91 dB
 against ground truth (120 s, one thread), side by side with its full render in one run (one
 thread; the other core was training the codec), defaults (K = 16, downsample 2, step factor
