@@ -23,7 +23,8 @@ OSNERF_LIGHTWEIGHT_VARIANTS (JSON list of LightweightConfig overrides measured b
 default on the test path, e.g. '[{"downsample": 2}]'; default none), OSNERF_BENCH_MODEL
 (a field saved by `osnerf train-nerf` on lego: the renderers are measured on it and
 no field is trained; OSNERF_BENCH_FIELDS is then ignored), OSNERF_BENCH_RESOLUTION (image
-width of every view, trained and rendered, 16..512; default 100, the goal's).
+width of every view, trained and rendered, in osnerf's RESOLUTION_PX_RANGE; default 100,
+the goal's).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pathlib import Path
 
 import torch
 
+from osnerf.commands.args import RESOLUTION_PX_RANGE
 from osnerf.paths import shared_data_dir
 from renderer import (
     FeatureConfig,
@@ -178,8 +180,9 @@ def run(out_dir: Path) -> dict:
     budget = float(os.environ.get("OSNERF_BENCH_SECONDS", "120"))
     lw_seconds = float(os.environ.get("OSNERF_LIGHTWEIGHT_SECONDS", "60"))
     resolution = int(os.environ.get("OSNERF_BENCH_RESOLUTION", "100"))
-    if not 16 <= resolution <= 512:
-        raise ValueError(f"OSNERF_BENCH_RESOLUTION must be in [16, 512], got {resolution}")
+    low, high = RESOLUTION_PX_RANGE
+    if not low <= resolution <= high:
+        raise ValueError(f"OSNERF_BENCH_RESOLUTION must be in [{low}, {high}], got {resolution}")
     root = shared_data_dir() / "nerf_synthetic" / "lego"
     train_set = load_dataset(root, "train", resolution)
     test_set = load_dataset(root, "test", resolution, aabb=train_set.aabb)
