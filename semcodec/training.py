@@ -203,8 +203,14 @@ def validate(
 
 def load_compatible(model: JSCCModel, init: JSCCModel) -> None:
     """Start ``model`` from ``init``'s weights where the architectures differ only in the
-    decoder's reliability input (v1 -> v2): the extra input planes start at zero, so the new
-    model first decodes exactly as ``init`` does on LMMSE estimates.
+    decoder's reliability input (v1 -> v2) or in more complex channels (a wider rate range).
+
+    The result decodes exactly as ``init`` does at every rate ``init`` serves:
+    * new decoder input planes (reliability, channels beyond ``init``'s) start at zero;
+    * the encoder's extra output channels start from the default init (they are dropped,
+      and so leave the power normalisation alone, at ``m <= init``'s channels);
+    * every AF module sees the rate as ``m / num_complex_channels``, so its weight on that
+      input is scaled by the ratio of channel counts.
 
     Raises ValueError naming both architectures when anything else differs.
     """
@@ -215,20 +221,44 @@ def load_compatible(model: JSCCModel, init: JSCCModel) -> None:
         snr_min_db=a.snr_min_db,
         snr_max_db=a.snr_max_db,
         decoder_reliability=a.decoder_reliability,
+        num_complex_channels=a.num_complex_channels,
     )
-    if same != a:
+    if same != a or a.num_complex_channels < b.num_complex_channels:
         raise ValueError(f"init checkpoint architecture {b.name} does not fit model {a.name}")
+    cn, co = a.num_complex_channels, b.num_complex_channels
     state = init.state_dict()
     own = model.state_dict()
     for k, v in own.items():
         src = state[k]
-        if src.shape == v.shape:
-            own[k] = src.clone()
-        else:  # the decoder's input conv: copy the shared input planes, zero the new ones
-            new = torch.zeros_like(v)
-            new[:, : src.shape[1]] = src
+        if k.startswith("decoder.inp."):
+            own[k] = (
+                _map_decoder_input(src, v, co, cn, b.decoder_reliability)
+                if v.dim() == 4
+                else src.clone()
+            )
+        elif k.startswith("encoder.out."):
+            new = v.clone()
+            new[: src.shape[0]] = src
             own[k] = new
+        elif k.endswith("af.fc1.weight"):
+            new = src.clone()
+            new[:, -1] *= cn / co
+            own[k] = new
+        else:
+            own[k] = src.clone()
     model.load_state_dict(own)
+
+
+def _map_decoder_input(
+    src: torch.Tensor, dst: torch.Tensor, co: int, cn: int, rel: bool
+) -> torch.Tensor:
+    """The decoder's input conv [width, planes, k, k]: planes are the 2*C feature planes, then
+    (with reliability) C reliability planes; copy ``init``'s into their place, zero the rest."""
+    new = torch.zeros_like(dst)
+    new[:, : 2 * co] = src[:, : 2 * co]
+    if rel:
+        new[:, 2 * cn : 2 * cn + co] = src[:, 2 * co : 3 * co]
+    return new
 
 
 STATE_KEYS = ("config", "model", "optimizer", "step", "elapsed_s", "best", "rng", "gen")

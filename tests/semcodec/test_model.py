@@ -83,3 +83,38 @@ def test_odd_sizes_round_trip(tiny_codec):
     y = tiny_codec.decode(enc.symbols, enc.meta, 5.0)
     assert y.shape == x.shape
     assert enc.meta.num_symbols == 3 * 8 * 10  # ceil(30/4) x ceil(37/4) positions
+
+
+@pytest.mark.parametrize("m", [1, 3, 8])
+def test_widened_model_decodes_as_its_init_at_the_init_rates(m):
+    """A 16-channel model started from an 8-channel one reconstructs bit for bit the same
+    at every rate the 8-channel one serves (noise-free link: the AF rate input is rescaled,
+    the extra encoder outputs are dropped, the extra decoder planes are zero)."""
+    from semcodec.model import reliability_to_features
+    from semcodec.training import load_compatible
+
+    torch.manual_seed(0)
+    old = make_model("adjscc_s4_w96_rel").eval()
+    new = make_model("adjscc_s4_w96_rel_c16").eval()
+    load_compatible(new, old)
+    x = torch.rand(2, 3, 16, 16)
+
+    def through(model):
+        c = model.cfg.num_complex_channels
+        side = side_info(torch.tensor([1.0, 10.0]), m, c, 2)
+        feat = model.encoder(x, side)
+        sym = features_to_symbols(feat, m)
+        z = symbols_to_features(sym, m, c, 4, 4)
+        rel = reliability_to_features(torch.full(sym.shape, 0.9), m, c, 4, 4)
+        return model.decoder(z, side, rel)
+
+    with torch.no_grad():
+        torch.testing.assert_close(through(new), through(old), atol=1e-6, rtol=0)
+        assert new.cfg.cbr_range[1] == pytest.approx(1 / 3)
+
+
+def test_narrowing_init_is_refused():
+    from semcodec.training import load_compatible
+
+    with pytest.raises(ValueError, match="does not fit"):
+        load_compatible(make_model("adjscc_s4_w96_rel"), make_model("adjscc_s4_w96_rel_c16"))
