@@ -54,10 +54,10 @@ def _channels(gen: torch.Generator) -> dict:
         if name == "raytraced":
             continue  # needs a scene: benchmarked by phy.raytrace's owner
         ch = phy.make_channel(name)
-        inp = grid_x if name in ("tdl", "cdl") else x
+        inp = grid_x if name in phy.OFDM_CHANNELS else x
         s = _median_seconds(
             lambda ch=ch, inp=inp: ch(inp, 10.0, generator=gen),
-            3 if name in ("tdl", "cdl") else REPEATS,
+            3 if name in phy.OFDM_CHANNELS else REPEATS,
         )
         out[name] = {"symbols_per_s": x.numel() / s, "seconds": s, "num_symbols": x.numel()}
     from sionna.phy.channel import AWGN as SionnaAWGN

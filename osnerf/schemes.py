@@ -1,6 +1,6 @@
 """The schemes of ``osnerf run``: one table, :data:`SCHEMES`, name -> scheme class.
 
-A scheme takes the views the SCU planned (:class:`osnerf.scu.ViewPlan`) and their pixels,
+A scheme takes the views the SCU planned (:class:`osnerf.run.plan.ViewPlan`) and their pixels,
 sends them over the run's links and returns what the receiver reconstructed
 (:class:`Transmission`). Everything else (collection, plan, links, reconstruction, scoring,
 report) is shared, so adding a scheme is one class and one line::
@@ -66,7 +66,7 @@ class RunContext:
     Attributes:
         config: the :class:`osnerf.run.RunConfig`.
         links: view -> ``phy.Link`` (unbiased ZF receivers with perfect or estimated CSI).
-        plan: the SCU's :class:`osnerf.scu.RunPlan`.
+        plan: the SCU's :class:`osnerf.run.plan.RunPlan`.
         codec, rx_codec: transmitter's and receiver's codecs (None when no scheme needs one).
         background: [3] float32 background colour of the scene.
         routing: (object masks [n_on_demand, K, h, w] tensor, K demand weights) for focus mode.
@@ -211,11 +211,10 @@ def refine_model_link(channel: str):
     drone position that the transmitter does not know) and ``ota`` (the radio link), as the
     digital scheme's MCS choice assumes."""
     import phy
-    from semcodec.evaluation import channel_link
 
-    name = channel if channel in phy.CHANNELS and channel != "raytraced" else "tdl"
+    name = phy.assumed_channel(channel)
     if name not in _MODEL_LINKS:
-        _MODEL_LINKS[name] = channel_link(name)
+        _MODEL_LINKS[name] = phy.channel_link(name)
     return _MODEL_LINKS[name]
 
 
@@ -355,8 +354,7 @@ class Digital(Scheme):
         import semcodec
 
         cfg = ctx.config
-        # the calibration's channel kind; the over-the-air link is frequency-selective OFDM
-        channel = cfg.channel if cfg.channel in phy.CHANNELS else "tdl"
+        channel = phy.assumed_channel(cfg.channel)
         out, per_view, failed = [], [], 0
         lost = {"budget": 0, "channel": 0}
         t = time.perf_counter()
@@ -451,7 +449,7 @@ class GroundTruth(Scheme):
     help = "bound: the on-demand views undistorted (ceiling)"
 
     def transmit(self, ctx, plans, images, generator):
-        from osnerf.scu import focus_pixel_masks
+        from semcodec.grid import focus_pixel_masks
 
         masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None
         rx = None

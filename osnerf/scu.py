@@ -1,139 +1,25 @@
-"""The semantic control unit (SCU): demand -> collector and encoder settings, one typed
-:class:`ViewPlan` per view (link SNR, measured SNR, CBR, focus, repetitions, outage), the
-knowledge-base check, and routing of each scheme's views to the renderer. Every decision is
-logged (``SemanticControlUnit.decisions``) and ends up in the report.
+"""The semantic control unit (SCU): it decides, and the pipeline carries out what it
+decides. It turns the demand into collector and encoder settings, measures each link with
+pilots, and returns one typed :class:`osnerf.run.plan.ViewPlan` per view (measured SNR, CBR,
+focus, copies, outage); it checks the knowledge base (both ends hold the same codec) and
+routes each scheme's views to the renderer. It owns its decision log
+(``SemanticControlUnit.decisions``), cached with the plan, which ends up in the report.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
 
+import phy
 from osnerf.collect import Collection, CollectorConfig, Demand
+from osnerf.run.plan import RunPlan, ViewPlan
+from osnerf.schemes import scheme_seed
 from semcodec.checkpoint import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
-from semcodec.codec import BLOCK_PX
-
-
-@dataclass(frozen=True)
-class ViewPlan:
-    """How one drone view is sent (decided by the SCU before any scheme runs).
-
-    Attributes:
-        view: index in ``SceneViews``.
-        snr_db: the SNR its link runs at (Es/N0, dB); None in outage.
-        measured_snr_db: post-equalisation SNR measured with pilot blocks (what the rate
-            uses); None in outage.
-        encoder_snr_db: the SNR the codec is told: the average SNR of the symbols after the
-            receiver combines the copies, ``measured + 10 log10(repetitions)`` (MRC of r
-            copies adds their SNRs), clamped to the codec's range; None in outage. Telling
-            the encoder the single-copy SNR instead cost 0.67 dB of received object PSNR on
-            the default scene (block Rayleigh, 0 dB, 2 copies, mean of 6 seeds).
-        cbr: whole-view CBR from the measured SNR.
-        repetitions: copies of each block (MRC-combined at the receiver).
-        on_demand: the view shows the demanded objects well enough to be sent on demand.
-        focus_cbr: on-demand CBR (of the oversampled view), None when not on demand.
-        budget_symbols: on-demand symbol budget incl. repetitions (0 when not on demand);
-            every object-routed scheme gets the same budget.
-        full_symbols: whole-view symbols incl. repetitions.
-        outage: no propagation path: never sent.
-        focus_repetitions: copies of the on-demand block (``repetitions`` where the copies
-            fade independently or the SNR is very low, else 1: the budget is spent as rate;
-            :meth:`SemanticControlUnit.choose_focus_repetitions`); None when not on demand.
-        focus_encoder_snr_db: ``encoder_snr_db`` for ``focus_repetitions`` copies.
-    """
-
-    view: int
-    snr_db: float | None
-    measured_snr_db: float | None
-    encoder_snr_db: float | None
-    cbr: float
-    repetitions: int
-    on_demand: bool
-    focus_cbr: float | None
-    budget_symbols: int
-    full_symbols: int
-    outage: bool = False
-    focus_repetitions: int | None = None
-    focus_encoder_snr_db: float | None = None
-
-
-@dataclass(frozen=True)
-class RunPlan:
-    """The SCU's plan for one run: a :class:`ViewPlan` per candidate view.
-
-    Attributes:
-        views: one plan per candidate view, in view order (outage views included, flagged).
-        oversampling: factor by which on-demand views are upsampled before encoding.
-        height, width: captured view size, pixels.
-    """
-
-    views: tuple[ViewPlan, ...]
-    oversampling: int
-    height: int
-    width: int
-
-    def on_demand(self) -> list[ViewPlan]:
-        """Views sent on demand (not in outage)."""
-        return [p for p in self.views if p.on_demand and not p.outage]
-
-    def whole(self) -> list[ViewPlan]:
-        """Every candidate view not in outage (what a full-scene scheme sends)."""
-        return [p for p in self.views if not p.outage]
-
-    def for_scheme(self, object_routed: bool) -> list[ViewPlan]:
-        """The views a scheme sends: on demand (with the on-demand copies and encoder SNR in
-        ``repetitions`` and ``encoder_snr_db``) when it is object-routed, else every one."""
-        if not object_routed:
-            return self.whole()
-        return [
-            replace(p, repetitions=p.focus_repetitions, encoder_snr_db=p.focus_encoder_snr_db)
-            for p in self.on_demand()
-        ]
-
-    @property
-    def full_scene_symbols(self) -> int:
-        return int(sum(p.full_symbols for p in self.whole()))
-
-    def to_dict(self) -> dict:
-        return {
-            "views": [asdict(p) for p in self.views],
-            "oversampling": self.oversampling,
-            "height": self.height,
-            "width": self.width,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> RunPlan:
-        return cls(
-            tuple(ViewPlan(**p) for p in d["views"]),
-            int(d["oversampling"]),
-            d["height"],
-            d["width"],
-        )
-
-
-@dataclass(frozen=True)
-class CopyFading:
-    """Whether two copies of a block see independent fades, measured with pilot copies
-    (:func:`measure_copy_fading`).
-
-    Attributes:
-        spread_db: std of the per-symbol post-equalisation SNR (dB) about each view's mean.
-        correlation: correlation of those deviations between the two copies of each symbol.
-    """
-
-    spread_db: float
-    correlation: float
-
-    def independent(self, policy: RatePolicy) -> bool:
-        """The copies fade, and not together: MRC of copies buys diversity."""
-        return (
-            self.spread_db >= policy.copy_spread_db
-            and self.correlation < policy.max_copy_correlation
-        )
+from semcodec.grid import BLOCK_PX, focus_coverage, full_rate_symbols
 
 
 @dataclass(frozen=True)
@@ -153,25 +39,19 @@ class RatePolicy:
     cbrs: tuple[float, ...] = (1 / 8, 1 / 12, 1 / 16, 1 / 24)
     repeat_below_db: float = 3.0
     """Below this measured SNR every view costs twice its CBR, sent as two MRC-combined copies.
-    On-demand views send copies only where they fade independently (:class:`CopyFading`);
-    otherwise the second copy's symbols are spent as rate (on a static channel a copy buys
-    only the 3 dB combining gain, which the codec's rate beats: tiny scene, over the air at
-    0 dB, s = 3 in one copy against s = 2 in two, seeds 0 / 1 at 9,000 NeRF steps: received
-    object PSNR +0.20 / +0.08 dB, the field's +0.26 / +0.04)."""
+    On-demand views send copies only where they fade independently (``phy.CopyFading``);
+    otherwise the second copy's symbols are spent as rate: on a static channel a copy buys
+    only the 3 dB combining gain, which the codec's rate beats (README, "End to end")."""
     copy_spread_db: float = 1.0
     """Copies can fade independently only where the per-symbol SNR spreads (std about each
     view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""
     max_copy_correlation: float = 0.5
     """... and where the two copies' per-symbol SNR deviations correlate less than this (a
-    static multipath channel repeats its frequency fades in every copy: 0.87 between the
-    emulated HackRFs at 0 dB, 0.67 at -5 dB; block, fast and TDL fading about 0). At -10 dB
-    over the air the receiver's channel estimates are noisy enough to decorrelate the
-    copies' reported reliabilities (0.36), and the copies are kept."""
+    static multipath channel repeats its frequency fades in every copy; block, fast and TDL
+    fading do not)."""
     static_repeat_below_db: float = -5.0
     """Where copies do not fade independently, views measured below this still send copies:
-    near the bottom of the codec's SNR range 3 dB of SNR is worth more than the rate (tiny
-    scene over the air, received object PSNR, two copies at s = 2 against one at s = 3:
-    0 dB -0.20 / -0.08 (seeds 0 / 1), -5 dB +0.02, -10 dB +0.32)."""
+    near the bottom of the codec's SNR range 3 dB of SNR is worth more than the rate."""
     max_object_oversampling: int = 3
     """Largest factor s by which the demanded objects are upsampled before encoding (s^2 times
     the feature positions), >= 1."""
@@ -182,10 +62,8 @@ class RatePolicy:
     min_fill: float = 0.5
     """The SCU takes the largest oversampling whose full rate (every channel on every position
     touching the objects) the on-demand budget covers at least this fraction of, and scales
-    the rate to spend the budget, in (0, 1]. Default scene, block Rayleigh 0 dB, received
-    object PSNR at about the same symbols: s = 3 at 0.6 of full rate 21.0 dB against s = 2
-    at 1.25 20.6; tiny scene: s = 2 at 0.77 20.6 against s = 3 at 0.34 20.0 (too few channels
-    per position), and 18.4 at s = 1, which left two thirds of the budget unspent."""
+    the rate to spend it, in (0, 1]: a larger oversampling at too few channels per position
+    loses to a smaller one at more."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:
@@ -364,7 +242,7 @@ class SemanticControlUnit:
         repetitions: np.ndarray,
         measured_snr_db: np.ndarray,
         full_scene_symbols: int,
-        copy_fading: CopyFading,
+        copy_fading: phy.CopyFading,
         block_px: int = BLOCK_PX,
     ) -> np.ndarray:
         """Copies of each on-demand view's block: its whole-view ``repetitions`` where copies
@@ -383,7 +261,7 @@ class SemanticControlUnit:
         if not np.any(reps > 1):
             return reps
         details = {"spread_db": copy_fading.spread_db, "correlation": copy_fading.correlation}
-        if copy_fading.independent(pol):
+        if copy_fading.independent(pol.copy_spread_db, pol.max_copy_correlation):
             self.log("rate", "on-demand copies fade independently: send copies", **details)
             return reps
         out = np.where(np.asarray(measured_snr_db) < pol.static_repeat_below_db, reps, 1)
@@ -438,6 +316,7 @@ class SemanticControlUnit:
 
     def plan(
         self,
+        *,
         candidates,
         on_demand,
         link_snr_db: dict[int, float],
@@ -448,7 +327,7 @@ class SemanticControlUnit:
         snr_range_db: tuple[float, float],
         height: int,
         width: int,
-        copy_fading: CopyFading,
+        copy_fading: phy.CopyFading,
     ) -> RunPlan:
         """One :class:`ViewPlan` per candidate view (logged).
 
@@ -458,6 +337,8 @@ class SemanticControlUnit:
             outage: views without a propagation path.
             masks: [len(on-demand views not in outage), height, width] union masks of the
                 demanded objects, in the order of ``on_demand``.
+            cbr_range, snr_range_db: the codec's.
+            height, width: captured view size, pixels.
             copy_fading: whether copies fade independently on these links.
         """
         outage = {int(v) for v in outage}
@@ -490,7 +371,7 @@ class SemanticControlUnit:
         plans = []
         for v in (int(v) for v in candidates):
             if v in outage:
-                plans.append(ViewPlan(v, None, None, None, 0.0, 0, False, None, 0, 0, True))
+                plans.append(_outage_plan(v))
                 continue
             f = focus.get(v)
             fr = focus_reps.get(v) if f else None
@@ -516,6 +397,64 @@ class SemanticControlUnit:
         if outage:
             self.log("link", "views in outage are not sent", views=sorted(outage))
         return RunPlan(tuple(plans), int(s), int(height), int(width))
+
+    def plan_run(
+        self,
+        *,
+        collection: Collection,
+        links,
+        cbr_range: tuple[float, float],
+        snr_range_db: tuple[float, float],
+        height: int,
+        width: int,
+        seed: int,
+        cache,
+    ) -> tuple[RunPlan, Collection]:
+        """Measure every link with pilots, then :meth:`plan` the run. The plan and the
+        decisions that made it are cached together, so a resumed run logs them as the
+        first did.
+
+        Args:
+            collection: the collector's views.
+            links: ``osnerf.run.links.RunLinks`` (``links``, ``snr_db``, ``outage``).
+            seed: the run seed (the pilots' draws come from it).
+            cache: the run's ``StageCache``.
+        Returns:
+            (the plan, the collection without views in outage).
+        Raises:
+            ValueError: every on-demand view is in outage.
+        """
+        sent = [int(v) for v in collection.indices if int(v) not in links.outage]
+        if not sent:
+            raise ValueError(
+                "every view showing the demanded objects is in outage: nothing can be sent"
+            )
+        collection = collection.subset(np.isin(collection.indices, sent))
+        cached = cache.load("plan")
+        if cached is not None:
+            self.decisions.extend(cached[1].get("decisions", []))
+            return RunPlan.from_dict(cached[1]), collection
+        first = len(self.decisions)
+        whole = [int(v) for v in collection.candidates if int(v) not in links.outage]
+        gen = torch.Generator().manual_seed(scheme_seed(seed, "scu", "measure"))
+        view_links, view_snr = [links.links[v] for v in whole], [links.snr_db[v] for v in whole]
+        measured = phy.measure_snr_db(view_links, view_snr, gen)
+        fading = phy.measure_copy_fading(view_links, view_snr, gen)  # after: the same draws
+        plan = self.plan(
+            candidates=collection.candidates,
+            on_demand=sent,
+            link_snr_db=links.snr_db,
+            measured_snr_db=dict(zip(whole, measured.tolist())),
+            outage=links.outage,
+            masks=collection.masks,
+            cbr_range=cbr_range,
+            snr_range_db=snr_range_db,
+            height=height,
+            width=width,
+            copy_fading=fading,
+        )
+        cache.save("plan", {}, {**plan.to_dict(), "decisions": self.decisions[first:]})
+        return plan, collection
 
     def route(self, scheme: str, object_routed: bool, views, meta: dict) -> np.ndarray:
         """Where the renderer of ``scheme`` trains: the demanded objects' box (padded) for
@@ -549,121 +488,18 @@ def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
     return np.stack([b[0] - pad, b[1] + pad])
 
 
-def full_rate_symbols(
-    masks: np.ndarray,
-    cbr_range: tuple[float, float],
-    repetitions: np.ndarray,
-    oversampling: int,
-    block_px: int = BLOCK_PX,
-) -> float:
-    """Symbols of the on-demand views at the codec's largest CBR on every feature position
-    touching the objects, upsampled by ``oversampling``, times their copies."""
-    h, w = np.asarray(masks).shape[1:]
-    cov = focus_coverage(masks, block_px, oversampling)
-    s = oversampling
-    return float(np.sum(cov * cbr_range[1] * (s * h) * (s * w) * 3 * np.asarray(repetitions)))
-
-
-def focus_blocks(masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1) -> np.ndarray:
-    """The codec's feature positions (``block_px`` squares of the image upsampled by
-    ``oversampling``) that touch the objects' mask (> 0.05).
-
-    Args:
-        masks: [num_views, height, width] in [0, 1].
-    Returns:
-        [num_views, ceil(s*height/block_px), ceil(s*width/block_px)] bool.
-    """
-    m = np.asarray(masks) > 0.05
-    if oversampling > 1:
-        m = m.repeat(oversampling, axis=1).repeat(oversampling, axis=2)
-    n, h, w = m.shape
-    hf, wf = -(-h // block_px), -(-w // block_px)
-    pad = np.zeros((n, hf * block_px, wf * block_px), bool)
-    pad[:, :h, :w] = m
-    return pad.reshape(n, hf, block_px, wf, block_px).any((2, 4))
-
-
-def focus_coverage(
-    masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1
-) -> np.ndarray:
-    """Fraction of the feature positions of :func:`focus_blocks` that touch the objects,
-    per view: [num_views] float64 in [0, 1]."""
-    return focus_blocks(masks, block_px, oversampling).mean((1, 2)).astype(np.float64)
-
-
-def focus_pixel_masks(
-    masks: np.ndarray, block_px: int = BLOCK_PX, oversampling: int = 1
-) -> np.ndarray:
-    """[num_views, height, width] float32: 1 on the pixels that the feature positions of
-    :func:`focus_blocks` cover (at the captured resolution)."""
-    n, h, w = np.asarray(masks).shape
-    b = focus_blocks(masks, block_px, oversampling)
-    px = b.repeat(block_px, axis=1).repeat(block_px, axis=2)[
-        :, : oversampling * h, : oversampling * w
-    ]
-    return px.reshape(n, h, oversampling, w, oversampling).any((2, 4)).astype(np.float32)
-
-
-def qpsk_pilots(num_blocks: int, num_pilots: int, generator: torch.Generator) -> torch.Tensor:
-    """[num_blocks, num_pilots] unit-power QPSK symbols, complex64."""
-    bits = torch.randint(0, 2, (num_blocks, num_pilots, 2), generator=generator)
-    return ((1 - 2 * bits[..., 0]) + 1j * (1 - 2 * bits[..., 1])).to(torch.complex64) / math.sqrt(2)
-
-
-def measure_snr_db(
-    links, snr_db, generator: torch.Generator, num_pilots: int = 256, num_blocks: int = 8
-) -> np.ndarray:
-    """Post-equalisation SNR per view from known QPSK pilot blocks sent through its link.
-
-    The links hand back unbiased estimates with their per-symbol noise variance; per block,
-    the LMMSE pilots ``x_hat / (1 + noise_var) = g x + e`` give the gain ``g = <x, x_hat> / <x, x>``
-    and the unbiased SNR ``|g|^2 / var(e)`` (``|h|^2 snr`` on block fading, ``1 / noise_var``
-    on AWGN; robust to the deep fades of fast fading, where ZF's error alone would diverge).
-    The linear SNR is averaged over ``num_blocks`` blocks (independent fades on a
-    block-fading link: the long-term SNR the rate is chosen on).
-
-    Args:
-        links: one link per view, ``link(x, snr_db, generator=None) -> LinkOutput``.
-        snr_db: one SNR per view (what its link runs at).
-    Returns:
-        [num_views] float measured SNR in dB.
-    """
-    out = []
-    for link, s in zip(links, snr_db):
-        x = qpsk_pilots(num_blocks, num_pilots, generator)
-        y = link(x, float(s), generator=generator)
-        z = y.x_hat / (1.0 + y.noise_var.clamp(0.0, 1e6))  # LMMSE
-        g = (x.conj() * z).sum(-1, keepdim=True) / (x.abs() ** 2).sum(
-            -1, keepdim=True
-        )  # [blocks, 1]
-        e = (z - g * x).abs().pow(2).mean(-1)  # [blocks]
-        snr = (g.abs().squeeze(-1) ** 2 / e.clamp_min(1e-12)).mean()
-        out.append(10 * math.log10(max(float(snr), 1e-3)))
-    return np.asarray(out)
-
-
-def measure_copy_fading(
-    links, snr_db, generator: torch.Generator, num_pilots: int = 256, num_pairs: int = 4
-) -> CopyFading:
-    """Whether copies fade independently: ``num_pairs`` QPSK pilot blocks per view, each
-    sent twice back to back (as the copies of a view are), and the per-symbol SNR the
-    receiver reports (``1 / noise_var``, dB) compared between the two copies, pooled over
-    the views after removing each view's mean.
-
-    Args:
-        links: one link per view, ``link(x, snr_db, generator=None) -> LinkOutput``.
-        snr_db: one SNR per view (what its link runs at).
-    """
-    first, second = [], []
-    for link, s in zip(links, snr_db):
-        x = qpsk_pilots(num_pairs, num_pilots, generator)
-        y = link(x.repeat_interleave(2, dim=0), float(s), generator=generator)
-        db = -10.0 * torch.log10(y.noise_var.double().clamp(1e-12, 1e12))
-        db = db - db.mean()
-        first.append(db[0::2].flatten())
-        second.append(db[1::2].flatten())
-    a, b = torch.cat(first), torch.cat(second)
-    va, vb = float((a * a).mean()), float((b * b).mean())
-    spread = math.sqrt((va + vb) / 2.0)
-    corr = float((a * b).mean()) / math.sqrt(va * vb) if va * vb > 1e-18 else 0.0
-    return CopyFading(spread_db=spread, correlation=corr)
+def _outage_plan(view: int) -> ViewPlan:
+    """The plan of a view without a propagation path: never sent."""
+    return ViewPlan(
+        view=view,
+        snr_db=None,
+        measured_snr_db=None,
+        encoder_snr_db=None,
+        cbr=0.0,
+        repetitions=0,
+        on_demand=False,
+        focus_cbr=None,
+        budget_symbols=0,
+        full_symbols=0,
+        outage=True,
+    )

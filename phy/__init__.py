@@ -4,7 +4,9 @@ Imports nothing else of osnerf. See ``phy.conventions`` for power and SNR defini
 sionna is imported lazily (only by the blocks that need it), so ``import phy`` is cheap.
 
 * channels (``phy.CHANNELS``, ``phy.make_channel``): ``channel(x, snr_db, generator) -> ChannelOutput``
-* links (``FlatLink``, ``OFDMLink``): ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``
+* links (``FlatLink``, ``OFDMLink``): ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``;
+  ``phy.models``: which link each channel runs on and what a transmitter assumes;
+  ``phy.measure``: pilot measurements of a link's SNR and of its copies' fading
 * OFDM (``phy.ofdm``): ``ResourceGrid``, (de)modulation, LS estimation, ZF/MMSE equalisation
 * over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``
 * theory (``phy.theory``, ``phy.modulation``): uncoded BER/SER closed forms, Gray constellations
@@ -39,6 +41,14 @@ from phy.conventions import (  # noqa: E402
 )
 from phy.frame import FrameConfig, build_frame  # noqa: E402
 from phy.link import FlatLink, Link, LinkOutput, OFDMLink, combine_repetitions  # noqa: E402
+from phy.measure import CopyFading, measure_copy_fading, measure_snr_db, qpsk_pilots  # noqa: E402
+from phy.models import (  # noqa: E402
+    OFDM_CHANNELS,
+    assumed_channel,
+    channel_kind,
+    channel_link,
+    receiver_description,
+)
 from phy.modulation import (  # noqa: E402
     MODULATIONS,
     bits_per_symbol,
@@ -72,6 +82,15 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "OFDM_CHANNELS",
+    "CopyFading",
+    "assumed_channel",
+    "channel_kind",
+    "channel_link",
+    "measure_copy_fading",
+    "measure_snr_db",
+    "qpsk_pilots",
+    "receiver_description",
     "AWGN",
     "CDLChannel",
     "CHANNELS",

@@ -21,19 +21,25 @@ from semcodec.checkpoint import (
     weights_sha256,
 )
 from semcodec.codec import (
-    BLOCK_PX,
     DEFAULT_CHECKPOINT,
     Codec,
     Encoded,
     EncodedMeta,
     check_images,
     load_codec,
-    positions_to_mask,
     receiver_mask,
 )
 from semcodec.evaluation import SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
 from semcodec.focus_eval import focus_gain, masked_psnr
+from semcodec.grid import (
+    BLOCK_PX,
+    focus_blocks,
+    focus_coverage,
+    focus_pixel_masks,
+    full_rate_symbols,
+    positions_to_mask,
+)
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
 from semcodec.model import (
     MODELS,
@@ -63,6 +69,10 @@ __all__ = [
     "BLOCK_PX",
     "Codec",
     "positions_to_mask",
+    "focus_blocks",
+    "focus_coverage",
+    "focus_pixel_masks",
+    "full_rate_symbols",
     "receiver_mask",
     "Encoded",
     "EncodedMeta",

@@ -232,29 +232,6 @@ ENVELOPE = "envelope"  # the old name of the genie (an oracle, kept for old conf
 MCS_MODES = (AUTO, GENIE)
 
 
-def channel_kind(link) -> str:
-    """The ``phy.CHANNELS`` name of a link's channel (what the transmitter may know: the
-    fading *distribution*, never the draw). KeyError when it cannot be told."""
-    ch = getattr(link, "channel", link)
-    name = type(ch).__name__
-    mode = getattr(ch, "mode", None)
-    kinds = {
-        ("AWGN", None): "awgn",
-        ("RayleighFading", "block"): "rayleigh",
-        ("RayleighFading", "fast"): "rayleigh_fast",
-        ("RicianFading", "block"): "rician",
-        ("RicianFading", "fast"): "rician_fast",
-        ("TDLChannel", None): "tdl",
-        ("CDLChannel", None): "cdl",
-    }
-    key = (name, mode if name in ("RayleighFading", "RicianFading") else None)
-    if key not in kinds:
-        raise KeyError(
-            f"cannot tell the channel kind of {name}; pass channel= one of {sorted(set(kinds.values()))}"
-        )
-    return kinds[key]
-
-
 def _lost(img: Tensor, mcs, why: str, failed: int = 0) -> tuple[Tensor, bool, dict]:
     info = {"mcs": mcs, "quality": None, "bits": 0, "failed_codewords": failed, "lost": why}
     return _grey(img.shape), False, info
@@ -367,7 +344,7 @@ def transmit_digital(
         generator: the draws; each image takes one seed from it (the same seed for every
             try of the genie, so the same fade and noise).
         channel: ``phy.CHANNELS`` name of the link's channel for ``"auto"`` (and the genie's
-            starting point) (default: told from ``link``; see :func:`channel_kind`). Needed
+            starting point) (default: told from ``link``; see ``phy.channel_kind``). Needed
             for links whose channel type does not tell (``raytraced`` per-position links); a
             genie without it searches from the lowest MCS.
     Returns:
@@ -376,6 +353,7 @@ def transmit_digital(
         mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
         calibrated).
     """
+    from phy import assumed_channel, channel_kind
     from phy.digital import MCS_TABLE, get_mcs
     from semcodec.digital_calibration import load_calibration
 
@@ -391,10 +369,10 @@ def transmit_digital(
             raise KeyError(f"mcs must be 'auto', 'genie' or one of {names}, got {mcs!r}") from None
     kind = None
     if mode == AUTO:
-        kind = channel or channel_kind(link)
+        kind = assumed_channel(channel or channel_kind(link))
     elif mode == GENIE:  # the genie needs no calibration: without one it searches from the bottom
         try:
-            kind = channel or channel_kind(link)
+            kind = assumed_channel(channel or channel_kind(link))
         except KeyError:
             kind = None
     if kind is not None:

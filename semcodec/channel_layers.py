@@ -21,7 +21,6 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from phy import make_channel
 from semcodec.model import lmmse_input, side_info
 
 TRAIN_CHANNELS: dict[str, tuple[str, str]] = {
@@ -48,13 +47,13 @@ def _link(channel: str) -> torch.nn.Module:
     """The phy link (channel + unbiased one-tap receiver) of a training channel, built once."""
     name, csi = TRAIN_CHANNELS[channel]
     if (name, csi) not in _LINKS:
-        import phy
+        from phy import channel_link
 
         if csi == "ofdm":
             kwargs = {"model": "A", "delay_spread_s": 100e-9} if name == "tdl" else {}
-            link = phy.OFDMLink(phy.ResourceGrid(), make_channel(name, **kwargs), "ls", "zf")
+            link = channel_link(name, ofdm=True, csi="ls", **kwargs)
         else:
-            link = phy.FlatLink(make_channel(name), csi=csi, equalizer="zf")
+            link = channel_link(name, ofdm=False, csi=csi)
         _LINKS[(name, csi)] = link
     return _LINKS[(name, csi)]
 

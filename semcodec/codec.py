@@ -26,6 +26,7 @@ from torch.nn import functional as F
 from phy import power_normalize, validate_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
 from semcodec.focus import attribution_box, demand_heatmap, demand_positions, select_positions
+from semcodec.grid import positions_to_mask
 from semcodec.model import (
     JSCCModel,
     features_to_symbols,
@@ -375,29 +376,12 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
     return Codec(model, card, p)
 
 
-BLOCK_PX = 4
-"""Pixels per feature position along each axis (the encoder downsamples by 4)."""
-
-
 def centre_first(rows: int, cols: int) -> Tensor:
     """The positions of a rows x cols box (row-major indices), nearest its centre first
     (ties in row-major order): where a partial channel goes, known to both ends."""
     r, c = torch.meshgrid(torch.arange(rows), torch.arange(cols), indexing="ij")
     d = (2 * r - (rows - 1)) ** 2 + (2 * c - (cols - 1)) ** 2
     return torch.sort(d.flatten(), stable=True).indices
-
-
-def positions_to_mask(positions, height: int, width: int) -> np.ndarray:
-    """[height, width] float32: 1 on the pixels of the sent feature positions.
-
-    Args:
-        positions: [num_positions] indices, row-major on the ceil(h/4) x ceil(w/4) grid.
-    """
-    hf, wf = -(-height // BLOCK_PX), -(-width // BLOCK_PX)
-    grid = np.zeros(hf * wf, np.float32)
-    grid[np.asarray(positions, np.int64)] = 1.0
-    full = np.kron(grid.reshape(hf, wf), np.ones((BLOCK_PX, BLOCK_PX), np.float32))
-    return full[:height, :width]
 
 
 def receiver_mask(meta: EncodedMeta, height: int, width: int) -> np.ndarray | None:

@@ -56,15 +56,12 @@ ALIASES = {
     "rician_fast": "rayleigh_fast",
     "tdl": "rayleigh_fast",
     "cdl": "rayleigh_fast",
-    "raytraced": "rayleigh_fast",
 }
 """Channels calibrated by another one's table, and why (``ALIAS_REASONS``)."""
 ALIAS_REASONS = {
     "rician_fast": "fast Rayleigh curve: pessimistic for a line-of-sight component",
     "tdl": "fast Rayleigh curve: an OFDM codeword spans many independent subcarrier fades",
     "cdl": "fast Rayleigh curve: an OFDM codeword spans many independent subcarrier fades",
-    "raytraced": "fast Rayleigh curve: a codeword spans the subcarriers of a frequency-"
-    "selective ray-traced response (conservative; the response is fixed per position)",
 }
 RICIAN_K_DB = 6.0  # phy.RicianFading's default
 HOW = (

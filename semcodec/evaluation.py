@@ -29,9 +29,6 @@ from semcodec.baselines import (
 from semcodec.codec import MIN_SIDE_PX, Codec
 from semcodec.image_codecs import read_image_file
 
-OFDM_CHANNELS = ("tdl", "cdl")
-"""Channels that ``eval-codec`` runs over OFDM with pilots and LS estimates (the rest: one
-tap per symbol, perfect CSI)."""
 DEFAULT_FIXED_MCS = "16qam-1/2"
 
 
@@ -40,17 +37,6 @@ def eval_channels() -> list[str]:
     import phy
 
     return list(phy.CHANNELS)
-
-
-def channel_link(channel: str):
-    """A ``phy`` link of ``channel`` with an unbiased receiver: one tap with perfect CSI, or
-    OFDM (``phy.ResourceGrid()``) with pilot LS estimates for :data:`OFDM_CHANNELS`."""
-    import phy
-
-    ch = phy.make_channel(channel)
-    if channel in OFDM_CHANNELS:
-        return phy.OFDMLink(phy.ResourceGrid(), ch, csi="ls", equalizer="zf")
-    return phy.FlatLink(ch, csi="perfect", equalizer="zf")
 
 
 @dataclass
@@ -73,17 +59,19 @@ class EvalContext:
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
 
     def link(self):
-        """The ``phy`` link of ``channel`` (built once, :func:`channel_link`)."""
+        """The ``phy`` link of ``channel`` (built once, ``phy.channel_link``)."""
         if "zf" not in self.links:
+            from phy import channel_link
+
             self.links["zf"] = channel_link(self.channel)
         return self.links["zf"]
 
     @property
     def receiver(self) -> str:
         """The receiver in words (for result files)."""
-        if self.channel in OFDM_CHANNELS:
-            return "OFDM, pilot LS estimates, ZF + per-symbol noise variance"
-        return "one tap, perfect CSI, ZF + per-symbol noise variance"
+        from phy import receiver_description
+
+        return receiver_description(self.channel)
 
 
 def _n(img, cbr) -> int:

@@ -14,7 +14,6 @@ import numpy as np
 
 import phy
 from osnerf.run.config import OTA, RunConfig
-from semcodec.evaluation import OFDM_CHANNELS, channel_link
 
 
 @dataclass
@@ -48,8 +47,8 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
         return _ota_links(cfg, idx, snr)
     if cfg.channel == "raytraced":
         return _raytraced_links(cfg, views, idx)
-    link = channel_link(cfg.channel)
-    if cfg.channel in OFDM_CHANNELS:
+    link = phy.channel_link(cfg.channel)
+    if cfg.channel in phy.OFDM_CHANNELS:
         info = {"channel": cfg.channel, "csi": "ls (pilots)", "ofdm": True}
     else:
         info = {"channel": cfg.channel, "csi": "perfect"}

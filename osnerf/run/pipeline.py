@@ -22,17 +22,12 @@ from osnerf.collect import Collection, Demand, collect
 from osnerf.report import Report, SchemeReport
 from osnerf.run.cache import StageCache
 from osnerf.run.config import RunConfig
-from osnerf.run.links import RunLinks, build_links
+from osnerf.run.links import build_links
+from osnerf.run.plan import RunPlan
 from osnerf.run.reconstruct import Reconstruction, received_dataset, reconstruct, view_metrics
 from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
 from osnerf.schemes import RunContext, Scheme, Transmission, get_scheme, scheme_seed
-from osnerf.scu import (
-    RatePolicy,
-    RunPlan,
-    SemanticControlUnit,
-    measure_copy_fading,
-    measure_snr_db,
-)
+from osnerf.scu import RatePolicy, SemanticControlUnit
 
 METRIC_NOTES = (
     "psnr/ssim/lpips: mean over held-out views of per-view values on the whole view "
@@ -82,45 +77,6 @@ def prepare(cfg: RunConfig) -> Prepared:
         rx = semcodec.load_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
         scu.check_knowledge_base(codec.sha256, rx.sha256)
     return Prepared(demand, schemes, codec, rx, scu)
-
-
-def plan_views(
-    cfg: RunConfig, prep: Prepared, views: SceneViews, col: Collection, links: RunLinks, cache
-) -> tuple[RunPlan, Collection]:
-    """The SCU's plan (measured SNR -> CBR, repetitions, focus, oversampling) and the
-    collection without views in outage."""
-    sent = [int(v) for v in col.indices if int(v) not in links.outage]
-    if not sent:
-        raise ValueError(
-            "every view showing the demanded objects is in outage: nothing can be sent"
-        )
-    col = col.subset(np.isin(col.indices, sent))
-    cached = cache.load("plan")
-    if cached is not None:  # a resumed run reports the plan's decisions as the first did
-        prep.scu.decisions.extend(cached[1].get("decisions", []))
-        return RunPlan.from_dict(cached[1]), col
-    logged = len(prep.scu.decisions)
-    whole = [int(v) for v in col.candidates if int(v) not in links.outage]
-    gen = torch.Generator().manual_seed(scheme_seed(cfg.seed, "scu", "measure"))
-    view_links, view_snr = [links.links[v] for v in whole], [links.snr_db[v] for v in whole]
-    measured = measure_snr_db(view_links, view_snr, gen)
-    fading = measure_copy_fading(view_links, view_snr, gen)  # after: the same SNR draws
-    codec = prep.codec
-    plan = prep.scu.plan(
-        col.candidates,
-        sent,
-        links.snr_db,
-        dict(zip(whole, measured.tolist())),
-        links.outage,
-        col.masks,
-        tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6),
-        tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
-        views.intrinsics.height,
-        views.intrinsics.width,
-        copy_fading=fading,
-    )
-    cache.save("plan", {}, {**plan.to_dict(), "decisions": prep.scu.decisions[logged:]})
-    return plan, col
 
 
 def transmit(
@@ -255,7 +211,17 @@ def run_pipeline(
     )
     links = build_links(cfg, views, col.candidates)
     try:
-        plan, col = plan_views(cfg, prep, views, col, links, cache)
+        codec = prep.codec
+        plan, col = prep.scu.plan_run(
+            collection=col,
+            links=links,
+            cbr_range=tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6),
+            snr_range_db=tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
+            height=views.intrinsics.height,
+            width=views.intrinsics.width,
+            seed=cfg.seed,
+            cache=cache,
+        )
         ctx = RunContext(
             cfg,
             links.links,

@@ -16,6 +16,8 @@ class AWGN(Channel):
     only draws from its global RNG), so runs are reproducible per call.
     """
 
+    kind = "awgn"
+
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
         """Args: x [batch, ...] complex64; snr_db float or [batch]. Returns y like x, h None."""
         check_symbols(x)

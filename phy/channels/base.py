@@ -53,5 +53,9 @@ class Channel(torch.nn.Module):
         generator: torch.Generator for noise and fading draws.
     """
 
+    kind: str = ""
+    """Its ``phy.CHANNELS`` name: the fading distribution a transmitter may know (never the
+    draw). Set by each subclass (a property where it depends on the mode)."""
+
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:  # noqa: D102
         raise NotImplementedError

@@ -31,6 +31,11 @@ class RayleighFading(Channel):
         super().__init__()
         self.mode = check_mode(mode)
 
+    @property
+    def kind(self) -> str:
+        """``"rayleigh"`` (block) or ``"rayleigh_fast"``."""
+        return "rayleigh" if self.mode == "block" else "rayleigh_fast"
+
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
         """Args: x [batch, ...] complex64; snr_db float or [batch]. Returns y like x."""
         check_symbols(x)

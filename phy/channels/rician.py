@@ -48,6 +48,11 @@ class RicianFading(Channel):
         """Linear K factor."""
         return 10.0 ** (self.k_factor_db / 10.0)
 
+    @property
+    def kind(self) -> str:
+        """``"rician"`` (block) or ``"rician_fast"``."""
+        return "rician" if self.mode == "block" else "rician_fast"
+
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
         """Args: x [batch, ...] complex64; snr_db float or [batch]. Returns y like x."""
         check_symbols(x)

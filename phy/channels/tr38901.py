@@ -164,6 +164,8 @@ class TDLChannel(_TR38901Channel):
 
     MODELS = TDL_MODELS
 
+    kind = "tdl"
+
     def _build(self):
         from sionna.phy.channel.tr38901 import TDL
 
@@ -190,6 +192,8 @@ class CDLChannel(_TR38901Channel):
     """
 
     MODELS = CDL_MODELS
+
+    kind = "cdl"
 
     def _build(self):
         from sionna.phy.channel.tr38901 import CDL, Antenna

@@ -51,6 +51,8 @@ class RayTracedChannel(Channel):
         tracer: an existing :class:`RayTracer` (shares its scene and cache).
     """
 
+    kind = "raytraced"
+
     def __init__(
         self,
         scene="simple_street_canyon",
@@ -179,6 +181,8 @@ class PerPositionChannel(Channel):
     Args:
         h: [num_subcarriers] complex64 frequency response.
     """
+
+    kind = "raytraced"
 
     def __init__(self, h):
         super().__init__()

@@ -4,21 +4,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 
-import phy
 from osnerf.collect import CollectorConfig, Demand, collect, masked_images
 from osnerf.scenes import SceneViews, intrinsics_from_fov
-from osnerf.scu import (
-    CopyFading,
-    KnowledgeBaseError,
-    RatePolicy,
-    SemanticControlUnit,
-    focus_coverage,
-    focus_pixel_masks,
-    measure_copy_fading,
-    measure_snr_db,
-)
+from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit
+from phy import CopyFading
+from semcodec.grid import focus_coverage, focus_pixel_masks
 
 
 def synthetic_views(visible_hydrant, visible_tree, n_test=2, size=8):
@@ -169,43 +160,6 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
         RatePolicy(min_fill=0.0)
 
 
-class StaticMultipathLink:
-    """A static 3-tap channel seen through OFDM: symbol k sits on subcarrier k mod 64, whose
-    gain |H_k|^2 is the same in every block; the receiver's noise variance carries a 10 %
-    estimation error, drawn per block."""
-
-    def __init__(self):
-        h = np.fft.fft(np.array([1.0, 0, 0.4, 0, 0, 0.2j]), 64)
-        self.gain = torch.from_numpy(np.abs(h) ** 2 / np.mean(np.abs(h) ** 2)).float()
-
-    def __call__(self, x, snr_db, generator=None):
-        g = self.gain.repeat(x.shape[-1] // 64 + 1)[: x.shape[-1]].expand(x.shape[0], -1)
-        nv = 10 ** (-snr_db / 10) / g
-        nv = nv * (1 + 0.1 * torch.randn(x.shape, generator=generator)).clamp_min(0.5)
-        noise = torch.complex(*torch.randn((2, *x.shape), generator=generator)) * (nv / 2).sqrt()
-        return phy.LinkOutput(x + noise, nv.float())
-
-
-def test_copy_fading_tells_independent_fades_from_a_static_channel():
-    """Pilot copies: AWGN has no fades (spread 0); block Rayleigh fades each copy on its own
-    (the dB spread of an exponential |h|^2 is 10/ln10 * pi/sqrt(6) = 5.57 dB, a little less
-    about each view's mean of 8 blocks; the copies uncorrelated); a static multipath channel
-    fades its subcarriers by the same amount in both copies."""
-    gen = torch.Generator().manual_seed(3)
-    policy = RatePolicy()
-    awgn = measure_copy_fading([phy.FlatLink(phy.make_channel("awgn"))] * 4, [0.0] * 4, gen)
-    assert awgn.spread_db == pytest.approx(0.0, abs=1e-6) and not awgn.independent(policy)
-    block = phy.FlatLink(phy.make_channel("rayleigh"), csi="perfect", equalizer="zf")
-    ray = measure_copy_fading([block] * 24, [0.0] * 24, gen)
-    assert 4.0 < ray.spread_db < 6.5 and abs(ray.correlation) < 0.35
-    assert ray.independent(policy)
-    static = measure_copy_fading([StaticMultipathLink()] * 4, [0.0] * 4, gen)
-    assert static.spread_db > 1.5 and static.correlation > 0.9
-    assert not static.independent(policy)
-    with pytest.raises(ValueError, match="max_copy_correlation must be in"):
-        RatePolicy(max_copy_correlation=2.0)
-
-
 def test_on_demand_copies_only_where_they_fade_independently():
     """The same 8 x 8 object as above in 3 views, each sent twice as a whole view; one copy
     of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 720 (2/3
@@ -232,18 +186,6 @@ def test_on_demand_copies_only_where_they_fade_independently():
     assert big.tolist() == [2, 2, 2] and "cannot take" in scu.decisions[-1]["decision"]
 
 
-@pytest.mark.parametrize("snr_db", [0.0, 10.0])
-def test_measured_snr_matches_the_awgn_link(snr_db):
-    link = phy.FlatLink(phy.make_channel("awgn"))
-    gen = torch.Generator().manual_seed(1)
-    est = measure_snr_db([link], [snr_db], gen, num_pilots=4096, num_blocks=4)[0]
-    assert est == pytest.approx(snr_db, abs=0.15)  # 16k samples: std of the estimate ~0.05 dB
-
-
-def test_measured_snr_of_rayleigh_mmse_is_the_mean_post_equalisation_snr():
-    """Perfect-CSI MMSE on block Rayleigh: per block the unbiased SNR is |h|^2 / noise_var,
-    so the average over many blocks is E|h|^2 / noise_var = the link SNR."""
-    link = phy.FlatLink(phy.make_channel("rayleigh"), csi="perfect", equalizer="mmse")
-    gen = torch.Generator().manual_seed(2)
-    est = measure_snr_db([link], [5.0], gen, num_pilots=1024, num_blocks=2000)[0]
-    assert est == pytest.approx(5.0, abs=0.3)
+def test_rate_policy_refuses_a_correlation_outside_minus_one_to_one():
+    with pytest.raises(ValueError, match="max_copy_correlation must be in"):
+        RatePolicy(max_copy_correlation=2.0)

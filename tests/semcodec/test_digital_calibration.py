@@ -37,9 +37,13 @@ def test_table_covers_every_mcs_measured_channel_and_codec(cal):
     assert t == sorted(t)
 
 
-@pytest.mark.parametrize("name", sorted(phy.CHANNELS))
-def test_every_registered_channel_has_a_calibration(cal, name):
-    assert name in cal.source(name)
+@pytest.mark.parametrize("name", [*sorted(phy.CHANNELS), "ota"])
+def test_the_model_a_transmitter_assumes_for_every_channel_has_a_calibration(cal, name):
+    """The transmitter plans with ``phy.assumed_channel``: the channel itself where phy
+    draws it from a distribution, TDL-A for a ray-traced response or a radio link."""
+    model = phy.assumed_channel(name)
+    assert model in cal.source(model)
+    assert model == (name if name in phy.CHANNELS and name != "raytraced" else "tdl")
 
 
 def test_unknown_channel_lists_the_known_ones(cal):
@@ -152,8 +156,8 @@ def test_envelope_is_the_genie_and_unknown_modes_list_the_known_ones():
 
 
 def test_honest_digital_needs_the_channel_kind_the_genie_does_not():
-    class Opaque(phy.AWGN):
-        pass
+    class Opaque(phy.AWGN):  # a channel of someone else's that does not say its kind
+        kind = ""
 
     link = phy.FlatLink(Opaque(), csi="perfect", equalizer="zf")
     x = smooth_image(8, 32, 32)
