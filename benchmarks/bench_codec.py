@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from semcodec.evaluation import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
+
 
 def _speed(codec) -> dict:
     out = {"threads": torch.get_num_threads()}
@@ -98,7 +100,12 @@ REFINED_CHANNELS = ("rayleigh",)
 symbols, :func:`semcodec.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
 fading, where jscc meets the honest digital link."""
 TABLE_SNRS = (1.0, 4.0, 10.0)
-SEPARATE = ("digital", "digital_genie", "ideal")
+SEPARATE = tuple(
+    name
+    for name, s in LINK_SCHEMES.items()
+    if s.kind in (DIGITAL, IDEAL) and s.image_codec == "avif" and s.mcs != "fixed"
+)
+"""The AVIF separate schemes of the table: honest digital, its genie bound, the capacity bound."""
 
 
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
@@ -158,7 +165,7 @@ def _codec_table(
             continue
         base = [*common, "--channel", channel, "--draws", str(draws)]
         docs = []
-        if only != "jscc":
+        if only != JSCC:
             docs.append(
                 _eval(
                     out_dir,

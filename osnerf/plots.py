@@ -20,6 +20,7 @@ from typing import Any
 from matplotlib.figure import Figure
 
 from osnerf.report import QUALITY_METRICS  # the run report's metrics
+from semcodec.evaluation import DIGITAL
 
 # Published Kodak numbers (../shared/reference/jscc-anchors.md): CBR 1/16, mean per-image PSNR.
 # scheme -> [(snr_db, psnr_db)]; "(plot)" values read off published figures, about +-0.3 dB.
@@ -37,7 +38,7 @@ ANCHORS: dict[str, dict[str, list[tuple[float, float]]]] = {
         "WITT": list(zip(_SNRS, (29.7, 31.3, 32.6, 33.6, 34.3))),
         "SwinJSCC, one model": list(zip(_SNRS, (29.54, 31.09, 32.27, 33.17, 33.80))),
     },
-    # the published Rayleigh results are fast fading with CSI at the receiver (issue #12)
+    # the published Rayleigh results are fast fading with CSI at the receiver
     "rayleigh_fast": {
         "BPG + 5G LDPC, best MCS (WITT paper)": [
             (2.4, 27.9),
@@ -97,26 +98,47 @@ def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
         for k in ("snr_db", "cbr"):
             if k in row:
                 row[k] = _number(row[k])
+        entry = scheme_entry(row)
+        if entry is not None:
+            row["scheme_kind"] = entry.kind
         if "mcs" in row or "fixed_mcs" in row:
-            row["mcs"] = _mcs_of(row)
+            row["mcs"] = _mcs_of(row, entry)
     return rows
 
 
-def _mcs_of(row: dict[str, Any]) -> str | None:
-    """The fixed MCS a row's scheme used, or None (not digital, or the envelope).
+def scheme_entry(row: dict[str, Any]):
+    """The table entry of a row's scheme: ``semcodec.LINK_SCHEMES`` for the link-level
+    commands (``eval-codec``, ``ota``), ``osnerf.schemes.SCHEMES`` for ``run``; a row
+    without a command is looked up in both (the names they share have the same kind)."""
+    from osnerf.schemes import load_entry_points
+    from semcodec import LINK_SCHEMES
 
-    ``eval-codec``'s ``--mcs`` sets only its ``digital_fixed`` scheme (config ``fixed_mcs``);
-    ``run``'s ``--mcs`` sets its ``digital`` scheme (``envelope`` or a fixed MCS).
-    """
-    scheme = str(row.get("scheme", ""))
-    if not scheme.startswith("digital"):
+    name = row.get("scheme")
+    if name is None:
         return None
-    if "fixed" in scheme:
+    run_level = load_entry_points()
+    tables = [LINK_SCHEMES, run_level] if row.get("command") != "run" else [run_level]
+    if row.get("command") in ("eval-codec", "ota"):
+        tables = [LINK_SCHEMES]
+    return next((t[str(name)] for t in tables if str(name) in t), None)
+
+
+def _mcs_of(row: dict[str, Any], entry) -> str | None:
+    """The fixed MCS a row's digital scheme used, or None (not digital, or an MCS chosen
+    per SNR or per draw).
+
+    ``eval-codec``'s ``--mcs`` sets only its fixed-MCS scheme (config ``fixed_mcs``);
+    ``run``'s ``--mcs`` sets its ``digital`` scheme (``auto`` or a fixed MCS).
+    """
+    if entry is None or entry.kind != DIGITAL or entry.bound:
+        return None
+    choice = getattr(entry, "mcs", None)
+    if choice == "fixed":
         return row.get("mcs") or row.get("fixed_mcs")
-    if row.get("command") == "eval-codec":
+    if choice is not None:  # a link-level scheme that picks its own MCS
         return None
     m = row.get("mcs")
-    return None if m in (None, "envelope") else str(m)
+    return None if m in (None, "auto", "genie") else str(m)
 
 
 def _flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -191,11 +213,9 @@ def _label(keys: tuple[str, ...], values: tuple) -> str:
 
 
 def _is_bound(scheme) -> bool:
-    """Whether a link-level scheme is a bound, not a system (``semcodec.evaluation.SCHEMES``)."""
-    from semcodec.evaluation import SCHEMES
-
-    s = SCHEMES.get(str(scheme))
-    return bool(s and s.bound)
+    """Whether a scheme is a bound, not a system (by its table entry, :func:`scheme_entry`)."""
+    entry = scheme_entry({"scheme": scheme})
+    return bool(entry is not None and entry.bound)
 
 
 def _ber_row_is_pooled(rows: list[dict]) -> bool:
@@ -404,7 +424,7 @@ def plot_psnr_vs_cbr(
 
 
 def _is_digital(r: dict) -> bool:
-    return str(r.get("scheme", "")).startswith("digital")
+    return r.get("scheme_kind") == DIGITAL
 
 
 def plot_digital_cliff(rows: list[dict]) -> Figure:
@@ -415,7 +435,7 @@ def plot_digital_cliff(rows: list[dict]) -> Figure:
     rows = [r for r in rows if _finite(r.get("psnr")) and _finite(r.get("snr_db"))]
     digital = [r for r in rows if _is_digital(r)]
     if not digital:
-        raise ValueError("no rows of a digital scheme (scheme 'digital...')")
+        raise ValueError("no rows of a digital scheme (by the kind in its scheme table)")
     fig = Figure(figsize=(6.8, 4.6), layout="constrained")
     ax = fig.add_subplot()
     keys = ("scheme", "mcs") if any(r.get("mcs") for r in digital) else ("scheme",)

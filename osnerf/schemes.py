@@ -24,8 +24,10 @@ the same view (a paired comparison: their difference is not draw luck).
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from types import SimpleNamespace
@@ -34,6 +36,8 @@ from typing import ClassVar
 import numpy as np
 import torch
 import torch.nn.functional as F
+
+from semcodec.evaluation import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
 
@@ -99,10 +103,13 @@ class Scheme:
             bounds are labelled as such in help and reports.
         help: one line for ``--help`` and reports.
         headline: the scheme the report's comparisons are about (the others are its baselines).
+        kind: one of ``semcodec.evaluation.SCHEME_KINDS`` (as the link-level schemes):
+            what plots and benchmarks group by.
     """
 
     name: ClassVar[str] = ""
     headline: ClassVar[bool] = False
+    kind: ClassVar[str] = ""
     seed_name: ClassVar[str | None] = None
     """Draw the channel with another scheme's seed (a bound on the same draws), else own name."""
     object_routed: ClassVar[bool] = True
@@ -162,17 +169,35 @@ def get_scheme(name: str) -> Scheme:
     return SCHEMES[name]()
 
 
-def parse_schemes(text: str) -> tuple[str, ...]:
-    """``"jscc,gt"`` -> names, each in :data:`SCHEMES` (argparse ``type=``: a bad name is
-    refused while parsing, so ``osnerf sweep`` rejects it before the first point)."""
-    import argparse
+class SchemeListError(argparse.ArgumentTypeError, ValueError):
+    """A bad list of scheme names: refused while parsing (argparse ``type=``) or, where a
+    command checks later, as bad input (exit 2)."""
 
-    known = load_entry_points()
-    names = tuple(s.strip() for s in str(text).split(",") if s.strip())
-    bad = [n for n in names if n not in known]
-    if not names or bad:
-        raise argparse.ArgumentTypeError(
-            f"schemes must be a subset of {','.join(known)}, got {text!r}"
+
+def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
+    """``"jscc,gt"`` -> names, each a key of ``table`` (default: the run's :data:`SCHEMES`
+    with the entry points; ``semcodec.LINK_SCHEMES`` for the link-level commands).
+
+    As argparse ``type=`` a bad list is refused while parsing, so ``osnerf sweep`` rejects
+    it before the first point.
+
+    Raises:
+        SchemeListError: an empty list or entry (``"jscc,"``), a name given twice, or a
+            name not in the table (the known ones listed).
+    """
+    known = load_entry_points() if table is None else table
+    names = tuple(s.strip() for s in str(text).split(","))
+    problem = None
+    if not any(names) or "" in names:
+        problem = "an empty name"
+    elif len(set(names)) < len(names):
+        problem = f"{next(n for n in names if names.count(n) > 1)!r} twice"
+    elif any(n not in known for n in names):
+        problem = f"unknown {next(n for n in names if n not in known)!r}"
+    if problem:
+        raise SchemeListError(
+            f"schemes must be a comma-separated subset of {','.join(known)}, got {text!r} "
+            f"({problem})"
         )
     return names
 
@@ -197,9 +222,8 @@ def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, g
 REFINE_OUTSIDE_WEIGHT = 0.05
 """With ``refine_steps``, the weight of an on-demand view's pixels outside the demanded
 objects (inside the sent box) in the refinement's squared error; the objects' pixels weigh
-1 (times their demand weight). Default scene, block Rayleigh 0 dB, 30 steps, object PSNR of
-the field at 6000 steps, seed 0: 20.07 dB unrefined, 20.04 with uniform weights, 20.64 with
-0.2, 20.95 with 0.05."""
+1 (times their demand weight): the NeRF is scored on the objects, and the box's rim only
+has to keep the background plausible."""
 _MODEL_LINKS: dict = {}
 
 
@@ -327,6 +351,7 @@ class OnDemandJSCC(Scheme):
     """The semantic link on demand: only views showing the demanded objects, through the
     codec in focus mode (the feature positions touching the objects, all channels)."""
 
+    kind = JSCC
     object_routed = True
     needs_codec = True
     headline = True
@@ -343,6 +368,7 @@ class Digital(Scheme):
     No CSI at the transmitter: the MCS comes from the average SNR alone (the calibration
     table's best expected PSNR over the channel's fading), so deep fades cost outages."""
 
+    kind = DIGITAL
     object_routed = True
     help = "image codec + 5G LDPC + QAM, MCS from the average SNR (no CSI at the transmitter)"
 
@@ -404,6 +430,7 @@ class Analog(Scheme):
     """Uncoded pixels linearly mapped to symbols (LMMSE at the receiver), on-demand views,
     the same symbol budget per view as the on-demand plan."""
 
+    kind = ANALOG
     object_routed = True
     help = "uncoded analog pixels, same views and budget as jscc"
 
@@ -444,6 +471,7 @@ class FullScene(OnDemandJSCC):
 class GroundTruth(Scheme):
     """The on-demand views undistorted: nothing crosses the channel (the ceiling)."""
 
+    kind = IDEAL
     object_routed = True
     bound = "ceiling: the on-demand views undistorted, nothing crosses the channel"
     help = "bound: the on-demand views undistorted (ceiling)"

@@ -29,7 +29,7 @@ from semcodec.codec import (
     load_codec,
     receiver_mask,
 )
-from semcodec.evaluation import SCHEMES
+from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
 from semcodec.focus_eval import focus_gain, masked_psnr
 from semcodec.grid import (
@@ -54,7 +54,7 @@ __all__ = [
     "DEFAULT_CHECKPOINT",
     "IMAGE_CODECS",
     "LOST_IMAGE_VALUE",
-    "SCHEMES",
+    "LINK_SCHEMES",
     "TRAIN_CHANNELS",
     "TransmitResult",
     "decode_image",

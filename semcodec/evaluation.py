@@ -1,6 +1,6 @@
 """Scheme registry and per-image scoring for ``osnerf eval-codec`` and the benchmark.
 
-:data:`SCHEMES`: name -> :class:`LinkScheme`, called as ``scheme(ctx, image [1, 3, H, W],
+:data:`LINK_SCHEMES`: name -> :class:`LinkScheme`, called as ``scheme(ctx, image [1, 3, H, W],
 snr_db, cbr, generator) -> TransmitResult``. One table; unknown names raise KeyError listing
 the known ones. ``digital_genie`` and ``ideal*`` are bounds (``LinkScheme.bound``).
 """
@@ -124,6 +124,12 @@ def _analog(ctx, img, snr, cbr, gen):
     return transmit_analog(img, ctx.link(), snr, _n(img, cbr), generator=gen)
 
 
+SCHEME_KINDS = (JSCC, DIGITAL, IDEAL, ANALOG) = ("jscc", "digital", "ideal", "analog")
+"""What a scheme is, link-level or run-level: the semantic codec, a separate image codec +
+LDPC + QAM, a separate scheme at capacity (error free), or uncoded pixels. Plots and
+benchmarks group by kind, never by a scheme's name."""
+
+
 @dataclass(frozen=True)
 class LinkScheme:
     """One link-level scheme: ``scheme(ctx, image [1, 3, H, W], snr_db, cbr, generator)``.
@@ -131,9 +137,14 @@ class LinkScheme:
     Attributes:
         run: the function that sends the image (returns a ``TransmitResult``).
         help: one line for ``--help``, plots and reports.
-        kind: ``"jscc"``, ``"digital"``, ``"ideal"`` or ``"analog"``.
+        kind: one of :data:`SCHEME_KINDS`.
         bound: what it bounds when it is not a real system (shown as such), else None.
         over_the_air: ``osnerf ota`` can send it between two radios.
+        mcs: how a digital scheme picks its modulation and code rate: ``"auto"`` (from the
+            average SNR), ``"genie"`` (from the draw: a bound) or ``"fixed"`` (``--mcs``);
+            None for the other kinds.
+        image_codec: the ``semcodec.IMAGE_CODECS`` name a separate (digital, ideal) scheme
+            compresses with; None for the others.
     """
 
     run: Callable[..., TransmitResult]
@@ -141,11 +152,16 @@ class LinkScheme:
     kind: str
     bound: str | None = None
     over_the_air: bool = False
+    mcs: str | None = None
+    image_codec: str | None = None
+
+    refines: bool = False
+    """The transmitter refines each image's symbols (``ctx.refine_steps``)."""
 
     @property
     def needs_codec(self) -> bool:
         """Whether it sends through the semantic codec (``ctx.codec`` must be loaded)."""
-        return self.kind == "jscc"
+        return self.kind == JSCC
 
     def __call__(self, ctx, img, snr_db, cbr, generator) -> TransmitResult:
         return self.run(ctx, img, snr_db, cbr, generator)
@@ -154,53 +170,65 @@ class LinkScheme:
 _GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on it"
 _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
-SCHEMES: dict[str, LinkScheme] = {
-    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", "jscc", over_the_air=True),
+LINK_SCHEMES: dict[str, LinkScheme] = {
+    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, over_the_air=True),
     "jscc_refined": LinkScheme(
         _send_jscc(True),
         "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
         "expected MSE over its own channel draws (knows the decoder, channel kind and "
         "average SNR, not the draw)",
-        "jscc",
+        JSCC,
+        refines=True,
     ),
     "digital": LinkScheme(
         _digital("avif"),
         "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",
-        "digital",
+        DIGITAL,
         over_the_air=True,
+        mcs=AUTO,
+        image_codec="avif",
     ),
-    "digital_genie": LinkScheme(_digital("avif", GENIE), f"AVIF, {_GENIE}", "digital", _GENIE),
+    "digital_genie": LinkScheme(
+        _digital("avif", GENIE),
+        f"AVIF, {_GENIE}",
+        DIGITAL,
+        _GENIE,
+        mcs=GENIE,
+        image_codec="avif",
+    ),
     "digital_fixed": LinkScheme(
-        _digital("avif", None), "AVIF + LDPC + QAM at one fixed MCS (--mcs): the cliff", "digital"
+        _digital("avif", None),
+        "AVIF + LDPC + QAM at one fixed MCS (--mcs): the cliff",
+        DIGITAL,
+        mcs="fixed",
+        image_codec="avif",
     ),
-    "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", "ideal", _IDEAL),
-    "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", "analog"),
+    "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", IDEAL, _IDEAL, image_codec="avif"),
+    "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", ANALOG),
     "digital_webp": LinkScheme(
-        _digital("webp"), "WebP + LDPC + QAM, MCS from the average SNR", "digital"
+        _digital("webp"),
+        "WebP + LDPC + QAM, MCS from the average SNR",
+        DIGITAL,
+        mcs=AUTO,
+        image_codec="webp",
     ),
     "digital_jpeg": LinkScheme(
-        _digital("jpeg"), "JPEG + LDPC + QAM, MCS from the average SNR", "digital"
+        _digital("jpeg"),
+        "JPEG + LDPC + QAM, MCS from the average SNR",
+        DIGITAL,
+        mcs=AUTO,
+        image_codec="jpeg",
     ),
-    "ideal_webp": LinkScheme(_ideal("webp"), f"WebP, {_IDEAL}", "ideal", _IDEAL),
-    "ideal_jpeg": LinkScheme(_ideal("jpeg"), f"JPEG, {_IDEAL}", "ideal", _IDEAL),
+    "ideal_webp": LinkScheme(_ideal("webp"), f"WebP, {_IDEAL}", IDEAL, _IDEAL, image_codec="webp"),
+    "ideal_jpeg": LinkScheme(_ideal("jpeg"), f"JPEG, {_IDEAL}", IDEAL, _IDEAL, image_codec="jpeg"),
 }
 """name -> :class:`LinkScheme`: the one table of link-level schemes (``eval-codec``,
-``osnerf ota``, the codec benchmark)."""
+``osnerf ota``, the codec benchmark). The run-level schemes are ``osnerf.schemes.SCHEMES``."""
 
 
 def schemes_help() -> str:
     """``name: help`` of every scheme, bounds marked, for ``--help``."""
-    return "; ".join(f"{k} ({v.help})" for k, v in SCHEMES.items())
-
-
-def parse_schemes(text: str) -> list[str]:
-    names = [s.strip() for s in str(text).split(",") if s.strip()]
-    if not names:
-        raise ValueError(f"--schemes must list at least one of {sorted(SCHEMES)}")
-    for s in names:
-        if s not in SCHEMES:
-            raise KeyError(f"--schemes: unknown scheme {s!r}; known: {sorted(SCHEMES)}")
-    return names
+    return "; ".join(f"{k} ({v.help})" for k, v in LINK_SCHEMES.items())
 
 
 def load_image_folder(folder: str | Path) -> tuple[list[str], list[torch.Tensor]]:

@@ -111,17 +111,17 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from osnerf.provenance import result_header, write_json_atomic
+    from osnerf.schemes import parse_schemes
     from phy import parse_cbr
     from renderer import LPIPS_MIN_SIDE_PX, lpips, lpips_weights
     from semcodec.baselines import psnr
     from semcodec.codec import load_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
-        SCHEMES,
+        LINK_SCHEMES,
         EvalContext,
         eval_channels,
         load_image_folder,
-        parse_schemes,
         ssim,
     )
 
@@ -135,20 +135,20 @@ def run(args: argparse.Namespace) -> int:
         raise KeyError(f"--channel: unknown channel {args.channel!r}; known: {channels}")
     if args.draws < 1:
         raise ValueError(f"--draws must be >= 1, got {args.draws}")
-    schemes = parse_schemes(args.schemes)
+    schemes = parse_schemes(args.schemes, LINK_SCHEMES)
     snrs = list(args.snr_db)
     try:
         cbr = parse_cbr(args.cbr)
     except ValueError as e:
         raise ValueError(f"--{e}") from None
     mcs = args.mcs or DEFAULT_FIXED_MCS
-    if "digital_fixed" in schemes or args.mcs:
+    if any(LINK_SCHEMES[s].mcs == "fixed" for s in schemes) or args.mcs:
         from phy.digital import MCS_TABLE
 
         if mcs not in MCS_TABLE:
             raise KeyError(f"--mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
     codec = None
-    if any(SCHEMES[s].needs_codec for s in schemes):
+    if any(LINK_SCHEMES[s].needs_codec for s in schemes):
         codec = load_codec(args.checkpoint)
         lo, hi = codec.cbr_range
         try:
@@ -192,12 +192,14 @@ def run(args: argparse.Namespace) -> int:
         "receiver": ctx.receiver,
         "draws": args.draws,
         "interval": "95% Student-t interval of the mean over images x draws",
-        "bounds": {s: SCHEMES[s].bound for s in schemes if SCHEMES[s].bound},
+        "bounds": {s: LINK_SCHEMES[s].bound for s in schemes if LINK_SCHEMES[s].bound},
         "snr_db": snrs,
         "cbr": cbr,
         "schemes": schemes,
         "fixed_mcs": mcs,
-        "refine_steps": args.refine_steps if "jscc_refined" in schemes else None,
+        "refine_steps": args.refine_steps
+        if any(LINK_SCHEMES[s].refines for s in schemes)
+        else None,
         "checkpoint": args.checkpoint,
         "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
         "lpips": score_lpips,
@@ -223,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
                 row = []
                 for d in range(args.draws):
                     gen = torch.Generator().manual_seed(draw_seed(args.seed, ki, ii, d))
-                    res = SCHEMES[scheme](ctx, img, snr, cbr, gen)
+                    res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen)
                     row.append(psnr(res.images, img))
                     ss.append(ssim(res.images, img))
                     if score_lpips:
@@ -261,8 +263,8 @@ def run(args: argparse.Namespace) -> int:
                 r["views_lost"] = lost
                 r["mcs_used"] = mcs_used
                 r.update(stats_keys)
-            if SCHEMES[scheme].bound:
-                r["bound"] = SCHEMES[scheme].bound
+            if LINK_SCHEMES[scheme].bound:
+                r["bound"] = LINK_SCHEMES[scheme].bound
             results.append(r)
             lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
             print(

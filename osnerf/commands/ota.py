@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from hil.emulator import FAULT_NAMES
     from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
     from phy.digital import MCS_TABLE
-    from semcodec.evaluation import SCHEMES
+    from semcodec.evaluation import LINK_SCHEMES
     from semcodec.image_codecs import IMAGE_CODECS
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
@@ -48,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--scheme",
         required=True,
-        choices=[k for k, v in SCHEMES.items() if v.over_the_air],
+        choices=[k for k, v in LINK_SCHEMES.items() if v.over_the_air],
         help="digital (codec + LDPC + QAM at --mcs) or jscc",
     )
     p.add_argument(
@@ -398,9 +398,9 @@ TRANSCEIVERS = {  # keyed by semcodec's LinkScheme.kind, for the schemes marked 
 
 
 def transceiver(scheme: str) -> OtaTransceiver:
-    from semcodec.evaluation import SCHEMES
+    from semcodec.evaluation import LINK_SCHEMES
 
-    return TRANSCEIVERS[SCHEMES[scheme].kind]
+    return TRANSCEIVERS[LINK_SCHEMES[scheme].kind]
 
 
 # ----------------------------------------------------------------------------- run

@@ -39,7 +39,7 @@ def _run(env, out, *extra):
         (["--scene", "atlantis"], "known scenes: firefighter"),
         (["--demand", "crate,piano"], "known objects: crate, post, cable"),
         (["--channel", "carrier-pigeon"], "invalid choice: 'carrier-pigeon'"),
-        (["--schemes", "jscc,telepathy"], "schemes must be a subset"),
+        (["--schemes", "jscc,telepathy"], "schemes must be a comma-separated subset"),
         (["--channel", "tdl", "--mcs", "foo"], "invalid choice: 'foo'"),
         (["--image-codec", "bmp"], "invalid choice: 'bmp'"),
         (["--snr-db", "55"], "outside the codec's range"),
@@ -94,9 +94,12 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     sent = set(views["sent_on_demand"])
     assert sent and sent <= set(views["candidates"])
     assert not sent & {int(k) for k in views["not_sent"]}  # skipped views were never sent
+    # AWGN at 10 dB: what arrived is close to what was sent; the ceiling sent it untouched
+    rx = {n: s["psnr_received_object"] for n, s in report["schemes"].items()}
+    assert rx["gt"] is None and report["schemes"]["gt"]["symbols_sent"] == 0
+    assert rx["jscc"] > 20.0 and rx["digital_genie"] >= rx["digital"] - 1e-9, rx
     for name, s in report["schemes"].items():
-        assert 0 < s["psnr"] < 60 and -1 <= s["ssim"] <= 1, name
-        assert s["psnr_object"] is None or 0 < s["psnr_object"] < 60, name
+        assert -1 <= s["ssim"] <= 1, name
         assert set(s["seconds"]) >= {"encode", "air", "decode", "nerf"}
         assert s["seconds"]["air"] == pytest.approx(s["symbols_sent"] / 1e6)
         # the PSNR-vs-time curve on the held-out views: from step 0 to the end of the budget
@@ -122,27 +125,6 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         assert light["settings"]["train_seconds"] == 1.0
         assert s["renderers"]["features"]["settings"]["train_seconds"] == 1.0
     sch = report["schemes"]
-    comp = report["comparisons"]
-    assert comp["symbols_jscc_over_full"] == pytest.approx(
-        sch["jscc"]["symbols_sent"] / sch["full"]["symbols_sent"]
-    )
-    # time to full's object PSNR: jscc's encode + decode + NeRF seconds at the first curve
-    # point that reaches it, None when none does
-    target = sch["full"]["psnr_object"]
-    reached = [
-        c
-        for c in sch["jscc"]["nerf_curve"]
-        if c["psnr_object"] is not None and c["psnr_object"] >= target
-    ]
-    at = comp["jscc_processing_seconds_to_full_psnr_object"]
-    ratio = comp["processing_jscc_over_full_at_equal_psnr_object"]
-    if reached:
-        sec = sch["jscc"]["seconds"]
-        assert at == pytest.approx(reached[0]["seconds"] + sec["encode"] + sec["decode"])
-        assert at <= sch["jscc"]["processing_seconds"] + 1e-6
-        assert ratio == pytest.approx(at / sch["full"]["processing_seconds"])
-    else:
-        assert at is None and ratio is None
     assert sch["gt"]["symbols_sent"] == 0 and sch["gt"]["views_sent"] == len(sent)
     assert sch["jscc"]["views_sent"] == len(sent) and sch["full"]["views_sent"] == len(
         views["candidates"]
@@ -186,3 +168,47 @@ def test_cache_key_does_not_depend_on_how_a_number_is_written():
     assert a.key() == b.key()
     assert RunConfig(snr_db=1.0).key() != b.key()
     assert RunConfig(schemes=("jscc",)).key() == RunConfig(schemes=("gt", "jscc")).key()
+
+
+def _scheme(psnr_object, symbols, processing, curve=(), encode=0.0, decode=0.0):
+    from osnerf.report import SchemeReport
+
+    return SchemeReport(
+        psnr=0.0,
+        ssim=0.0,
+        lpips=None,
+        psnr_object=psnr_object,
+        mask_iou=None,
+        symbols_sent=symbols,
+        views_sent=1,
+        seconds={"encode": encode, "decode": decode},
+        processing_seconds=processing,
+        nerf_curve=[{"seconds": t, "psnr_object": p} for t, p in curve],
+    )
+
+
+def test_comparisons_by_hand():
+    """jscc (headline) against full (the first whole-view scheme) and gt, numbers by hand:
+    jscc's curve first reaches full's 20 dB at 30 s of NeRF, plus 2 s encode and 1 s
+    decode = 33 s, over full's 50 s of processing = 0.66."""
+    from osnerf.run.pipeline import comparisons
+    from osnerf.schemes import SCHEMES
+
+    schemes = {n: SCHEMES[n]() for n in ("jscc", "full", "gt")}
+    results = {
+        "jscc": _scheme(21.5, 300, 40.0, [(10, 15.0), (30, 20.5), (37, 21.5)], 2.0, 1.0),
+        "full": _scheme(20.0, 1200, 50.0),
+        "gt": _scheme(23.0, 0, 30.0),
+    }
+    comp = comparisons(results, schemes)
+    assert comp["jscc_minus_full_psnr_object_db"] == pytest.approx(1.5)
+    assert comp["jscc_minus_gt_psnr_object_db"] == pytest.approx(-1.5)
+    assert comp["symbols_jscc_over_full"] == pytest.approx(0.25)
+    assert comp["processing_jscc_over_full"] == pytest.approx(0.8)
+    assert comp["jscc_processing_seconds_to_full_psnr_object"] == pytest.approx(33.0)
+    assert comp["processing_jscc_over_full_at_equal_psnr_object"] == pytest.approx(0.66)
+    results["jscc"] = _scheme(19.0, 300, 40.0, [(10, 15.0), (37, 19.0)], 2.0, 1.0)
+    never = comparisons(results, schemes)
+    assert never["jscc_processing_seconds_to_full_psnr_object"] is None
+    assert never["processing_jscc_over_full_at_equal_psnr_object"] is None
+

@@ -2,7 +2,6 @@
 group, results independent of which other schemes run, and no scheme name dispatched by
 string outside the table."""
 
-import inspect
 import json
 import re
 import sys
@@ -17,7 +16,6 @@ import torch
 import osnerf.schemes as schemes_mod
 import phy
 from osnerf.cli import main
-from osnerf.run import run_pipeline
 from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
@@ -139,25 +137,59 @@ def test_a_scheme_from_another_package_runs_beside_the_builtins(env, tmp_path, m
         sys.modules.pop("osnerf_plugin_demo", None)
 
 
-def test_run_pipeline_reads_as_the_data_flow():
-    lines = inspect.getsource(run_pipeline).splitlines()
-    assert len(lines) < 100
+SCHEME_DISPATCH = (
+    r"""(==|!=|\bin\b)\s*[(\[{{]?\s*["']({names})["']"""  # x == "jscc", x in ("jscc", ...)
+    r"""|["']({names})["']\s*(==|!=)"""  # "jscc" == x
+    r"""|\.(startswith|endswith)\(\s*\(?\s*["']({prefixes})"""  # x.startswith("digital")
+    r"""|["']({prefixes})["']\s+in\s+(str\()?\w*(scheme|name)s?\b"""  # "fixed" in scheme
+)
 
 
-def test_no_scheme_name_is_dispatched_by_string_outside_the_table():
-    root = Path(__file__).resolve().parents[2] / "osnerf"
-    names = "|".join(SCHEMES)
+def _dispatch_offenders(sources: dict[str, str]) -> list[str]:
+    from semcodec import LINK_SCHEMES
+
+    names = sorted({*SCHEMES, *LINK_SCHEMES}, key=len, reverse=True)
+    parts = {p for n in names for p in n.split("_")}
     pattern = re.compile(
-        rf"""(==|!=|\bin\b)\s*\(?\s*["']({names})["']|["']({names})["']\s*(==|!=)"""
+        SCHEME_DISPATCH.format(
+            names="|".join(names),
+            prefixes="|".join(sorted({*names, *parts}, key=len, reverse=True)),
+        )
     )
-    offenders = [
-        f"{p.relative_to(root)}:{i + 1}"
-        for p in root.rglob("*.py")
-        if p.name != "schemes.py"
-        for i, line in enumerate(p.read_text().splitlines())
+    return [
+        f"{where}:{i + 1}"
+        for where, text in sources.items()
+        for i, line in enumerate(text.splitlines())
         if pattern.search(line)
     ]
-    assert not offenders, offenders
+
+
+def test_no_scheme_name_is_dispatched_by_string_outside_the_tables():
+    """Plots, commands and benchmarks read a scheme's kind from its table
+    (``osnerf.schemes.SCHEMES``, ``semcodec.LINK_SCHEMES``), never from its name."""
+    root = Path(__file__).resolve().parents[2]
+    tables = {"osnerf/schemes.py", "semcodec/evaluation.py"}
+    sources = {
+        str(p.relative_to(root)): p.read_text()
+        for folder in ("osnerf", "semcodec", "benchmarks")
+        for p in (root / folder).rglob("*.py")
+        if str(p.relative_to(root)) not in tables
+    }
+    assert not _dispatch_offenders(sources), _dispatch_offenders(sources)
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        'if scheme == "jscc":',
+        "if name in ('digital', 'ideal'):",
+        'return str(r.get("scheme", "")).startswith("digital")',
+        'if "fixed" in scheme:',
+        'if "gt" != other:',
+    ],
+)
+def test_the_dispatch_check_catches_each_form(line):
+    assert _dispatch_offenders({"x.py": line}) == ["x.py:1"]
 
 
 def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(env):

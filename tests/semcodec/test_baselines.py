@@ -9,8 +9,8 @@ from smooth_images import smooth_image
 import phy
 from semcodec import (
     IMAGE_CODECS,
+    LINK_SCHEMES,
     LOST_IMAGE_VALUE,
-    SCHEMES,
     encode_image,
     encode_to_budget,
     transmit_analog,
@@ -70,9 +70,19 @@ def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
     assert psnr(good.images, x) > 25
 
 
-def test_scheme_registry_runs_every_name(tiny_codec):
-    ctx = EvalContext(channel="awgn", codec=tiny_codec)
-    x = smooth_image(2, 32, 32)
-    for name, fn in SCHEMES.items():
-        res = fn(ctx, x, 20.0, 1 / 6, torch.Generator().manual_seed(0))
-        assert res.images.shape == x.shape, name
+def test_scheme_registry_runs_every_name_and_bounds_bound(tiny_codec):
+    """Every link-level scheme sends the same images on the same draws; a bound is never
+    below the system it bounds (the genie keeps the best MCS that decodes on the draw; the
+    capacity bound has at least the bits any MCS carries error free)."""
+    ctx = EvalContext(channel="awgn", codec=tiny_codec, fixed_mcs="64qam-3/4")
+    x = smooth_image(1, 32, 32)
+    score = {}
+    for name, fn in LINK_SCHEMES.items():
+        res = fn(ctx, x, 6.0, 1 / 6, torch.Generator().manual_seed(0))
+        assert res.images.shape == x.shape and res.images.dtype == torch.float32, name
+        assert float(res.images.min()) >= 0 and float(res.images.max()) <= 1, name
+        score[name] = psnr(res.images, x)
+    for codec in ("", "_webp", "_jpeg"):
+        assert score["ideal" + codec] >= score["digital" + codec] - 1e-9, (codec, score)
+    assert score["digital_genie"] >= score["digital"] - 1e-9, score
+    assert score["digital_genie"] >= score["digital_fixed"] - 1e-9, score

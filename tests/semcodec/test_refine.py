@@ -7,7 +7,7 @@ import torch
 from smooth_images import smooth_image
 
 import phy
-from semcodec import SCHEMES, load_codec, refine_symbols, transmit_jscc
+from semcodec import LINK_SCHEMES, load_codec, refine_symbols, transmit_jscc
 from semcodec.evaluation import EvalContext
 
 
@@ -81,10 +81,10 @@ def test_refined_scheme_draws_from_its_own_stream(codec):
     x = smooth_image(6, 32, 32)
     ctx = EvalContext(channel="awgn", codec=codec, refine_steps=3, refine_seed=11)
     g1, g2 = torch.Generator().manual_seed(5), torch.Generator().manual_seed(5)
-    SCHEMES["jscc_refined"](ctx, x, 5.0, 1 / 16, g1)
-    SCHEMES["jscc"](EvalContext(channel="awgn", codec=codec), x, 5.0, 1 / 16, g2)
+    LINK_SCHEMES["jscc_refined"](ctx, x, 5.0, 1 / 16, g1)
+    LINK_SCHEMES["jscc"](EvalContext(channel="awgn", codec=codec), x, 5.0, 1 / 16, g2)
     assert torch.equal(g1.get_state(), g2.get_state())
-    assert SCHEMES["jscc_refined"].bound is None and SCHEMES["jscc_refined"].kind == "jscc"
+    assert LINK_SCHEMES["jscc_refined"].bound is None and LINK_SCHEMES["jscc_refined"].kind == "jscc"
 
 
 def test_pixel_weights_spend_the_refinement_where_they_point(codec):

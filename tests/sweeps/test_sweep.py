@@ -78,7 +78,6 @@ def _check_complete(out: Path, spec) -> list[dict]:
         assert r["metrics"]["results"][0]["value"] == pytest.approx(want, abs=0, rel=1e-15)
         assert r["spec_hash"] == spec.sha256
         assert r["git_commit"]
-        assert r["seconds"] >= 0
         assert r["config"]["mode"] == r["point"].get("mode", "a")
     return records
 

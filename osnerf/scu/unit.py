@@ -8,7 +8,6 @@ routes each scheme's views to the renderer. It owns its decision log
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -18,80 +17,9 @@ import phy
 from osnerf.collect import Collection, CollectorConfig, Demand
 from osnerf.run.plan import RunPlan, ViewPlan
 from osnerf.schemes import scheme_seed
+from osnerf.scu.policy import RatePolicy, combined_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
 from semcodec.grid import BLOCK_PX, focus_coverage, full_rate_symbols
-
-
-@dataclass(frozen=True)
-class RatePolicy:
-    """CBR per measured SNR: lower SNR -> more channel symbols per source value.
-
-    The SNR (dB) falls in band ``k`` when it is below ``thresholds_db[k]`` (and above the
-    previous one); the last band is everything above the last threshold.
-
-    Attributes:
-        thresholds_db: ascending band edges, dB.
-        cbrs: one CBR per band (len(thresholds_db) + 1), each in (0, 1].
-        repeat_below_db: below it a block is sent twice and the copies MRC-combined.
-    """
-
-    thresholds_db: tuple[float, ...] = (0.0, 5.0, 10.0)
-    cbrs: tuple[float, ...] = (1 / 8, 1 / 12, 1 / 16, 1 / 24)
-    repeat_below_db: float = 3.0
-    """Below this measured SNR every view costs twice its CBR, sent as two MRC-combined copies.
-    On-demand views send copies only where they fade independently (``phy.CopyFading``);
-    otherwise the second copy's symbols are spent as rate: on a static channel a copy buys
-    only the 3 dB combining gain, which the codec's rate beats (README, "End to end")."""
-    copy_spread_db: float = 1.0
-    """Copies can fade independently only where the per-symbol SNR spreads (std about each
-    view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""
-    max_copy_correlation: float = 0.5
-    """... and where the two copies' per-symbol SNR deviations correlate less than this (a
-    static multipath channel repeats its frequency fades in every copy; block, fast and TDL
-    fading do not)."""
-    static_repeat_below_db: float = -5.0
-    """Where copies do not fade independently, views measured below this still send copies:
-    near the bottom of the codec's SNR range 3 dB of SNR is worth more than the rate."""
-    max_object_oversampling: int = 3
-    """Largest factor s by which the demanded objects are upsampled before encoding (s^2 times
-    the feature positions), >= 1."""
-    object_budget_fraction: float = 2 / 3
-    """On-demand views cost this fraction of what sending every view whole would cost at the
-    same SNR (the full-scene budget): the symbols saved by not sending the background are
-    spent on the objects through oversampling. In (0, 1]."""
-    min_fill: float = 0.5
-    """The SCU takes the largest oversampling whose full rate (every channel on every position
-    touching the objects) the on-demand budget covers at least this fraction of, and scales
-    the rate to spend it, in (0, 1]: a larger oversampling at too few channels per position
-    loses to a smaller one at more."""
-
-    def __post_init__(self):
-        if len(self.cbrs) != len(self.thresholds_db) + 1:
-            raise ValueError(
-                f"cbrs must have len(thresholds_db) + 1 = {len(self.thresholds_db) + 1} entries"
-            )
-        if list(self.thresholds_db) != sorted(self.thresholds_db):
-            raise ValueError(f"thresholds_db must be ascending, got {self.thresholds_db}")
-        if any(not 0 < c <= 1 for c in self.cbrs):
-            raise ValueError(f"cbrs must be in (0, 1], got {self.cbrs}")
-        if self.max_object_oversampling < 1:
-            raise ValueError(
-                f"max_object_oversampling must be >= 1, got {self.max_object_oversampling}"
-            )
-        if self.copy_spread_db < 0:
-            raise ValueError(f"copy_spread_db must be >= 0, got {self.copy_spread_db}")
-        if not -1 <= self.max_copy_correlation <= 1:
-            raise ValueError(
-                f"max_copy_correlation must be in [-1, 1], got {self.max_copy_correlation}"
-            )
-        for name in ("object_budget_fraction", "min_fill"):
-            if not 0 < getattr(self, name) <= 1:
-                raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
-
-    def cbr_for(self, snr_db: float) -> float:
-        """The CBR of the band ``snr_db`` falls in."""
-        k = int(np.searchsorted(np.asarray(self.thresholds_db), float(snr_db), side="right"))
-        return float(self.cbrs[k])
 
 
 @dataclass
@@ -335,33 +263,28 @@ class SemanticControlUnit:
             candidates: every view considered; on_demand: the collector's selection.
             link_snr_db, measured_snr_db: per view not in outage.
             outage: views without a propagation path.
-            masks: [len(on-demand views not in outage), height, width] union masks of the
-                demanded objects, in the order of ``on_demand``.
-            cbr_range, snr_range_db: the codec's.
-            height, width: captured view size, pixels.
+            masks: [num_sent, height, width] union masks of the demanded objects in the
+                on-demand views not in outage, in the order of ``on_demand``.
+            cbr_range, snr_range_db: the codec's; height, width: the views' size, pixels.
             copy_fading: whether copies fade independently on these links.
         """
         outage = {int(v) for v in outage}
         whole = [int(v) for v in candidates if int(v) not in outage]
         sent = [int(v) for v in on_demand if int(v) not in outage]
         meas = np.asarray([measured_snr_db[v] for v in whole])
+        fading = {"spread_db": copy_fading.spread_db, "correlation": copy_fading.correlation}
         self.log(
             "link",
             f"pilot copies: per-symbol SNR spread {copy_fading.spread_db:.2f} dB, correlation "
             f"between copies {copy_fading.correlation:.2f}",
-            spread_db=copy_fading.spread_db,
-            correlation=copy_fading.correlation,
+            **fading,
         )
         cbrs = dict(zip(whole, self.choose_cbr(meas, cbr_range, whole)))
         reps = dict(zip(whole, self.choose_repetitions(meas, whole)))
         full = {v: int(round(cbrs[v] * height * width * 3)) * int(reps[v]) for v in whole}
+        sent_reps, sent_snr = [reps[v] for v in sent], [measured_snr_db[v] for v in sent]
         focus_reps = self.choose_focus_repetitions(
-            masks,
-            cbr_range,
-            np.asarray([reps[v] for v in sent]),
-            np.asarray([measured_snr_db[v] for v in sent]),
-            sum(full.values()),
-            copy_fading,
+            masks, cbr_range, sent_reps, sent_snr, sum(full.values()), copy_fading
         )
         focus_reps = dict(zip(sent, focus_reps.tolist()))
         s, scale = self.choose_oversampling(
@@ -375,7 +298,6 @@ class SemanticControlUnit:
                 continue
             f = focus.get(v)
             fr = focus_reps.get(v) if f else None
-            budget = int(round(f * (s * height) * (s * width) * 3)) * int(fr) if f else 0
             plans.append(
                 ViewPlan(
                     view=v,
@@ -386,7 +308,7 @@ class SemanticControlUnit:
                     repetitions=int(reps[v]),
                     on_demand=f is not None,
                     focus_cbr=None if f is None else float(f),
-                    budget_symbols=budget,
+                    budget_symbols=int(round(f * s * height * s * width * 3)) * fr if f else 0,
                     full_symbols=full[v],
                     focus_repetitions=fr,
                     focus_encoder_snr_db=None
@@ -472,13 +394,6 @@ class SemanticControlUnit:
             bounds="demanded objects" if object_routed else "whole scene",
         )
         return aabb
-
-
-def combined_snr_db(measured_snr_db: float, repetitions: int, snr_range_db) -> float:
-    """The average SNR after MRC of ``repetitions`` copies (their SNRs add), clamped to the
-    codec's range: what the encoder is told and the decoder's AF modules see."""
-    snr = float(measured_snr_db) + 10.0 * math.log10(max(int(repetitions), 1))
-    return float(np.clip(snr, *snr_range_db))
 
 
 def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:

@@ -1,0 +1,74 @@
+"""Reviewed numbers that must not drift (``tests/golden/*.json``), with stated tolerances.
+
+A change that moves one of them on purpose regenerates the file with
+``OSNERF_REGEN_GOLDEN=1 pytest tests/test_golden.py`` and says why in its commit.
+"""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+GOLDEN = Path(__file__).resolve().parent / "golden"
+REGEN = os.environ.get("OSNERF_REGEN_GOLDEN") == "1"
+
+
+def _check(name: str, got: dict, compare) -> None:
+    path = GOLDEN / f"{name}.json"
+    if REGEN:
+        path.write_text(json.dumps(got, indent=1, sort_keys=True) + "\n")
+        pytest.skip(f"regenerated {path.name}")
+    want = json.loads(path.read_text())
+    assert set(got) == set(want), (sorted(got), sorted(want))
+    for key in want:
+        compare(key, got[key], want[key])
+
+
+def test_digital_mcs_choice_per_channel_and_snr():
+    """The honest digital link's MCS from the average SNR (shipped calibration), exactly:
+    a Kodak-sized view at CBR 1/16 on the channels a transmitter plans with."""
+    from semcodec.digital_calibration import load_calibration
+
+    cal = load_calibration()
+    n_px = 512 * 768
+    got = {
+        f"{ch}@{snr:g}dB": cal.choose_mcs(ch, snr, n_px * 3 // 16, n_px)[0]
+        for ch in ("awgn", "rayleigh", "rayleigh_fast", "tdl")
+        for snr in (-5.0, 0.0, 5.0, 10.0, 15.0)
+    }
+
+    def same(key, g, w):
+        assert g == w, key
+
+    _check("digital_mcs", got, same)
+
+
+def test_default_codec_on_two_kodak_images(shared_data):
+    """The shipped codec's PSNR on kodim01-02 at CBR 1/16 (AWGN and block Rayleigh at 1 and
+    10 dB, seed 0): within 0.02 dB (float reductions differ between CPUs by far less)."""
+    import phy
+    from renderer import psnr
+    from semcodec import load_codec, transmit_jscc
+    from semcodec.evaluation import load_image_folder
+
+    _, images = load_image_folder(shared_data / "kodak")
+    codec = load_codec()
+    got = {}
+    for ch in ("awgn", "rayleigh"):
+        link = phy.channel_link(ch)
+        for snr in (1.0, 10.0):
+            vals = []
+            for k, img in enumerate(images[:2]):
+                img = img[:, :, :256, :256]
+                g = torch.Generator().manual_seed(k)
+                res = transmit_jscc(codec, img, link, snr, 1 / 16, generator=g)
+                vals.append(psnr(res.images, img))
+            got[f"{ch}@{snr:g}dB"] = float(np.mean(vals))
+
+    def close(key, g, w):
+        assert g == pytest.approx(w, abs=0.02), key
+
+    _check("codec_kodak2", got, close)
