@@ -211,4 +211,3 @@ def test_comparisons_by_hand():
     never = comparisons(results, schemes)
     assert never["jscc_processing_seconds_to_full_psnr_object"] is None
     assert never["processing_jscc_over_full_at_equal_psnr_object"] is None
-

@@ -84,7 +84,9 @@ def test_refined_scheme_draws_from_its_own_stream(codec):
     LINK_SCHEMES["jscc_refined"](ctx, x, 5.0, 1 / 16, g1)
     LINK_SCHEMES["jscc"](EvalContext(channel="awgn", codec=codec), x, 5.0, 1 / 16, g2)
     assert torch.equal(g1.get_state(), g2.get_state())
-    assert LINK_SCHEMES["jscc_refined"].bound is None and LINK_SCHEMES["jscc_refined"].kind == "jscc"
+    assert (
+        LINK_SCHEMES["jscc_refined"].bound is None and LINK_SCHEMES["jscc_refined"].kind == "jscc"
+    )
 
 
 def test_pixel_weights_spend_the_refinement_where_they_point(codec):
