@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from osnerf.anchors import KODAK, KODAK_CBR, at_own_snr, capacity_anchor
 from semcodec.evaluation import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
 
 
@@ -71,24 +72,6 @@ def _speed(codec) -> dict:
     return out
 
 
-# Published numbers beside each row (reference/jscc-anchors.md; "(plot)" = read off a plot,
-# about +-0.3 dB). The Rayleigh anchors are fast fading with CSI at the receiver, so they
-# sit beside ``rayleigh_fast``; BPG + LDPC points are at their own SNRs.
-ANCHORS = {
-    "awgn": {
-        "bpg_plus_capacity": {1: 29.9, 4: 31.5, 10: 34.6},
-        "vtm_plus_capacity": {1: 30.8, 4: 32.6, 10: 35.8},
-        "bpg_ldpc_best_mcs_at_own_snr": {2: 29.3, 6: 30.2, 10: 33.3},
-        "deep_jscc_cnn (plot)": {1: 28.2, 4: 29.5, 10: 31.5},
-        "witt (plot)": {1: 29.7, 4: 31.3, 10: 33.6},
-        "swinjscc": {1: 29.54, 4: 31.09, 10: 33.17},
-    },
-    "rayleigh_fast": {
-        "deep_jscc_cnn (plot)": {1: 26.7, 4: 27.7, 10: 29.2},
-        "witt (plot)": {1: 28.3, 4: 29.4, 10: 30.8},
-        "bpg_ldpc_at_own_snr (plot)": {2.4: 27.9, 5.2: 29.3, 11.3: 32.0},
-    },
-}
 CHANNELS = (("awgn", 1), ("rayleigh", 4), ("rayleigh_fast", 1))
 """(channel, draws per image) of the codec table."""
 OTHER_PHOTOS = ("bsds500/test", (("rayleigh", 4),))
@@ -106,6 +89,15 @@ SEPARATE = tuple(
     if s.kind in (DIGITAL, IDEAL) and s.image_codec == "avif" and s.mcs != "fixed"
 )
 """The AVIF separate schemes of the table: honest digital, its genie bound, the capacity bound."""
+
+
+def _anchors_at(channel: str, snr_db: float) -> dict[str, float]:
+    """The published Kodak numbers (``osnerf.anchors``) at exactly this channel and SNR,
+    codec + capacity included on AWGN."""
+    table = dict(KODAK.get(channel, {}))
+    if channel == "awgn":
+        table.update({f"{k} + capacity": v for k, v in capacity_anchor(None, KODAK_CBR).items()})
+    return {k: p for k, pts in table.items() for s, p in pts if abs(s - snr_db) < 1e-6}
 
 
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
@@ -210,14 +202,10 @@ def _codec_table(
         rows.values(), key=lambda r: ([c for c, _ in channels].index(r["channel"]), r["snr_db"])
     )
     for row in table:
-        row["anchors"] = {
-            k: v.get(int(row["snr_db"])) for k, v in ANCHORS.get(row["channel"], {}).items()
-        }
-        row["anchors"] = {k: v for k, v in row["anchors"].items() if v is not None}
-        if row["channel"] in ANCHORS:
-            row["anchors_at_own_snr"] = {
-                k: v for k, v in ANCHORS[row["channel"]].items() if "own_snr" in k
-            }
+        row["anchors"] = _anchors_at(row["channel"], row["snr_db"])
+        own = {k: v for k, v in KODAK.get(row["channel"], {}).items() if at_own_snr(v)}
+        if own:
+            row["anchors_at_own_snr"] = own
     checks = {}
     for row in table:
         sch = row["schemes"]

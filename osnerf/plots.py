@@ -1,7 +1,7 @@
 """Figures from a sweep results file: BER vs SNR with theory, quality vs SNR per scheme (with
 published anchors), PSNR vs CBR, and the cliff of the digital baseline.
 
-Pure functions: :func:`result_rows` flattens records into rows, each ``plot_*`` function
+Pure functions: ``osnerf.results.result_rows`` flattens records into rows, each ``plot_*`` function
 takes rows and returns a ``matplotlib.figure.Figure`` (no pyplot state), :func:`make_plots`
 writes every figure the rows support as PNG and PDF. Values averaged over seeds are the mean
 (error bars: one standard deviation across seeds). PSNR/SSIM are the mean of per-image
@@ -10,7 +10,6 @@ values, as the commands report them.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import defaultdict
 from collections.abc import Iterable
@@ -19,151 +18,15 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
-from osnerf.report import QUALITY_METRICS  # the run report's metrics
+from osnerf.anchors import KODAK, KODAK_AWGN_10DB_VS_CBR, KODAK_CBR, capacity_anchor
+from osnerf.report import QUALITY_METRICS
+from osnerf.results import result_rows, scheme_entry
 from semcodec.evaluation import DIGITAL
-
-# Published Kodak numbers (../shared/reference/jscc-anchors.md): CBR 1/16, mean per-image PSNR.
-# scheme -> [(snr_db, psnr_db)]; "(plot)" values read off published figures, about +-0.3 dB.
-_SNRS = (1, 4, 7, 10, 13)
-ANCHORS: dict[str, dict[str, list[tuple[float, float]]]] = {
-    "awgn": {
-        "BPG + 5G LDPC, best MCS (WITT paper)": [
-            (2, 29.3),
-            (6, 30.2),
-            (8, 32.0),
-            (10, 33.3),
-            (13, 35.5),
-        ],
-        "Deep JSCC, CNN (WITT paper)": list(zip(_SNRS, (28.2, 29.5, 30.4, 31.5, 32.1))),
-        "WITT": list(zip(_SNRS, (29.7, 31.3, 32.6, 33.6, 34.3))),
-        "SwinJSCC, one model": list(zip(_SNRS, (29.54, 31.09, 32.27, 33.17, 33.80))),
-    },
-    # the published Rayleigh results are fast fading with CSI at the receiver
-    "rayleigh_fast": {
-        "BPG + 5G LDPC, best MCS (WITT paper)": [
-            (2.4, 27.9),
-            (5.2, 29.3),
-            (8.3, 30.3),
-            (11.3, 32.0),
-        ],
-        "Deep JSCC, CNN (WITT paper)": list(zip(_SNRS, (26.7, 27.7, 28.4, 29.2, 29.6))),
-        "WITT": list(zip(_SNRS, (28.3, 29.4, 30.3, 30.8, 31.2))),
-    },
-}
-ANCHOR_CBR = 1 / 16
-# Kodak, AWGN, SNR 10 dB, across CBR (SwinJSCC re-run): [(cbr, psnr_db)]
-ANCHORS_CBR_AWGN_10DB = {
-    "SwinJSCC, one model": [
-        (1 / 48, 29.04),
-        (1 / 24, 31.55),
-        (1 / 16, 33.17),
-        (1 / 12, 34.41),
-        (1 / 8, 36.05),
-    ]
-}
-CAPACITY_CSV = Path("anchors") / "kodak_codec_plus_capacity.csv"  # under the shared data folder
-CAPACITY_CODECS = ("BPG444", "VTM")
 
 CLIFF_SLOPE = 3.0  # dB of PSNR per dB of SNR: steeper than any graceful (JSCC-like) curve
 
 
 # --- rows -----------------------------------------------------------------------------------
-
-
-def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Flatten sweep records into one row per measured entry.
-
-    A row is ``{**config, **point, "seed": ..., **entry}`` where the entries are: each item of
-    ``metrics["results"]`` (``ber`` with several SNRs, ``eval-codec``), each scheme of
-    ``metrics["schemes"]`` (``run``, with ``"scheme": name``), else ``metrics`` itself;
-    nested dicts become dotted keys (``seconds.nerf``), lists are left out.
-    Later keys win, so an entry's own ``snr_db`` overrides the config's list of SNRs.
-    """
-    rows = []
-    for r in records:
-        base = {k: v for k, v in (r.get("config") or {}).items() if not isinstance(v, dict | list)}
-        base.update(r.get("point") or {})
-        base["seed"] = r.get("seed")
-        if r.get("command"):
-            base["command"] = r["command"]
-        m = r.get("metrics") or {}
-        if isinstance(m.get("results"), list):
-            rows += [{**base, **_flat(e)} for e in m["results"] if isinstance(e, dict)]
-        elif isinstance(m.get("schemes"), dict):
-            schemes = m["schemes"].items()
-            rows += [{**base, "scheme": k, **_flat(v)} for k, v in schemes if isinstance(v, dict)]
-        else:
-            rows.append({**base, **_flat(m)})
-    for row in rows:
-        for k in ("snr_db", "cbr"):
-            if k in row:
-                row[k] = _number(row[k])
-        entry = scheme_entry(row)
-        if entry is not None:
-            row["scheme_kind"] = entry.kind
-        if "mcs" in row or "fixed_mcs" in row:
-            row["mcs"] = _mcs_of(row, entry)
-    return rows
-
-
-def scheme_entry(row: dict[str, Any]):
-    """The table entry of a row's scheme: ``semcodec.LINK_SCHEMES`` for the link-level
-    commands (``eval-codec``, ``ota``), ``osnerf.schemes.SCHEMES`` for ``run``; a row
-    without a command is looked up in both (the names they share have the same kind)."""
-    from osnerf.schemes import load_entry_points
-    from semcodec import LINK_SCHEMES
-
-    name = row.get("scheme")
-    if name is None:
-        return None
-    run_level = load_entry_points()
-    tables = [LINK_SCHEMES, run_level] if row.get("command") != "run" else [run_level]
-    if row.get("command") in ("eval-codec", "ota"):
-        tables = [LINK_SCHEMES]
-    return next((t[str(name)] for t in tables if str(name) in t), None)
-
-
-def _mcs_of(row: dict[str, Any], entry) -> str | None:
-    """The fixed MCS a row's digital scheme used, or None (not digital, or an MCS chosen
-    per SNR or per draw).
-
-    ``eval-codec``'s ``--mcs`` sets only its fixed-MCS scheme (config ``fixed_mcs``);
-    ``run``'s ``--mcs`` sets its ``digital`` scheme (``auto`` or a fixed MCS).
-    """
-    if entry is None or entry.kind != DIGITAL or entry.bound:
-        return None
-    choice = getattr(entry, "mcs", None)
-    if choice == "fixed":
-        return row.get("mcs") or row.get("fixed_mcs")
-    if choice is not None:  # a link-level scheme that picks its own MCS
-        return None
-    m = row.get("mcs")
-    return None if m in (None, "auto", "genie") else str(m)
-
-
-def _flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested dicts as dotted keys (``{"seconds": {"nerf": 1}}`` -> ``{"seconds.nerf": 1}``);
-    lists are left out."""
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        elif not isinstance(v, list):
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def _number(v: Any) -> float | Any:
-    if isinstance(v, str) and "/" in v:
-        num, _, den = v.partition("/")
-        try:
-            return float(num) / float(den)
-        except (ValueError, ZeroDivisionError):
-            return v
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return v
 
 
 def _finite(v: Any) -> bool:
@@ -325,16 +188,16 @@ def _draw_snr_anchors(ax, rows, data_dir):
     cbrs = {r["cbr"] for r in rows if _finite(r.get("cbr"))}
     snrs = [r["snr_db"] for r in rows]
     lo, hi = min(snrs) - 1.0, max(snrs) + 1.0
-    near_1_16 = not cbrs or any(abs(c - ANCHOR_CBR) / ANCHOR_CBR < 0.02 for c in cbrs)
+    near_1_16 = not cbrs or any(abs(c - KODAK_CBR) / KODAK_CBR < 0.02 for c in cbrs)
     styles = ["--", ":", "-.", (0, (5, 1, 1, 1))]
     curves = []
     if near_1_16:
-        for ch in sorted(channels & set(ANCHORS)):
-            for name, pts in ANCHORS[ch].items():
+        for ch in sorted(channels & set(KODAK)):
+            for name, pts in KODAK[ch].items():
                 curves.append((pts, "0.45", f"anchor: {name} [Kodak, {ch}, CBR 1/16]"))
     if "awgn" in channels:
-        for c in sorted(cbrs) or [ANCHOR_CBR]:
-            for codec, pts in _capacity_anchor(data_dir, cbr=c).items():
+        for c in sorted(cbrs) or [KODAK_CBR]:
+            for codec, pts in capacity_anchor(data_dir, cbr=c).items():
                 curves.append(
                     (pts, "0.7", f"anchor: {codec} + ideal code [Kodak, awgn, CBR 1/{1 / c:.3g}]")
                 )
@@ -351,33 +214,6 @@ def _draw_snr_anchors(ax, rows, data_dir):
                 lw=1,
                 label=label,
             )
-
-
-def _capacity_anchor(
-    data_dir: Path | None, cbr: float | None = None, snr_db: float | None = None
-) -> dict[str, list[tuple[float, float]]]:
-    """Codec + ideal channel code (Kodak, AWGN) from the shared CSV: vs SNR at ``cbr`` (within
-    2 %) or vs CBR at ``snr_db``. Empty when the file is not there."""
-    if data_dir is None:
-        from osnerf.paths import shared_data_dir
-
-        data_dir = shared_data_dir()
-    path = Path(data_dir) / CAPACITY_CSV
-    if not path.is_file():
-        return {}
-    out: dict[str, list[tuple[float, float]]] = defaultdict(list)
-    with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            c, s = float(row["cbr_complex_per_dim"]), float(row["snr_db"])
-            for codec in CAPACITY_CODECS:
-                v = float(row[codec])
-                if not math.isfinite(v):
-                    continue
-                if cbr is not None and abs(c - cbr) / cbr < 0.02:
-                    out[codec].append((s, v))
-                elif snr_db is not None and abs(s - snr_db) < 1e-6:
-                    out[codec].append((c, v))
-    return {k: sorted(v) for k, v in out.items()}
 
 
 def plot_psnr_vs_cbr(
@@ -397,7 +233,7 @@ def plot_psnr_vs_cbr(
     if anchors and channels == {"awgn"}:
         snrs = sorted({r["snr_db"] for r in rows if _finite(r.get("snr_db"))})
         if 10.0 in snrs:
-            for name, pts in ANCHORS_CBR_AWGN_10DB.items():
+            for name, pts in KODAK_AWGN_10DB_VS_CBR.items():
                 ax.plot(
                     *zip(*pts),
                     "--",
@@ -406,7 +242,7 @@ def plot_psnr_vs_cbr(
                     label=f"anchor: {name} [Kodak, awgn, 10 dB]",
                 )
         for s in snrs:
-            for codec, pts in _capacity_anchor(data_dir, snr_db=s).items():
+            for codec, pts in capacity_anchor(data_dir, snr_db=s).items():
                 ax.plot(
                     *zip(*pts),
                     ":",
@@ -424,7 +260,12 @@ def plot_psnr_vs_cbr(
 
 
 def _is_digital(r: dict) -> bool:
-    return r.get("scheme_kind") == DIGITAL
+    """By the row's scheme kind (``result_rows`` sets it; else from the scheme tables)."""
+    kind = r.get("scheme_kind")
+    if kind is None:
+        entry = scheme_entry(r)
+        kind = entry.kind if entry is not None else None
+    return kind == DIGITAL
 
 
 def plot_digital_cliff(rows: list[dict]) -> Figure:

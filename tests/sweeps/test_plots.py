@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import osnerf.cli
+from osnerf.anchors import KODAK
 from osnerf.plots import (
-    ANCHORS,
     make_plots,
     plot_ber,
     plot_digital_cliff,
     plot_quality_vs_snr,
-    result_rows,
 )
+from osnerf.results import result_rows
 from osnerf.sweeps import append_record
 
 
@@ -65,10 +65,12 @@ def test_rows_flatten_results_schemes_and_plain_metrics():
         "snr_db": 1.0,
         "seed": 0,
         "scheme": "jscc",
+        "scheme_kind": "jscc",  # from the scheme table
         "psnr": 25.0,
         "ssim": 0.8,
     }
     assert rows[2]["scheme"] == "jscc" and rows[2]["channel"] == "rayleigh" and rows[2]["seed"] == 3
+    assert rows[3]["scheme"] == "gt" and rows[3]["scheme_kind"] == "ideal"  # the run's table
     assert rows[2]["seconds.nerf"] == 1.0 and "seconds" not in rows[2]  # nested: dotted keys
     assert rows[4] == {"max_seconds": 5, "seed": 0, "psnr": 20.5, "num_views": 4}
 
@@ -82,7 +84,7 @@ def test_quality_is_averaged_over_seeds_and_anchors_are_optional():
     np.testing.assert_allclose(x, [1.0, 4.0])
     np.testing.assert_allclose(y, [21.5, 24.5])  # mean over seeds 0 and 1
     labels = [ln.get_label() for ln in ax.get_lines()]
-    assert sum(lb.startswith("anchor:") and "awgn" in lb for lb in labels) >= len(ANCHORS["awgn"])
+    assert sum(lb.startswith("anchor:") and "awgn" in lb for lb in labels) >= len(KODAK["awgn"])
     ax2 = plot_quality_vs_snr(rows, "psnr", anchors=False).axes[0]
     assert not any(ln.get_label().startswith("anchor") for ln in ax2.get_lines())
     # no JSCC anchors at a CBR they were not measured at
@@ -255,5 +257,5 @@ def test_bounds_are_labelled_and_rayleigh_anchors_sit_beside_fast_fading():
     ax = plot_quality_vs_snr(rows, "psnr", anchors=True).axes[0]
     labels = [ln.get_label() for ln in ax.get_lines()]
     assert "digital" in labels and "digital_genie (bound)" in labels and "ideal (bound)" in labels
-    assert any("WITT [Kodak, rayleigh_fast" in s for s in labels)
-    assert "rayleigh" not in ANCHORS  # block fading has no published counterpart
+    assert any("WITT (plot) [Kodak, rayleigh_fast" in s for s in labels)
+    assert "rayleigh" not in KODAK  # block fading has no published counterpart
