@@ -230,13 +230,13 @@ _MODEL_LINKS: dict = {}
 def refine_model_link(channel: str):
     """The link the jscc transmitter simulates when it refines its symbols
     (:func:`semcodec.refine_symbols`): a statistical model of the run's channel, drawn from
-    the transmitter's own generator, never the real link. The run's channel when ``phy``
-    simulates it; TDL-A over OFDM with LS estimates for ``raytraced`` (a fixed response per
-    drone position that the transmitter does not know) and ``ota`` (the radio link), as the
-    digital scheme's MCS choice assumes."""
+    the transmitter's own generator, never the real link: ``phy.symbol_model`` of the run's
+    channel (the channel itself where ``phy`` draws it from a flat distribution; fast
+    Rayleigh for TDL/CDL over OFDM, for ``raytraced`` and for ``ota``, whose symbols ride
+    independently faded subcarriers), one tap per symbol with perfect CSI."""
     import phy
 
-    name = phy.assumed_channel(channel)
+    name = phy.symbol_model(channel)
     if name not in _MODEL_LINKS:
         _MODEL_LINKS[name] = phy.channel_link(name)
     return _MODEL_LINKS[name]

@@ -48,6 +48,7 @@ from phy.models import (  # noqa: E402
     channel_kind,
     channel_link,
     receiver_description,
+    symbol_model,
 )
 from phy.modulation import (  # noqa: E402
     MODULATIONS,
@@ -91,6 +92,7 @@ __all__ = [
     "measure_snr_db",
     "qpsk_pilots",
     "receiver_description",
+    "symbol_model",
     "AWGN",
     "CDLChannel",
     "CHANNELS",

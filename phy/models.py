@@ -11,7 +11,7 @@ baseline's MCS choice and the refining transmitter):
 * :func:`assumed_channel`: the statistical model a transmitter that never sees the draw
   plans with: the channel itself where ``phy`` simulates it by its distribution; TDL-A over
   OFDM for the ray-traced responses (fixed per position, unknown to the transmitter) and
-  for any radio link (``"ota"``).
+  for any radio link (``"ota"``); :func:`symbol_model`: its flat per-symbol equivalent.
 """
 
 from __future__ import annotations
@@ -64,6 +64,17 @@ def channel_kind(link) -> str:
             f"{sorted(CHANNELS)}"
         )
     return kind
+
+
+def symbol_model(channel: str) -> str:
+    """The flat ``phy.CHANNELS`` model that gives each symbol of ``channel``'s link the fade
+    statistics it sees, for a transmitter that simulates its link symbol by symbol (the
+    refining JSCC transmitter): fast Rayleigh for the frequency-selective OFDM channels,
+    whose interleaved symbols ride independently faded subcarriers (as the digital
+    calibration's curves assume); the channel itself otherwise. One tap per symbol costs a
+    fraction of an OFDM grid with pilots and estimation."""
+    kind = assumed_channel(channel)
+    return "rayleigh_fast" if kind in OFDM_CHANNELS else kind
 
 
 def assumed_channel(channel: str) -> str:

@@ -37,7 +37,9 @@ class TrainConfig:
     process's CPU seconds divided by torch's thread count: the wall time the same work
     would take on otherwise idle cores; use it on a shared machine)."""
     max_steps: int | None = None
-    """Optional cap on optimiser steps (>= 1); whichever of the two ends first."""
+    """Optional number of optimiser steps (>= 1). When given, the steps drive the schedule
+    (coarse-to-fine stages, learning rate) and ``max_seconds`` is only a cap: a run that
+    ends by steps does the same work on a busy machine as on an idle one."""
     grid_resolutions: tuple[int, ...] = (48, 96, 128)
     """Grid vertices on the longest axis per coarse-to-fine stage (grid field)."""
     stage_starts: tuple[float, ...] = (0.0, 0.12, 0.35)
@@ -95,6 +97,8 @@ class TrainConfig:
     (object-only training)."""
     eval_every_seconds: float = 10.0
     """Training seconds between points of the PSNR curve (needs ``eval_dataset``), > 0."""
+    eval_every_steps: int | None = None
+    """Steps between points of the curve instead (>= 1), e.g. with ``max_steps``."""
     eval_views: int = 10
     """Views of ``eval_dataset`` (evenly spaced) used for the curve, >= 1."""
     progress: bool = True
@@ -109,6 +113,8 @@ class TrainConfig:
             raise ValueError(f"max_seconds must be > 0 and finite, got {self.max_seconds}")
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"max_steps must be >= 1 or None, got {self.max_steps}")
+        if self.eval_every_steps is not None and self.eval_every_steps < 1:
+            raise ValueError(f"eval_every_steps must be >= 1 or None, got {self.eval_every_steps}")
         if len(self.grid_resolutions) != len(self.stage_starts) or not self.grid_resolutions:
             raise ValueError("grid_resolutions and stage_starts must be non-empty and equally long")
         if self.stage_starts[0] != 0.0 or list(self.stage_starts) != sorted(self.stage_starts):
@@ -291,10 +297,15 @@ def train(
         )
 
     def progress_fraction() -> float:
-        p = train_seconds / config.max_seconds
+        """Of the schedule: by steps when ``max_steps`` is given, else by seconds."""
         if config.max_steps is not None:
-            p = max(p, step / config.max_steps)
-        return p
+            return step / config.max_steps
+        return train_seconds / config.max_seconds
+
+    def curve_due() -> bool:
+        if config.eval_every_steps is not None:
+            return step >= next_eval
+        return train_seconds >= next_eval
 
     def record_curve():
         model.eval()
@@ -306,10 +317,10 @@ def train(
         curve.append(point)
         model.train()
 
-    while progress_fraction() < 1.0:
-        if curve_set is not None and train_seconds >= next_eval:
+    while progress_fraction() < 1.0 and train_seconds < config.max_seconds:
+        if curve_set is not None and curve_due():
             record_curve()
-            next_eval += config.eval_every_seconds
+            next_eval += config.eval_every_steps or config.eval_every_seconds
         t0 = now()
         frac = progress_fraction()
         upsampled = False

@@ -59,8 +59,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-seconds",
         type=float,
-        default=60.0,
-        help="NeRF training seconds per scheme (default 60)",
+        default=600.0,
+        help="cap on NeRF training seconds per scheme (the budget itself with --nerf-steps 0; default 600)",
     )
     p.add_argument(
         "--resolution",
@@ -99,8 +99,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--nerf-steps",
         type=int,
-        default=None,
-        help="cap on NeRF steps per scheme (with a large --max-seconds: equal steps for all)",
+        default=6000,
+        help="NeRF steps per scheme, equal for all (default 6000; 0: the same --max-seconds instead)",
     )
     p.add_argument(
         "--ota-device",
@@ -110,7 +110,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--nerf-clock",
-        default="wall",
+        default="cpu",
         help="what --max-seconds counts: wall, or cpu (CPU s / threads; for shared machines)",
     )
     p.add_argument(
@@ -161,7 +161,7 @@ def run_config(args: argparse.Namespace):
         image_codec=args.image_codec,
         nerf_clock=args.nerf_clock,
         ota_device=args.ota_device,
-        nerf_steps=args.nerf_steps,
+        nerf_steps=args.nerf_steps or None,
         lightweight_seconds=args.lightweight_seconds,
         refine_steps=args.refine_steps,
     )

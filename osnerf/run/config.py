@@ -35,7 +35,8 @@ class RunConfig:
         snr_db: Es/N0 in dB (for "raytraced": at the median drone position).
         schemes: names in ``osnerf.schemes.SCHEMES``.
         seed: seeds every random draw (each scheme's from the seed and its name).
-        max_seconds: NeRF training budget per scheme, seconds (> 0).
+        max_seconds: cap on each scheme's NeRF training, seconds of ``nerf_clock`` (> 0);
+            with ``nerf_steps`` None, the budget itself.
         resolution_px: drone image size (16..512).
         num_train_views, num_test_views: drone views captured and held out.
         symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
@@ -44,8 +45,10 @@ class RunConfig:
             transmitter) or a fixed phy.digital.MCS_TABLE name.
         image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).
         render_spp: Mitsuba samples per pixel.
-        nerf_clock: what ``max_seconds`` counts: "wall" or "cpu".
-        nerf_steps: optional cap on NeRF optimiser steps per scheme (>= 1).
+        nerf_clock: what ``max_seconds`` counts: "cpu" (this process's CPU seconds over its
+            threads: the same work on a busy machine as on an idle one) or "wall".
+        nerf_steps: NeRF optimiser steps per scheme (>= 1): every scheme's field gets the
+            same steps (the fair default); None: the same ``max_seconds`` instead.
         ota_device: for channel "ota": "emulated" or "hackrf".
         lightweight_seconds: training budget (s) of each learned renderer of
             ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
@@ -64,7 +67,7 @@ class RunConfig:
     snr_db: float = 0.0
     schemes: tuple[str, ...] = DEFAULT_SCHEMES
     seed: int = 0
-    max_seconds: float = 60.0
+    max_seconds: float = 600.0
     resolution_px: int = 80
     num_train_views: int = 24
     num_test_views: int = 8
@@ -74,9 +77,9 @@ class RunConfig:
     mcs: str = "auto"
     image_codec: str = "avif"
     render_spp: int = 32
-    nerf_clock: str = "wall"
+    nerf_clock: str = "cpu"
     ota_device: str = "emulated"
-    nerf_steps: int | None = None
+    nerf_steps: int | None = 6000
     lightweight_seconds: float = 15.0
     refine_steps: int = 30
 

@@ -269,7 +269,7 @@ def run_pipeline(
         },
         views=views_summary(plan, col),
         schemes=results,
-        comparisons=comparisons(results, prep.schemes),
+        comparisons=_flag(comparisons(results, prep.schemes)),
         scu_decisions=prep.scu.decisions,
         metric_notes=METRIC_NOTES,
         seconds_total=time.perf_counter() - t_run,
@@ -282,6 +282,12 @@ def run_pipeline(
         "received": received,
         "renders": renders,
     }
+
+
+def _flag(comp: dict) -> dict:
+    for line in comp.get("unequal_budgets", []):
+        _log(f"warning: {line}")
+    return comp
 
 
 def views_summary(plan: RunPlan, col: Collection) -> dict:
@@ -304,11 +310,35 @@ def views_summary(plan: RunPlan, col: Collection) -> dict:
     }
 
 
+BUDGET_TOLERANCE = 0.10
+"""Two schemes' NeRF budgets (steps) differing by more than this fraction make their
+comparison unfair: it is flagged in the report and on stderr."""
+
+
+def unequal_budgets(results: dict[str, SchemeReport]) -> list[str]:
+    """One line per pair of schemes whose NeRF fields took steps differing by more than
+    :data:`BUDGET_TOLERANCE` (e.g. one hit the ``max_seconds`` cap, or a wall-clock budget
+    on a busy machine)."""
+    steps = {n: r.nerf_steps for n, r in results.items() if r.nerf_steps}
+    out = []
+    names = list(steps)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            lo, hi = sorted((steps[a], steps[b]))
+            if hi > (1 + BUDGET_TOLERANCE) * lo:
+                out.append(
+                    f"{a} ({steps[a]} NeRF steps) vs {b} ({steps[b]} NeRF steps): budgets differ by "
+                    f"{hi / lo - 1:.0%}, their comparison is not fair"
+                )
+    return out
+
+
 def comparisons(results: dict[str, SchemeReport], schemes: dict[str, Scheme]) -> dict:
     """The headline numbers: the headline scheme (jscc) minus every other scheme in object
     PSNR; against the first whole-view scheme (full) its symbols, processing time and the
-    paper's claim (processing time to the same object PSNR)."""
-    out = {}
+    paper's claim (processing time to the same object PSNR); ``unequal_budgets``: the pairs
+    whose NeRF budgets differ (:func:`unequal_budgets`)."""
+    out = {"unequal_budgets": unequal_budgets(results)}
     subject = next((n for n, s in schemes.items() if s.headline), None)
     j = results.get(subject)
     if j is None or j.psnr_object is None:

@@ -91,6 +91,7 @@ def reconstruct(
         clock=config.nerf_clock,
         progress=False,
         eval_every_seconds=max(float(config.max_seconds) / 12, 0.5),
+        eval_every_steps=max(config.nerf_steps // 12, 1) if config.nerf_steps else None,
         eval_views=len(test),
     )
     torch.set_num_threads(min(2, torch.get_num_threads()))

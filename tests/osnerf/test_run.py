@@ -11,7 +11,7 @@ import pytest
 
 from osnerf.cli import main
 
-SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--max-seconds", "2"]
+SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--nerf-steps", "60"]
 SMALL += ["--lightweight-seconds", "0"]  # scored in the report-structure test only
 
 
@@ -43,7 +43,7 @@ def _run(env, out, *extra):
         (["--channel", "tdl", "--mcs", "foo"], "invalid choice: 'foo'"),
         (["--image-codec", "bmp"], "invalid choice: 'bmp'"),
         (["--snr-db", "55"], "outside the codec's range"),
-        (["--nerf-steps", "0"], "nerf_steps must be an integer >= 1"),
+        (["--nerf-steps", "-1"], "nerf_steps must be an integer >= 1"),
         (["--lightweight-seconds", "-1"], "lightweight_seconds must be >= 0"),
     ],
 )
@@ -211,3 +211,39 @@ def test_comparisons_by_hand():
     never = comparisons(results, schemes)
     assert never["jscc_processing_seconds_to_full_psnr_object"] is None
     assert never["processing_jscc_over_full_at_equal_psnr_object"] is None
+    assert never["unequal_budgets"] == []  # no steps recorded: nothing to compare
+
+
+def test_unequal_nerf_budgets_are_flagged():
+    """44 against 3 steps (a wall-clock budget on a busy machine) is flagged; 6000 against
+    6500 (8 %) is within the 10 % tolerance."""
+    from osnerf.run.pipeline import unequal_budgets
+
+    a, b, c = _scheme(20.0, 1, 1.0), _scheme(7.2, 0, 1.0), _scheme(21.0, 1, 1.0)
+    a.nerf_steps, b.nerf_steps, c.nerf_steps = 44, 3, 44
+    flags = unequal_budgets({"jscc": a, "gt": b, "digital": c})
+    assert len(flags) == 2 and all("gt (3 NeRF steps)" in f for f in flags), flags
+    a.nerf_steps, b.nerf_steps, c.nerf_steps = 6000, 6500, 6000
+    assert unequal_budgets({"jscc": a, "gt": b, "digital": c}) == []
+
+
+def test_the_ceiling_gets_the_same_steps_on_a_busy_machine(env, tmp_path):
+    """By default every scheme's field takes the same optimiser steps, so another process
+    hogging the CPU cannot starve one scheme's field: gt (the undistorted views) gets
+    exactly jscc's steps and ends at least as good, and nothing is flagged."""
+    import subprocess
+    import sys
+
+    hog = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        out = tmp_path / "busy"
+        args = ["--schemes", "jscc,gt", "--nerf-steps", "400", "--seed", "0"]
+        assert _run(env, out, "--channel", "rayleigh", "--snr-db", "0", *args) == 0
+    finally:
+        hog.kill()
+        hog.wait()
+    report = json.loads((out / "report.json").read_text())
+    sch = report["schemes"]
+    assert sch["gt"]["nerf_steps"] == sch["jscc"]["nerf_steps"] == 400
+    assert sch["gt"]["psnr_object"] >= sch["jscc"]["psnr_object"], sch
+    assert report["comparisons"]["unequal_budgets"] == []
