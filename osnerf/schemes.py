@@ -30,12 +30,10 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from types import SimpleNamespace
 from typing import ClassVar
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from semcodec.evaluation import ANALOG, DIGITAL, IDEAL, JSCC
 
@@ -211,141 +209,6 @@ def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
 # ----------------------------------------------------------------------------- helpers
 
 
-def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, generator):
-    """``repetitions`` copies of a [1, n] block through ``link``, MRC-combined."""
-    from phy import combine_repetitions
-
-    out = link(symbols.expand(repetitions, -1).contiguous(), snr_db, generator=generator)
-    return combine_repetitions(out.x_hat, out.noise_var)
-
-
-REFINE_OUTSIDE_WEIGHT = 0.05
-"""With ``refine_steps``, the weight of an on-demand view's pixels outside the demanded
-objects (inside the sent box) in the refinement's squared error; the objects' pixels weigh
-1 (times their demand weight): the NeRF is scored on the objects, and the box's rim only
-has to keep the background plausible."""
-_MODEL_LINKS: dict = {}
-
-
-def refine_model_link(channel: str):
-    """The link the jscc transmitter simulates when it refines its symbols
-    (:func:`semcodec.refine_symbols`): a statistical model of the run's channel, drawn from
-    the transmitter's own generator, never the real link: ``phy.symbol_model`` of the run's
-    channel (the channel itself where ``phy`` draws it from a flat distribution; fast
-    Rayleigh for TDL/CDL over OFDM, for ``raytraced`` and for ``ota``, whose symbols ride
-    independently faded subcarriers), one tap per symbol with perfect CSI."""
-    import phy
-
-    name = phy.symbol_model(channel)
-    if name not in _MODEL_LINKS:
-        _MODEL_LINKS[name] = phy.channel_link(name)
-    return _MODEL_LINKS[name]
-
-
-@dataclass
-class _Copies:
-    """``repetitions`` copies through ``link`` at ``snr_db``, MRC-combined, as a link
-    (what :func:`_send_blocks` does to the real symbols)."""
-
-    link: object
-    snr_db: float
-    repetitions: int
-
-    def __call__(self, x, snr_db=None, generator=None):
-        x_hat, nv = _send_blocks(self.link, x, self.snr_db, self.repetitions, generator)
-        return SimpleNamespace(x_hat=x_hat, noise_var=nv)
-
-
-def _jscc_views(ctx: RunContext, plans, images, on_demand: bool) -> Transmission:
-    """Each view through the semantic codec and its link (unbiased receiver, MRC of copies).
-
-    On demand (focus mode) each view and its object masks are upsampled by the plan's
-    oversampling s before encoding; outside the sent box the receiver shows the background,
-    composited at the decoded resolution and then averaged back over s x s pixels (a box
-    edge need not fall on the view's pixel grid: averaging first would mix the decoder's
-    output for the erased positions into the edge pixels, a dark frame around every box).
-    """
-    from semcodec import receiver_mask, refine_symbols
-
-    codec, rx = ctx.codec, ctx.rx_codec
-    s_up = ctx.plan.oversampling if on_demand else 1
-    n, _, h, w = images.shape
-    bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]
-    out, symbols, rx_masks, side = [], [], [], []
-    sec = {"encode": 0.0, "decode": 0.0, "channel": 0.0, "encode_cpu": 0.0, "decode_cpu": 0.0}
-    for k, p in enumerate(plans):
-        x = images[k : k + 1]
-        kw = {}
-        if on_demand:
-            kw = {"mask": ctx.routing[0][k : k + 1], "demand_weights": list(ctx.routing[1])}
-        if s_up > 1:
-            x = F.interpolate(x, scale_factor=s_up, mode="bicubic", align_corners=False).clamp(0, 1)
-            if kw:
-                kw["mask"] = F.interpolate(kw["mask"], scale_factor=s_up, mode="nearest")
-        cbr = p.focus_cbr if on_demand else p.cbr
-        t, c = time.perf_counter(), time.process_time()
-        with torch.no_grad():
-            enc = codec.encode(x, p.encoder_snr_db, cbr, **kw)
-        steps = int(ctx.config.refine_steps)
-        if steps:  # transmitter-side refinement against its own model of the channel
-            model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.repetitions)
-            gen = torch.Generator().manual_seed(
-                scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
-            )
-            wts = None
-            if kw:  # the demanded objects' pixels first (their weights), the rest of the box
-                lam = torch.as_tensor(kw["demand_weights"], dtype=torch.float32)
-                obj = (kw["mask"] * lam[None, :, None, None]).sum(1, keepdim=True).clamp(0, 1)
-                wts = REFINE_OUTSIDE_WEIGHT + (1.0 - REFINE_OUTSIDE_WEIGHT) * obj
-            enc = refine_symbols(
-                codec,
-                x,
-                enc,
-                model,
-                p.snr_db,
-                steps,
-                generator=gen,
-                decoder_snr_db=p.encoder_snr_db,
-                pixel_weights=wts,
-            )
-        sec["encode"] += time.perf_counter() - t
-        sec["encode_cpu"] += time.process_time() - c
-        t = time.perf_counter()
-        with torch.no_grad():
-            x_hat, nv = _send_blocks(
-                ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, ctx.view_generator(p.view)
-            )
-        sec["channel"] += time.perf_counter() - t
-        t, c = time.perf_counter(), time.process_time()
-        with torch.no_grad():  # the average SNR after combining; per-symbol noise in nv
-            img = rx.decode(
-                x_hat, enc.meta, p.encoder_snr_db, expected_sha256=codec.sha256, noise_var=nv
-            )[0]
-            m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
-            if m is not None:
-                mt = torch.from_numpy(m)[None]
-                img = img * mt + bg * (1.0 - mt)
-            if s_up > 1:
-                img = F.avg_pool2d(img[None], s_up)[0]
-        sec["decode"] += time.perf_counter() - t
-        sec["decode_cpu"] += time.process_time() - c
-        if m is not None:  # the pixels holding anything that was sent
-            rx_masks.append(m.reshape(h, s_up, w, s_up).max(axis=(1, 3)) if s_up > 1 else m)
-        out.append(img)
-        symbols.append(p.repetitions * int(enc.symbols.shape[-1]))
-        side.append(int(enc.meta.side_info_bits()))
-    return Transmission(
-        torch.stack(out),
-        np.asarray(symbols, np.int64),
-        np.stack(rx_masks) if rx_masks else None,
-        sec,
-        {"side_info_bits": int(sum(side)) if on_demand else 0},
-    )
-
-
-# ----------------------------------------------------------------------------- built-ins
-
-
 @register("jscc")
 class OnDemandJSCC(Scheme):
     """The semantic link on demand: only views showing the demanded objects, through the
@@ -358,7 +221,9 @@ class OnDemandJSCC(Scheme):
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
     def transmit(self, ctx, plans, images, generator):
-        return _jscc_views(ctx, plans, images, on_demand=self.object_routed)
+        from osnerf.run.jscc import send_views
+
+        return send_views(ctx, plans, images, on_demand=self.object_routed)
 
 
 @register("digital")

@@ -57,8 +57,8 @@ class RunConfig:
         refine_steps: the semantic schemes' transmitter (jscc, full) refines each view's
             symbols with this many Adam steps on the expected squared error over its own
             model of the channel at the view's measured SNR (:func:`semcodec.refine_symbols`,
-            :func:`osnerf.schemes.refine_model_link`), on demand weighted to the demanded
-            objects (:data:`osnerf.schemes.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
+            :func:`osnerf.run.jscc.refine_model_link`), on demand weighted to the demanded
+            objects (:data:`osnerf.run.jscc.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
     """
 
     scene: str = DEFAULT_SCENE

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from osnerf.collect import Collection, Demand, collect
+from osnerf.collect import Collection, Demand
 from osnerf.report import Report, SchemeReport
 from osnerf.run.cache import StageCache
 from osnerf.run.config import RunConfig
@@ -201,14 +201,7 @@ def run_pipeline(
     views = load_scene_views(folder)
     scene_seconds = time.perf_counter() - t
     _log(f"scene {cfg.scene}: {len(views.images)} views in {folder} ({scene_seconds:.1f} s)")
-    col = collect(views, prep.demand, prep.scu.collector_settings())
-    for v, why in sorted(col.reasons.items()):
-        prep.scu.log("collector", f"view {v}: not sent", view=v, reason=why)
-    prep.scu.log(
-        "collector",
-        f"send {col.num_sent} of {len(col.candidates)} views",
-        views=col.indices.tolist(),
-    )
+    col = prep.scu.collect(views)
     links = build_links(cfg, views, col.candidates)
     try:
         codec = prep.codec
@@ -245,28 +238,12 @@ def run_pipeline(
         links.close()
     test = views.indices("test")
     report = Report(
-        scene={
-            "name": cfg.scene,
-            "folder": str(folder),
-            "objects": list(views.objects),
-            "num_train_views": int(len(col.candidates)),
-            "num_test_views": int(len(test)),
-            "resolution_px": [views.intrinsics.height, views.intrinsics.width],
-            "render_seconds": views.meta.get("render_seconds"),
-            "ground_station_m": views.meta["ground_station_m"],
-        },
+        scene=scene_summary(cfg, folder, views, col),
         demand={"objects": list(prep.demand.objects), "weights": list(prep.demand.weights)},
         link=links.info,
         snr_db=cfg.snr_db,
         symbol_rate_hz=cfg.symbol_rate_hz,
-        codec=None
-        if prep.codec is None
-        else {
-            "sha256": prep.codec.sha256,
-            "name": prep.codec.name,
-            "cbr_range": list(prep.codec.cbr_range),
-            "snr_range_db": list(prep.codec.snr_range_db),
-        },
+        codec=None if prep.codec is None else codec_summary(prep.codec),
         views=views_summary(plan, col),
         schemes=results,
         comparisons=_flag(comparisons(results, prep.schemes)),
@@ -281,6 +258,30 @@ def run_pipeline(
         "gt_masks": gt_masks,
         "received": received,
         "renders": renders,
+    }
+
+
+def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) -> dict:
+    """The scene as the report shows it."""
+    return {
+        "name": cfg.scene,
+        "folder": str(folder),
+        "objects": list(views.objects),
+        "num_train_views": int(len(col.candidates)),
+        "num_test_views": int(len(views.indices("test"))),
+        "resolution_px": [views.intrinsics.height, views.intrinsics.width],
+        "render_seconds": views.meta.get("render_seconds"),
+        "ground_station_m": views.meta["ground_station_m"],
+    }
+
+
+def codec_summary(codec) -> dict:
+    """The codec as the report shows it (its knowledge-base identity and ranges)."""
+    return {
+        "sha256": codec.sha256,
+        "name": codec.name,
+        "cbr_range": list(codec.cbr_range),
+        "snr_range_db": list(codec.snr_range_db),
     }
 
 

@@ -51,6 +51,21 @@ class SemanticControlUnit:
         )
         return self.collector
 
+    def collect(self, views) -> Collection:
+        """The on-demand collector's views for the demand, with why each other view is not
+        sent (logged)."""
+        from osnerf.collect import collect
+
+        col = collect(views, self.demand, self.collector_settings())
+        for v, why in sorted(col.reasons.items()):
+            self.log("collector", f"view {v}: not sent", view=v, reason=why)
+        self.log(
+            "collector",
+            f"send {col.num_sent} of {len(col.candidates)} views",
+            views=col.indices.tolist(),
+        )
+        return col
+
     def check_knowledge_base(self, transmitter_sha256: str, receiver_sha256: str) -> None:
         """Refuse to run when the two ends hold different codecs.
 

@@ -266,7 +266,13 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     assert mse[30] < 0.9 * mse[0], mse
 
 
-def test_the_refining_transmitter_models_links_it_cannot_know_as_tdl():
-    assert isinstance(schemes_mod.refine_model_link("rayleigh"), phy.FlatLink)
-    for name in ("raytraced", "ota", "tdl"):
-        assert isinstance(schemes_mod.refine_model_link(name), phy.OFDMLink), name
+def test_the_refining_transmitter_simulates_one_tap_per_symbol():
+    """Flat channels as they are; frequency-selective OFDM links (tdl, and the ray-traced and
+    radio links it assumes TDL for) as fast Rayleigh: each interleaved symbol on its own
+    subcarrier fade, at a fraction of an OFDM grid's cost."""
+    from osnerf.run.jscc import refine_model_link
+
+    assert phy.channel_kind(refine_model_link("rayleigh")) == "rayleigh"
+    for name in ("raytraced", "ota", "tdl", "cdl"):
+        link = refine_model_link(name)
+        assert isinstance(link, phy.FlatLink) and phy.channel_kind(link) == "rayleigh_fast", name
