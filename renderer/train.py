@@ -213,6 +213,49 @@ def _curve_subset(eval_dataset: Dataset, n: int) -> Dataset:
     return eval_dataset.subset(idx.unique().tolist())
 
 
+def _initial_model(dataset: Dataset, config: TrainConfig) -> tuple[RadianceField, float, int]:
+    """The untrained field (first coarse-to-fine stage for the grid field) with its camera
+    spec for later renders; returns (model, learning rate, rays per step)."""
+    aabb = dataset.aabb
+    if config.field == "grid":
+        res = config.grid_resolutions[0]
+        step_m = config.step_voxels * _voxel_m(aabb, res)
+        field_ = GridField(aabb, resolution=res, alpha_init=config.alpha_init, step_m=step_m)
+        occupancy = OccupancyGrid.for_grid_field(field_)
+        spec = {
+            "field": "grid",
+            "resolution": res,
+            "step_m": step_m,
+            "alpha_init": config.alpha_init,
+        }
+        lr, batch = config.lr, max(1, config.batch_rays // 2)
+    else:
+        step_m = config.mlp_step_voxels * (aabb[1] - aabb[0]).max().item() / 96
+        field_ = MLPField(aabb, width=config.mlp_width, depth=config.mlp_depth)
+        occupancy = OccupancyGrid(aabb, (64, 64, 64))
+        spec = {"field": "mlp", "width": config.mlp_width, "depth": config.mlp_depth}
+        lr, batch = config.mlp_lr, config.mlp_batch_rays
+    centre = aabb.mean(0)
+    spec["camera"] = {  # for default camera paths when rendering later
+        "intrinsics": dataset.intrinsics.as_dict(),
+        "center": centre.tolist(),
+        "radius_m": (dataset.poses[:, :3, 3] - centre).norm(dim=-1).mean().item(),
+        "up": torch.nn.functional.normalize(dataset.poses[:, :3, 1].mean(0), dim=0).tolist(),
+        "poses": dataset.poses.tolist(),  # the lightweight renderer trains around them
+    }
+    return RadianceField(field_, occupancy, step_m, dataset.background, spec), lr, batch
+
+
+def _progress_bar(config: TrainConfig):
+    if not config.progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(
+        total=int(config.max_seconds), unit="s", file=sys.stderr, desc=f"train {config.field}"
+    )
+
+
 def train(
     dataset: Dataset,
     config: TrainConfig = TrainConfig(),
@@ -239,37 +282,10 @@ def train(
     origins, dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
     targets = _targets(dataset, config.use_masks)
     num_pixels = targets.shape[0]
-    background = dataset.background
     curve_set = _curve_subset(eval_dataset, config.eval_views) if eval_dataset is not None else None
 
-    if config.field == "grid":
-        stage = 0
-        res = config.grid_resolutions[0]
-        step_m = config.step_voxels * _voxel_m(aabb, res)
-        field_ = GridField(aabb, resolution=res, alpha_init=config.alpha_init, step_m=step_m)
-        occupancy = OccupancyGrid.for_grid_field(field_)
-        spec = {
-            "field": "grid",
-            "resolution": res,
-            "step_m": step_m,
-            "alpha_init": config.alpha_init,
-        }
-        lr, batch = config.lr, max(1, config.batch_rays // 2)
-    else:
-        step_m = config.mlp_step_voxels * (aabb[1] - aabb[0]).max().item() / 96
-        field_ = MLPField(aabb, width=config.mlp_width, depth=config.mlp_depth)
-        occupancy = OccupancyGrid(aabb, (64, 64, 64))
-        spec = {"field": "mlp", "width": config.mlp_width, "depth": config.mlp_depth}
-        lr, batch = config.mlp_lr, config.mlp_batch_rays
-    centre = aabb.mean(0)
-    spec["camera"] = {  # for default camera paths when rendering later
-        "intrinsics": dataset.intrinsics.as_dict(),
-        "center": centre.tolist(),
-        "radius_m": (dataset.poses[:, :3, 3] - centre).norm(dim=-1).mean().item(),
-        "up": torch.nn.functional.normalize(dataset.poses[:, :3, 1].mean(0), dim=0).tolist(),
-        "poses": dataset.poses.tolist(),  # the lightweight renderer trains around them
-    }
-    model = RadianceField(field_, occupancy, step_m, background, spec)
+    model, lr, batch = _initial_model(dataset, config)
+    stage, res = 0, config.grid_resolutions[0]
 
     def make_optimizer():
         # fused: one pass over each grid per step instead of several (30 -> 12 ms at 8M values)
@@ -288,13 +304,7 @@ def train(
     train_seconds = 0.0
     next_eval = 0.0
     step = 0
-    bar = None
-    if config.progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=int(config.max_seconds), unit="s", file=sys.stderr, desc=f"train {config.field}"
-        )
+    bar = _progress_bar(config)
 
     def progress_fraction() -> float:
         """Of the schedule: by steps when ``max_steps`` is given, else by seconds."""
