@@ -263,6 +263,10 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     comp = "".join(
         f"<li>{html.escape(k)}: {'n/a' if v is None else f'{v:.3f}'}</li>"
         for k, v in report.comparisons.items()
+        if not isinstance(v, list)
+    ) + "".join(
+        f"<li><b>unfair</b>: {html.escape(line)}</li>"
+        for line in report.comparisons.get("unequal_budgets", [])
     )
     bounds = "".join(
         f"<li>{html.escape(n)} is a bound, not a real system: {html.escape(r.bound)}</li>"
