@@ -73,15 +73,12 @@ class Medium:
 
     def append_tx(self, radio, raw: np.ndarray) -> None:
         """Add ``raw`` [2 * num_samples] int8 written by the transmitter at its current gains."""
-        scale = 10 ** (
-            (
-                radio.txvga_gain_db
-                + AMP_GAIN_DB * radio.amp_enabled
-                - self.channel.reference_txvga_db
-            )
-            / 20
-        )
-        x = (raw.astype(np.float32) * np.float32(scale / 128.0)).view(np.complex64)
+        self.append_tx_iq(radio, (raw.astype(np.float32) / np.float32(128.0)).view(np.complex64))
+
+    def append_tx_iq(self, radio, x: np.ndarray) -> None:
+        """Add ``x`` [num_samples] complex64 (full scale 1.0 at the DAC) at ``radio.tx_gain_db``."""
+        scale = 10 ** ((radio.tx_gain_db - self.channel.reference_txvga_db) / 20)
+        x = np.asarray(x, np.complex64) * np.float32(scale)
         with self.cond:
             self._ensure(self.tx_len + len(x))
             self._tx[self.tx_len : self.tx_len + len(x)] = x
@@ -93,6 +90,15 @@ class Medium:
             grown = np.zeros(max(n, 2 * len(self._tx)), np.complex64)
             grown[: self.tx_len] = self._tx[: self.tx_len]
             self._tx = grown
+
+    def idle_until(self, num_samples: int) -> None:
+        """Run an idle transmitter's timeline on in silence up to ``num_samples`` (its own
+        clock), so that what it sends next starts no earlier than that."""
+        with self.cond:
+            if not self.tx_streaming and num_samples > self.tx_len:
+                self._ensure(num_samples)
+                self._tx[self.tx_len : num_samples] = 0
+                self.tx_len = int(num_samples)
 
     def notify(self) -> None:
         with self.cond:
@@ -111,6 +117,11 @@ class Medium:
         ``still_receiving()`` is polled while waiting: when it turns False the wait ends
         (returns None), as a real transfer would be cancelled.
         """
+        y = self.render_iq(radio, k0, n, still_receiving)
+        return None if y is None else quantize_ci8(y)
+
+    def render_iq(self, radio, k0: int, n: int, still_receiving) -> np.ndarray | None:
+        """As :meth:`render`, before the ADC: [n] complex64 at the ADC input (full scale 1.0)."""
         ch = self.channel
         fs_rx = radio.sample_rate_hz * (1 + radio.ppm * 1e-6)
         t = (k0 + np.arange(n, dtype=np.float64)) / fs_rx
@@ -159,9 +170,8 @@ class Medium:
         noise = rng.standard_normal(2 * n, dtype=np.float32).view(np.complex64) * np.float32(
             math.sqrt(ch.noise_var / 2)
         )
-        rx_gain_db = radio.lna_gain_db + radio.vga_gain_db + AMP_GAIN_DB * radio.amp_enabled
-        y = (sig + noise) * np.float32(10 ** ((rx_gain_db - ch.reference_rx_gain_db) / 20))
+        y = (sig + noise) * np.float32(10 ** ((radio.rx_gain_db - ch.reference_rx_gain_db) / 20))
         y = iq_imbalance(y, ch.iq_gain_imbalance_db, ch.iq_phase_imbalance_deg)
         if ch.dc_offset:
             y = y + np.complex64(ch.dc_offset)
-        return quantize_ci8(y)
+        return y

@@ -27,9 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.devices import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 
-DEVICE_KINDS = ("emulated", "loopback", "hackrf")
+DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 
@@ -43,6 +44,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from semcodec.image_codecs import IMAGE_CODECS
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
+    p.add_argument(
+        "--uri",
+        default=None,
+        help="pluto: libiio URI of the board, ip:ADDRESS[:PORT] or usb:B.D.I (default: the first "
+        "found; one Pluto is both ends of the link)",
+    )
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
     p.add_argument(
@@ -154,7 +161,7 @@ def _usage(msg: str):
 
 def parse_device(value: str, name: str) -> tuple[str, str | None]:
     kind, _, serial = value.partition(":")
-    if kind not in DEVICE_KINDS or (serial and kind != "hackrf"):
+    if kind not in DEVICE_KINDS or (serial and kind not in HARDWARE):
         raise _usage(
             f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
         )
@@ -246,8 +253,18 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
     simulated = {"emulated", "loopback"}
-    if (tx_kind in simulated) != (rx_kind in simulated):
-        raise _usage("--tx and --rx must both be simulated (emulated/loopback) or both hackrf")
+    if (tx_kind in simulated) != (rx_kind in simulated) or (
+        tx_kind != rx_kind and tx_kind not in simulated
+    ):
+        raise _usage(
+            "--tx and --rx must both be simulated (emulated/loopback) or both the same hardware "
+            f"({', '.join(HARDWARE)})"
+        )
+    uri = getattr(args, "uri", None)
+    if uri is not None and tx_kind != "pluto":
+        raise _usage("--uri needs --tx pluto --rx pluto")
+    if tx_kind == "pluto":
+        tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
     if tx_kind != rx_kind and tx_kind in simulated:
         raise _usage(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
@@ -263,8 +280,8 @@ def open_pair(args, ota_cfg):
     from osnerf.ota_link import open_radios
 
     kind, tx_serial, rx_serial = device_kinds(args)
-    if kind == "hackrf":
-        return open_radios("hackrf", args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
+    if kind in HARDWARE:
+        return open_radios(kind, args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
     tx, rx, emu = open_radios(
         "emulated",
         args.snr_db,
@@ -452,8 +469,9 @@ def run(args: argparse.Namespace) -> int:
         f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {args.scheme}",
         file=sys.stderr,
     )
+    kind = device_kinds(args)[0]
     tx, rx, emu = open_pair(args, cfg)
-    hw = "HackRF One (emulated)" if emu is not None else "HackRF One"
+    hw = "HackRF One (emulated)" if emu is not None else HARDWARE[kind].label
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -464,7 +482,8 @@ def run(args: argparse.Namespace) -> int:
         raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
     finally:
         tx.close()
-        rx.close()
+        if rx is not tx:
+            rx.close()
     for w in caught:  # one line each, not a Python warning with its source line
         print(f"ota: warning: {w.message}", file=sys.stderr)
     per_image = trx.receive(result, state, images, args, cfg)
