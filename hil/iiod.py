@@ -33,7 +33,7 @@ from hil.pluto_emulator import PHY, RX_DEV, TX_DEV, EmulatedPluto
 
 IIOD_PORT = 30431
 VERSION_LINE = b"0.24.osnerf0\n"
-READ_CHUNK_SAMPLES = 1 << 16
+READ_CHUNK_SAMPLES = 1 << 13  # rendered (and paced) in pieces of about 2 ms at 4 MS/s
 
 
 class _Handler(socketserver.StreamRequestHandler):

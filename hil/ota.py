@@ -496,7 +496,9 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
     for dev in (tx, rx) if rx is not tx else (tx,):
         _configure(dev, cfg)
     burst, reports, layout = build_burst(blocks, cfg, frames)
-    lead = int(cfg.rx_lead_s * cfg.sample_rate_hz)
+    # a front end that needs time to start transmitting (a Pluto's buffer set-up) captures longer
+    late_s = float(getattr(tx, "tx_start_latency_s", 0.0))
+    lead = int((cfg.rx_lead_s + late_s) * cfg.sample_rate_hz)
     capture = transmit_and_capture(
         tx,
         rx,

@@ -99,6 +99,9 @@ class Pluto:
         sdr: an ``adi.Pluto``.
         uri: its libiio URI.
         rx_chunk_samples: samples per receive buffer (refill), > 0.
+        tx_start_latency_s: how long after ``tx`` is called the first samples may leave
+            (buffer set-up over the network or USB); an over-the-air capture starts that
+            much earlier (:func:`hil.send_blocks`).
         tx_chunk_samples: samples per transmit buffer of a streamed burst, > 0.
         kernel_buffers: the driver's buffer queue depth (a burst's tail plays out of it).
     """
@@ -108,8 +111,9 @@ class Pluto:
         sdr,
         uri: str,
         *,
-        rx_chunk_samples: int = 1 << 16,
+        rx_chunk_samples: int = 1 << 14,
         tx_chunk_samples: int = 1 << 16,
+        tx_start_latency_s: float = 0.1,
         kernel_buffers: int = 4,
         configure: bool = True,
     ):
@@ -121,6 +125,7 @@ class Pluto:
         self.rx_chunk_samples = int(rx_chunk_samples)
         self.tx_chunk_samples = int(tx_chunk_samples)
         self.kernel_buffers = int(kernel_buffers)
+        self.tx_start_latency_s = float(tx_start_latency_s)
         self._closed = False
         self._receiving = False
         self._cyclic = False
@@ -361,11 +366,11 @@ class Pluto:
         try:
             sdr.rx_destroy_buffer()
             sdr.rx_buffer_size = chunk
-            self._receiving = True
             while have < num_samples:
                 x = np.asarray(sdr.rx())  # [chunk] complex128, ADC counts
                 parts.append((x / RX_FULL_SCALE).astype(np.complex64))
                 have += len(x)
+                self._receiving = True  # the stream is live once a buffer arrived
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
             err = e if isinstance(e, HilError) else iio_error_to_hil(e, "receive")
             got = np.concatenate(parts)[:num_samples] if parts else np.zeros(0, np.complex64)
