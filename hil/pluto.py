@@ -372,6 +372,7 @@ class Pluto:
                 have += len(x)
                 self._receiving = True  # the stream is live once a buffer arrived
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
+            _release_frames(e)
             err = e if isinstance(e, HilError) else iio_error_to_hil(e, "receive")
             got = np.concatenate(parts)[:num_samples] if parts else np.zeros(0, np.complex64)
             err.capture = got[None, :]
@@ -451,6 +452,7 @@ class Pluto:
                 time.sleep(queued / float(self.sample_rate_hz))  # the queue plays out
                 sdr.tx_destroy_buffer()
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
+            _release_frames(e)
             raise iio_error_to_hil(e, "transmit") from e
         self.last_stats = StreamStats("tx", len(x))
         if save_to is not None:
@@ -469,6 +471,15 @@ class Pluto:
         except Exception as e:  # noqa: BLE001
             warnings.warn(f"Pluto {self.uri}: stop transmit: {e}", stacklevel=2)
         self._cyclic = False
+
+
+def _release_frames(exc: BaseException) -> None:
+    """Drop the locals of the frames in ``exc``'s traceback: pyadi-iio's frames hold its
+    ``iio.Buffer``, which must be destroyed before its context (libiio frees the buffer
+    through the context; garbage collection in the wrong order crashes the process)."""
+    import traceback
+
+    traceback.clear_frames(exc.__traceback__)
 
 
 def _hz(value: float, name: str) -> int:

@@ -1,0 +1,144 @@
+"""`osnerf ota --tx pluto --rx pluto` through one emulated Pluto looping to itself, and the
+network faults (a board killed mid-capture, an unreachable address)."""
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import phy
+from osnerf.cli import main
+
+adi = pytest.importorskip("adi", reason="pyadi-iio (and libiio0) are not installed")
+pytestmark = pytest.mark.skipif(
+    not all(
+        hasattr(phy, n) for n in ("FrameConfig", "build_frame", "find_frames", "receive_frame")
+    ),
+    reason="phy's frame API is not in this checkout",
+)
+
+from hil import EmulatedPluto, IiodServer  # noqa: E402
+from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH  # noqa: E402
+
+ADDRESS = "127.0.0.8"
+
+
+def free_port(address: str = ADDRESS) -> int:
+    with socket.socket() as s:
+        s.bind((address, 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def images(tmp_path_factory, shared_data):
+    from PIL import Image
+
+    folder = tmp_path_factory.mktemp("ota_images")
+    Image.open(sorted((shared_data / "kodak").glob("*.png"))[0]).save(folder / "kodim01.png")
+    return folder
+
+
+def serve(snr_db: float, **kwargs) -> IiodServer:
+    board = EmulatedPluto.for_link(
+        snr_db, seed=0, multipath=DEFAULT_MULTIPATH, delay_s=DEFAULT_DELAY_S, **kwargs
+    )
+    return IiodServer(board, ADDRESS, free_port()).serve_in_background()
+
+
+def ota(tmp_path, images, uri, scheme, snr_db, *extra):
+    out = tmp_path / "ota.json"
+    argv = ["ota", "--tx", "pluto", "--rx", "pluto", "--uri", uri, "--scheme", scheme]
+    argv += ["--snr-db", str(snr_db), "--images", str(images), "--out", str(out)]
+    argv += ["--size", "48", "--max-images", "1", "--symbols-per-frame", "1024", *extra]
+    return main(argv), out
+
+
+def test_jscc_at_0_db_matches_the_simulated_link(tmp_path, images):
+    semcodec = pytest.importorskip("semcodec")
+    if not semcodec.DEFAULT_CHECKPOINT.is_file():
+        pytest.skip("semcodec's shipped default checkpoint is not in this checkout")
+    import torch
+
+    with serve(0.0) as srv:
+        rc, out = ota(tmp_path, images, srv.uri, "jscc", 0)
+    assert rc == 0
+    d = json.loads(out.read_text())
+    r = d["results"][0]
+    assert r["frames_sent"] >= 1 and r["frames_lost"] == 0
+    # pilots: 0 dB + 10 log10(64 / 52) on a flat channel; this multipath reads about 1 dB off
+    assert -1.0 <= r["snr_db_measured"] <= 0 + 10 * np.log10(64 / 52) + 1.5
+    # one board: TX and RX LOs from one crystal, no carrier offset
+    assert all(abs(f["cfo_hz"]) < 1500 for f in d["frames"])
+    from osnerf.commands.ota import load_images
+    from renderer import psnr
+
+    _, imgs = load_images(str(images), 48, 1)
+    codec = semcodec.load_codec()
+    enc = codec.encode(torch.from_numpy(imgs), r["snr_db_measured"], phy.parse_cbr("1/16"))
+    g = torch.Generator().manual_seed(0)
+    rx = phy.FlatLink(phy.make_channel("awgn"))(enc.symbols, r["snr_db_measured"], generator=g)
+    ref = psnr(codec.decode(rx.x_hat, enc.meta, r["snr_db_measured"], noise_var=rx.noise_var)[0].numpy(), imgs[0])  # fmt: skip
+    assert r["psnr"] == pytest.approx(ref, abs=1.5)
+    assert d["config"]["uri"] == srv.uri and "ADALM-Pluto" in open(d["sigmf"][1][: -len("data")] + "meta").read()  # fmt: skip
+
+
+def test_digital_at_0_db_reports_its_lost_codewords(tmp_path, images):
+    with serve(0.0) as srv:
+        rc, out = ota(tmp_path, images, srv.uri, "digital", 0, "--mcs", "16qam-3/4")
+    assert rc == 0
+    r = json.loads(out.read_text())["results"][0]
+    assert r["frames_crc_failed"] > 0 and not r["decoded"]
+    assert r["frames_lost"] + r["frames_crc_failed"] <= r["frames_sent"]
+
+
+def test_unreachable_address_is_one_line_naming_it(tmp_path, images, capsys):
+    uri = f"ip:127.0.0.3:{free_port('127.0.0.3')}"
+    rc, out = ota(tmp_path, images, uri, "digital", 15)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and not out.exists()
+    assert err[-1].startswith("osnerf ota: failed: DeviceNotFoundError: no Pluto at " + uri)
+
+
+def test_board_killed_mid_capture_exits_1_and_keeps_the_capture(tmp_path, images, capsys):
+    """The emulator runs as its own process and dies (--fault drop) 200000 samples into the
+    capture, as a board that is switched off: the run says so in one line and keeps what
+    arrived as valid SigMF."""
+    import sigmf
+
+    port = free_port()
+    emu = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))",
+        ]  # fmt: skip
+        + ["hil", "emulate", "pluto", "--address", ADDRESS, "--port", str(port), "--snr-db", "15"]
+        + ["--fault", "drop", "--fault-after-samples", "200000"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert "osnerf hil emulate: pluto at" in emu.stderr.readline()
+        rc, out = ota(tmp_path, images, f"ip:{ADDRESS}:{port}", "digital", 15)
+        assert emu.wait(timeout=30) == 1  # the emulator says it died
+    finally:
+        emu.kill()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and not out.exists()
+    assert err[-1].startswith("osnerf ota: failed: DisconnectedError: receive: the board is gone")
+    partial = tmp_path / "ota_sigmf" / "ota_rx_partial.sigmf-meta"
+    assert f"capture so far saved to {partial}" in err[-1]
+    rec = sigmf.fromfile(str(partial))
+    rec.validate()
+    n = len(rec.read_samples())
+    assert 0 < n <= 200_000 and n % (1 << 14) == 0  # whole buffers, none after the drop
+
+
+def test_emulate_refuses_a_non_loopback_address(capsys):
+    t0 = time.monotonic()
+    assert main(["hil", "emulate", "pluto", "--address", "10.1.2.3", "--port", "0"]) == 2
+    assert "127.0.0.0/8" in capsys.readouterr().err and time.monotonic() - t0 < 10
