@@ -26,7 +26,7 @@ from hil.errors import (
     StreamError,
     TimedOutError,
 )
-from hil.hackrf import StreamStats
+from hil.hackrf import StreamStats, full_scale_samples
 
 RX_FULL_SCALE = 2048.0  # 12-bit ADC samples in 16-bit containers
 TX_FULL_SCALE = 32767.0  # 12-bit DAC samples in the containers' most significant bits
@@ -418,20 +418,7 @@ class Pluto:
             save_to: SigMF path stem for the samples as sent.
             max_shortfalls: accepted for the HackRF's interface (no underrun count in libiio 0.x).
         """
-        x = np.asarray(samples)
-        if x.ndim == 2 and x.shape[0] == 1:
-            x = x[0]
-        if x.ndim != 1 or x.size == 0:
-            raise ValueError(
-                f"samples must be [num_samples] or [1, num_samples] complex, got shape {x.shape}"
-            )
-        if not np.all(np.isfinite(x)):
-            raise ValueError("samples must be finite")
-        peak = max(np.abs(x.real).max(), np.abs(np.imag(x)).max())
-        if peak > 1.0 + 1e-6:
-            raise ValueError(
-                f"samples must lie within full scale |I|, |Q| <= 1, peak is {peak:.3f}"
-            )
+        x = full_scale_samples(samples)
         if self._closed:
             raise HilError("transmit: the device is closed")
         counts = np.round(x.real * TX_FULL_SCALE) + 1j * np.round(np.imag(x) * TX_FULL_SCALE)
