@@ -25,7 +25,6 @@ import ipaddress
 import socket
 import socketserver
 import threading
-import time
 
 import numpy as np
 
@@ -55,8 +54,6 @@ class _Handler(socketserver.StreamRequestHandler):
             pass
 
     def _send(self, data: bytes) -> None:
-        if self.server.board.reply_delay_s:
-            time.sleep(self.server.board.reply_delay_s)
         self.wfile.write(data)
         self.wfile.flush()
 

@@ -104,6 +104,7 @@ class Pluto:
             much earlier (:func:`hil.send_blocks`).
         tx_chunk_samples: samples per transmit buffer of a streamed burst, > 0.
         kernel_buffers: the driver's buffer queue depth (a burst's tail plays out of it).
+        timeout_ms: libiio's timeout of each request and buffer, ms.
     """
 
     def __init__(
@@ -114,6 +115,7 @@ class Pluto:
         rx_chunk_samples: int = 1 << 14,
         tx_chunk_samples: int = 1 << 16,
         tx_start_latency_s: float = 0.1,
+        timeout_ms: int = 5000,
         kernel_buffers: int = 4,
         configure: bool = True,
     ):
@@ -126,6 +128,7 @@ class Pluto:
         self.tx_chunk_samples = int(tx_chunk_samples)
         self.kernel_buffers = int(kernel_buffers)
         self.tx_start_latency_s = float(tx_start_latency_s)
+        self.timeout_ms = int(timeout_ms)
         self._closed = False
         self._receiving = False
         self._cyclic = False
@@ -147,6 +150,8 @@ class Pluto:
                 Pluto was found.
         """
         iio = _import_iio()
+        if uri is None and os.environ.get("IIOD_REMOTE"):
+            uri = f"ip:{os.environ['IIOD_REMOTE']}"  # no scan: libiio's default network host
         if uri is None:
             found = find_plutos()
             if not found:
@@ -171,7 +176,7 @@ class Pluto:
             raise iio_error_to_hil(e, f"open {uri}") from e
         except Exception as e:  # noqa: BLE001 - pyadi-iio raises plain Exception
             raise DeviceNotFoundError(f"{uri} is not a Pluto (AD9361) context: {e}") from e
-        return cls(sdr, uri, **kwargs)
+        return cls(sdr, uri, timeout_ms=timeout_ms, **kwargs)
 
     def _context_attr(self, name: str) -> str:
         try:
@@ -361,19 +366,30 @@ class Pluto:
             raise HilError("receive: the device is closed")
         sdr = self._sdr
         chunk = min(self.rx_chunk_samples, num_samples)
-        parts, have = [], 0
+        parts, have, asked = [], 0, time.monotonic()
         tuning = (float(self.sample_rate_hz), float(self.rx_lo_hz))  # for SigMF, read while alive
         try:
             sdr.rx_destroy_buffer()
             sdr.rx_buffer_size = chunk
             while have < num_samples:
+                asked = time.monotonic()
                 x = np.asarray(sdr.rx())  # [chunk] complex128, ADC counts
                 parts.append((x / RX_FULL_SCALE).astype(np.complex64))
                 have += len(x)
                 self._receiving = True  # the stream is live once a buffer arrived
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
             _release_frames(e)
-            err = e if isinstance(e, HilError) else iio_error_to_hil(e, "receive")
+            waited_s = time.monotonic() - asked if parts or self._receiving else 0.0
+            if isinstance(e, HilError):
+                err = e
+            elif waited_s >= 0.95 * self.timeout_ms / 1000:
+                # libiio 0.24's network backend reports its own timeout as EPIPE
+                err = TimedOutError(
+                    f"receive: the board did not answer in time (no buffer within "
+                    f"{self.timeout_ms} ms; libiio: {e})"
+                )
+            else:
+                err = iio_error_to_hil(e, "receive")
             got = np.concatenate(parts)[:num_samples] if parts else np.zeros(0, np.complex64)
             err.capture = got[None, :]
             if save_to is not None and len(got):

@@ -38,9 +38,9 @@ DEVICE_NAMES = {PHY: "ad9361-phy", RX_DEV: "cf-ad9361-lpc", TX_DEV: "cf-ad9361-d
 
 
 NETWORK_FAULTS = ("drop", "slow")
-"""Faults of a served board (``osnerf hil emulate pluto --fault``): ``drop`` (the board dies
-mid-capture: every connection closes after ``after_samples`` received samples) and ``slow``
-(every reply comes ``SLOW_REPLY_S`` late, past libiio's 5 s timeout)."""
+"""Faults of a served board (``osnerf hil emulate pluto --fault``), both ``after_samples``
+received samples into its life: ``drop`` (the board dies: every connection closes) and
+``slow`` (each later receive reply comes ``SLOW_REPLY_S`` late, past libiio's 5 s timeout)."""
 SLOW_REPLY_S = 6.0
 
 
@@ -154,9 +154,10 @@ class EmulatedPluto:
         seed: noise seed.
         ppm: crystal error, parts per million (LOs and sample clock alike).
         serial: what ``hw_serial`` reports.
-        drop_after_samples: the board's connection drops once this many samples were
+        drop_after_samples: the board's connections drop once this many samples were
             received (a killed or unplugged board); None: never.
-        reply_delay_s: every reply of the server is this late (a slow server).
+        slow_after_samples: once this many samples were received, each receive reply is
+            ``SLOW_REPLY_S`` late (a server that stalls); None: never.
     """
 
     def __init__(
@@ -166,13 +167,13 @@ class EmulatedPluto:
         ppm: float = 0.0,
         serial: str = "104473dc599300131100210074c83b9f0e",
         drop_after_samples: int | None = None,
-        reply_delay_s: float = 0.0,
+        slow_after_samples: int | None = None,
     ):
         self.medium = Medium(channel, seed=seed)
         self.ppm = float(ppm)
         self.serial = serial
         self.drop_after_samples = drop_after_samples
-        self.reply_delay_s = float(reply_delay_s)
+        self.slow_after_samples = slow_after_samples
         self.lock = threading.RLock()
         self.rx_port = _Port(self, "rx", 0)
         self.tx_port = _Port(self, "tx", 1)
@@ -217,7 +218,7 @@ class EmulatedPluto:
 
         Args:
             fault: one of :data:`NETWORK_FAULTS` or None.
-            after_samples: received samples before a ``drop``.
+            after_samples: received samples before the fault.
         """
         if fault is not None and fault not in NETWORK_FAULTS:
             raise KeyError(f"unknown fault {fault!r}; known: {', '.join(NETWORK_FAULTS)}")
@@ -233,7 +234,7 @@ class EmulatedPluto:
             channel,
             seed=seed,
             drop_after_samples=int(after_samples) if fault == "drop" else None,
-            reply_delay_s=SLOW_REPLY_S if fault == "slow" else 0.0,
+            slow_after_samples=int(after_samples) if fault == "slow" else None,
         )
 
     # ------------------------------------------------------------------ derived state
@@ -498,6 +499,12 @@ class EmulatedPluto:
                 self.dropped.set()
                 return None
             num_samples = min(num_samples, left)
+        if self.slow_after_samples is not None:
+            left = self.slow_after_samples - self.samples_received
+            if left <= 0:  # late; a client that gave up has closed the connection by then
+                self.dropped.wait(SLOW_REPLY_S)
+            else:
+                num_samples = min(num_samples, left)
         t0, k0 = self.rx_opened_at
         due = t0 + (self.rx_cursor + num_samples - k0) / self.sample_rate_hz
         wait = due - time.monotonic()

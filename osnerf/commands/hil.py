@@ -51,14 +51,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--fault",
         default=None,
         choices=NETWORK_FAULTS,
-        help="emulate: drop (the board dies after --fault-after-samples received samples) or "
-        "slow (every reply 6 s late)",
+        help="emulate: after --fault-after-samples received samples, drop (the board dies) or "
+        "slow (each receive reply 6 s late, past libiio's 5 s timeout)",
     )
     p.add_argument(
         "--fault-after-samples",
         type=_integer(0, 2**40),
         default=50_000,
-        help="emulate --fault drop: received samples before the board dies (default 50000)",
+        help="emulate --fault: received samples before the fault (default 50000)",
     )
     p.add_argument(
         "--emulate", action="store_true", help="use two emulated boards instead of USB hardware"

@@ -142,3 +142,58 @@ def test_emulate_refuses_a_non_loopback_address(capsys):
     t0 = time.monotonic()
     assert main(["hil", "emulate", "pluto", "--address", "10.1.2.3", "--port", "0"]) == 2
     assert "127.0.0.0/8" in capsys.readouterr().err and time.monotonic() - t0 < 10
+
+
+def test_slow_server_mid_capture_times_out_in_one_line(tmp_path, images, capsys):
+    """The board stops answering in time 200000 samples in: libiio's 5 s timeout ends the
+    capture; the run exits 1 in one line and keeps what arrived."""
+    with serve(15.0, fault="slow", after_samples=200_000) as srv:
+        t0 = time.monotonic()
+        rc, out = ota(tmp_path, images, srv.uri, "digital", 15)
+        took = time.monotonic() - t0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and not out.exists() and took < 60
+    assert err[-1].startswith(
+        "osnerf ota: failed: TimedOutError: receive: the board did not answer"
+    )
+    partial = tmp_path / "ota_sigmf" / "ota_rx_partial.sigmf-meta"
+    assert f"capture so far saved to {partial}" in err[-1]
+    import sigmf
+
+    assert 0 < len(sigmf.fromfile(str(partial)).read_samples()) <= 200_000
+
+
+def test_hil_info_lists_the_pluto_at_iiod_remote(monkeypatch, capsys):
+    with serve(15.0) as srv:
+        monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")
+        assert main(["hil", "info"]) == 0
+    out = capsys.readouterr().out
+    assert f"Found Pluto\nURI: {srv.uri}\n" in out and "PlutoSDR" in out
+
+
+def test_the_pipeline_link_crosses_one_pluto(monkeypatch):
+    """``osnerf run --channel ota --ota-device pluto``'s link: the first Pluto found
+    (IIOD_REMOTE), both ends on one board; unit-power QPSK comes back at the air's SNR."""
+    import torch
+
+    from hil import OtaConfig
+    from osnerf.ota_link import OtaLink, open_radios
+
+    with serve(10.0) as srv:
+        monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")
+        cfg = OtaConfig(symbols_per_frame=1024)
+        tx, rx, emu = open_radios("pluto", 10.0, cfg)
+        assert tx is rx and emu is None and tx.uri == srv.uri
+        link = OtaLink(tx, rx, 10.0, cfg)
+        g = torch.Generator().manual_seed(0)
+        bits = torch.randint(0, 4, (2, 1500), generator=g)
+        x = torch.exp(1j * (torch.pi / 4 + torch.pi / 2 * bits)).to(torch.complex64)
+        try:
+            out = link(x, 10.0)
+        finally:
+            link.close()
+    assert link.frames_lost == 0 and link.frames_sent == 4
+    err = (out.x_hat - x).abs().pow(2).mean().item()
+    # zero-forced symbols: the error is the reported noise variance, near 10 dB below the signal
+    assert err == pytest.approx(out.noise_var.mean().item(), rel=0.3)
+    assert 7.0 <= -10 * np.log10(err) <= 13.0
