@@ -2,8 +2,8 @@
 host CPU per MS.
 
 The Pluto runs through pyadi-iio and libiio's network backend against the emulated board's
-iiod server in this process (its rendering counts in the CPU time, as the HackRF
-emulator's does); the server delivers at most the sample rate, like a board.
+iiod server in another process (``osnerf hil emulate pluto``): its CPU time is the host's
+alone; the server delivers at most the sample rate, like a board.
 
 CPU time (all threads of the process) is the measure; wall time on a shared machine is not.
 Side by side in one run: the whole path through pyusb (driver thread + pyusb + emulated
@@ -18,7 +18,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from hil import AirChannel, EmulatedPluto, Emulator, HackRF, IiodServer, Pluto, open_loopback
+from hil import AirChannel, Emulator, HackRF, Pluto, open_loopback
 
 TARGET_MSPS = 4.0
 NUM_SAMPLES = 4_000_000  # one second at 4 MS/s
@@ -40,17 +40,33 @@ def _measure(fn) -> dict:
 
 
 def _pluto() -> dict:
-    """The Pluto front end's receive path at 4 MS/s and at 20 MS/s (paced by the board)."""
-    out = {}
-    board = EmulatedPluto(AirChannel(snr_db=20), seed=0)
-    with IiodServer(board, "127.0.0.5", 0).serve_in_background() as srv:
-        with Pluto.open(srv.uri, rx_chunk_samples=1 << 16) as sdr:
-            for rate in (4e6, 20e6):
+    """The Pluto front end's receive path (pyadi-iio, libiio's network backend) against an
+    emulated board in its own process (``osnerf hil emulate pluto``), as against a board on
+    the network: CPU time here is the host's alone. The board delivers at most its rate."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.5", 0))
+        port = sock.getsockname()[1]
+    code = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
+    args = ["hil", "emulate", "pluto", "--address", "127.0.0.5", "--port", str(port)]
+    emu = subprocess.Popen([sys.executable, "-c", code, *args], stderr=subprocess.PIPE, text=True)
+    out: dict = {}
+    try:
+        emu.stderr.readline()  # "... pluto at ip:...": listening
+        with Pluto.open(f"ip:127.0.0.5:{port}", rx_chunk_samples=1 << 16) as sdr:
+            for rate in (4e6, 10e6, 20e6):
                 sdr.sample_rate_hz = rate
                 sdr.rx(1000)  # warm up
                 out[f"pluto_rx_{rate / 1e6:g}msps"] = _measure(
                     lambda s=sdr: s.rx(NUM_SAMPLES).shape[1]
                 )
+    finally:
+        emu.send_signal(signal.SIGTERM)
+        out["pluto_emulator_exit_code_on_sigterm"] = emu.wait(timeout=30)
     return out
 
 

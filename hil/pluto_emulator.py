@@ -516,6 +516,8 @@ class EmulatedPluto:
             raise _err(errno.ETIMEDOUT, "no samples: the receive wait timed out")
         self.rx_cursor += num_samples
         self.samples_received += num_samples
+        keep = int(self.medium.channel.delay_s * self.sample_rate_hz) + 8192  # delay + filters
+        self.medium.forget_before(self.rx_cursor - keep)
         inter = y.view(np.float32) * np.float32(RX_FULL_SCALE)
         return np.clip(np.rint(inter), -RX_FULL_SCALE, RX_FULL_SCALE - 1).astype(np.int16)
 
