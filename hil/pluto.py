@@ -191,7 +191,7 @@ class Pluto:
         rx_gain_db: float = 30,
         tx_gain_db: float = -10.0,
     ) -> None:
-        """A known state: rate, both LOs, RF bandwidth 0.8 Fs, manual gain, gains."""
+        """A known state: rate, both LOs, RF bandwidth Fs (at most 20 MHz), manual gain, gains."""
         self.sample_rate_hz = sample_rate_hz
         self.center_freq_hz = center_freq_hz
         self.gain_control_mode = "manual"
@@ -252,7 +252,8 @@ class Pluto:
 
     @property
     def sample_rate_hz(self) -> int:
-        """RX and TX sample rate, 520833-61440000 S/s (read back from the clock chain)."""
+        """RX and TX sample rate, 520833-61440000 S/s (read back from the clock chain); setting
+        it also sets the RF bandwidth to the rate (at most 20 MHz)."""
         return int(self._get("sample_rate"))
 
     @sample_rate_hz.setter
@@ -261,7 +262,7 @@ class Pluto:
         if not math.isfinite(v) or not 520_833 <= v <= 61_440_000:
             raise ValueError(f"sample_rate_hz must be in [520833, 61440000] S/s, got {value!r}")
         self._set("sample_rate", int(round(v)), "set sample rate")
-        self.rf_bandwidth_hz = min(max(int(0.8 * v), 200_000), 20_000_000)
+        self.rf_bandwidth_hz = min(max(int(v), 200_000), 20_000_000)  # the whole band passes
 
     @property
     def rx_lo_hz(self) -> int:

@@ -10,6 +10,10 @@ out of the TX HackRF and into the RX HackRF. Emulated boards sit ``--ppm`` apart
 PSNR, the SNR measured from the pilots, frames sent and lost, and lists the SigMF files.
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
 
+``--tx pluto --rx pluto [--uri URI]`` uses one ADALM-Pluto (full duplex) as both ends, real or
+emulated (``osnerf hil emulate pluto --snr-db X``: its air is set there; give ``--snr-db`` the
+same value for the codec).
+
 ``--fault`` switches on an emulated USB fault of the receiving board (stall, rx-timeout,
 unplug, overrun) to rehearse how a run reports it: exit 1 with a one-line message, and the
 capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).

@@ -121,6 +121,7 @@ def test_front_end_interface(server):
         assert sdr.rx_lo_hz == sdr.tx_lo_hz == 915_000_000
         sdr.rx_gain_db = 40.7
         assert sdr.rx_gain_db == 40
+        assert sdr.rf_bandwidth_hz == 4_000_000  # the rate sets the analog filter to match
         assert "sample_rate_hz=4000000" in repr(sdr) and "rx_gain_db=40.0" in repr(sdr)
         with pytest.raises(ValueError, match="tx_gain_db must be in"):
             sdr.tx_gain_db = 1
