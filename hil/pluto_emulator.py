@@ -198,7 +198,8 @@ class EmulatedPluto:
         self.tx_is_cyclic = False
         self.tx_cyclic: np.ndarray | None = None
         self.samples_received = 0
-        self.dropped = threading.Event()
+        self.dropped = threading.Event()  # set when a drop fault closed every connection
+        self.stalled = threading.Event()  # set when a slow fault began
 
     @classmethod
     def for_link(
@@ -502,6 +503,7 @@ class EmulatedPluto:
         if self.slow_after_samples is not None:
             left = self.slow_after_samples - self.samples_received
             if left <= 0:  # late; a client that gave up has closed the connection by then
+                self.stalled.set()
                 self.dropped.wait(SLOW_REPLY_S)
             else:
                 num_samples = min(num_samples, left)

@@ -114,8 +114,16 @@ def _emulate(args: argparse.Namespace) -> int:
         file=sys.stderr,
         flush=True,
     )
+    told = False
     while not stop.is_set() and not board.dropped.is_set():
-        stop.wait(0.2)
+        stop.wait(0.05)
+        if board.stalled.is_set() and not told:
+            told = True
+            print(
+                f"osnerf hil emulate: fault: receive stalls after {board.samples_received} samples",
+                file=sys.stderr,
+                flush=True,
+            )
     server.close()
     if board.dropped.is_set():
         print("osnerf hil emulate: fault: the board dropped every connection", file=sys.stderr)

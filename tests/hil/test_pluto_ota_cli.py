@@ -112,10 +112,10 @@ def test_unreachable_address_is_one_line_naming_it(tmp_path, images, capsys):
     assert err[-1].startswith("osnerf ota: failed: DeviceNotFoundError: no Pluto at " + uri)
 
 
-def test_board_killed_mid_capture_exits_1_and_keeps_the_capture(tmp_path, images, capsys):
-    """The emulator runs as its own process and dies (--fault drop) 200000 samples into the
-    capture, as a board that is switched off: the run says so in one line and keeps what
-    arrived as valid SigMF."""
+def test_board_dropping_mid_capture_exits_1_and_keeps_the_capture(tmp_path, images, capsys):
+    """The emulator runs as its own process and drops every connection (--fault drop) 200000
+    samples into the capture, as a board that is switched off: the run says so in one line
+    and keeps what arrived as valid SigMF."""
     import sigmf
 
     port = free_port()
@@ -145,6 +145,52 @@ def test_board_killed_mid_capture_exits_1_and_keeps_the_capture(tmp_path, images
     rec.validate()
     n = len(rec.read_samples())
     assert 0 < n <= 200_000 and n % (1 << 14) == 0  # whole buffers, none after the drop
+
+
+def test_emulator_killed_mid_capture_exits_1_and_keeps_the_capture(tmp_path, images, capsys):
+    """SIGKILL to the emulator's process while the run is receiving: the emulator stalls its
+    receive stream 150000 samples in (--fault slow) and says so, and is killed then."""
+    import signal
+    import threading
+
+    import sigmf
+
+    port = free_port()
+    emu = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))",
+        ]  # fmt: skip
+        + ["hil", "emulate", "pluto", "--address", ADDRESS, "--port", str(port), "--snr-db", "15"]
+        + ["--fault", "slow", "--fault-after-samples", "150000"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    result = {}
+    try:
+        assert "osnerf hil emulate: pluto at" in emu.stderr.readline()
+        run = threading.Thread(
+            target=lambda: result.update(
+                rc=ota(tmp_path, images, f"ip:{ADDRESS}:{port}", "digital", 15)
+            )
+        )
+        run.start()
+        assert "receive stalls after 150000 samples" in emu.stderr.readline()
+        emu.send_signal(signal.SIGKILL)
+        assert emu.wait(timeout=30) == -signal.SIGKILL
+        run.join(timeout=120)
+    finally:
+        emu.kill()
+    rc, out = result["rc"]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1 and not out.exists()
+    assert err[-1].startswith("osnerf ota: failed: DisconnectedError: receive: the board is gone")
+    partial = tmp_path / "ota_sigmf" / "ota_rx_partial.sigmf-meta"
+    assert f"capture so far saved to {partial}" in err[-1]
+    rec = sigmf.fromfile(str(partial))
+    rec.validate()
+    assert 0 < len(rec.read_samples()) <= 150_000
 
 
 def test_emulate_refuses_a_non_loopback_address(capsys):
