@@ -2,10 +2,12 @@
 network faults (a board killed mid-capture, an unreachable address)."""
 
 import json
+import os
 import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,6 +27,20 @@ from hil import EmulatedPluto, IiodServer  # noqa: E402
 from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH  # noqa: E402
 
 ADDRESS = "127.0.0.8"
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def emulator_process(*args: str) -> subprocess.Popen:
+    """``osnerf hil emulate pluto ARGS`` in its own process (this checkout's code)."""
+    path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    env = {**os.environ, "PYTHONPATH": path}
+    code = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
+    return subprocess.Popen(
+        [sys.executable, "-c", code, "hil", "emulate", "pluto", "--address", ADDRESS, *args],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
 
 
 def free_port(address: str = ADDRESS) -> int:
@@ -119,16 +135,8 @@ def test_board_dropping_mid_capture_exits_1_and_keeps_the_capture(tmp_path, imag
     import sigmf
 
     port = free_port()
-    emu = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))",
-        ]  # fmt: skip
-        + ["hil", "emulate", "pluto", "--address", ADDRESS, "--port", str(port), "--snr-db", "15"]
-        + ["--fault", "drop", "--fault-after-samples", "200000"],
-        stderr=subprocess.PIPE,
-        text=True,
+    emu = emulator_process(
+        "--port", str(port), "--snr-db", "15", "--fault", "drop", "--fault-after-samples", "200000"
     )
     try:
         assert "osnerf hil emulate: pluto at" in emu.stderr.readline()
@@ -156,16 +164,8 @@ def test_emulator_killed_mid_capture_exits_1_and_keeps_the_capture(tmp_path, ima
     import sigmf
 
     port = free_port()
-    emu = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))",
-        ]  # fmt: skip
-        + ["hil", "emulate", "pluto", "--address", ADDRESS, "--port", str(port), "--snr-db", "15"]
-        + ["--fault", "slow", "--fault-after-samples", "150000"],
-        stderr=subprocess.PIPE,
-        text=True,
+    emu = emulator_process(
+        "--port", str(port), "--snr-db", "15", "--fault", "slow", "--fault-after-samples", "150000"
     )
     result = {}
     try:
@@ -252,3 +252,19 @@ def test_the_pipeline_link_crosses_one_pluto(monkeypatch):
     # zero-forced symbols: the error is the reported noise variance, near 10 dB below the signal
     assert err == pytest.approx(out.noise_var.mean().item(), rel=0.3)
     assert 7.0 <= -10 * np.log10(err) <= 13.0
+
+
+def test_emulate_serves_until_sigterm_then_exits_0():
+    import signal
+
+    port = free_port()
+    emu = emulator_process("--port", str(port))
+    try:
+        assert f"pluto at ip:{ADDRESS}:{port}" in emu.stderr.readline()
+        with socket.create_connection((ADDRESS, port), timeout=10) as conn:
+            conn.sendall(b"VERSION\r\n")
+            assert conn.recv(64).startswith(b"0.24.")
+        emu.send_signal(signal.SIGTERM)
+        assert emu.wait(timeout=30) == 0
+    finally:
+        emu.kill()
