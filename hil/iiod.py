@@ -28,7 +28,8 @@ import threading
 
 import numpy as np
 
-from hil.pluto_emulator import PHY, RX_DEV, TX_DEV, EmulatedPluto
+from hil.pluto_context import PHY, RX_DEV, TX_DEV
+from hil.pluto_emulator import EmulatedPluto
 
 IIOD_PORT = 30431
 VERSION_LINE = b"0.24.osnerf0\n"
@@ -276,4 +277,4 @@ class IiodServer(socketserver.ThreadingTCPServer):
         self.close()
 
 
-__all__ = ["IIOD_PORT", "IiodServer", "PHY"]
+__all__ = ["IIOD_PORT", "IiodServer"]
