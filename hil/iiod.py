@@ -28,7 +28,7 @@ import threading
 
 import numpy as np
 
-from hil.pluto_context import PHY, RX_DEV, TX_DEV
+from hil.pluto_context import RX_DEV, TX_DEV
 from hil.pluto_emulator import EmulatedPluto
 
 IIOD_PORT = 30431

@@ -107,11 +107,12 @@ class Medium:
             self._tx[: len(kept)] = kept
             self.tx_base = index
 
-    def idle_until(self, num_samples: int) -> None:
+    def idle_until(self, num_samples: int, underrun: bool = False) -> None:
         """Run an idle transmitter's timeline on in silence up to ``num_samples`` (its own
-        clock), so that what it sends next starts no earlier than that."""
+        clock), so that what it sends next starts no earlier than that. ``underrun``: also
+        while it streams (it did not keep up; the gap goes out as silence)."""
         with self.cond:
-            if not self.tx_streaming and num_samples > self.tx_len:
+            if (underrun or not self.tx_streaming) and num_samples > self.tx_len:
                 self._ensure(num_samples)
                 self._tx[self.tx_len - self.tx_base : num_samples - self.tx_base] = 0
                 self.tx_len = int(num_samples)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil import ad9361
-from hil.air import AirChannel
+from hil.air import RESAMPLER_TAPS, AirChannel
 from hil.medium import Medium
 from hil.pluto_context import (
     BUFFER_ATTRS,
@@ -50,6 +50,7 @@ NETWORK_FAULTS = ("drop", "slow")
 received samples into its life: ``drop`` (the board dies: every connection closes) and
 ``slow`` (each later receive reply comes ``SLOW_REPLY_S`` late, past libiio's 5 s timeout)."""
 SLOW_REPLY_S = 6.0
+TX_UNDERRUN_S = 1.0  # wall time a receive waits for an open TX buffer's data before it underruns
 
 
 def _err(code: int, what: str) -> OSError:
@@ -108,7 +109,7 @@ class EmulatedPluto:
         drop_after_samples: int | None = None,
         slow_after_samples: int | None = None,
     ):
-        self.medium = Medium(channel, seed=seed)
+        self.medium = Medium(channel, seed=seed, wait_timeout_s=TX_UNDERRUN_S)
         self.ppm = float(ppm)
         self.serial = serial
         self.drop_after_samples = drop_after_samples
@@ -137,6 +138,8 @@ class EmulatedPluto:
         self.tx_is_cyclic = False
         self.tx_cyclic: np.ndarray | None = None
         self.samples_received = 0
+        self.tx_underruns = 0  # times the open TX buffer ran dry while receiving
+        self.tx_starved = False  # the open TX buffer is dry: the DAC sends silence
         self.dropped = threading.Event()  # set when a drop fault closed every connection
         self.stalled = threading.Event()  # set when a slow fault began
 
@@ -417,7 +420,16 @@ class EmulatedPluto:
         if wait > 0:
             time.sleep(wait)
         self._extend_cyclic(num_samples)
+        if self.tx_starved and self.medium.tx_streaming:  # still dry: silence, no waiting
+            self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
         y = self.medium.render_iq(self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open)
+        if y is None and self.rx_open and self.medium.tx_streaming:
+            self.tx_starved = True
+            # the host did not feed the open TX buffer in time: the DAC underruns (sends
+            # silence) and what it writes later goes out later, as on a board
+            self.tx_underruns += 1
+            self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
+            y = self.medium.render_iq(self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open)  # fmt: skip
         if y is None:
             raise _err(errno.ETIMEDOUT, "no samples: the receive wait timed out")
         self.rx_cursor += num_samples
@@ -450,6 +462,7 @@ class EmulatedPluto:
 
     def write_tx(self, raw: np.ndarray) -> None:
         """[2 * num_samples] int16 I, Q from the host; the DAC keeps the 12 MSBs."""
+        self.tx_starved = False
         x = ((raw.astype(np.int32) >> 4) << 4).astype(np.float32) / np.float32(TX_FULL_SCALE)
         iq = x.view(np.complex64)
         if self.tx_is_cyclic:

@@ -114,9 +114,16 @@ def _emulate(args: argparse.Namespace) -> int:
         file=sys.stderr,
         flush=True,
     )
-    told = False
+    told, underruns = False, 0
     while not stop.is_set() and not board.dropped.is_set():
         stop.wait(0.05)
+        if board.tx_underruns > underruns:
+            underruns = board.tx_underruns
+            print(
+                f"osnerf hil emulate: TX underrun ({underruns} so far): the host fed the DAC late",
+                file=sys.stderr,
+                flush=True,
+            )
         if board.stalled.is_set() and not told:
             told = True
             print(
