@@ -15,9 +15,11 @@ LPIPS_WEIGHTS ?= $(or $(OSNERF_LPIPS_WEIGHTS),$(XDG_CACHE_HOME)/osnerf/lpips_ale
 LPIPS_SDIST_DIR := $(XDG_CACHE_HOME)/osnerf/sdist
 LPIPS_REF := $(VENV)/.lpips-ref
 
-.PHONY: demo test bench setup llvm lpips lint clean
+LIBIIO_LIB := /usr/lib/x86_64-linux-gnu/libiio.so.0
 
-setup: $(STAMP) llvm lpips
+.PHONY: demo test bench setup llvm libiio lpips lint clean
+
+setup: $(STAMP) llvm libiio lpips
 
 lpips: $(LPIPS_WEIGHTS) $(LPIPS_REF)
 
@@ -48,6 +50,18 @@ llvm:
 		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q libllvm19; \
 	else \
 		echo "ray tracing needs LLVM 19: run 'sudo apt-get install libllvm19' (Debian 12), then re-run make" >&2; \
+		exit 1; \
+	fi
+
+# The Pluto front end (pyadi-iio on pylibiio 0.25) needs libiio 0.24's C library; the tests
+# run iio_info (libiio-utils) against the emulated board.
+libiio:
+	@if [ -e $(LIBIIO_LIB) ] && command -v iio_info >/dev/null; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing libiio0 and libiio-utils (the ADALM-Pluto front end and its tests)"; \
+		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q libiio0 libiio-utils; \
+	else \
+		echo "the Pluto front end needs libiio 0.24: run 'sudo apt-get install libiio0 libiio-utils' (Debian 12), then re-run make" >&2; \
 		exit 1; \
 	fi
 

@@ -1,8 +1,12 @@
-"""hil: hardware in the loop. HackRF One over pure pyusb, its emulator, SigMF, loopback.
+"""hil: hardware in the loop. HackRF One over pure pyusb, ADALM-Pluto through pyadi-iio,
+their emulators, SigMF, loopback.
 
 May import ``phy`` only. Public names::
 
+    DEVICES, DeviceKind           the one table of front ends ("hackrf", "pluto")
     HackRF                        the driver (HackRF.open(serial=None, backend=None))
+    Pluto, find_plutos            the Pluto front end (Pluto.open(uri=None)) on pyadi-iio
+    EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
@@ -14,6 +18,7 @@ May import ``phy`` only. Public names::
 
 from hil import protocol
 from hil.air import AirChannel, fractional_resample, iq_imbalance, quantize_ci8
+from hil.devices import DEVICES, DeviceKind, device_kind
 from hil.emulator import (
     EmulatedHackRF,
     Emulator,
@@ -30,9 +35,11 @@ from hil.errors import (
     SigmfError,
     StallError,
     StreamError,
+    TimedOutError,
     UsbTimeoutError,
 )
 from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
+from hil.iiod import IIOD_PORT, IiodServer
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
 from hil.ota import (
@@ -45,10 +52,21 @@ from hil.ota import (
     save_sigmf,
     send_blocks,
 )
+from hil.pluto import Pluto, find_plutos
+from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 
 __all__ = [
+    "DEVICES",
+    "DeviceKind",
+    "device_kind",
+    "EmulatedPluto",
+    "IIOD_PORT",
+    "IiodServer",
+    "Pluto",
+    "find_plutos",
+    "TimedOutError",
     "AirChannel",
     "BurstResult",
     "FrameReport",

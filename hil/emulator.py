@@ -23,7 +23,7 @@ import usb.core
 
 from hil import protocol as p
 from hil.air import AirChannel
-from hil.medium import Medium
+from hil.medium import AMP_GAIN_DB, Medium
 
 _STRINGS = {1: "Great Scott Gadgets", 2: "HackRF One", 3: "Transceiver"}
 _STALE_VALUE = 100  # the stale first buffer holds this int8 value in every byte
@@ -175,6 +175,16 @@ class EmulatedHackRF:
     @property
     def serial(self) -> str:
         return self.spec.serial
+
+    @property
+    def rx_gain_db(self) -> float:
+        """LNA + VGA (+ the amp), dB: the receive gain the medium applies."""
+        return self.lna_gain_db + self.vga_gain_db + AMP_GAIN_DB * self.amp_enabled
+
+    @property
+    def tx_gain_db(self) -> float:
+        """TX VGA (+ the amp), dB: the transmit gain the medium applies."""
+        return self.txvga_gain_db + AMP_GAIN_DB * self.amp_enabled
 
     # ------------------------------------------------------------------ control
     def control(self, request_type: int, request: int, value: int, index: int, data_or_length):

@@ -25,14 +25,18 @@ class HilError(RuntimeError):
 
 
 class DeviceNotFoundError(HilError):
-    """No HackRF matched (or no libusb backend could be loaded)."""
+    """No board matched (no HackRF on USB, nothing at a Pluto's URI, no libusb / libiio)."""
 
 
 class StallError(HilError):
     """The device stalled a request (USB errno 32): the firmware refused a value."""
 
 
-class UsbTimeoutError(HilError):
+class TimedOutError(HilError):
+    """A transfer or request timed out (errno 110): over USB or to a network board."""
+
+
+class UsbTimeoutError(TimedOutError):
     """A USB transfer timed out (errno 110)."""
 
 

@@ -156,6 +156,31 @@ def to_int8_iq(samples: np.ndarray) -> np.ndarray:
     return np.clip(np.round(inter), -128, 127).astype(np.int8)
 
 
+def full_scale_samples(samples) -> np.ndarray:
+    """Check samples to transmit: [num_samples] or [1, num_samples], finite, |I|, |Q| <= 1.
+
+    Returns:
+        [num_samples], as given (complex or real).
+    Raises:
+        ValueError: naming what is wrong.
+    """
+    x = np.asarray(samples)
+    if x.ndim == 2 and x.shape[0] == 1:
+        x = x[0]
+    if x.ndim != 1 or x.size == 0:
+        raise ValueError(
+            f"samples must be [num_samples] or [1, num_samples] complex, got shape {x.shape}"
+        )
+    if not np.all(np.isfinite(x)):
+        raise ValueError("samples must be finite")
+    peak = (
+        max(np.abs(x.real).max(), np.abs(x.imag).max()) if np.iscomplexobj(x) else np.abs(x).max()
+    )
+    if peak > 1.0 + 1e-6:
+        raise ValueError(f"samples must lie within full scale |I|, |Q| <= 1, peak is {peak:.3f}")
+    return x
+
+
 def find_hackrfs(backend=None) -> list:
     """Every HackRF-family board (pyusb ``Device`` objects) on ``backend`` (None: libusb).
 
@@ -635,24 +660,7 @@ class HackRF:
 
         if self._rx is not None:
             raise HilError("tx: the device is receiving; stop_rx() first (HackRF is half duplex)")
-        x = np.asarray(samples)
-        if x.ndim == 2 and x.shape[0] == 1:
-            x = x[0]
-        if x.ndim != 1 or x.size == 0:
-            raise ValueError(
-                f"samples must be [num_samples] or [1, num_samples] complex, got shape {x.shape}"
-            )
-        if not np.all(np.isfinite(x)):
-            raise ValueError("samples must be finite")
-        peak = (
-            max(np.abs(x.real).max(), np.abs(x.imag).max())
-            if np.iscomplexobj(x)
-            else np.abs(x).max()
-        )
-        if peak > 1.0 + 1e-6:
-            raise ValueError(
-                f"samples must lie within full scale |I|, |Q| <= 1, peak is {peak:.3f}"
-            )
+        x = full_scale_samples(samples)
         raw = to_int8_iq(x)
         payload = raw.tobytes()
         self._gain_request(p.set_txvga_gain(self._txvga_gain_db), "set TX VGA gain")

@@ -49,7 +49,8 @@ class Medium:
         self.wait_timeout_s = float(wait_timeout_s)
         self.cond = threading.Condition()
         self.transmitter = None
-        self._tx = np.zeros(1 << 16, np.complex64)
+        self._tx = np.zeros(1 << 16, np.complex64)  # transmitter samples tx_base .. tx_len - 1
+        self.tx_base = 0
         self.tx_len = 0
         self.tx_streaming = False
         self.bursts_completed = 0
@@ -73,26 +74,48 @@ class Medium:
 
     def append_tx(self, radio, raw: np.ndarray) -> None:
         """Add ``raw`` [2 * num_samples] int8 written by the transmitter at its current gains."""
-        scale = 10 ** (
-            (
-                radio.txvga_gain_db
-                + AMP_GAIN_DB * radio.amp_enabled
-                - self.channel.reference_txvga_db
-            )
-            / 20
-        )
-        x = (raw.astype(np.float32) * np.float32(scale / 128.0)).view(np.complex64)
+        self.append_tx_iq(radio, (raw.astype(np.float32) / np.float32(128.0)).view(np.complex64))
+
+    def append_tx_iq(self, radio, x: np.ndarray) -> None:
+        """Add ``x`` [num_samples] complex64 (full scale 1.0 at the DAC) at ``radio.tx_gain_db``."""
+        scale = 10 ** ((radio.tx_gain_db - self.channel.reference_txvga_db) / 20)
+        x = np.asarray(x, np.complex64) * np.float32(scale)
         with self.cond:
             self._ensure(self.tx_len + len(x))
-            self._tx[self.tx_len : self.tx_len + len(x)] = x
+            b = self.tx_base
+            self._tx[self.tx_len - b : self.tx_len - b + len(x)] = x
             self.tx_len += len(x)
             self.cond.notify_all()
 
     def _ensure(self, n: int) -> None:
-        if n > len(self._tx):
-            grown = np.zeros(max(n, 2 * len(self._tx)), np.complex64)
-            grown[: self.tx_len] = self._tx[: self.tx_len]
+        """Room for transmitter samples up to index ``n`` (exclusive)."""
+        need = n - self.tx_base
+        if need > len(self._tx):
+            grown = np.zeros(max(need, 2 * len(self._tx)), np.complex64)
+            grown[: self.tx_len - self.tx_base] = self._tx[: self.tx_len - self.tx_base]
             self._tx = grown
+
+    def forget_before(self, index: int) -> None:
+        """Drop the transmitter's samples before ``index`` (no receiver will read them again),
+        so a medium that runs for hours holds a bounded buffer."""
+        with self.cond:
+            index = min(int(index), self.tx_len)
+            if index - self.tx_base < (1 << 20):  # not worth a copy yet
+                return
+            kept = self._tx[index - self.tx_base : self.tx_len - self.tx_base]
+            self._tx = np.zeros(max(1 << 16, 2 * len(kept)), np.complex64)
+            self._tx[: len(kept)] = kept
+            self.tx_base = index
+
+    def idle_until(self, num_samples: int, underrun: bool = False) -> None:
+        """Run an idle transmitter's timeline on in silence up to ``num_samples`` (its own
+        clock), so that what it sends next starts no earlier than that. ``underrun``: also
+        while it streams (it did not keep up; the gap goes out as silence)."""
+        with self.cond:
+            if (underrun or not self.tx_streaming) and num_samples > self.tx_len:
+                self._ensure(num_samples)
+                self._tx[self.tx_len - self.tx_base : num_samples - self.tx_base] = 0
+                self.tx_len = int(num_samples)
 
     def notify(self) -> None:
         with self.cond:
@@ -111,6 +134,11 @@ class Medium:
         ``still_receiving()`` is polled while waiting: when it turns False the wait ends
         (returns None), as a real transfer would be cancelled.
         """
+        y = self.render_iq(radio, k0, n, still_receiving)
+        return None if y is None else quantize_ci8(y)
+
+    def render_iq(self, radio, k0: int, n: int, still_receiving) -> np.ndarray | None:
+        """As :meth:`render`, before the ADC: [n] complex64 at the ADC input (full scale 1.0)."""
         ch = self.channel
         fs_rx = radio.sample_rate_hz * (1 + radio.ppm * 1e-6)
         t = (k0 + np.arange(n, dtype=np.float64)) / fs_rx
@@ -141,12 +169,14 @@ class Medium:
                     idle_to = max(0, int(math.floor(u[-1])) + 1)
                     if idle_to > self.tx_len:  # an idle transmitter's clock runs on in silence
                         self._ensure(idle_to)
-                        self._tx[self.tx_len : idle_to] = 0
+                        self._tx[self.tx_len - self.tx_base : idle_to - self.tx_base] = 0
                         self.tx_len = idle_to
                 taps = ch.taps
                 lo = max(0, int(math.floor(u[0])) - RESAMPLER_TAPS - len(taps))
                 hi = min(self.tx_len, int(math.ceil(u[-1])) + RESAMPLER_TAPS + 1)
-                seg = self._tx[lo:hi].copy() if hi > lo else np.zeros(0, np.complex64)
+                lo = max(lo, self.tx_base)  # forgotten samples are never needed again
+                b = self.tx_base
+                seg = self._tx[lo - b : hi - b].copy() if hi > lo else np.zeros(0, np.complex64)
                 tx_freq = tx.center_freq_hz * (1 + tx.ppm * 1e-6)
                 df = tx_freq - radio.center_freq_hz * (1 + radio.ppm * 1e-6)
         if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx:
@@ -159,9 +189,8 @@ class Medium:
         noise = rng.standard_normal(2 * n, dtype=np.float32).view(np.complex64) * np.float32(
             math.sqrt(ch.noise_var / 2)
         )
-        rx_gain_db = radio.lna_gain_db + radio.vga_gain_db + AMP_GAIN_DB * radio.amp_enabled
-        y = (sig + noise) * np.float32(10 ** ((rx_gain_db - ch.reference_rx_gain_db) / 20))
+        y = (sig + noise) * np.float32(10 ** ((radio.rx_gain_db - ch.reference_rx_gain_db) / 20))
         y = iq_imbalance(y, ch.iq_gain_imbalance_db, ch.iq_phase_imbalance_deg)
         if ch.dc_offset:
             y = y + np.complex64(ch.dc_offset)
-        return quantize_ci8(y)
+        return y

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from hil.errors import HilError
+from hil.pluto_emulator import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 from hil.sigmf_io import Annotation, write_sigmf
 
 HEADER_BITS = 16
@@ -55,7 +56,9 @@ class OtaConfig:
             has a false-alarm probability of 4e-14 per lag and CFO hypothesis, while a
             preamble at -10 dB per sample reaches about 0.045 through the emulated boards);
             a detection where no frame of the burst starts is dropped.
-        lna_gain_db, vga_gain_db, txvga_gain_db: radio gains (quantised by the driver).
+        lna_gain_db, vga_gain_db, txvga_gain_db: HackRF gains (quantised by the driver).
+        ad9361_rx_gain_db, ad9361_tx_gain_db: Pluto (AD9361) gains: manual RX gain, and TX
+            gain (minus the attenuation, <= 0), dB.
         max_rx_overruns: receive overruns (lost samples) tolerated before the capture
             fails with :class:`hil.StreamError` (None: warn only).
     """
@@ -72,6 +75,8 @@ class OtaConfig:
     lna_gain_db: float = 16
     vga_gain_db: float = 24
     txvga_gain_db: float = 30
+    ad9361_rx_gain_db: float = DEFAULT_RX_GAIN_DB
+    ad9361_tx_gain_db: float = DEFAULT_TX_GAIN_DB
     max_rx_overruns: int | None = None
 
     def __post_init__(self):
@@ -299,6 +304,9 @@ def build_burst(
 
 
 def _configure(dev, cfg: OtaConfig) -> None:
+    if hasattr(dev, "apply_ota_config"):  # a front end with its own knobs (Pluto)
+        dev.apply_ota_config(cfg)
+        return
     dev.sample_rate_hz = cfg.sample_rate_hz
     dev.center_freq_hz = cfg.center_freq_hz
     dev.lna_gain_db = cfg.lna_gain_db
@@ -485,10 +493,12 @@ def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None)
     """
     cfg = cfg or OtaConfig()
     frames = frames or _default_frames(cfg)
-    for dev in (tx, rx):
+    for dev in (tx, rx) if rx is not tx else (tx,):
         _configure(dev, cfg)
     burst, reports, layout = build_burst(blocks, cfg, frames)
-    lead = int(cfg.rx_lead_s * cfg.sample_rate_hz)
+    # a front end that needs time to start transmitting (a Pluto's buffer set-up) captures longer
+    late_s = float(getattr(tx, "tx_start_latency_s", 0.0))
+    lead = int((cfg.rx_lead_s + late_s) * cfg.sample_rate_hz)
     capture = transmit_and_capture(
         tx,
         rx,

@@ -18,7 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-DEVICES = ("emulated", "hackrf")
+from hil.devices import DEVICES as _HARDWARE
+
+DEVICES = ("emulated", *_HARDWARE)  # emulated HackRFs, then hil's table of real front ends
 DEFAULT_PPM = (0.0, 20.0)
 DEFAULT_MULTIPATH = ((2, 0.4 + 0j), (5, 0.2j))
 DEFAULT_DELAY_S = 5e-6
@@ -37,13 +39,16 @@ def open_radios(
     rx_serial: str | None = None,
 ):
     """(tx, rx, emulator or None): two emulated boards ``ppm`` apart with the air at
-    ``snr_db`` (``loopback``: the same without USB), or two real HackRFs.
+    ``snr_db`` (``loopback``: the same without USB), or real boards of a kind of
+    ``hil.DEVICES`` (a full-duplex Pluto is both ends; its id is a libiio URI).
 
     Args:
-        device: "emulated" or "hackrf".
+        device: "emulated" or a key of ``hil.DEVICES``.
+        tx_serial, rx_serial: which boards (HackRF serial, Pluto URI); None: the first found.
         ota_cfg: ``hil.OtaConfig`` (its powers and gains calibrate the emulated SNR).
     """
-    from hil import AirChannel, DeviceNotFoundError, Emulator, HackRF, find_hackrfs, open_loopback
+    from hil import DEVICES as HARDWARE
+    from hil import AirChannel, Emulator, HackRF, open_loopback
 
     if device not in DEVICES:
         raise ValueError(f"ota device must be one of {', '.join(DEVICES)}, got {device!r}")
@@ -64,21 +69,7 @@ def open_radios(
             HackRF.open(emu.serials[1], backend=emu.backend),
             emu,
         )
-    tx = HackRF.open(tx_serial)
-    try:
-        if rx_serial is None:
-            others = [
-                d.serial_number for d in find_hackrfs() if d.serial_number != tx.serial_number
-            ]
-            if not others:
-                raise DeviceNotFoundError(
-                    "only one HackRF found: over the air needs two (TX and RX; osnerf ota: --rx hackrf:SERIAL)"
-                )
-            rx_serial = others[0]
-        rx = HackRF.open(rx_serial)
-    except BaseException:
-        tx.close()
-        raise
+    tx, rx = HARDWARE[device].open_pair(tx_serial, rx_serial)
     return tx, rx, None
 
 

@@ -1,16 +1,64 @@
-"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb)."""
+"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb) and
+the Plutos libiio finds; `osnerf hil emulate pluto --address 127.0.0.1 [--port N]`: serve an
+emulated Pluto over iiod's network protocol until SIGINT or SIGTERM."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-ACTIONS = ("info",)
+ACTIONS = ("info", "emulate")
+
+
+def _integer(lo: int, hi: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}")
+        return value
+
+    parse.__name__ = "integer"
+    return parse
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from hil import DEVICES, IIOD_PORT
+    from hil.air import SNR_DB_RANGE
+    from hil.pluto_emulator import NETWORK_FAULTS
+    from osnerf.commands import args as checks
+
     p.add_argument(
-        "action", choices=ACTIONS, help="info: board id, firmware, serial, USB API of each HackRF"
+        "action",
+        choices=ACTIONS,
+        help="info: board id, firmware, serial, USB API of each HackRF, and each Pluto; "
+        "emulate DEVICE: serve an emulated board in the foreground",
+    )
+    served = [k for k, v in DEVICES.items() if v.emulator is not None]
+    p.add_argument("device", nargs="?", choices=served, help="emulate: which board")
+    p.add_argument("--address", default="127.0.0.1", help="emulate: loopback IPv4 to listen on")
+    p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="emulate: TCP port")
+    p.add_argument(
+        "--snr-db",
+        type=checks.number(*SNR_DB_RANGE, "dB"),
+        default=15.0,
+        help="emulate: SNR of the board's TX-to-RX loop for over-the-air frames, dB",
+    )
+    p.add_argument("--seed", type=checks.seed, default=0, help="emulate: noise seed")
+    p.add_argument(
+        "--fault",
+        default=None,
+        choices=NETWORK_FAULTS,
+        help="emulate: after --fault-after-samples received samples, drop (the board dies) or "
+        "slow (each receive reply 6 s late, past libiio's 5 s timeout)",
+    )
+    p.add_argument(
+        "--fault-after-samples",
+        type=_integer(0, 2**40),
+        default=50_000,
+        help="emulate --fault: received samples before the fault (default 50000)",
     )
     p.add_argument(
         "--emulate", action="store_true", help="use two emulated boards instead of USB hardware"
@@ -32,9 +80,86 @@ def _info_lines(index: int, dev) -> list[str]:
     ]
 
 
+def _emulate(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from hil import DEVICES, IiodServer
+    from osnerf.cli import UsageError as usage_error
+    from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
+
+    if args.device is None:
+        raise usage_error("emulate needs a device: osnerf hil emulate pluto")
+    board = DEVICES[args.device].emulator(
+        args.snr_db,
+        seed=args.seed,
+        multipath=DEFAULT_MULTIPATH,
+        delay_s=DEFAULT_DELAY_S,
+        fault=args.fault,
+        after_samples=args.fault_after_samples,
+    )
+    try:
+        server = IiodServer(board, args.address, args.port)
+    except ValueError as e:
+        raise usage_error(f"--address/--port: {e}") from None
+    except OSError as e:
+        raise OSError(e.errno, f"cannot listen on {args.address}:{args.port}: {e.strerror}") from e
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    server.serve_in_background()
+    print(
+        f"osnerf hil emulate: {args.device} at {server.uri} (air {args.snr_db:g} dB); "
+        "SIGINT or SIGTERM stops it",
+        file=sys.stderr,
+        flush=True,
+    )
+    told, underruns = False, 0
+    while not stop.is_set() and not board.dropped.is_set():
+        stop.wait(0.05)
+        if board.tx_underruns > underruns:
+            underruns = board.tx_underruns
+            print(
+                f"osnerf hil emulate: TX underrun ({underruns} so far): the host fed the DAC late",
+                file=sys.stderr,
+                flush=True,
+            )
+        if board.stalled.is_set() and not told:
+            told = True
+            print(
+                f"osnerf hil emulate: fault: receive stalls after {board.samples_received} samples",
+                file=sys.stderr,
+                flush=True,
+            )
+    server.close()
+    if board.dropped.is_set():
+        print("osnerf hil emulate: fault: the board dropped every connection", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _pluto_info() -> int:
+    """Print each Pluto libiio finds; returns how many."""
+    from hil import HilError, Pluto, find_plutos
+
+    found = find_plutos()
+    for uri, desc in found:
+        try:
+            with Pluto.open(uri, configure=False) as dev:
+                print(
+                    f"Found Pluto\nURI: {uri}\nModel: {dev.product}\nSerial number: "
+                    f"{dev.serial_number}\nFirmware Version: {dev.firmware_version}"
+                )
+        except HilError as e:
+            print(f"URI: {uri} ({desc})\nerror: {e}", file=sys.stderr)
+    return len(found)
+
+
 def run(args: argparse.Namespace) -> int:
     from hil import Emulator, HackRF, HilError, find_hackrfs
 
+    if args.action == "emulate":
+        return _emulate(args)
     backend = Emulator().backend if args.emulate else None
     serials = [d.serial_number for d in find_hackrfs(backend)]
     if args.serial:
@@ -42,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     print("osnerf hil info (pure pyusb, no libhackrf)")
     if not serials:
         print("No HackRF boards found.")
-        return 1
+        return 0 if _pluto_info() else 1
     for i, serial in enumerate(serials):
         try:
             with HackRF.open(serial, backend=backend, configure=False) as dev:
@@ -52,4 +177,5 @@ def run(args: argparse.Namespace) -> int:
             return 1
         if i + 1 < len(serials):
             print()
+    _pluto_info()
     return 0

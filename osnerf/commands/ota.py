@@ -10,6 +10,10 @@ out of the TX HackRF and into the RX HackRF. Emulated boards sit ``--ppm`` apart
 PSNR, the SNR measured from the pilots, frames sent and lost, and lists the SigMF files.
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
 
+``--tx pluto --rx pluto [--uri URI]`` uses one ADALM-Pluto (full duplex) as both ends, real or
+emulated (``osnerf hil emulate pluto --snr-db X``: its air is set there; give ``--snr-db`` the
+same value for the codec).
+
 ``--fault`` switches on an emulated USB fault of the receiving board (stall, rx-timeout,
 unplug, overrun) to rehearse how a run reports it: exit 1 with a one-line message, and the
 capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).
@@ -27,9 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
+from hil.devices import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 
-DEVICE_KINDS = ("emulated", "loopback", "hackrf")
+DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 
@@ -43,6 +48,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from semcodec.image_codecs import IMAGE_CODECS
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
+    p.add_argument(
+        "--uri",
+        default=None,
+        help="pluto: libiio URI of the board, ip:ADDRESS[:PORT] or usb:B.D.I (default: the first "
+        "found; one Pluto is both ends of the link)",
+    )
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
     p.add_argument(
@@ -154,7 +165,7 @@ def _usage(msg: str):
 
 def parse_device(value: str, name: str) -> tuple[str, str | None]:
     kind, _, serial = value.partition(":")
-    if kind not in DEVICE_KINDS or (serial and kind != "hackrf"):
+    if kind not in DEVICE_KINDS or (serial and kind not in HARDWARE):
         raise _usage(
             f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
         )
@@ -246,8 +257,18 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
     simulated = {"emulated", "loopback"}
-    if (tx_kind in simulated) != (rx_kind in simulated):
-        raise _usage("--tx and --rx must both be simulated (emulated/loopback) or both hackrf")
+    if (tx_kind in simulated) != (rx_kind in simulated) or (
+        tx_kind != rx_kind and tx_kind not in simulated
+    ):
+        raise _usage(
+            "--tx and --rx must both be simulated (emulated/loopback) or both the same hardware "
+            f"({', '.join(HARDWARE)})"
+        )
+    uri = getattr(args, "uri", None)
+    if uri is not None and tx_kind != "pluto":
+        raise _usage("--uri needs --tx pluto --rx pluto")
+    if tx_kind == "pluto":
+        tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
     if tx_kind != rx_kind and tx_kind in simulated:
         raise _usage(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
@@ -263,8 +284,8 @@ def open_pair(args, ota_cfg):
     from osnerf.ota_link import open_radios
 
     kind, tx_serial, rx_serial = device_kinds(args)
-    if kind == "hackrf":
-        return open_radios("hackrf", args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
+    if kind in HARDWARE:
+        return open_radios(kind, args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
     tx, rx, emu = open_radios(
         "emulated",
         args.snr_db,
@@ -452,8 +473,9 @@ def run(args: argparse.Namespace) -> int:
         f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {args.scheme}",
         file=sys.stderr,
     )
+    kind = device_kinds(args)[0]
     tx, rx, emu = open_pair(args, cfg)
-    hw = "HackRF One (emulated)" if emu is not None else "HackRF One"
+    hw = "HackRF One (emulated)" if emu is not None else HARDWARE[kind].label
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -464,7 +486,8 @@ def run(args: argparse.Namespace) -> int:
         raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
     finally:
         tx.close()
-        rx.close()
+        if rx is not tx:
+            rx.close()
     for w in caught:  # one line each, not a Python warning with its source line
         print(f"ota: warning: {w.message}", file=sys.stderr)
     per_image = trx.receive(result, state, images, args, cfg)

@@ -106,7 +106,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--ota-device",
         default="emulated",
         choices=OTA_DEVICES,
-        help="--channel ota: two emulated HackRFs (default) or two real ones on USB",
+        help="--channel ota: two emulated HackRFs (default), two real ones on USB (hackrf) or "
+        "one Pluto (pluto: the first libiio finds, or ip:$IIOD_REMOTE)",
     )
     p.add_argument(
         "--nerf-clock",

@@ -1,0 +1,108 @@
+"""hil's one table of hardware front ends: ``DEVICES`` (name -> :class:`DeviceKind`).
+
+Every list of device names elsewhere (``osnerf ota --tx``, ``osnerf run --ota-device``,
+``osnerf hil info``) is derived from it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DeviceKind:
+    """One family of SDR front ends.
+
+    Attributes:
+        name: the key in :data:`DEVICES`.
+        label: what SigMF files and reports call it (``core:hw``).
+        id_name: what picks one board (a HackRF's serial, a Pluto's libiio URI).
+        full_duplex: one board can transmit and receive at once (a whole link).
+        find: ``() -> [id, ...]`` of the boards present.
+        open: ``(id or None) -> device`` (None: the first found).
+        emulator: ``(snr_db, **kwargs) -> board`` for a board served over the network
+            (:meth:`hil.EmulatedPluto.for_link`), or None.
+    """
+
+    name: str
+    label: str
+    id_name: str
+    full_duplex: bool
+    find: Callable[[], list]
+    open: Callable
+    emulator: Callable | None = None
+
+    def open_pair(self, tx_id: str | None = None, rx_id: str | None = None):
+        """``(tx, rx)`` for a link: a full-duplex kind uses one board for both ends unless
+        two ids are given; a half-duplex one needs two boards.
+
+        Raises:
+            DeviceNotFoundError: a board is missing (only one half-duplex board present).
+        """
+        from hil.errors import DeviceNotFoundError
+
+        tx = self.open(tx_id)
+        if self.full_duplex and (rx_id is None or rx_id == tx_id):
+            return tx, tx
+        try:
+            if rx_id is None:
+                own = getattr(tx, "serial_number", None)
+                others = [i for i in self.find() if i != own]
+                if not others:
+                    raise DeviceNotFoundError(
+                        f"only one {self.label} found: over the air needs two (TX and RX; "
+                        f"osnerf ota: --rx {self.name}:{self.id_name.upper()})"
+                    )
+                rx_id = others[0]
+            rx = self.open(rx_id)
+        except BaseException:
+            tx.close()
+            raise
+        return tx, rx
+
+
+def _find_hackrfs() -> list:
+    from hil.hackrf import find_hackrfs
+
+    return [d.serial_number for d in find_hackrfs()]
+
+
+def _open_hackrf(serial=None):
+    from hil.hackrf import HackRF
+
+    return HackRF.open(serial)
+
+
+def _emulated_pluto(snr_db: float, **kwargs):
+    from hil.pluto_emulator import EmulatedPluto
+
+    return EmulatedPluto.for_link(snr_db, **kwargs)
+
+
+def _find_plutos() -> list:
+    from hil.pluto import find_plutos
+
+    return [uri for uri, _ in find_plutos()]
+
+
+def _open_pluto(uri=None):
+    from hil.pluto import Pluto
+
+    return Pluto.open(uri)
+
+
+DEVICES: dict[str, DeviceKind] = {
+    "hackrf": DeviceKind("hackrf", "HackRF One", "serial", False, _find_hackrfs, _open_hackrf),
+    "pluto": DeviceKind(
+        "pluto", "ADALM-Pluto", "uri", True, _find_plutos, _open_pluto, _emulated_pluto
+    ),
+}
+
+
+def device_kind(name: str) -> DeviceKind:
+    """The :class:`DeviceKind` called ``name``; ``KeyError`` lists the known ones."""
+    try:
+        return DEVICES[name]
+    except KeyError:
+        raise KeyError(f"unknown device {name!r}; known: {', '.join(DEVICES)}") from None
