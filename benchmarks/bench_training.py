@@ -54,6 +54,7 @@ def _layouts() -> list[dict]:
 def _run_one(codec: str, layout: dict, steps: int, crop_px: int, batch: int, data: Path) -> dict:
     cfg = {
         "codec": codec,
+        "model": None,  # the codec's default architecture
         "crop_px": crop_px,
         "batch_size": batch,
         "max_steps": steps,

@@ -106,6 +106,8 @@ def refine_symbols(
     """
     if steps < 0:
         raise ValueError(f"steps must be >= 0, got {steps}")
+    if steps and not hasattr(codec, "decode_differentiable"):
+        raise ValueError(f"codec {codec.name} cannot refine symbols (no decode_differentiable)")
     if not lr > 0:
         raise ValueError(f"lr must be > 0, got {lr}")
     if steps == 0:

@@ -43,7 +43,7 @@ from semcodec.contract import CODEC_MEMBERS, TRAINABLE_MEMBERS, missing_members
 from semcodec.image_codecs import read_image_file
 from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.model import make_model
-from semcodec.registry import make_codec
+from semcodec.registry import make_codec, parse_codec_spec
 
 __all__ = [
     "TrainConfig",
@@ -64,8 +64,11 @@ class TrainConfig:
     """One training run.
 
     Attributes:
-        codec: the codec to train, a name in ``semcodec.CODECS`` (a :class:`TrainableCodec`).
-        model: the codec's architecture (one of its ``architectures``; None = its default).
+        codec: the codec to train, a name in ``semcodec.CODECS`` (a :class:`TrainableCodec`),
+            or ``NAME:CHECKPOINT`` to start from that checkpoint's weights (as ``init``).
+        model: the codec's architecture, one of its ``architectures`` (None: its default;
+            the default value is the JSCC's ``adjscc_s4_w96``, so other codecs name theirs or
+            None).
         channel: training channel in ``semcodec.TRAIN_CHANNELS``, or a comma-separated
             mixture of them (one drawn uniformly per step).
         crop_px: side of the square random crops.
@@ -91,7 +94,7 @@ class TrainConfig:
     """
 
     codec: str = "jscc"
-    model: str | None = None
+    model: str | None = "adjscc_s4_w96"
     channel: str = "awgn"
     crop_px: int = 96
     batch_size: int = 12
@@ -250,24 +253,26 @@ def validate(
 def build_codec(cfg: TrainConfig, init: Path | None = None):
     """A fresh :class:`semcodec.TrainableCodec` of ``cfg.codec`` / ``cfg.model``, weights drawn
     from ``torch.manual_seed(cfg.seed)`` (every rank the same), optionally started from the
-    checkpoint ``init`` of the same codec. ValueError (one line) when the codec is not
+    checkpoint ``init`` of the same codec (``cfg.codec = "NAME:CHECKPOINT"`` names one too). ValueError (one line) when the codec is not
     trainable."""
-    base = make_codec(cfg.codec)
+    name, checkpoint = parse_codec_spec(cfg.codec)
+    init = init if init is not None else checkpoint
+    base = make_codec(name)
     missing = missing_members(base, CODEC_MEMBERS + TRAINABLE_MEMBERS)
     if missing:
         raise ValueError(
-            f"codec {cfg.codec} cannot be trained here: it lacks {', '.join(missing)} "
+            f"codec {name} cannot be trained here: it lacks {', '.join(missing)} "
             "(semcodec.TrainableCodec)"
         )
     if cfg.model is not None and cfg.model not in base.architectures:
         raise KeyError(
-            f"unknown architecture {cfg.model!r} of codec {cfg.codec}; known: "
+            f"unknown architecture {cfg.model!r} of codec {name}; known: "
             f"{', '.join(base.architectures)}"
         )
     torch.manual_seed(cfg.seed)
     codec = base.untrained(cfg.model)
     if init is not None:
-        codec.load_compatible(make_codec(f"{cfg.codec}:{init}"))
+        codec.load_compatible(make_codec(f"{name}:{init}"))
     return codec
 
 

@@ -1,6 +1,7 @@
 """The trainer at scale: torchrun with 2 processes x 1 thread (gloo on CPU), resume at
 another world size, agreement with the 1-process run, and bad input."""
 
+import dataclasses
 import json
 import os
 import signal
@@ -138,5 +139,11 @@ def test_the_deep_jscc_trains_with_the_same_trainer(folders, tmp_path):
     assert summary["steps"] == 3 and set(summary["validation"]) == {"psnr_1db", "psnr_10db"}
     codec = semcodec.make_codec(f"deepjscc:{tmp_path / 'deep' / 'last.safetensors'}")
     assert codec.card["training"]["config"]["codec"] == "deepjscc"
+    more = TrainConfig(**{**CFG, "codec": f"deepjscc:{tmp_path / 'deep' / 'last.safetensors'}"})
+    more = dataclasses.replace(more, model=None, max_steps=1, lr=1e-9)
+    train(more, [folders[0]], tmp_path / "more", val_dir=folders[1])
+    tuned = semcodec.make_codec(f"deepjscc:{tmp_path / 'more' / 'last.safetensors'}")
+    for a, b in zip(tuned.module.parameters(), codec.module.parameters(), strict=True):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=0)  # started from it (lr ~ 0)
     with pytest.raises(KeyError, match="unknown architecture 'adjscc_s4_w64' of codec deepjscc"):
         train(TrainConfig(**{**CFG, "codec": "deepjscc"}), [folders[0]], tmp_path / "x")
