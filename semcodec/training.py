@@ -25,7 +25,6 @@ gradient reduction's float sums.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import sys
@@ -40,23 +39,22 @@ from torch import nn
 from semcodec import distributed
 from semcodec.channel_layers import parse_train_channels
 from semcodec.contract import CODEC_MEMBERS, TRAINABLE_MEMBERS, missing_members
-from semcodec.image_codecs import read_image_file
 from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.model import make_model
 from semcodec.registry import make_codec, parse_codec_spec
+from semcodec.training_data import list_images, load_data, random_crops
 
 __all__ = [
     "TrainConfig",
     "build_codec",
     "forward_train",
+    "list_images",
     "load_compatible",
     "load_train_state",
     "make_model",
     "train",
     "validate",
 ]
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 @dataclass(frozen=True)
@@ -149,49 +147,6 @@ class TrainConfig:
                 raise ValueError(f"{name} must be {allowed}, got {getattr(self, name)!r}")
         parse_train_channels(self.channel)
         distributed.check_device(self.device)
-
-
-def list_images(folder: str | Path) -> list[Path]:
-    """PNG/JPEG files of a folder, sorted by name."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"image folder not found: {folder}")
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-
-
-def load_uint8_images(paths: list[Path]) -> list[torch.Tensor]:
-    """RGB images as [3, height, width] uint8 tensors."""
-    return [
-        torch.from_numpy(np.array(read_image_file(p).convert("RGB"))).permute(2, 0, 1).contiguous()
-        for p in paths
-    ]
-
-
-def files_sha256(paths: list[Path]) -> str:
-    """sha256 over the names and bytes of the training files (recorded in the model card)."""
-    h = hashlib.sha256()
-    for p in paths:
-        h.update(p.name.encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()
-
-
-def random_crops(
-    images: list[torch.Tensor], n: int, crop_px: int, rng: np.random.Generator
-) -> torch.Tensor:
-    """[n, 3, crop_px, crop_px] float32 in [0, 1]: random image, position and horizontal flip."""
-    out = torch.empty(n, 3, crop_px, crop_px)
-    for i in range(n):
-        img = images[rng.integers(len(images))]
-        _, h, w = img.shape
-        y, x = rng.integers(h - crop_px + 1), rng.integers(w - crop_px + 1)
-        c = img[:, y : y + crop_px, x : x + crop_px]
-        if rng.random() < 0.5:
-            c = c.flip(-1)
-        if rng.random() < 0.5 and crop_px <= min(h, w):
-            c = c.transpose(1, 2)
-        out[i] = c.float() / 255.0
-    return out
 
 
 def lr_at(cfg: TrainConfig, elapsed_s: float, step: int = 0) -> float:
@@ -321,24 +276,6 @@ class _TrainForward(nn.Module):
         return self._codec[0].forward_train(x, snr_db, cbr, channel, generator)
 
 
-def load_data(cfg: TrainConfig, train_dirs: list[Path], val_dir: Path | None):
-    """Training images (those at least ``crop_px``), their paths and hash, and up to 8
-    validation images cropped to one square side (<= 256 px, multiple of 4) or None."""
-    paths = [p for d in train_dirs for p in list_images(d)]
-    if not paths:
-        raise FileNotFoundError(f"no PNG/JPEG training images in {[str(d) for d in train_dirs]}")
-    images = [im for im in load_uint8_images(paths) if min(im.shape[1:]) >= cfg.crop_px]
-    if not images:
-        raise ValueError(f"no training image is at least crop_px = {cfg.crop_px} px on each side")
-    val = None
-    if val_dir is not None:
-        vimgs = load_uint8_images(list_images(val_dir)[:8])
-        if vimgs:
-            side = min(256, min(min(im.shape[1:]) for im in vimgs) // 4 * 4)
-            val = torch.stack([im[:, :side, :side].float() / 255 for im in vimgs])
-    return images, paths, files_sha256(paths), val
-
-
 class _Run:
     """What :func:`train` carries between steps: codec, optimiser, counters, files."""
 
@@ -444,7 +381,7 @@ def train(
             f"batch_size must be a multiple of the world size {place.world_size}, got {cfg.batch_size}"
         )
     torch.set_num_threads(cfg.num_threads)
-    images, paths, data_hash, val = load_data(cfg, train_dirs, val_dir)
+    images, paths, data_hash, val = load_data(cfg.crop_px, train_dirs, val_dir)
     codec = build_codec(cfg, init)
     codec.module.to(place.device).train()
     card = {
