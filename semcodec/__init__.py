@@ -1,6 +1,28 @@
 """semcodec: the semantic codec (SNR- and rate-adaptive JSCC with on-demand object focus)
 and the baselines it is judged against (digital, ideal, analog).
 
+The codec contract (:mod:`semcodec.contract`), which every codec on osnerf's links meets:
+
+* ``encode(images, snr_db, cbr, mask=None, demand_weights=None) -> Encoded``: images
+  ``[batch, 3, height, width]`` float32 in [0, 1], SNR (Es/N0, dB; float or ``[batch]``),
+  CBR in ``cbr_range``, optional object masks ``[batch, K, height, width]`` (codecs with
+  ``supports_focus``) -> ``Encoded.symbols`` ``[batch, num_symbols]`` complex64, mean
+  ``|x|^2 = 1`` per image, and ``Encoded.meta`` (side information: ``height``, ``width``,
+  ``num_symbols``, ``cbr``, ``codec_sha256``, ...).
+* ``decode(x_hat, meta, snr_db, expected_sha256=None, noise_var=None) -> images``: unbiased
+  equalised symbols ``[batch, num_symbols]`` complex64 and their effective noise variance
+  (float, ``[batch]`` or ``[batch, num_symbols]``) -> ``[batch, 3, height, width]`` float32;
+  ``KnowledgeBaseMismatch`` when the transmitter's hash is not the receiver's.
+* ``name``, ``sha256`` (architecture + weights: the knowledge-base identity),
+  ``cbr_range``, ``snr_range_db``, ``supports_focus``.
+
+``SemanticCodec`` is the runtime-checkable protocol; ``TrainableCodec`` adds what the trainer
+needs. Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
+entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` builds one.
+``encode_with_focus`` / ``decode_received`` serve a focus demand with any codec (a codec
+without ``supports_focus`` sends the objects' box at the same symbol budget,
+``focus_by_box`` / ``decode_box``).
+
 Imports only ``phy`` of osnerf.
 """
 
@@ -29,6 +51,17 @@ from semcodec.codec import (
     load_codec,
     receiver_mask,
 )
+from semcodec.contract import (
+    BoxMeta,
+    SemanticCodec,
+    TrainableCodec,
+    decode_box,
+    decode_received,
+    encode_with_focus,
+    focus_by_box,
+    is_trainable,
+    mask_box,
+)
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
 from semcodec.focus_eval import focus_gain, masked_psnr
@@ -49,8 +82,33 @@ from semcodec.model import (
     make_model,
     symbols_to_features,
 )
+from semcodec.registry import (
+    CODECS,
+    CodecPluginError,
+    codec_names,
+    load_codec_entry_points,
+    make_codec,
+    parse_codec_spec,
+    register_codec,
+)
 
 __all__ = [
+    "BoxMeta",
+    "CODECS",
+    "CodecPluginError",
+    "SemanticCodec",
+    "TrainableCodec",
+    "codec_names",
+    "decode_box",
+    "decode_received",
+    "encode_with_focus",
+    "focus_by_box",
+    "is_trainable",
+    "load_codec_entry_points",
+    "make_codec",
+    "mask_box",
+    "parse_codec_spec",
+    "register_codec",
     "DEFAULT_CHECKPOINT",
     "IMAGE_CODECS",
     "LOST_IMAGE_VALUE",

@@ -28,6 +28,7 @@ from torch.nn import functional as F
 
 from phy import Channel, FlatLink, power_normalize
 from semcodec.codec import Codec, Encoded, check_images
+from semcodec.contract import decode_received, encode_with_focus
 from semcodec.image_codecs import (
     IMAGE_CODECS,
     decode_wire,
@@ -105,6 +106,8 @@ def refine_symbols(
     """
     if steps < 0:
         raise ValueError(f"steps must be >= 0, got {steps}")
+    if steps and not hasattr(codec, "decode_differentiable"):
+        raise ValueError(f"codec {codec.name} cannot refine symbols (no decode_differentiable)")
     if not lr > 0:
         raise ValueError(f"lr must be > 0, got {lr}")
     if steps == 0:
@@ -142,8 +145,11 @@ def transmit_jscc(
     rx_codec: Codec | None = None,
     encoded: Encoded | None = None,
 ) -> TransmitResult:
-    """Images through the JSCC and the link. The decoder gets the link's unbiased estimates
-    with their per-symbol noise variance and the average SNR (``Codec.decode``'s convention).
+    """Images through a semantic codec (any :class:`semcodec.SemanticCodec`) and the link.
+    The decoder gets the link's unbiased estimates with their per-symbol noise variance and
+    the average SNR (the contract's convention). With a ``mask`` and a codec without
+    ``supports_focus``, the objects' box is sent at the same symbol budget
+    (:func:`semcodec.encode_with_focus`).
 
     Args:
         link: ``phy.FlatLink``/``phy.OFDMLink`` with ``equalizer="zf"`` (or a bare ``phy``
@@ -154,11 +160,11 @@ def transmit_jscc(
             has it already (several draws of one image), else computed here.
     """
     x = check_images(images)
-    enc = encoded or codec.encode(x, snr_db, cbr, mask=mask, demand_weights=demand_weights)
+    enc = encoded or encode_with_focus(codec, x, snr_db, cbr, mask, demand_weights)
     with torch.no_grad():
         x_hat, nv = _run_link(link, enc.symbols, snr_db, generator)
     rx = rx_codec or codec
-    y = rx.decode(x_hat, enc.meta, snr_db, expected_sha256=codec.sha256, noise_var=nv)
+    y = decode_received(rx, x_hat, enc.meta, snr_db, expected_sha256=codec.sha256, noise_var=nv)
     n = x.shape[0]
     return TransmitResult(
         y,

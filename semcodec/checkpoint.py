@@ -20,6 +20,8 @@ from safetensors.torch import load_file, save_file
 from semcodec.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
+JSCC_CODEC = "jscc"
+"""Registry name of semcodec's own JSCC; cards without a ``codec`` field are of it."""
 FORMAT_VERSIONS = ("1", "2")
 """Knowledge-base versions this code reads: 1 = the decoder sees LMMSE symbols and one SNR;
 2 = it also sees each symbol's reliability (``JSCCConfig.decoder_reliability``)."""
@@ -33,11 +35,12 @@ class _Unsupported(Exception):
     pass
 
 
-def weights_sha256(state: dict[str, torch.Tensor], cfg: JSCCConfig) -> str:
-    """sha256 hex of the architecture and the weights (names, dtypes, shapes, bytes)."""
+def weights_sha256(state: dict[str, torch.Tensor], cfg) -> str:
+    """sha256 hex of the architecture (a config with ``to_dict()``, or its dict) and the
+    weights (names, dtypes, shapes, bytes)."""
     h = hashlib.sha256()
-    arch = cfg.to_dict()
-    if not arch["decoder_reliability"]:  # version 1 architectures hash as they always did
+    arch = dict(cfg) if isinstance(cfg, dict) else cfg.to_dict()
+    if arch.get("decoder_reliability") is False:  # version 1 architectures hash as they did
         del arch["decoder_reliability"]
     h.update(json.dumps(arch, sort_keys=True).encode())
     for name in sorted(state):
@@ -47,13 +50,18 @@ def weights_sha256(state: dict[str, torch.Tensor], cfg: JSCCConfig) -> str:
     return h.hexdigest()
 
 
-def save_checkpoint(path: str | os.PathLike, model: JSCCModel, card: dict | None = None) -> str:
-    """Write weights + card atomically; returns the sha256. The card gets architecture and hash.
+def save_checkpoint(
+    path: str | os.PathLike, model, card: dict | None = None, codec: str = JSCC_CODEC
+) -> str:
+    """Write weights + card atomically; returns the sha256. The card gets the codec's
+    registry name, the architecture and the hash.
 
     Args:
         path: ``*.safetensors`` target.
-        model: the trained model.
+        model: the trained ``nn.Module`` with ``cfg`` (``to_dict()``, ``cbr_range``,
+            ``snr_min_db``, ``snr_max_db``; ``decoder_reliability`` for the JSCC).
         card: extra model-card fields (training data, metrics, ...).
+        codec: the name in ``semcodec.CODECS`` whose factory loads the file.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -61,7 +69,8 @@ def save_checkpoint(path: str | os.PathLike, model: JSCCModel, card: dict | None
     sha = weights_sha256(state, model.cfg)
     full = {
         **(card or {}),
-        "format_version": "2" if model.cfg.decoder_reliability else "1",
+        "codec": codec,
+        "format_version": "2" if getattr(model.cfg, "decoder_reliability", False) else "1",
         "architecture": model.cfg.to_dict(),
         "cbr_range": list(model.cfg.cbr_range),
         "snr_range_db": [model.cfg.snr_min_db, model.cfg.snr_max_db],
@@ -90,10 +99,13 @@ def write_card_json(checkpoint_path: str | os.PathLike) -> Path:
     return out
 
 
-def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
-    """Load a checkpoint; returns (model in eval mode, card). Verifies the stored hash.
+def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[dict, dict, object]:
+    """Read a checkpoint of registry codec ``codec``; returns (state dict, card, config).
 
-    Raises FileNotFoundError when missing and ValueError (one line) when corrupt.
+    The card's architecture becomes ``config_type(**architecture)`` and the stored hash is
+    verified. Raises FileNotFoundError when missing, ValueError (one line) when corrupt or
+    when the file holds another codec (naming both codecs and the file's architecture and
+    hash).
     """
     path = Path(path)
     if not path.is_file():
@@ -102,27 +114,42 @@ def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
         with safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}
         card = json.loads(meta[CARD_KEY])
+        held = str(card.get("codec", JSCC_CODEC))
+        if held != codec:
+            arch = (card.get("architecture") or {}).get("name", "?")
+            raise _Unsupported(
+                f"checkpoint {path} holds codec {held!r} (architecture {arch}, sha256 "
+                f"{str(card.get('sha256'))[:12]}), not {codec!r}: load it as {held}:{path}"
+            )
         version = str(card.get("format_version", "1"))
         if version not in FORMAT_VERSIONS:
             raise _Unsupported(
                 f"checkpoint {path} is knowledge-base version {version}; this osnerf reads "
                 f"versions {', '.join(FORMAT_VERSIONS)}: update osnerf or use a matching checkpoint"
             )
-        cfg = JSCCConfig(**card["architecture"])
+        cfg = config_type(**card["architecture"])
         state = load_file(str(path))
     except _Unsupported as e:
         raise ValueError(str(e)) from None
-    except (
-        Exception
-    ) as e:  # safetensors raises a variety of errors on garbage (e.g. header too large)
+    except Exception as e:  # noqa: BLE001 - safetensors raises many kinds on garbage
         raise ValueError(
-            f"checkpoint {path} is corrupt or not a semcodec checkpoint ({type(e).__name__})"
+            f"checkpoint {path} is corrupt or not a {codec} checkpoint ({type(e).__name__})"
         ) from None
     sha = weights_sha256(state, cfg)
     if card.get("sha256") != sha:
         raise ValueError(
             f"checkpoint {path} is corrupt: weights hash {sha[:12]} != card {str(card.get('sha256'))[:12]}"
         )
+    return state, card, cfg
+
+
+def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
+    """Load a JSCC checkpoint; returns (model in eval mode, card). Verifies the stored hash.
+
+    Raises FileNotFoundError when missing and ValueError (one line) when corrupt or of
+    another codec.
+    """
+    state, card, cfg = read_checkpoint(path, JSCC_CODEC, JSCCConfig)
     model = JSCCModel(cfg)
     try:
         model.load_state_dict(state)

@@ -24,13 +24,20 @@ from torch import Tensor
 from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
-from semcodec.checkpoint import KnowledgeBaseMismatch, load_checkpoint
+from semcodec.checkpoint import (
+    KnowledgeBaseMismatch,
+    load_checkpoint,
+    save_checkpoint,
+    weights_sha256,
+)
 from semcodec.focus import attribution_box, demand_heatmap, demand_positions, select_positions
 from semcodec.grid import positions_to_mask
+from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.model import (
-    JSCCModel,
+    MODELS,
     features_to_symbols,
     lmmse_input,
+    make_model,
     reliability_to_features,
     side_info,
     symbols_to_features,
@@ -116,10 +123,12 @@ def _pad4(x: Tensor) -> Tensor:
     return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
 
 
-class Codec:
-    """A loaded JSCC (encoder + decoder) with its model card and hash."""
+class ChannelTruncationCodec:
+    """What semcodec's codecs share: a network whose encoder output holds
+    ``num_complex_channels`` importance-ordered complex channels per 4x4 block (CBR m/48 for
+    the first m), loaded with its model card and hash."""
 
-    def __init__(self, model: JSCCModel, card: dict, path: Path | None = None):
+    def __init__(self, model, card: dict, path: Path | None = None):
         self.model = model.eval()
         self.card = card
         self.path = path
@@ -128,6 +137,11 @@ class Codec:
     @property
     def name(self) -> str:
         return self.card.get("name", self.model.cfg.name)
+
+    @property
+    def module(self):
+        """The network (every trained parameter)."""
+        return self.model
 
     @property
     def cbr_range(self) -> tuple[float, float]:
@@ -139,8 +153,25 @@ class Codec:
         """SNR range (Es/N0, dB) the model was trained for."""
         return (self.model.cfg.snr_min_db, self.model.cfg.snr_max_db)
 
+    @property
+    def rate_levels(self) -> tuple[float, ...]:
+        """CBRs m/48 for m = 1 .. num_complex_channels."""
+        c = self.model.cfg.num_complex_channels
+        return tuple(k * self.model.cfg.cbr_per_channel for k in range(1, c + 1))
+
     def __repr__(self) -> str:
-        return f"Codec(name={self.name!r}, sha256={self.sha256[:12]}, cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
+        return f"{type(self).__name__}(name={self.name!r}, sha256={self.sha256[:12]}, cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
+
+    def check_knowledge_base(self, expected_sha256: str | None, meta_sha256: str | None) -> None:
+        """Raise :class:`KnowledgeBaseMismatch` unless both hashes (where given) are ours."""
+        for label, sha in (
+            ("expected_sha256", expected_sha256),
+            ("meta.codec_sha256", meta_sha256),
+        ):
+            if sha is not None and sha != self.sha256:
+                raise KnowledgeBaseMismatch(
+                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
+                )
 
     def channels_for_cbr(self, cbr: float) -> int:
         """Kept complex channels m for a CBR (nearest multiple of 1/48); ValueError outside the range."""
@@ -159,6 +190,41 @@ class Codec:
                 self.model.cfg.num_complex_channels,
             )
         )
+
+
+class Codec(ChannelTruncationCodec):
+    """A loaded JSCC (encoder + decoder) with its model card and hash: semcodec's own
+    :class:`semcodec.SemanticCodec` and :class:`semcodec.TrainableCodec` (registry name
+    ``jscc``; architectures :data:`semcodec.MODELS`)."""
+
+    supports_focus = True
+    architectures = ("adjscc_s4_w96", *(m for m in MODELS if m != "adjscc_s4_w96"))
+    """Architectures :meth:`untrained` builds; the first is the default."""
+
+    def untrained(self, architecture: str | None = None) -> Codec:
+        """A fresh JSCC of ``architecture`` (a :data:`semcodec.MODELS` name; None = the first
+        of :attr:`architectures`)."""
+        model = make_model(architecture or self.architectures[0])
+        name = model.cfg.name
+        return Codec(model, {"name": name, "sha256": weights_sha256(model.state_dict(), model.cfg)})
+
+    def forward_train(self, x, snr_db, cbr, channel, generator) -> Tensor:
+        """:meth:`semcodec.TrainableCodec.forward_train`: ``cbr`` [batch] -> m = cbr * 48."""
+        m = torch.round(torch.as_tensor(cbr) / self.model.cfg.cbr_per_channel).long()
+        return forward_train(self.model, x, snr_db, m, channel, generator)
+
+    def save(self, path, card: dict) -> str:
+        """Write the checkpoint (``load_codec`` / ``make_codec("jscc:PATH")`` load it)."""
+        self.sha256 = save_checkpoint(path, self.model, {"name": self.name, **card})
+        return self.sha256
+
+    def load_compatible(self, init: Codec) -> None:
+        """Start from ``init``'s weights (:func:`semcodec.training.load_compatible`)."""
+        if not isinstance(init, Codec):
+            raise ValueError(
+                f"init codec {getattr(init, 'name', type(init).__name__)} is not a jscc codec"
+            )
+        load_compatible(self.model, init.model)
 
     def _extra_symbols(self, budget: int, m: int, rows: int, cols: int) -> int:
         """Symbols of channel m + 1 that fill a focus budget's remainder over a box of
@@ -282,14 +348,7 @@ class Codec:
         Raises:
             KnowledgeBaseMismatch: the hashes differ.
         """
-        for label, sha in (
-            ("expected_sha256", expected_sha256),
-            ("meta.codec_sha256", meta.codec_sha256),
-        ):
-            if sha is not None and sha != self.sha256:
-                raise KnowledgeBaseMismatch(
-                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
-                )
+        self.check_knowledge_base(expected_sha256, meta.codec_sha256)
         if not isinstance(x_hat, Tensor) or not x_hat.is_complex() or x_hat.dim() != 2:
             raise ValueError(
                 f"x_hat must be [batch, num_symbols] complex64, got {getattr(x_hat, 'shape', type(x_hat))}"

@@ -84,6 +84,10 @@ def _send_jscc(refine: bool):
         if key not in ctx.encodings:  # the transmitter's symbols: once for all draws
             ctx.encodings.clear()
             enc = ctx.codec.encode(img, snr, cbr)
+            if refine and not hasattr(ctx.codec, "decode_differentiable"):
+                raise ValueError(
+                    f"codec {ctx.codec.name} cannot refine symbols (no decode_differentiable)"
+                )
             if refine:  # on the transmitter's own draws, never the evaluation's
                 tx = torch.Generator().manual_seed(ctx.refine_seed)
                 enc = refine_symbols(

@@ -1,0 +1,297 @@
+"""The codec contract and the one registry: built-ins, entry-point plugins, bad input, and
+focus for codecs that cannot focus."""
+
+import sys
+import textwrap
+
+import pytest
+import torch
+from smooth_images import smooth_image
+
+import phy
+import semcodec
+from semcodec import (
+    CODECS,
+    BoxMeta,
+    CodecPluginError,
+    KnowledgeBaseMismatch,
+    SemanticCodec,
+    TrainableCodec,
+    make_codec,
+)
+from semcodec import registry as registry_mod
+
+
+def smooth_images(n: int, h: int, w: int) -> torch.Tensor:
+    return torch.cat([smooth_image(i, h, w) for i in range(n)])
+
+
+def _psnr(x, y) -> float:
+    return float(-10 * torch.log10(((x - y) ** 2).mean()))
+
+
+@pytest.mark.parametrize("name", ["jscc", "deepjscc"])
+def test_every_builtin_codec_meets_the_contract(name):
+    codec = make_codec(name)
+    assert isinstance(codec, SemanticCodec) and isinstance(codec, TrainableCodec)
+    lo, hi = codec.cbr_range
+    assert 0 < lo < hi and codec.snr_range_db[0] < codec.snr_range_db[1]
+    x = smooth_images(2, 24, 40)
+    enc = codec.encode(x, 10.0, 1 / 16)
+    assert enc.symbols.dtype == torch.complex64 and enc.symbols.shape[0] == 2
+    power = enc.symbols.abs().pow(2).mean(dim=1)
+    torch.testing.assert_close(power, torch.ones(2), atol=1e-4, rtol=0)
+    assert enc.meta.num_symbols == enc.symbols.shape[1]
+    assert enc.meta.cbr == pytest.approx(enc.symbols.shape[1] / (3 * 24 * 40))
+    y = codec.decode(enc.symbols, enc.meta, 10.0, expected_sha256=codec.sha256)
+    assert y.shape == x.shape and 0 <= float(y.min()) and float(y.max()) <= 1
+    with pytest.raises(KnowledgeBaseMismatch, match="knowledge base mismatch"):
+        codec.decode(enc.symbols, enc.meta, 10.0, expected_sha256="0" * 64)
+
+
+def test_spec_parsing_and_unknown_names():
+    assert semcodec.parse_codec_spec("jscc") == ("jscc", None)
+    assert semcodec.parse_codec_spec("jscc:a/b.safetensors") == ("jscc", "a/b.safetensors")
+    for bad in ("", ":x", "jscc:"):
+        with pytest.raises(ValueError, match="NAME or NAME:CHECKPOINT"):
+            semcodec.parse_codec_spec(bad)
+    with pytest.raises(KeyError, match=r"unknown codec 'witt'; known: .*deepjscc.*jscc"):
+        make_codec("witt")
+    assert {"jscc", "deepjscc"} <= set(semcodec.codec_names())
+
+
+def test_the_jscc_factory_is_load_codec():
+    assert make_codec("jscc").sha256 == semcodec.load_codec().sha256
+    path = str(semcodec.DEFAULT_CHECKPOINT)
+    assert make_codec(f"jscc:{path}").sha256 == semcodec.load_codec(path).sha256
+
+
+def test_a_checkpoint_of_another_codec_is_refused_naming_both(tmp_path):
+    deep = make_codec("deepjscc")
+    path = tmp_path / "deep.safetensors"
+    sha = deep.save(path, {})
+    assert make_codec(f"deepjscc:{path}").sha256 == sha
+    with pytest.raises(ValueError) as e:
+        make_codec(f"jscc:{path}")
+    msg = str(e.value)
+    assert "'deepjscc'" in msg and "'jscc'" in msg and sha[:12] in msg and "\n" not in msg
+    with pytest.raises(ValueError, match="holds codec 'deepjscc'"):
+        semcodec.load_codec(path)
+    shipped = make_codec("jscc")
+    with pytest.raises(ValueError, match=f"holds codec 'jscc'.*{shipped.sha256[:12]}"):
+        make_codec(f"deepjscc:{semcodec.DEFAULT_CHECKPOINT}")
+
+
+def test_focus_by_box_sends_the_box_at_the_budget():
+    codec = make_codec("deepjscc")
+    torch.manual_seed(0)
+    x = torch.rand(1, 3, 64, 96)
+    mask = torch.zeros(1, 1, 64, 96)
+    mask[..., 20:30, 40:61] = 1.0
+    assert semcodec.mask_box(mask, 64, 96) == (16, 40, 16, 24)
+    budget = 16 * 24 * 3 // 16  # CBR 1/16 over the box
+    enc = semcodec.encode_with_focus(codec, x, 5.0, budget / (3 * 64 * 96), mask)
+    assert isinstance(enc.meta, BoxMeta) and enc.meta.crop == (16, 40, 16, 24)
+    assert enc.meta.num_symbols == budget == enc.symbols.shape[1]
+    y = semcodec.decode_received(codec, enc.symbols, enc.meta, 40.0, codec.sha256)
+    assert y.shape == x.shape
+    outside = torch.ones_like(y, dtype=torch.bool)
+    outside[..., 16:32, 40:64] = False
+    assert torch.all(y[outside] == 0.5)
+    # a budget below the smallest rate over the box: the box goes downscaled, within budget
+    small = semcodec.focus_by_box(codec, x, mask, 10, 5.0)
+    assert 4 <= small.meta.num_symbols <= 10 and small.meta.crop == (16, 40, 16, 24)
+    y = semcodec.decode_box(codec, small.symbols, small.meta, 5.0)
+    assert y.shape == x.shape
+    with pytest.raises(ValueError, match="budget_symbols must be >= 1"):
+        semcodec.focus_by_box(codec, x, mask, 0, 5.0)
+    with pytest.raises(ValueError, match="budget_symbols 3 is below the smallest message"):
+        semcodec.focus_by_box(codec, x, mask, 3, 5.0)
+
+
+PLUGIN = '''
+"""A codec from outside semcodec: a fixed orthonormal 4x4 block transform (block means
+first), the first 2 m coefficients sent as m complex symbols; LMMSE at the receiver."""
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+
+@dataclass(frozen=True)
+class Meta:
+    height: int
+    width: int
+    num_symbols: int
+    cbr: float
+    codec_sha256: str
+    scale: torch.Tensor  # [batch] power normalisation, sent as side information
+
+    def side_info_bits(self):
+        return 32
+
+
+class BlockTransform(nn.Module):
+    def __init__(self, num_complex=8):
+        super().__init__()
+        g = torch.Generator().manual_seed(1)
+        dc = torch.zeros(3, 48)
+        for c in range(3):
+            dc[c, c * 16 : (c + 1) * 16] = 0.25
+        rest = torch.randn(48, 48, generator=g)
+        q, _ = torch.linalg.qr(torch.cat([dc.T, rest], 1))
+        basis = q.T[: 2 * num_complex] * torch.sign(q.T[: 2 * num_complex, :1] + 1e-9)
+        basis[:3] = dc
+        self.register_buffer("basis", basis)  # [2 * num_complex, 48]
+        self.num_complex = num_complex
+
+
+class DemoCodec:
+    name = "demo"
+    supports_focus = False
+    snr_range_db = (-10.0, 30.0)
+
+    def __init__(self, checkpoint=None):
+        self.module = BlockTransform()
+        self.cbr_range = (1 / 48, self.module.num_complex / 48)
+        self.sha256 = "d" * 64 if checkpoint is None else "e" * 64
+
+    def encode(self, images, snr_db, cbr, mask=None, demand_weights=None):
+        from semcodec import Encoded
+        b, _, h, w = images.shape
+        m = max(1, min(self.module.num_complex, round(cbr * 48)))
+        blocks = nn.functional.unfold(images * 2 - 1, 4, stride=4)  # [b, 48, positions]
+        coef = self.module.basis[: 2 * m] @ blocks  # [b, 2m, positions]
+        sym = torch.view_as_complex(coef.reshape(b, m, 2, -1).transpose(2, 3).contiguous())
+        sym = sym.reshape(b, -1)
+        scale = sym.abs().pow(2).mean(1).sqrt()
+        sym = (sym / scale[:, None]).to(torch.complex64)
+        n = sym.shape[1]
+        return Encoded(sym, Meta(h, w, n, n / (3 * h * w), self.sha256, scale))
+
+    def decode(self, x_hat, meta, snr_db, expected_sha256=None, noise_var=None):
+        from semcodec import KnowledgeBaseMismatch
+        if expected_sha256 not in (None, self.sha256) or meta.codec_sha256 != self.sha256:
+            raise KnowledgeBaseMismatch(f"{expected_sha256} != {self.sha256}")
+        b = x_hat.shape[0]
+        nv = 10 ** (-torch.as_tensor(snr_db, dtype=torch.float32) / 10) if noise_var is None else noise_var
+        nv = torch.as_tensor(nv, dtype=torch.float32)
+        nv = nv.reshape(-1, 1) if nv.dim() <= 1 else nv
+        z = x_hat / (1 + nv) * meta.scale[:, None]
+        pos = (meta.height // 4) * (meta.width // 4)
+        m = x_hat.shape[1] // pos
+        coef = torch.view_as_real(z.reshape(b, m, pos)).transpose(2, 3).reshape(b, 2 * m, pos)
+        blocks = self.module.basis[: 2 * m].T @ coef  # [b, 48, positions]
+        y = nn.functional.fold(blocks, (meta.height, meta.width), 4, stride=4)
+        return ((y + 1) / 2).clamp(0, 1)
+
+
+def make(checkpoint=None):
+    return DemoCodec(checkpoint)
+
+
+def broken(checkpoint=None):
+    raise RuntimeError("weights server unreachable")
+
+
+def not_a_codec(checkpoint=None):
+    return object()
+'''
+
+
+@pytest.fixture
+def plugin(tmp_path, monkeypatch):
+    """The package ``semcodec_plugin_demo`` installed on a tmp sys.path with its entry points."""
+    site = tmp_path / "site"
+    info = site / "semcodec_plugin_demo-0.1.dist-info"
+    info.mkdir(parents=True)
+    (site / "semcodec_plugin_demo.py").write_text(textwrap.dedent(PLUGIN))
+    (info / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: semcodec-plugin-demo\nVersion: 0.1\n"
+    )
+    (info / "entry_points.txt").write_text(
+        "[semcodec.codecs]\n"
+        "demo = semcodec_plugin_demo:make\n"
+        "demo_broken = semcodec_plugin_demo:broken\n"
+        "demo_object = semcodec_plugin_demo:not_a_codec\n"
+    )
+    monkeypatch.syspath_prepend(str(site))
+    before = dict(CODECS)
+    semcodec.load_codec_entry_points(force=True)
+    yield
+    CODECS.clear()
+    CODECS.update(before)
+    for name in ("demo", "demo_broken", "demo_object"):
+        registry_mod.PLUGINS.pop(name, None)
+    sys.modules.pop("semcodec_plugin_demo", None)
+
+
+def test_a_plugin_codec_runs_over_awgn_and_block_rayleigh(plugin):
+    codec = make_codec("demo")
+    assert type(codec).__module__ == "semcodec_plugin_demo"
+    assert not isinstance(codec.module, semcodec.JSCCModel)
+    assert isinstance(codec, SemanticCodec) and not semcodec.is_trainable(codec)
+    assert "demo" in semcodec.codec_names()
+    x = smooth_images(2, 32, 48)
+    for channel in ("awgn", "rayleigh"):
+        link = phy.channel_link(channel)
+        g = torch.Generator().manual_seed(0)
+        lo = semcodec.transmit_jscc(codec, x, link, 0.0, 1 / 6, generator=g)
+        hi = semcodec.transmit_jscc(codec, x, link, 30.0, 1 / 6, generator=g)
+        assert lo.stats["cbr"] == pytest.approx(1 / 6)
+        assert lo.stats["side_info_bits"] == 2 * 32
+        assert _psnr(hi.images, x) > _psnr(lo.images, x) + 3, channel
+        assert _psnr(hi.images, x) > 24, channel  # smooth images: the block means carry most
+
+
+def test_a_plugin_codec_runs_as_the_eval_codec_link_scheme(plugin):
+    codec = make_codec("demo")
+    x = smooth_images(1, 32, 32)
+    for channel in ("awgn", "rayleigh"):
+        ctx = semcodec.evaluation.EvalContext(channel=channel, codec=codec)
+        out = semcodec.LINK_SCHEMES["jscc"](ctx, x, 20.0, 1 / 12, torch.Generator().manual_seed(1))
+        assert out.images.shape == x.shape and _psnr(out.images, x) > 20
+        with pytest.raises(ValueError, match="cannot refine"):
+            semcodec.LINK_SCHEMES["jscc_refined"](ctx, x, 20.0, 1 / 12, None)
+
+
+def test_a_plugin_without_focus_serves_a_focus_demand_by_its_box(plugin):
+    codec = make_codec("demo")
+    x = smooth_images(1, 48, 64)
+    mask = torch.zeros(1, 1, 48, 64)
+    mask[..., 8:20, 16:40] = 1
+    g = torch.Generator().manual_seed(0)
+    out = semcodec.transmit_jscc(codec, x, phy.channel_link("awgn"), 30.0, 1 / 48, mask, g)
+    box = out.images[..., 8:24, 16:40]
+    assert _psnr(box, x[..., 8:24, 16:40]) > 24
+    assert torch.all(out.images[..., 30:, :] == 0.5)
+    assert out.stats["num_symbols"] <= 48 * 64 * 3 // 48
+
+
+def test_a_plugin_that_raises_or_returns_no_codec_is_named_in_one_line(plugin):
+    with pytest.raises(CodecPluginError) as e:
+        make_codec("demo_broken")
+    msg = str(e.value)
+    assert "demo_broken = semcodec_plugin_demo:broken" in msg and "unreachable" in msg
+    assert "\n" not in msg
+    with pytest.raises(CodecPluginError, match=r"demo_object .* returned object, not a semantic"):
+        make_codec("demo_object")
+
+
+def test_a_plugin_that_cannot_be_imported_is_named(tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    info = site / "semcodec_plugin_gone-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(
+        "Metadata-Version: 2.1\nName: semcodec-plugin-gone\nVersion: 0.1\n"
+    )
+    (info / "entry_points.txt").write_text("[semcodec.codecs]\ngone = semcodec_plugin_gone:make\n")
+    monkeypatch.syspath_prepend(str(site))
+    try:
+        with pytest.raises(
+            CodecPluginError, match="codec plugin gone = semcodec_plugin_gone:make failed to load"
+        ):
+            semcodec.load_codec_entry_points(force=True)
+    finally:
+        CODECS.pop("gone", None)
