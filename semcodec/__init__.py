@@ -18,7 +18,7 @@ The codec contract (:mod:`semcodec.contract`), which every codec on osnerf's lin
 
 ``SemanticCodec`` is the runtime-checkable protocol; ``TrainableCodec`` adds what the trainer
 needs. Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
-entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` builds one.
+entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` builds one, ``open_codec`` also takes a bare checkpoint path.
 ``encode_with_focus`` / ``decode_received`` serve a focus demand with any codec (a codec
 without ``supports_focus`` sends the objects' box at the same symbol budget,
 ``focus_by_box`` / ``decode_box``).
@@ -88,6 +88,7 @@ from semcodec.registry import (
     codec_names,
     load_codec_entry_points,
     make_codec,
+    open_codec,
     parse_codec_spec,
     register_codec,
 )
@@ -106,6 +107,7 @@ __all__ = [
     "is_trainable",
     "load_codec_entry_points",
     "make_codec",
+    "open_codec",
     "mask_box",
     "parse_codec_spec",
     "register_codec",

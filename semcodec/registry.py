@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from importlib.metadata import entry_points
+from pathlib import Path
 
 from semcodec.contract import CODEC_MEMBERS, missing_members
 
@@ -117,6 +118,18 @@ def make_codec(spec: str):
             f"(missing {', '.join(missing)})"
         )
     return codec
+
+
+def open_codec(spec: str | None = None):
+    """The codec a command names: None -> the shipped default (``jscc``); ``NAME[:CHECKPOINT]``
+    -> :func:`make_codec`; a bare path to a checkpoint file -> ``jscc:PATH`` (a checkpoint of
+    another codec is refused, naming the spec that loads it)."""
+    if spec is None:
+        return make_codec("jscc")
+    name, _ = parse_codec_spec(spec)
+    if name not in load_codec_entry_points() and Path(spec).is_file():
+        return make_codec(f"jscc:{spec}")
+    return make_codec(spec)
 
 
 @register_codec("jscc")

@@ -132,13 +132,16 @@ def _encode(ctx, p, x, kw: dict, on_demand: bool):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
     from semcodec import refine_symbols
+    from semcodec.contract import encode_with_focus
 
     codec = ctx.codec
     with torch.no_grad():
-        enc = codec.encode(x, p.encoder_snr_db, p.focus_cbr if on_demand else p.cbr, **kw)
+        enc = encode_with_focus(
+            codec, x, p.encoder_snr_db, p.focus_cbr if on_demand else p.cbr, **kw
+        )
     steps = int(ctx.config.refine_steps)
-    if not steps:
-        return enc
+    if not steps or not hasattr(codec, "decode_differentiable"):
+        return enc  # a codec whose decoder cannot be differentiated is sent as encoded
     model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.repetitions)
     gen = torch.Generator().manual_seed(
         scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
@@ -166,12 +169,13 @@ def _decode(ctx, p, enc, x_hat, nv, size, s_up: int, on_demand: bool):
     demand, the background outside the sent box, then back to the captured size. Returns
     (image [3, h, w], the sent pixels at the decoded resolution or None)."""
     from semcodec import receiver_mask
+    from semcodec.contract import decode_received
 
     h, w = size
     bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]
     with torch.no_grad():
-        img = ctx.rx_codec.decode(
-            x_hat, enc.meta, p.encoder_snr_db, expected_sha256=ctx.codec.sha256, noise_var=nv
+        img = decode_received(
+            ctx.rx_codec, x_hat, enc.meta, p.encoder_snr_db, ctx.codec.sha256, nv
         )[0]
         m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
         if m is not None:

@@ -68,13 +68,13 @@ def prepare(cfg: RunConfig) -> Prepared:
     if any(s.needs_codec for s in schemes.values()):
         import semcodec
 
-        codec = semcodec.load_codec(cfg.codec)
+        codec = semcodec.open_codec(cfg.codec)
         lo, hi = (float(v) for v in codec.snr_range_db)
         if not lo <= cfg.snr_db <= hi:
             raise ValueError(
                 f"--snr-db {cfg.snr_db:g} is outside the codec's range [{lo:g}, {hi:g}] dB"
             )
-        rx = semcodec.load_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
+        rx = semcodec.open_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
         scu.check_knowledge_base(codec.sha256, rx.sha256)
     return Prepared(demand, schemes, codec, rx, scu)
 
