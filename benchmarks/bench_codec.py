@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from common import write_text
+
 
 def _speed(codec) -> dict:
     out = {"threads": torch.get_num_threads()}
@@ -115,7 +117,7 @@ def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
         raise RuntimeError(f"eval-codec failed: {' '.join(want)}")
     doc = json.loads(path.read_text())
     doc["argv"] = want[:-2]
-    path.write_text(json.dumps(doc))
+    write_text(path, json.dumps(doc))
     return doc
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+from common import write_figure
 from osnerf.report import QUALITY_METRICS  # the run report's metrics
 
 # Published Kodak numbers (../shared/reference/jscc-anchors.md): CBR 1/16, mean per-image PSNR.
@@ -512,6 +513,6 @@ def make_plots(
     for name, fig in figures:
         for fmt in formats:
             path = out_dir / f"{name}.{fmt}"
-            fig.savefig(path, dpi=150)
+            write_figure(path, fig, dpi=150)
             written.append(path)
     return written

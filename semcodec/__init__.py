@@ -33,7 +33,7 @@ from semcodec.codec import (
 )
 from semcodec.evaluation import SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
-from semcodec.focus_eval import focus_gain, masked_psnr
+from semcodec.focus_eval import focus_gain
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
 from semcodec.model import (
     MODELS,
@@ -72,7 +72,6 @@ __all__ = [
     "attribution_box",
     "check_images",
     "focus_gain",
-    "masked_psnr",
     "demand_heatmap",
     "demand_weight_map",
     "features_to_symbols",

@@ -18,12 +18,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from common import list_images, psnr, read_image, write_torch
 from semcodec.channel_layers import masked_transmit, parse_train_channels
 from semcodec.checkpoint import load_checkpoint, save_checkpoint
-from semcodec.image_codecs import read_image_file
 from semcodec.model import JSCCModel, make_model, side_info
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 @dataclass(frozen=True)
@@ -101,18 +99,11 @@ class TrainConfig:
         parse_train_channels(self.channel)
 
 
-def list_images(folder: str | Path) -> list[Path]:
-    """PNG/JPEG files of a folder, sorted by name."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"image folder not found: {folder}")
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-
-
 def load_uint8_images(paths: list[Path]) -> list[torch.Tensor]:
-    """RGB images as [3, height, width] uint8 tensors."""
+    """RGB images (:func:`common.read_image`: 16-bit, palette, EXIF orientation) as
+    [3, height, width] uint8 tensors."""
     return [
-        torch.from_numpy(np.array(read_image_file(p).convert("RGB"))).permute(2, 0, 1).contiguous()
+        torch.from_numpy(np.round(read_image(p) * 255.0).astype(np.uint8)).permute(2, 0, 1)
         for p in paths
     ]
 
@@ -194,9 +185,8 @@ def validate(
         for s in snrs_db:
             b = images.shape[0]
             y = forward_train(model, images, torch.full((b,), s), torch.full((b,), m), ch, g)
-            mse = ((y - images) ** 2).mean(dim=(1, 2, 3))
             key = f"psnr_{s:g}db" if len(names) == 1 else f"{ch}_psnr_{s:g}db"
-            out[key] = float((-10 * torch.log10(mse)).mean())
+            out[key] = float(np.mean([psnr(a, b) for a, b in zip(y, images)]))
     model.train()
     return out
 
@@ -300,16 +290,18 @@ def train(
     from tqdm import tqdm
 
     torch.set_num_threads(cfg.num_threads)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [p for d in train_dirs for p in list_images(d)]
-    if not paths:
-        raise FileNotFoundError(f"no PNG/JPEG training images in {[str(d) for d in train_dirs]}")
+    paths = [p for d in train_dirs for p in list_images(d, "--data")]
     images = load_uint8_images(paths)
     images = [im for im in images if min(im.shape[1:]) >= cfg.crop_px]
+    if not images:
+        raise ValueError(
+            f"crop_px: no training image is at least {cfg.crop_px}x{cfg.crop_px} px "
+            f"(of {len(paths)} images in {', '.join(str(d) for d in train_dirs)})"
+        )
     data_hash = files_sha256(paths)
     val = None
     if val_dir is not None:
-        vimgs = load_uint8_images(list_images(val_dir)[:8])
+        vimgs = load_uint8_images(list_images(val_dir, "--val")[:8])
         if vimgs:
             side = min(256, min(min(im.shape[1:]) for im in vimgs) // 4 * 4)
             val = torch.stack([im[:, :side, :side].float() / 255 for im in vimgs])
@@ -323,11 +315,18 @@ def train(
     gen = torch.Generator().manual_seed(cfg.seed)
     step, elapsed, best = 0, 0.0, -math.inf
     state_path = out_dir / "last_state.pt"
+    out_dir.mkdir(parents=True, exist_ok=True)
     if resume and state_path.exists():
         st = load_train_state(state_path)
+        try:
+            model.load_state_dict(st["model"])
+        except RuntimeError:  # another architecture: one line, not torch's key-by-key dump
+            raise ValueError(
+                f"{state_path} was trained with architecture {st['config'].get('model')!r}, "
+                f"not {cfg.model!r}: resume it with that architecture or train into a new folder"
+            ) from None
         if st["config"] != dataclasses.asdict(cfg) | {"max_minutes": st["config"]["max_minutes"]}:
             print("train-codec: resuming with a changed config", file=sys.stderr)
-        model.load_state_dict(st["model"])
         opt.load_state_dict(st["optimizer"])
         step, elapsed, best = st["step"], st["elapsed_s"], st["best"]
         rng.bit_generator.state = st["rng"]
@@ -351,7 +350,8 @@ def train(
         save_checkpoint(out_dir / "last.safetensors", model, c)
         if best_now:
             save_checkpoint(out_dir / "best.safetensors", model, c)
-        torch.save(
+        write_torch(
+            state_path,
             {
                 "config": dataclasses.asdict(cfg),
                 "model": model.state_dict(),
@@ -362,9 +362,7 @@ def train(
                 "rng": rng.bit_generator.state,
                 "gen": gen.get_state(),
             },
-            str(state_path) + ".tmp",
         )
-        Path(str(state_path) + ".tmp").replace(state_path)
 
     budget = cfg.max_minutes * 60.0
     log = open(out_dir / "log.jsonl", "a")
@@ -405,7 +403,7 @@ def train(
         opt.step()
         step += 1
         acc_loss += float(loss.detach())
-        acc_psnr += float((-10 * torch.log10(mse_per.detach())).mean())
+        acc_psnr += float(np.mean([psnr(a, b) for a, b in zip(y, x)]))
         acc_n += 1
         dt = time.perf_counter() - t0
         elapsed += dt

@@ -37,9 +37,11 @@ class RunConfig:
         seed: seeds every random draw (each scheme's from the seed and its name).
         max_seconds: NeRF training budget per scheme, seconds (> 0).
         resolution_px: drone image size (16..512).
-        num_train_views, num_test_views: drone views captured and held out.
+        num_train_views: drone views captured (the candidates to send).
+        num_test_views: held-out drone views, for scoring (never sent).
         symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
-        codec, receiver_codec: codec checkpoints (None = semcodec's default; the same).
+        codec: the transmitter's codec checkpoint (None: semcodec's default).
+        receiver_codec: the receiver's codec checkpoint (None: the same as ``codec``).
         mcs: the digital scheme's MCS: "auto" (from the average SNR, no CSI at the
             transmitter) or a fixed phy.digital.MCS_TABLE name.
         image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).

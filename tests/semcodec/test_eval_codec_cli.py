@@ -80,11 +80,6 @@ def test_bad_input_one_line_errors(image_dir, tmp_path, capsys):
     (d / "x.png").write_bytes(b"not an image")
     _bad(tmp_path, images=d)
     assert "x.png: not a readable image" in capsys.readouterr().err
-    g = tmp_path / "grey"
-    g.mkdir()
-    Image.fromarray(np.zeros((32, 32), np.uint8)).save(g / "g.png")
-    _bad(tmp_path, images=g)
-    assert "not RGB" in capsys.readouterr().err
     s = tmp_path / "small"
     s.mkdir()
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(s / "s.png")
@@ -172,7 +167,9 @@ def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeyp
     monkeypatch.setattr(semcodec.evaluation, "load_image_folder", boom)
     for n in ("0", "-2"):
         _bad(tmp_path, "--draws", n, images=image_dir)
-        assert f"--draws must be >= 1, got {n}" in capsys.readouterr().err
+        assert f"argument --draws: must be an integer in [1, 10000], got {n!r}" in (
+            capsys.readouterr().err
+        )
     for n in ("-1", "1.5", "20000"):
         _bad(tmp_path, "--refine-steps", n, images=image_dir)
         err = capsys.readouterr().err
