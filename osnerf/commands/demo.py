@@ -14,7 +14,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace a finished demo in --out (refused without it, as `osnerf run` does)",
+        help="write into an --out that holds something other than this demo's own run "
+        "(refused without it, as `osnerf run` does)",
     )
 
 

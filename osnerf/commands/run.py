@@ -112,10 +112,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--out",
         required=True,
-        help="RUN_DIR: report and stage cache; an unfinished run of the same config there is "
-        "resumed, a finished one or other files are refused without --overwrite",
+        help="RUN_DIR: report and stage cache; a run of the same config there is continued "
+        "from its cache (the same numbers); a folder holding anything else is refused "
+        "without --overwrite",
     )
-    checks.add_overwrite(p, "the report of a finished run, or other files, in --out")
+    checks.add_overwrite(p, "what a --out folder holds (another config's run, other files)")
     p.add_argument(
         "--cache-dir",
         default=None,
@@ -140,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
         args.out,
         "--out",
         overwrite=args.overwrite,
-        resumable=lambda d: (d / "cache" / cfg.key()).is_dir() and not (d / "report.json").exists(),
+        resumable=lambda d: (d / "cache" / cfg.key()).is_dir(),  # this config's own run
     )
     from osnerf.scenes.dataset import default_cache_dir
 

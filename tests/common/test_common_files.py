@@ -2,6 +2,7 @@
 
 import errno
 import os
+import stat
 
 import numpy as np
 import pytest
@@ -40,9 +41,16 @@ def test_a_path_that_is_not_a_regular_file_is_never_replaced(tmp_path, kind):
     assert sorted(os.listdir(tmp_path)) == ["target.txt", "x"]
 
 
-def test_a_character_device_is_never_replaced():
+def test_a_character_device_is_never_replaced(tmp_path):
+    """A device node of our own (never the machine's /dev/null: a regression would replace it)."""
+    node = tmp_path / "null"
+    try:
+        os.mknod(node, stat.S_IFCHR | 0o666, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("making a device node needs CAP_MKNOD")
     with pytest.raises(FileExistsError, match="a character device"):
-        common.write_text("/dev/null", "x")
+        common.write_text(node, "x")
+    assert stat.S_ISCHR(os.lstat(node).st_mode)
 
 
 def _full_disk(path, data):

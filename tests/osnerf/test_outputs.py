@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import time
 
 import numpy as np
@@ -43,9 +44,16 @@ def test_out_on_a_fifo_or_symlink_is_refused_and_left_as_it_is(one_line, tmp_pat
     assert (x.is_fifo() if kind == "fifo" else x.is_symlink()) and target.read_text() == "keep"
 
 
-def test_out_on_a_device_node_is_refused():
-    assert _ber("/dev/null") == 2
-    assert os.path.exists("/dev/null") and not os.path.isfile("/dev/null")
+def test_out_on_a_device_node_is_refused(one_line, tmp_path):
+    """A device node of our own (never the machine's /dev/null: a regression would replace it)."""
+    node = tmp_path / "null"
+    try:
+        os.mknod(node, stat.S_IFCHR | 0o666, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("making a device node needs CAP_MKNOD")
+    assert _ber(node) == 2
+    assert "is a character device, not a regular file or folder" in one_line()
+    assert stat.S_ISCHR(os.lstat(node).st_mode)
 
 
 # ------------------------------------------------------------------------ existing results
@@ -115,7 +123,7 @@ def test_folder_outputs_that_hold_files_are_refused(one_line, tmp_path, capsys, 
     assert _listing(out) == {"001.png": b"old", "report.json": b"{}"}
 
 
-def test_run_resumes_an_unfinished_run_but_refuses_a_finished_one(tmp_path, capsys):
+def test_output_dir_lets_a_command_continue_only_its_own_work(tmp_path, capsys):
     from osnerf.commands import args as checks
 
     out = tmp_path / "run"
