@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from common import write_text
 from osnerf.anchors import KODAK, KODAK_CBR, at_own_snr, capacity_anchor
 from semcodec.evaluation import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
 
@@ -114,7 +115,7 @@ def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
         raise RuntimeError(f"eval-codec failed: {' '.join(want)}")
     doc = json.loads(path.read_text())
     doc["argv"] = want[:-2]
-    path.write_text(json.dumps(doc))
+    write_text(path, json.dumps(doc))
     return doc
 
 
@@ -170,7 +171,7 @@ def _codec_table(
                 codec = load_codec(ck)
                 label = f"jscc[{codec.name}]"
                 codecs[label] = {"path": ck or "shipped default", "sha256": codec.sha256}
-                args = [*base, "--schemes", "jscc"] + (["--checkpoint", ck] if ck else [])
+                args = [*base, "--schemes", "jscc"] + (["--codec", ck] if ck else [])
                 doc = _eval(out_dir, f"{prefix}{channel}_jscc_{codec.sha256[:12]}", args)
                 for r in doc["results"]:
                     r["scheme"] = label

@@ -31,13 +31,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import time
 from pathlib import Path
 
 import torch
 
+from common import psnr, write_figure
 from osnerf.commands.args import RESOLUTION_PX_RANGE
 from osnerf.paths import shared_data_dir
 from renderer import (
@@ -72,7 +72,7 @@ def _time_to_reach(curve: list[dict], target: float, key: str = "seconds") -> fl
 
 def _pooled_psnr(a: torch.Tensor, b: torch.Tensor) -> float:
     """PSNR of the MSE over all frames (finite when some frames are exact)."""
-    return -10.0 * math.log10(max(torch.mean((a - b) ** 2).item(), 1e-12))
+    return psnr(a, b)
 
 
 def _lightweight_on_path(lw, path: torch.Tensor, intr, truth: torch.Tensor | None = None) -> dict:
@@ -169,7 +169,7 @@ def _plot(curves: dict, path: Path) -> None:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    write_figure(path, fig, dpi=120)
     plt.close(fig)
 
 

@@ -52,7 +52,7 @@ class OtaConfig:
             capture is longer by as many samples).
         detection_threshold: the receiver's normalised coherent preamble metric that counts
             as a frame, in (0, 1) (``phy.FrameConfig.detection_threshold``: in noise alone it
-            is Beta(1, N - 1) distributed, so the default 0.015 with the 2048-sample preamble
+            is Beta(1, N - 1) distributed, so 0.015 with the 2048-sample preamble
             has a false-alarm probability of 4e-14 per lag and CFO hypothesis, while a
             preamble at -10 dB per sample reaches about 0.045 through the emulated boards);
             a detection where no frame of the burst starts is dropped.

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_bytes, write_text
 from hil.errors import SigmfError
 
 DATATYPES = ("ci8", "cf32_le")
@@ -132,7 +133,7 @@ def write_sigmf(
     if center_freq_hz is not None:
         capture[sigmf.FREQUENCY_KEY] = float(center_freq_hz)
     try:
-        data_path.write_bytes(payload)
+        write_bytes(data_path, payload)
         meta = SigMFFile(data_file=data_path, global_info=info)
         meta.add_capture(0, metadata=capture)
         for a in annotations:
@@ -146,7 +147,8 @@ def write_sigmf(
                 sigmf.COMMENT_KEY: json.dumps(facts, sort_keys=True),
             }
             meta.add_annotation(int(a.sample_start), int(a.sample_count), metadata=md)
-        meta.tofile(meta_path, overwrite=True)
+        meta.validate()
+        write_text(meta_path, meta.dumps(pretty=True))
     except BaseException:
         for q in (data_path, meta_path):  # never a data file without its metadata
             q.unlink(missing_ok=True)

@@ -35,7 +35,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 # argparse takes "-10,-5" for an option unless it looks like a negative number: let
 # comma-separated lists of numbers through too ("--snr-db -10,-5,0").
-_NEGATIVE_LIST = re.compile(r"^-\d*\.?\d+([eE][-+]?\d+)?(,[-+]?\d*\.?\d+([eE][-+]?\d+)?)*$")
+# A fraction ("--cbr -1/16") passes too, so the option's own check can say what is wrong.
+_NUM = r"[-+]?\d*\.?\d+([eE][-+]?\d+)?(/\d*\.?\d+)?"
+_NEGATIVE_LIST = re.compile(rf"^-\d*\.?\d+([eE][-+]?\d+)?(/\d*\.?\d+)?(,{_NUM})*$")
+STDOUT_COMMANDS = ("scenes", "hil")  # their result is what they print
 
 
 class UsageError(ValueError):
@@ -85,20 +88,34 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:  # argparse already printed its message
         return int(e.code or 0)
     module = importlib.import_module(COMMANDS[args.command][0])
-    tune_malloc()
-    git_commit()  # read once, now: results name the code this run started with (cached)
     try:
-        return int(module.run(args) or 0)
+        if sys.stdout is None and args.command in STDOUT_COMMANDS:
+            raise UsageError("standard output is closed; its listing would be lost")
+        tune_malloc()
+        git_commit()  # read once, now: results name the code this run started with (cached)
+        rc = int(module.run(args) or 0)
+        if sys.stdout is not None:
+            sys.stdout.flush()  # a full disk or closed pipe is a failure, not a lost listing
+        return rc
     except (UsageError, ValueError, KeyError, FileNotFoundError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-        print(f"osnerf {args.command}: error: {msg}", file=sys.stderr)
+        print(f"osnerf {args.command}: error: {_first_line(msg)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"osnerf {args.command}: interrupted", file=sys.stderr)
         return 130
     except Exception as e:  # noqa: BLE001 - the CLI boundary: one line, exit 1
-        print(f"osnerf {args.command}: failed: {type(e).__name__}: {e}", file=sys.stderr)
+        print(
+            f"osnerf {args.command}: failed: {type(e).__name__}: {_first_line(e)}", file=sys.stderr
+        )
         return 1
+
+
+def _first_line(e: BaseException) -> str:
+    """A message as one line: a library's multi-line text (a state-dict dump) is cut to its
+    first line, so the error stays one line."""
+    lines = [ln for ln in str(e).splitlines() if ln.strip()]
+    return lines[0] + (" (...)" if len(lines) > 1 else "") if lines else type(e).__name__
 
 
 def entry() -> None:

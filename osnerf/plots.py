@@ -18,6 +18,7 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+from common import write_figure
 from osnerf.anchors import KODAK, KODAK_AWGN_10DB_VS_CBR, KODAK_CBR, capacity_anchor
 from osnerf.report import QUALITY_METRICS
 from osnerf.results import result_rows, scheme_entry
@@ -373,6 +374,6 @@ def make_plots(
     for name, fig in figures:
         for fmt in formats:
             path = out_dir / f"{name}.{fmt}"
-            fig.savefig(path, dpi=150)
+            write_figure(path, fig, dpi=150)
             written.append(path)
     return written

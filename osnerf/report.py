@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_bytes, write_text
 from osnerf.provenance import result_header, write_json_atomic
 
 QUALITY_METRICS = ("psnr", "ssim", "lpips", "psnr_object")
@@ -310,8 +311,8 @@ def write_report(out_dir: Path, config: dict, seed: int, report: Report, picture
         "plot: views": "plot_views.png",
     }
     for k, data in images.items():
-        (out_dir / files[k]).write_bytes(data)
-    (out_dir / "report.html").write_text(render_html(report, header, images))
+        write_bytes(out_dir / files[k], data)
+    write_text(out_dir / "report.html", render_html(report, header, images))
     full = {**header, **report.to_dict()}
     write_json_atomic(out_dir / "report.json", full)
     return full

@@ -22,7 +22,10 @@ def tune_malloc(mmap_threshold: int = 32 << 20, trim_threshold: int = 1 << 30) -
     Off with ``OSNERF_MALLOC_TUNE=0`` (for measuring the difference). Returns whether the
     settings were applied (False off glibc).
     """
-    if os.environ.get("OSNERF_MALLOC_TUNE", "1") == "0":
+    value = os.environ.get("OSNERF_MALLOC_TUNE", "1")
+    if value not in ("0", "1"):
+        raise ValueError(f"$OSNERF_MALLOC_TUNE must be 0 or 1, got {value!r}")
+    if value == "0":
         return False
     try:
         libc = ctypes.CDLL("libc.so.6")

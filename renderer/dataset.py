@@ -29,9 +29,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from common import IMAGE_SUFFIXES, read_image, write_text
 from renderer.cameras import Intrinsics, pose_problem
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 SPLITS = ("train", "val", "test", "all")
 HOLDOUT_EVERY = 8
 
@@ -108,6 +108,10 @@ def _select_frames(meta: dict, frames: list, split: str | None, path: Path) -> l
     return [f for i, f in enumerate(frames) if (i % HOLDOUT_EVERY == 0) == holdout]
 
 
+MAX_CAMERA_DISTANCE = 1e6
+"""Farthest camera position from the origin that the scene bounds stay finite for."""
+
+
 def _resolve_image(base: Path, file_path: str, json_path: Path, index: int, field: str) -> Path:
     p = base / file_path
     if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file():
@@ -119,21 +123,6 @@ def _resolve_image(base: Path, file_path: str, json_path: Path, index: int, fiel
     raise FileNotFoundError(f"{json_path}: frames[{index}].{field}: image {p} not found")
 
 
-def _read_image(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise ValueError(f"{path}: not a readable image")
-    scale = 65535.0 if img.dtype == np.uint16 else 255.0
-    img = img.astype(np.float32) / scale
-    if img.ndim == 2:
-        img = np.repeat(img[..., None], 3, axis=-1)
-    elif img.shape[2] == 4:
-        img = img[..., [2, 1, 0, 3]]
-    else:
-        img = img[..., 2::-1]
-    return np.ascontiguousarray(img)
-
-
 def _resize(img: np.ndarray, height: int, width: int) -> np.ndarray:
     if img.shape[0] == height and img.shape[1] == width:
         return img
@@ -141,19 +130,37 @@ def _resize(img: np.ndarray, height: int, width: int) -> np.ndarray:
     return out if out.ndim == img.ndim else out[..., None]
 
 
-def _intrinsics(meta: dict, width: int, height: int, path: Path) -> Intrinsics:
-    w = float(meta.get("w", width))
-    h = float(meta.get("h", height))
-    if "fl_x" in meta:
-        fx = float(meta["fl_x"])
-        fy = float(meta.get("fl_y", fx))
-    elif "camera_angle_x" in meta:
-        fx = 0.5 * w / math.tan(0.5 * float(meta["camera_angle_x"]))
-        fy = (
-            0.5 * h / math.tan(0.5 * float(meta["camera_angle_y"]))
-            if "camera_angle_y" in meta
-            else fx
+def _number(meta: dict, key: str, path: Path, default=None) -> float:
+    """``meta[key]`` as a finite float; ValueError naming the file and field otherwise."""
+    value = meta.get(key, default)
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: field {key!r} must be a number, got {value!r}") from None
+    if not math.isfinite(out):
+        raise ValueError(f"{path}: field {key!r} must be finite, got {value!r}")
+    return out
+
+
+def _focal(meta: dict, key: str, side: float, path: Path) -> float:
+    """The focal length from a field of view ``meta[key]`` in radians, in (0, pi)."""
+    angle = _number(meta, key, path)
+    if not 0.0 < angle < math.pi:
+        raise ValueError(
+            f"{path}: field {key!r} must be a field of view in (0, pi) radians, got {angle!r}"
         )
+    return 0.5 * side / math.tan(0.5 * angle)
+
+
+def _intrinsics(meta: dict, width: int, height: int, path: Path) -> Intrinsics:
+    w = _number(meta, "w", path, width)
+    h = _number(meta, "h", path, height)
+    if "fl_x" in meta:
+        fx = _number(meta, "fl_x", path)
+        fy = _number(meta, "fl_y", path, fx)
+    elif "camera_angle_x" in meta:
+        fx = _focal(meta, "camera_angle_x", w, path)
+        fy = _focal(meta, "camera_angle_y", h, path) if "camera_angle_y" in meta else fx
     else:
         raise ValueError(
             f"{path}: no intrinsics: needs 'fl_x' (with fl_y, cx, cy, w, h) or 'camera_angle_x'"
@@ -162,8 +169,8 @@ def _intrinsics(meta: dict, width: int, height: int, path: Path) -> Intrinsics:
         raise ValueError(
             f"{path}: focal length fl_x/fl_y/camera_angle_x gives {fx}, {fy}; must be finite and > 0"
         )
-    cx = float(meta.get("cx", w / 2.0))
-    cy = float(meta.get("cy", h / 2.0))
+    cx = _number(meta, "cx", path, w / 2.0)
+    cy = _number(meta, "cy", path, h / 2.0)
     if (int(round(w)), int(round(h))) != (width, height):
         raise ValueError(
             f"{path}: fields w, h = {int(w)}x{int(h)} differ from the images' {width}x{height}"
@@ -252,6 +259,10 @@ def load_dataset(
         meta = json.loads(path.read_text())
     except json.JSONDecodeError as e:
         raise ValueError(f"{path}: not valid JSON ({e})") from e
+    if not isinstance(meta, dict):
+        raise ValueError(
+            f"{path}: must hold a JSON object with 'frames', got a {type(meta).__name__}"
+        )
     frames = meta.get("frames")
     if not isinstance(frames, list) or not frames:
         raise ValueError(f"{path}: field 'frames' must be a non-empty list")
@@ -278,10 +289,16 @@ def load_dataset(
         problem = pose_problem(pose) if pose.ndim == 2 else f"has shape {pose.shape}"
         if problem:
             raise ValueError(f"{path}: frames[{i}].transform_matrix {problem}")
+        far = float(np.abs(pose[:3, 3]).max())
+        if far > MAX_CAMERA_DISTANCE:
+            raise ValueError(
+                f"{path}: frames[{i}].transform_matrix puts the camera {far:g} from the origin; "
+                f"positions must be within {MAX_CAMERA_DISTANCE:g} (scene units)"
+            )
         if pose.shape == (3, 4):
             pose = np.vstack([pose, [0.0, 0.0, 0.0, 1.0]])
         img_path = _resolve_image(path.parent, f["file_path"], path, i, "file_path")
-        img = _read_image(img_path)
+        img = read_image(img_path, channels=None)  # RGBA when the file has alpha
         size = img.shape[:2]
         if stored_size is None:
             stored_size = size
@@ -307,7 +324,7 @@ def load_dataset(
         img = _resize(img, out_h, out_w)
         if "mask_path" in f:
             mpath = _resolve_image(path.parent, f["mask_path"], path, i, "mask_path")
-            m = _read_image(mpath)
+            m = read_image(mpath, channels=1)
             if m.shape[:2] != stored_size:
                 raise ValueError(
                     f"{path}: frames[{i}].mask_path {mpath.name} is {m.shape[1]}x{m.shape[0]}, "
@@ -369,5 +386,4 @@ def write_transforms(
         for i, fp in enumerate(file_paths)
     ]
     path = Path(path)
-    path.write_text(json.dumps(meta, indent=2))
-    return path
+    return write_text(path, json.dumps(meta, indent=2))

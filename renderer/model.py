@@ -10,6 +10,7 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
+from common import write_torch
 from renderer.cameras import Intrinsics, camera_rays, intersect_aabb
 from renderer.fields import GridField, MLPField
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
@@ -175,10 +176,7 @@ def save_model(model: RadianceField, path) -> Path:
         "occupancy_cells": list(model.occupancy.cells),
         "state_dict": model.state_dict(),
     }
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(payload, tmp)
-    tmp.replace(path)
-    return path
+    return write_torch(path, payload)
 
 
 def load_model(path) -> RadianceField:

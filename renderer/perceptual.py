@@ -37,9 +37,18 @@ def _load(path: str) -> dict[str, Tensor]:
             f"LPIPS weights not found at {p}: run `{MAKE_TARGET}` (part of `make setup`) "
             f"or point {ENV_VAR} at the file"
         )
+    from safetensors import SafetensorError
     from safetensors.torch import load_file
 
-    return {k: v.float().contiguous() for k, v in load_file(str(p)).items()}
+    try:
+        tensors = load_file(str(p))
+    except (SafetensorError, OSError, ValueError) as e:
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ValueError(
+            f"LPIPS weights {p} (from {ENV_VAR} or the default path) are not a readable "
+            f"safetensors file ({first}): run `{MAKE_TARGET}` again or point {ENV_VAR} at the file"
+        ) from None
+    return {k: v.float().contiguous() for k, v in tensors.items()}
 
 
 def lpips_weights(path: str | Path | None = None) -> dict[str, Tensor]:

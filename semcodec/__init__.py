@@ -64,7 +64,7 @@ from semcodec.contract import (
 )
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
-from semcodec.focus_eval import focus_gain, masked_psnr
+from semcodec.focus_eval import focus_gain
 from semcodec.grid import (
     BLOCK_PX,
     focus_blocks,
@@ -142,7 +142,6 @@ __all__ = [
     "attribution_box",
     "check_images",
     "focus_gain",
-    "masked_psnr",
     "demand_heatmap",
     "demand_weight_map",
     "features_to_symbols",

@@ -26,6 +26,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
+from common import psnr
 from phy import Channel, FlatLink, power_normalize
 from semcodec.codec import Codec, Encoded, check_images
 from semcodec.contract import decode_received, encode_with_focus
@@ -273,13 +274,6 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
             "lost": None if ok else "channel",
         },
     )
-
-
-def psnr(x: Tensor, y: Tensor) -> float:
-    """PSNR in dB (peak 1.0) of one image pair, ``x`` clamped to [0, 1] (semcodec's one PSNR;
-    ``renderer.psnr`` is the rest of the project's, on [height, width, 3] arrays)."""
-    mse = float(((x.clamp(0, 1) - y) ** 2).mean())
-    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
 
 
 def _genie(img, start: int, names, link, snr_db, n, image_codec, seed):

@@ -10,13 +10,13 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import torch
 from safetensors import safe_open
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
+from common import write_bytes, write_text
 from semcodec.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
@@ -76,16 +76,7 @@ def save_checkpoint(
         "snr_range_db": [model.cfg.snr_min_db, model.cfg.snr_max_db],
         "sha256": sha,
     }
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    os.close(fd)
-    try:
-        save_file(state, tmp, metadata={CARD_KEY: json.dumps(full, sort_keys=True)})
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_bytes(path, save(state, metadata={CARD_KEY: json.dumps(full, sort_keys=True)}))
     return sha
 
 
@@ -95,7 +86,7 @@ def write_card_json(checkpoint_path: str | os.PathLike) -> Path:
     with safe_open(str(checkpoint_path), framework="pt") as f:
         card = json.loads((f.metadata() or {})[CARD_KEY])
     out = checkpoint_path.with_name(checkpoint_path.name.replace(".safetensors", "") + ".card.json")
-    out.write_text(json.dumps(card, indent=2, sort_keys=True) + "\n")
+    write_text(out, json.dumps(card, indent=2, sort_keys=True) + "\n")
     return out
 
 

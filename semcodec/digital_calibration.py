@@ -46,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common import psnr, read_image, write_text
+
 CALIBRATION_PATH = Path(__file__).resolve().parent / "data" / "digital_calibration.json"
 CODEWORD_BITS = (960, 1920, 3840)
 """Codeword lengths E (coded bits) with a measured curve; others interpolate in log E."""
@@ -316,9 +318,8 @@ def measure_rate_distortion(images, image_codec: str, qualities) -> list[dict]:
             h, w = img.shape[1:]
             rec = decode_wire(data, image_codec, h, w).astype(np.float64) / 255.0
             ref = np.round(img.permute(1, 2, 0).numpy() * 255) / 255.0
-            mse = float(np.mean((rec - ref) ** 2))
             bpps.append(8 * len(data) / (h * w))
-            psnrs.append(10 * math.log10(1.0 / max(mse, 1e-12)))
+            psnrs.append(psnr(rec, ref))
         out.append(
             {
                 "quality": q,
@@ -331,15 +332,9 @@ def measure_rate_distortion(images, image_codec: str, qualities) -> list[dict]:
 
 def _kodak(folder: Path, limit: int | None):
     import torch
-    from PIL import Image
 
     paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")[:limit]
-    return [
-        torch.from_numpy(np.asarray(Image.open(p).convert("RGB"), np.float32) / 255.0).permute(
-            2, 0, 1
-        )
-        for p in paths
-    ]
+    return [torch.from_numpy(read_image(p)).permute(2, 0, 1) for p in paths]
 
 
 QUALITIES = {
@@ -383,7 +378,7 @@ def main(argv: list[str] | None = None) -> int:
                         f"({time.perf_counter() - t0:.0f} s)",
                         file=sys.stderr,
                     )
-                    out.write_text(json.dumps(doc, indent=1))
+                    write_text(out, json.dumps(doc, indent=1))
     if args.part in ("all", "rd"):
         from semcodec.image_codecs import IMAGE_CODECS
 
@@ -391,10 +386,10 @@ def main(argv: list[str] | None = None) -> int:
         doc["rate_distortion"] = {
             c: measure_rate_distortion(imgs, c, QUALITIES[c]) for c in IMAGE_CODECS
         }
-        grey = [10 * math.log10(1.0 / float(((im - 0.5) ** 2).mean())) for im in imgs]
+        grey = [psnr(im, torch.full_like(im, 0.5)) for im in imgs]
         doc["lost_psnr_db"] = round(float(np.mean(grey)), 3)
         doc["rd_images"] = f"{len(imgs)} Kodak images"
-        out.write_text(json.dumps(doc, indent=1))
+        write_text(out, json.dumps(doc, indent=1))
     return 0
 
 

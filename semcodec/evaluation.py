@@ -11,9 +11,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import torch
 
+from common import list_images, read_image
 from phy import num_symbols_for_cbr
 from semcodec.baselines import (
     AUTO,
@@ -27,7 +27,6 @@ from semcodec.baselines import (
     transmit_jscc,
 )
 from semcodec.codec import MIN_SIDE_PX, Codec
-from semcodec.image_codecs import read_image_file
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
 
@@ -236,33 +235,32 @@ def schemes_help() -> str:
 
 
 def load_image_folder(folder: str | Path) -> tuple[list[str], list[torch.Tensor]]:
-    """Every PNG/JPEG of a folder as [1, 3, H, W] float32 in [0, 1]; one-line errors on bad files."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"--images folder not found: {folder}")
-    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
-    if not paths:
-        raise FileNotFoundError(f"--images folder {folder} holds no PNG/JPEG files")
+    """Every image that ``--images`` names (a folder, or one file) as [1, 3, H, W] float32 in
+    [0, 1] (:func:`common.read_image`); one-line errors naming the file.
+
+    Images must be at least :data:`EVAL_MIN_SIDE_PX` on each side (the codec's and SSIM's
+    minimum).
+    """
     names, images = [], []
-    for p in paths:
+    for p in list_images(folder, "--images"):
         try:
-            im = read_image_file(p)
+            a = read_image(p)
         except ValueError as e:
             raise ValueError(f"--images: {e}") from None
-        mode, a = im.mode, np.asarray(im)
-        if mode != "RGB":
+        if min(a.shape[:2]) < EVAL_MIN_SIDE_PX:
             raise ValueError(
-                f"--images: {p.name} is not RGB (mode {mode}); convert it to 8-bit RGB"
-            )
-        if min(a.shape[:2]) < MIN_SIDE_PX:
-            raise ValueError(
-                f"--images: {p.name} is {a.shape[1]}x{a.shape[0]} px; images must be at least {MIN_SIDE_PX}x{MIN_SIDE_PX}"
+                f"--images: {p.name} is {a.shape[1]}x{a.shape[0]} px; images must be at least "
+                f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} (SSIM's Gaussian window)"
             )
         names.append(p.name)
-        images.append(
-            torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1)[None].contiguous()
-        )
+        images.append(torch.from_numpy(a).permute(2, 0, 1)[None].contiguous())
     return names, images
+
+
+SSIM_SIGMA = 1.5
+SSIM_WINDOW_PX = 2 * int(3.5 * SSIM_SIGMA + 0.5) + 1
+"""The side of :func:`ssim`'s Gaussian window (11 px): scikit-image's truncation at 3.5 sigma."""
+EVAL_MIN_SIDE_PX = max(MIN_SIDE_PX, SSIM_WINDOW_PX)
 
 
 def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
@@ -278,7 +276,7 @@ def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
             channel_axis=2,
             data_range=1.0,
             gaussian_weights=True,
-            sigma=1.5,
+            sigma=SSIM_SIGMA,
             use_sample_covariance=False,
         )
     )

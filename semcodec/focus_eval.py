@@ -8,18 +8,11 @@ focused budget whose object-region PSNR matches the whole-image one.
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 
+from common import psnr
 from semcodec.baselines import transmit_jscc
 from semcodec.codec import Codec
-
-
-def masked_psnr(x: torch.Tensor, y: torch.Tensor, mask: torch.Tensor) -> float:
-    """PSNR (peak 1.0) over the pixels where ``mask`` [1, 1, H, W] > 0.5; images [1, 3, H, W]."""
-    m = (mask > 0.5).float().expand_as(x)
-    mse = float((((x.clamp(0, 1) - y) ** 2) * m).sum() / m.sum().clamp_min(1))
-    return float(10 * np.log10(1.0 / max(mse, 1e-12)))
 
 
 def focus_gain(
@@ -41,7 +34,7 @@ def focus_gain(
     whole = transmit_jscc(
         codec, image, link, snr_db, cbr, generator=torch.Generator().manual_seed(seed)
     )
-    p_whole = masked_psnr(whole.images, image, mask)
+    p_whole = psnr(whole.images, image, mask)
     curve = []
     for f in fractions:
         res = transmit_jscc(
@@ -57,7 +50,7 @@ def focus_gain(
             {
                 "fraction": f,
                 "num_symbols": res.stats["num_symbols"],
-                "object_psnr": masked_psnr(res.images, image, mask),
+                "object_psnr": psnr(res.images, image, mask),
             }
         )
     enough = [r["fraction"] for r in curve if r["object_psnr"] >= p_whole]
@@ -66,7 +59,7 @@ def focus_gain(
         "cbr": cbr,
         "whole_symbols": whole.stats["num_symbols"],
         "whole_object_psnr": p_whole,
-        "whole_psnr": masked_psnr(whole.images, image, torch.ones_like(mask)),
+        "whole_psnr": psnr(whole.images, image, torch.ones_like(mask)),
         "focus_object_psnr_same_symbols": curve[-1]["object_psnr"],
         "focus_curve": curve,
         "object_fraction": float((mask > 0.5).float().mean()),

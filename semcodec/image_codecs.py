@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from common import write_bytes
+
 AVIF_SPEED = 6
 
 
@@ -234,25 +236,6 @@ def get_image_codec(codec: str) -> ImageCodec:
         raise KeyError(f"unknown image codec {codec!r}; known: {sorted(IMAGE_CODECS)}") from None
 
 
-def read_image_file(path) -> Image.Image:
-    """Open and fully decode an image file.
-
-    Raises:
-        ValueError: naming the file when it is not a readable image (corrupt, truncated,
-            another kind of file), so a command reports bad input (exit 2), not a crash.
-    """
-    from PIL import UnidentifiedImageError
-
-    try:
-        with Image.open(path) as im:
-            im.load()
-            return im.copy()
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as e:
-        raise ValueError(
-            f"{path}: not a readable image ({type(e).__name__}); replace or remove it"
-        ) from None
-
-
 def to_uint8(image) -> np.ndarray:
     """[3, H, W] float in [0, 1] (tensor or array) or [H, W, 3] uint8 -> [H, W, 3] uint8."""
     a = np.asarray(image.detach().cpu() if hasattr(image, "detach") else image)
@@ -284,10 +267,7 @@ def _encode_cached(
     if data is None:
         data = c.encoder(Image.fromarray(np.frombuffer(raw, np.uint8).reshape(shape)), quality)
         if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".tmp{os.getpid()}")
-            tmp.write_bytes(data)
-            tmp.replace(path)
+            write_bytes(path, data)
     h, w = shape[:2]
     wire = c.strip(data, h, w)
     if c.rebuild(wire, h, w) != data:

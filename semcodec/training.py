@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from common import write_torch
 from semcodec import distributed
 from semcodec.channel_layers import parse_train_channels
 from semcodec.contract import CODEC_MEMBERS, TRAINABLE_MEMBERS, missing_members
@@ -294,7 +295,14 @@ class _Run:
         }:
             if self.place.rank == 0:
                 print("train-codec: resuming with a changed config", file=sys.stderr)
-        self.codec.module.load_state_dict(st["model"])
+        try:
+            self.codec.module.load_state_dict(st["model"])
+        except RuntimeError:  # another architecture: one line, not torch's key-by-key dump
+            raise ValueError(
+                f"{self.state_path} was trained with {st['config'].get('codec', 'jscc')} "
+                f"architecture {st['config'].get('model')!r}, not {self.cfg.model!r}: resume it "
+                "with that architecture or train into a new folder"
+            ) from None
         self.opt.load_state_dict(st["optimizer"])
         self.step, self.elapsed, self.best = st["step"], st["elapsed_s"], st["best"]
         if self.place.rank == 0:
@@ -315,7 +323,6 @@ class _Run:
         self.codec.save(self.out_dir / "last.safetensors", c)
         if best_now:
             self.codec.save(self.out_dir / "best.safetensors", c)
-        tmp = Path(str(self.state_path) + ".tmp")
         state = {
             "config": dataclasses.asdict(self.cfg),
             "model": self.codec.module.state_dict(),
@@ -325,8 +332,7 @@ class _Run:
             "best": self.best,
             "world_size": self.place.world_size,
         }
-        torch.save(state, str(tmp))
-        tmp.replace(self.state_path)
+        write_torch(self.state_path, state)
 
     def done(self) -> bool:
         cfg = self.cfg

@@ -11,23 +11,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from semcodec.image_codecs import read_image_file
-
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
-
-
-def list_images(folder: str | Path) -> list[Path]:
-    """PNG/JPEG files of a folder, sorted by name."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"image folder not found: {folder}")
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+from common import list_images, read_image
 
 
 def load_uint8_images(paths: list[Path]) -> list[torch.Tensor]:
-    """RGB images as [3, height, width] uint8 tensors."""
+    """RGB images (:func:`common.read_image`: 16-bit, palette, EXIF orientation) as
+    [3, height, width] uint8 tensors."""
     return [
-        torch.from_numpy(np.array(read_image_file(p).convert("RGB"))).permute(2, 0, 1).contiguous()
+        torch.from_numpy(np.round(read_image(p) * 255.0).astype(np.uint8)).permute(2, 0, 1)
         for p in paths
     ]
 
@@ -62,15 +53,16 @@ def random_crops(
 def load_data(crop_px: int, train_dirs: list[Path], val_dir: Path | None):
     """Training images ([3, height, width] uint8, those at least ``crop_px`` a side), their paths and hash, and up to 8
     validation images cropped to one square side (<= 256 px, multiple of 4) or None."""
-    paths = [p for d in train_dirs for p in list_images(d)]
-    if not paths:
-        raise FileNotFoundError(f"no PNG/JPEG training images in {[str(d) for d in train_dirs]}")
+    paths = [p for d in train_dirs for p in list_images(d, "--data")]
     images = [im for im in load_uint8_images(paths) if min(im.shape[1:]) >= crop_px]
     if not images:
-        raise ValueError(f"no training image is at least crop_px = {crop_px} px on each side")
+        raise ValueError(
+            f"crop_px: no training image is at least {crop_px}x{crop_px} px "
+            f"(of {len(paths)} images in {', '.join(str(d) for d in train_dirs)})"
+        )
     val = None
     if val_dir is not None:
-        vimgs = load_uint8_images(list_images(val_dir)[:8])
+        vimgs = load_uint8_images(list_images(val_dir, "--val")[:8])
         if vimgs:
             side = min(256, min(min(im.shape[1:]) for im in vimgs) // 4 * 4)
             val = torch.stack([im[:, :side, :side].float() / 255 for im in vimgs])

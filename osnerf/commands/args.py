@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,9 +25,27 @@ from osnerf.cli import UsageError
 SEED_RANGE = (0, 2**63 - 1)  # what torch.Generator.manual_seed and numpy accept alike
 THREADS_RANGE = (1, 256)
 RESOLUTION_PX_RANGE = (16, 512)  # the same as osnerf.scenes.RenderConfig.resolution_px
+MAX_BUDGET_S = 7 * 24 * 3600.0  # the longest training or time budget a flag takes: a week
+MAX_VIEWS = 10_000  # the most views a command renders or captures
 
 
-def _int_in(text: str, lo: int, hi: int, what: str) -> int:
+def count(lo: int, hi: int) -> Callable:
+    """An argparse type: an integer in [lo, hi] (counts and sizes always have an upper bound)."""
+
+    def parse(text: str) -> int:
+        return int_in(text, lo, hi)
+
+    parse.__name__ = "count"
+    return parse
+
+
+def seconds(text: str) -> float:
+    """A time budget in seconds: a finite number in (0, MAX_BUDGET_S] (one week)."""
+    return number(0.0, MAX_BUDGET_S, "s", low_open=True)(text)
+
+
+def int_in(text: str, lo: int, hi: int, what: str = "") -> int:
+    """An argparse type's body: ``text`` as an integer in [lo, hi], else ArgumentTypeError."""
     try:
         value = int(str(text).strip())
     except ValueError:
@@ -40,22 +59,22 @@ def _int_in(text: str, lo: int, hi: int, what: str) -> int:
 
 def seed(text: str) -> int:
     """``--seed``: an integer in [0, 2**63 - 1]."""
-    return _int_in(text, *SEED_RANGE, "")
+    return int_in(text, *SEED_RANGE, "")
 
 
 def refine_steps(text: str) -> int:
     """``--refine-steps``: an integer in [0, 10000]."""
-    return _int_in(text, 0, 10_000, "")
+    return int_in(text, 0, 10_000, "")
 
 
 def threads(text: str) -> int:
     """``--threads``: torch CPU threads, an integer in [1, 256]."""
-    return _int_in(text, *THREADS_RANGE, "")
+    return int_in(text, *THREADS_RANGE, "")
 
 
 def resolution(text: str) -> int:
     """``--resolution``: image width in pixels, an integer in [16, 512]."""
-    return _int_in(text, *RESOLUTION_PX_RANGE, "of pixels ")
+    return int_in(text, *RESOLUTION_PX_RANGE, "of pixels ")
 
 
 def number(lo: float, hi: float, unit: str = "", *, low_open: bool = False) -> Callable:
@@ -102,6 +121,19 @@ def snr_db_list(text) -> list[float]:
 
 
 # ----------------------------------------------------------------------------- output paths
+def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--overwrite``: without it an existing output that holds results is refused.
+
+    Args:
+        what: what the flag replaces, for its help ("the result JSON and --plot").
+    """
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help=f"replace {what} when it already exists; without it an existing one is refused (exit 2, nothing written)",
+    )
+
+
 def _check_parent(path: Path, flag: str) -> None:
     """The nearest existing ancestor of ``path`` must be a writable folder."""
     parent = path.parent if str(path.parent) else Path(".")
@@ -114,33 +146,96 @@ def _check_parent(path: Path, flag: str) -> None:
             return
 
 
-def output_file(path, flag: str = "--out") -> Path:
-    """Check a result file path before any work: not a folder, its folder creatable.
+def _kind(p: Path, flag: str, want: str) -> str | None:
+    """What ``p`` names (``common.path_kind``); anything but a regular file or folder is
+    refused: a device node, FIFO or symlink would be replaced by the atomic rename."""
+    from common import path_kind
 
+    kind = path_kind(p)
+    if kind not in (None, "a file", "a folder"):
+        raise UsageError(f"{flag} {str(p)!r} is {kind}, not a regular file or folder; give {want}")
+    return kind
+
+
+def _outside_inputs(p: Path, flag: str, inputs: dict[str, str | None] | None) -> None:
+    """Refuse an output inside (or equal to) an input folder, or equal to an input file."""
+    out = Path(os.path.realpath(p))
+    for in_flag, path in (inputs or {}).items():
+        if path is None:
+            continue
+        src = Path(os.path.realpath(path))
+        if out == src or (src.is_dir() and src in out.parents):
+            raise UsageError(
+                f"{flag} {str(p)!r} is inside the input {in_flag} {str(path)!r}: outputs must "
+                "not be written among the inputs; give another path"
+            )
+
+
+def output_file(
+    path,
+    flag: str = "--out",
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    inputs: dict[str, str | None] | None = None,
+) -> Path:
+    """Check a result file path before any work.
+
+    Args:
+        overwrite: an existing file may be replaced (``--overwrite``).
+        resume: an existing file is the command's own to continue (``osnerf sweep``).
+        inputs: ``{"--images": path, ...}``: the output must not be inside any of them.
     Raises:
         UsageError: naming ``flag`` and what is wrong (exit 2). Nothing is created.
     """
     p = Path(path)
-    if p.is_dir():
+    kind = _kind(p, flag, "a file path")
+    if kind == "a folder":
         raise UsageError(f"{flag} {str(p)!r} is a folder; give a file path")
-    if p.exists() and not os.access(p, os.W_OK):
-        raise UsageError(f"{flag} {str(p)!r} exists and is not writable")
+    if kind == "a file":
+        if not os.access(p, os.W_OK):
+            raise UsageError(f"{flag} {str(p)!r} exists and is not writable")
+        if not (overwrite or resume):
+            raise UsageError(
+                f"{flag} {str(p)!r} exists; give --overwrite to replace it, or another path"
+            )
     _check_parent(p, flag)
+    _outside_inputs(p, flag, inputs)
     return p
 
 
-def output_dir(path, flag: str = "--out") -> Path:
-    """Check an output folder path before any work: a folder or creatable as one.
+def output_dir(
+    path,
+    flag: str = "--out",
+    *,
+    overwrite: bool = False,
+    resumable: Callable[[Path], bool] | None = None,
+    inputs: dict[str, str | None] | None = None,
+) -> Path:
+    """Check an output folder path before any work: absent, empty, or replaceable.
 
+    Args:
+        overwrite: a folder that holds files may be written into (``--overwrite``).
+        resumable: ``resumable(folder) -> True`` when a non-empty folder is the command's
+            own unfinished work, which it continues without ``--overwrite``.
+        inputs: ``{"--data": path, ...}``: the output must not be inside any of them.
     Raises:
         UsageError: naming ``flag`` and what is wrong (exit 2). Nothing is created.
     """
     p = Path(path)
-    if p.exists() and not p.is_dir():
+    kind = _kind(p, flag, "a folder path")
+    if kind == "a file":
         raise UsageError(f"{flag} {str(p)!r} is a file; give a folder path")
-    if p.is_dir() and not os.access(p, os.W_OK | os.X_OK):
-        raise UsageError(f"{flag} {str(p)!r} is not writable")
+    if kind == "a folder":
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise UsageError(f"{flag} {str(p)!r} is not writable")
+        if any(p.iterdir()) and not overwrite and not (resumable and resumable(p)):
+            raise UsageError(
+                f"{flag} {str(p)!r} exists and holds files; give --overwrite to write over "
+                "them, or another folder"
+            )
     _check_parent(p, flag)
+    _outside_inputs(p, flag, inputs)
     return p
 
 
@@ -157,13 +252,18 @@ def distinct_outputs(**paths) -> None:
         seen[key] = flag
 
 
-def flag_error(e: ValueError) -> UsageError:
+def flag_error(e: ValueError, flags: dict[str, str] | None = None) -> UsageError:
     """A config's ``ValueError("max_papr_db must be ...")`` as the flag's: ``--max-papr-db must ...``.
 
-    For configs whose field names are the commands' option names (units included).
+    Args:
+        flags: field -> option where they differ (``{"num_train_views": "--views"}``); other
+            fields become ``--field-name``. Every field named in the message is renamed.
     """
     msg = str(e)
-    name, sep, rest = msg.partition(" ")
-    if sep and name.isidentifier() and name.islower():
-        msg = f"--{name.replace('_', '-')} {rest}"
+    renames = dict(flags or {})
+    first, sep, _ = msg.partition(" ")
+    if sep and first.isidentifier() and first.islower():
+        renames.setdefault(first, "--" + first.replace("_", "-"))
+    for name in sorted(renames, key=len, reverse=True):
+        msg = re.sub(rf"(?<![-\w]){re.escape(name)}\b", renames[name], msg)
     return UsageError(msg)

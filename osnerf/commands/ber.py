@@ -46,6 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG: simulation and theory")
+    checks.add_overwrite(p, "--out and --plot")
 
 
 def parse_snr_list(text) -> list[float]:
@@ -80,9 +81,9 @@ def parse_args(args: argparse.Namespace) -> dict:
         raise UsageError(f"--num-bits must be in [1, {MAX_NUM_BITS:.0e}], got {args.num_bits!r}")
     if args.plot is not None and not str(args.plot).lower().endswith(".png"):
         raise UsageError(f"--plot must be a .png path, got {args.plot!r}")
-    checks.output_file(args.out, "--out")
+    checks.output_file(args.out, "--out", overwrite=args.overwrite)
     if args.plot is not None:
-        checks.output_file(args.plot, "--plot")
+        checks.output_file(args.plot, "--plot", overwrite=args.overwrite)
     checks.distinct_outputs(out=args.out, plot=args.plot)
     return {
         "channel": args.channel,
@@ -176,10 +177,9 @@ def plot(config: dict, results: list[dict], path: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    from pathlib import Path
+    from common.files import write_figure
 
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
+    write_figure(path, fig, dpi=120)
     plt.close(fig)
 
 

@@ -25,11 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_figure
 from osnerf.commands import args as checks
+
+MAX_DRAWS = 10_000
+MAX_IMAGES = 100_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--images", required=True, help="folder of PNG/JPEG images")
+    p.add_argument(
+        "--images", required=True, help="an image file, or a folder of images (png, jpg, ...)"
+    )
     from semcodec.evaluation import eval_channels, schemes_help
 
     p.add_argument(
@@ -41,9 +47,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--draws",
-        type=int,
+        type=checks.count(1, MAX_DRAWS),
         default=1,
-        help="independent noise and fading draws per image (default 1); results give the "
+        help=f"independent noise and fading draws per image, 1..{MAX_DRAWS} (default 1); "
+        "results give the "
         "mean and a 95%% interval over images x draws",
     )
     p.add_argument(
@@ -73,9 +80,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
-    p.add_argument("--checkpoint", default=None, help="codec checkpoint (default: the shipped one)")
+    checks.add_overwrite(p, "--out and --plot")
+    from semcodec import codec_names
+
     p.add_argument(
-        "--max-images", type=int, default=None, help="use only the first N images (sorted by name)"
+        "--codec",
+        default=None,
+        metavar="NAME[:CHECKPOINT]",
+        help=f"the semantic codec: one of {', '.join(codec_names())} (plugins through the "
+        "semcodec.codecs entry points), optionally with a checkpoint, or a checkpoint path "
+        "(default: jscc with the shipped checkpoint)",
+    )
+    p.add_argument(
+        "--max-images",
+        type=checks.count(1, MAX_IMAGES),
+        default=None,
+        help=f"use only the first N images (sorted by name), 1..{MAX_IMAGES}",
     )
     p.add_argument(
         "--no-lpips",
@@ -110,12 +130,12 @@ def mean_ci95(values) -> tuple[float, float, float]:
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from common import psnr
     from osnerf.provenance import result_header, write_json_atomic
     from osnerf.schemes import parse_schemes
-    from phy import parse_cbr
+    from phy import num_symbols_for_cbr, parse_cbr
     from renderer import LPIPS_MIN_SIDE_PX, lpips, lpips_weights
-    from semcodec.baselines import psnr
-    from semcodec.codec import load_codec
+    from semcodec import open_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
         LINK_SCHEMES,
@@ -125,16 +145,15 @@ def run(args: argparse.Namespace) -> int:
         ssim,
     )
 
-    out = checks.output_file(args.out, "--out")
+    inputs = {"--images": args.images}
+    out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     if args.plot:
-        checks.output_file(args.plot, "--plot")
+        checks.output_file(args.plot, "--plot", overwrite=args.overwrite, inputs=inputs)
     checks.distinct_outputs(out=args.out, plot=args.plot)
     torch.set_num_threads(args.threads)
     channels = eval_channels()
     if args.channel not in channels:
         raise KeyError(f"--channel: unknown channel {args.channel!r}; known: {channels}")
-    if args.draws < 1:
-        raise ValueError(f"--draws must be >= 1, got {args.draws}")
     schemes = parse_schemes(args.schemes, LINK_SCHEMES)
     snrs = list(args.snr_db)
     try:
@@ -149,25 +168,27 @@ def run(args: argparse.Namespace) -> int:
             raise KeyError(f"--mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
     codec = None
     if any(LINK_SCHEMES[s].needs_codec for s in schemes):
-        codec = load_codec(args.checkpoint)
+        codec = open_codec(args.codec)
         lo, hi = codec.cbr_range
-        try:
-            codec.channels_for_cbr(cbr)
-        except ValueError:
+        if not lo * 0.999 <= cbr <= hi * 1.001:
             raise ValueError(
-                f"--cbr {args.cbr} is outside the codec's range [1/48, {round(hi * 48)}/48]"
-            ) from None
+                f"--cbr {args.cbr} is outside codec {codec.name!r}'s range [{lo:.4g}, {hi:.4g}]"
+            )
         slo, shi = codec.snr_range_db
         if not slo <= min(snrs) <= max(snrs) <= shi:
             raise ValueError(
-                f"--snr-db [{min(snrs):g}, {max(snrs):g}] dB is not covered by checkpoint "
+                f"--snr-db [{min(snrs):g}, {max(snrs):g}] dB is not covered by codec "
                 f"{codec.name!r}, trained for SNR [{slo:g}, {shi:g}] dB"
             )
     names, images = load_image_folder(args.images)
     if args.max_images is not None:
-        if args.max_images < 1:
-            raise ValueError(f"--max-images must be >= 1, got {args.max_images}")
         names, images = names[: args.max_images], images[: args.max_images]
+    for name, img in zip(names, images):
+        if num_symbols_for_cbr(cbr, *img.shape[-2:]) < 1:
+            raise ValueError(
+                f"--cbr {args.cbr} gives {name} ({img.shape[-1]}x{img.shape[-2]} px) no channel "
+                "symbol; give a larger --cbr"
+            )
     score_lpips = not args.no_lpips and all(
         min(img.shape[-2:]) >= LPIPS_MIN_SIDE_PX for img in images
     )
@@ -200,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         "refine_steps": args.refine_steps
         if any(LINK_SCHEMES[s].refines for s in schemes)
         else None,
-        "checkpoint": args.checkpoint,
+        "codec": args.codec,
         "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
         "lpips": score_lpips,
         "lost_image": "mid-grey 0.5",
@@ -316,7 +337,6 @@ def _plot(results: list[dict], path: Path, title: str) -> None:
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend()
-    path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    write_figure(path, fig, dpi=120)
     plt.close(fig)

@@ -164,10 +164,12 @@ def run(args: argparse.Namespace) -> int:
     serials = [d.serial_number for d in find_hackrfs(backend)]
     if args.serial:
         serials = [s for s in serials if s.endswith(args.serial.lower())]
-    print("osnerf hil info (pure pyusb, no libhackrf)")
     if not serials:
-        print("No HackRF boards found.")
-        return 0 if _pluto_info() else 1
+        if _pluto_info():  # no HackRF, but a Pluto
+            return 0
+        which = f" with a serial ending in {args.serial!r}" if args.serial else ""
+        raise RuntimeError(f"no HackRF or Pluto board found{which}")
+    print("osnerf hil info (pure pyusb, no libhackrf)")
     for i, serial in enumerate(serials):
         try:
             with HackRF.open(serial, backend=backend, configure=False) as dev:

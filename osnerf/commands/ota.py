@@ -33,13 +33,37 @@ import numpy as np
 
 from hil.devices import DEVICES as HARDWARE
 from osnerf.commands import args as checks
+from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
 
 DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
+MAX_IMAGES = 10_000
+OTA_CONFIG_FIELDS = (
+    "sample_rate_hz",
+    "center_freq_hz",
+    "max_papr_db",
+    "symbols_per_frame",
+    "detection_threshold",
+    "max_rx_overruns",
+)
+OTA_FLAGS = {"max_rx_overruns": "--max-overruns"}
+
+
+def check_codec_snr(spec: str | None, snr_db: float) -> None:
+    """Refuse an ``--snr-db`` outside the SNR range the codec declares."""
+    from semcodec import open_codec
+
+    codec = open_codec(spec)
+    lo, hi = codec.snr_range_db
+    if not lo <= snr_db <= hi:
+        raise _usage(
+            f"--snr-db {snr_db:g} dB is not covered by checkpoint {codec.name!r}, trained for "
+            f"SNR [{lo:g}, {hi:g}] dB"
+        )
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from hil import OtaConfig
     from hil.air import MAX_DELAY_S, SNR_DB_RANGE
     from hil.emulator import FAULT_NAMES
     from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
@@ -68,11 +92,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=15.0,
         help="air SNR of emulated boards, dB (default 15)",
     )
-    p.add_argument("--images", required=True, help="folder of images (png/jpg/...)")
+    p.add_argument(
+        "--images", required=True, help="an image file, or a folder of images (png, jpg, ...)"
+    )
     p.add_argument("--out", required=True, help="result JSON path")
     p.add_argument(
         "--sigmf-dir", default=None, help="SigMF folder (default: <out>_sigmf beside --out)"
     )
+    checks.add_overwrite(p, "--out and the SigMF files in --sigmf-dir")
     p.add_argument(
         "--seed", type=checks.seed, default=0, help="seed of the emulated air (default 0)"
     )
@@ -91,10 +118,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="propagation delay, microseconds (default 5)",
     )
     p.add_argument(
-        "--size", type=int, default=64, help="images are centre-cropped and resized to SIZE x SIZE"
+        "--size",
+        type=checks.count(8, 1024),
+        default=64,
+        help="images are centre-cropped and resized to SIZE x SIZE, 8..1024 px; never "
+        "upscaled (default 64)",
     )
     p.add_argument(
-        "--max-images", type=int, default=4, help="send at most this many images (default 4)"
+        "--max-images",
+        type=checks.count(1, MAX_IMAGES),
+        default=4,
+        help=f"send at most this many images, 1..{MAX_IMAGES} (default 4)",
     )
     p.add_argument(
         "--mcs",
@@ -115,37 +149,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--cbr", default="1/16", help="jscc: channel symbols per source value (default 1/16)"
     )
+    from semcodec import codec_names
+
     p.add_argument(
-        "--codec", default=None, help="jscc: codec checkpoint (default: the shipped one)"
+        "--codec",
+        default=None,
+        metavar="NAME[:CHECKPOINT]",
+        help=f"jscc: the semantic codec, one of {', '.join(codec_names())} (plugins through "
+        "the semcodec.codecs entry points), optionally with a checkpoint, or a checkpoint path "
+        "(default: jscc with the shipped checkpoint)",
     )
-    p.add_argument(
-        "--sample-rate-hz",
-        type=checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
-        default=4e6,
-        help="both radios (default 4e6)",
-    )
-    p.add_argument(
-        "--center-freq-hz",
-        type=checks.number(*FREQ_RANGE_HZ, "Hz"),
-        default=2.45e9,
-        help="both radios (default 2.45e9)",
-    )
-    p.add_argument(
-        "--max-papr-db", type=float, default=9.0, help="PAPR clip; mean power is -PAPR dBFS"
-    )
-    p.add_argument("--symbols-per-frame", type=int, default=2048, help="data symbols per frame")
-    p.add_argument(
-        "--detection-threshold",
-        type=float,
-        default=0.015,
-        help="normalised preamble correlation that counts as a frame, in (0, 1) (default 0.015: "
-        "4e-14 false alarms per lag and CFO hypothesis in noise, finds frames at -10 dB)",
-    )
-    p.add_argument(
-        "--max-overruns",
-        type=int,
-        default=0,
-        help="receive overruns (lost samples) tolerated before the run fails (default 0)",
+    add_config_arguments(
+        p,
+        OtaConfig,
+        OTA_CONFIG_FIELDS,
+        flags=OTA_FLAGS,
+        types={
+            "sample_rate_hz": checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
+            "center_freq_hz": checks.number(*FREQ_RANGE_HZ, "Hz"),
+            "max_papr_db": finite,  # OtaConfig's own check names its range
+            "symbols_per_frame": checks.count(64, 1 << 20),
+            "detection_threshold": checks.number(0.0, 1.0),
+            "max_rx_overruns": checks.count(0, 1_000_000),
+        },
+        defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
     )
     p.add_argument(
         "--fault",
@@ -207,28 +234,39 @@ def parse_ppm(value: str) -> tuple[float, float]:
     return a, b
 
 
-def load_images(folder: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
-    """Centre-cropped, resized images: (names, [batch, 3, size, size] float32 in [0, 1])."""
+def load_images(path: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
+    """Centre-cropped, resized images of ``--images`` (a folder, or one file), read by
+    :func:`common.read_image`: (names, [batch, 3, size, size] float32 in [0, 1]).
+
+    An image whose square crop is smaller than ``size`` is refused, never upscaled.
+    """
     from PIL import Image
 
-    from semcodec.image_codecs import read_image_file
+    from common import list_images, read_image
 
-    root = Path(folder)
-    if not root.is_dir():
-        raise FileNotFoundError(f"--images: no such folder {folder!r}")
-    files = sorted(f for f in root.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)[:max_images]
-    if not files:
-        raise FileNotFoundError(f"--images: no images ({', '.join(IMAGE_SUFFIXES)}) in {folder!r}")
+    files = list_images(path, "--images")[:max_images]
     out = []
     for f in files:
         try:
-            im = read_image_file(f).convert("RGB")
+            a = read_image(f)
         except ValueError as e:
             raise _usage(f"--images: {e}") from None
-        s = min(im.size)
-        left, top = (im.size[0] - s) // 2, (im.size[1] - s) // 2
-        im = im.crop((left, top, left + s, top + s)).resize((size, size), Image.Resampling.LANCZOS)
-        out.append(np.asarray(im, np.float32).transpose(2, 0, 1) / 255.0)
+        h, w = a.shape[:2]
+        s = min(h, w)
+        if s < size:
+            raise _usage(
+                f"--images: {f.name} is {w}x{h} px, smaller than --size {size}: it would be "
+                "upscaled; give a larger image or a smaller --size"
+            )
+        top, left = (h - s) // 2, (w - s) // 2
+        crop = a[top : top + s, left : left + s]
+        chans = [
+            np.asarray(
+                Image.fromarray(crop[..., c], "F").resize((size, size), Image.Resampling.LANCZOS)
+            )
+            for c in range(3)
+        ]
+        out.append(np.clip(np.stack(chans), 0.0, 1.0).astype(np.float32))
     return [f.name for f in files], np.stack(out)
 
 
@@ -361,9 +399,9 @@ def jscc_blocks(images, args, cfg=None):
     import torch
 
     from phy import parse_cbr
-    from semcodec import load_codec
+    from semcodec import open_codec
 
-    codec = load_codec(args.codec)
+    codec = open_codec(args.codec)
     cbr = parse_cbr(args.cbr)
     encs = [codec.encode(torch.from_numpy(img)[None], args.snr_db, cbr) for img in images]
     return [e.symbols[0].numpy() for e in encs], (encs, codec)
@@ -429,11 +467,6 @@ def run(args: argparse.Namespace) -> int:
     from hil import HilError, OtaConfig, save_partial_capture, save_sigmf, send_blocks
     from osnerf.provenance import result_header, write_json_atomic
     from phy import parse_cbr
-
-    if not 8 <= args.size <= 1024:
-        raise _usage(f"--size must be in [8, 1024] px, got {args.size}")
-    if args.max_images < 1:
-        raise _usage(f"--max-images must be >= 1, got {args.max_images}")
     from semcodec.image_codecs import IMAGE_CODECS
 
     qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
@@ -441,8 +474,6 @@ def run(args: argparse.Namespace) -> int:
         raise _usage(
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
-    if args.max_overruns < 0:
-        raise _usage(f"--max-overruns must be >= 0, got {args.max_overruns}")
     device_kinds(args)
     parse_ppm(args.ppm)
     parse_multipath(args.multipath)
@@ -452,20 +483,12 @@ def run(args: argparse.Namespace) -> int:
             parse_cbr(args.cbr)
         except ValueError as e:
             raise _usage(f"--{e}") from None
-    try:
-        cfg = OtaConfig(
-            sample_rate_hz=args.sample_rate_hz,
-            center_freq_hz=args.center_freq_hz,
-            max_papr_db=args.max_papr_db,
-            symbols_per_frame=args.symbols_per_frame,
-            detection_threshold=args.detection_threshold,
-            max_rx_overruns=args.max_overruns,
-        )
-    except ValueError as e:
-        raise checks.flag_error(e) from None
-    out = checks.output_file(args.out, "--out")
+        check_codec_snr(args.codec, args.snr_db)
+    cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
+    inputs = {"--images": args.images}
+    out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
-    checks.output_dir(sigmf_dir, "--sigmf-dir")
+    checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
     t0 = time.perf_counter()
     blocks, state = trx.send(images, args, cfg)

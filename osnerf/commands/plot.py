@@ -22,6 +22,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--formats", default="png,pdf", help="comma-separated: png, pdf, svg (default png,pdf)"
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into an --out folder that already holds files; without it such a folder is refused (exit 2)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.plots import make_plots
     from osnerf.sweeps import read_results
 
-    checks.output_dir(args.out, "--out")
+    checks.output_dir(args.out, "--out", overwrite=args.overwrite)
     formats = tuple(f.strip().lower() for f in args.formats.split(",") if f.strip())
     records = read_results(args.results)
     if not records:

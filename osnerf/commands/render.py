@@ -15,11 +15,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
+from common import atomic_path, write_png
 from osnerf.cli import UsageError
 from osnerf.commands import args as checks
 
@@ -32,8 +35,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         required=True,
         help="run folder of `osnerf train-nerf` (with model.pt), or a model .pt file",
     )
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--num-views", type=int, default=60, help="views on the orbit (default 60)")
+    p.add_argument("--out", required=True, help="output folder (frames/, video, render.json)")
+    checks.add_overwrite(p, "the frames, video and render.json of an --out folder")
+    p.add_argument(
+        "--num-views",
+        type=checks.count(1, checks.MAX_VIEWS),
+        default=60,
+        help=f"views on the orbit, 1..{checks.MAX_VIEWS} (default 60)",
+    )
     p.add_argument(
         "--resolution",
         type=checks.resolution,
@@ -42,17 +51,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--elevation-deg",
-        type=float,
+        type=checks.number(-90.0, 90.0, "deg"),
         default=30.0,
-        help="orbit elevation above the horizon (default 30)",
+        help="orbit elevation above the horizon, -90..90 (default 30)",
     )
     p.add_argument(
         "--radius-m",
-        type=float,
+        type=checks.number(0.0, 1e4, "m", low_open=True),
         default=None,
         help="orbit radius (default: mean training camera distance)",
     )
-    p.add_argument("--arc-deg", type=float, default=360.0, help="orbit arc (default 360)")
+    p.add_argument(
+        "--arc-deg",
+        type=checks.number(0.0, 360.0, "deg", low_open=True),
+        default=360.0,
+        help="orbit arc, (0, 360] (default 360)",
+    )
     p.add_argument(
         "--path",
         default=None,
@@ -72,16 +86,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--lightweight-seconds",
-        type=float,
+        type=checks.seconds,
         default=None,
         help="lightweight and features renderers: training budget in seconds (default: "
         "the renderer's own, 60 and 180)",
     )
-    p.add_argument("--seed", type=int, default=0, help="learned renderers' seed (default 0)")
+    p.add_argument(
+        "--seed", type=checks.seed, default=0, help="learned renderers' seed (default 0)"
+    )
     p.add_argument(
         "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
     )
-    p.add_argument("--fps", type=float, default=24.0, help="video frame rate (default 24)")
+    p.add_argument(
+        "--fps",
+        type=checks.number(0.0, 240.0, "frames/s", low_open=True),
+        default=24.0,
+        help="video frame rate, (0, 240] (default 24)",
+    )
     p.add_argument(
         "--threads", type=checks.threads, default=2, help="torch CPU threads (default 2)"
     )
@@ -133,23 +154,15 @@ def run(args: argparse.Namespace) -> int:
             f"--lightweight-preset must be one of {', '.join(LIGHTWEIGHT_PRESETS)}, "
             f"got {args.lightweight_preset!r}"
         )
-    if args.lightweight_seconds is not None and not args.lightweight_seconds > 0:
-        raise UsageError(f"--lightweight-seconds must be > 0, got {args.lightweight_seconds}")
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
-    if args.num_views < 1:
-        raise UsageError(f"--num-views must be >= 1, got {args.num_views}")
-    if args.radius_m is not None and not args.radius_m > 0:
-        raise UsageError(f"--radius-m must be > 0, got {args.radius_m}")
-    if not args.fps > 0:
-        raise UsageError(f"--fps must be > 0, got {args.fps}")
     run_path = Path(args.run)
     model_path = run_path / "model.pt" if run_path.is_dir() else run_path
     if not model_path.is_file():
         raise FileNotFoundError(
             f"--run {run_path}: no model.pt (train one with `osnerf train-nerf`)"
         )
-    out_dir = checks.output_dir(args.out, "--out")
+    out_dir = checks.output_dir(args.out, "--out", overwrite=args.overwrite)
     torch.set_num_threads(args.threads)
     try:
         model = load_model(model_path)
@@ -190,32 +203,39 @@ def run(args: argparse.Namespace) -> int:
     rendered = rend.render_path(poses, intr)
 
     out_dir = Path(args.out)
-    (out_dir / "frames").mkdir(parents=True, exist_ok=True)
+    for old in sorted((out_dir / "frames").glob("[0-9][0-9][0-9].png")):
+        old.unlink()  # --overwrite: no frame of an earlier render stays beside the new ones
     frames = []
     for i, rgb in enumerate(rendered["rgb"]):
         if not torch.isfinite(rgb).all():
             raise RuntimeError(
                 f"view {i} rendered non-finite colours: the model {model_path} is broken"
             )
-        frame = to_uint8(rgb)[..., ::-1]  # BGR for OpenCV
-        cv2.imwrite(str(out_dir / "frames" / f"{i:03d}.png"), frame)
-        frames.append(frame)
+        frame = to_uint8(rgb)
+        write_png(out_dir / "frames" / f"{i:03d}.png", frame)
+        frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
     video = None
     if args.video == "mp4":
         video = out_dir / "path.mp4"
-        writer = cv2.VideoWriter(
-            str(video), cv2.VideoWriter_fourcc(*"mp4v"), args.fps, (intr.width, intr.height)
-        )
-        for f in frames:
-            writer.write(f)
-        writer.release()
+        with atomic_path(video) as tmp:
+            writer = cv2.VideoWriter(
+                str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), args.fps, (intr.width, intr.height)
+            )
+            if not writer.isOpened():
+                raise RuntimeError(f"OpenCV could not write {video}")
+            for f in frames:
+                writer.write(f)
+            writer.release()
+            if os.path.getsize(tmp) == 0:
+                raise OSError(errno.EIO, "OpenCV wrote an empty video", str(video))
     elif args.video == "gif":
         video = out_dir / "path.gif"
         anim = cv2.Animation()
         anim.frames = frames
         anim.durations = [int(round(1000 / args.fps))] * len(frames)
-        if not cv2.imwriteanimation(str(video), anim):
-            raise RuntimeError(f"OpenCV could not write {video}")
+        with atomic_path(video) as tmp:
+            if not cv2.imwriteanimation(str(tmp), anim):
+                raise OSError(errno.EIO, "OpenCV could not write the animation", str(video))
     cfg = {k: v for k, v in vars(args).items() if k != "func"}
     record = result_header(cfg, None)
     record.update(

@@ -11,128 +11,112 @@ resumes from the stages cached in RUN_DIR/cache/.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import asdict
 from pathlib import Path
 
 from osnerf.commands import args as checks
+from osnerf.commands.config_cli import add_config_arguments, config_from_args
+
+# RunConfig fields that are options, in --help order, and the options named otherwise.
+CONFIG_FIELDS = (
+    "scene",
+    "demand",
+    "channel",
+    "snr_db",
+    "schemes",
+    "seed",
+    "max_seconds",
+    "resolution_px",
+    "num_train_views",
+    "num_test_views",
+    "symbol_rate_hz",
+    "codec",
+    "receiver_codec",
+    "mcs",
+    "image_codec",
+    "nerf_steps",
+    "ota_device",
+    "nerf_clock",
+    "lightweight_seconds",
+    "refine_steps",
+)
+FLAGS = {
+    "resolution_px": "--resolution",
+    "num_train_views": "--views",
+    "num_test_views": "--test-views",
+}
+MAX_NERF_STEPS = 10_000_000
+
+
+def _demand(text: str) -> str:
+    """``--demand``: OBJECT[:WEIGHT][,OBJECT...], not empty (leave the flag out for the
+    scene's default demand)."""
+    if not str(text).strip():
+        raise argparse.ArgumentTypeError(
+            "must name at least one object (OBJECT[:WEIGHT][,...]); leave --demand out for "
+            "the scene's default demand"
+        )
+    return text
+
+
+def _schemes(text: str, parse) -> tuple[str, ...]:
+    """``--schemes``: known names, each once, no empty item (``jscc,`` is a typo, not jscc)."""
+    items = [s.strip() for s in str(text).split(",")]
+    if not all(items) or len(set(items)) != len(items):
+        raise argparse.ArgumentTypeError(
+            f"must name each scheme once, comma-separated, with no empty item, got {text!r}"
+        )
+    return tuple(parse(text))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import RUN_CHANNELS, RunConfig
-    from osnerf.scenes import DEFAULT_SCENE
-    from osnerf.schemes import DEFAULT_SCHEMES, load_entry_points, parse_schemes
+    from osnerf.schemes import load_entry_points, parse_schemes
     from phy.digital import MCS_TABLE
     from semcodec import IMAGE_CODECS
 
-    schemes = load_entry_points()
-
-    p.add_argument(
-        "--scene",
-        default=DEFAULT_SCENE,
-        help=f"built-in scene (default {DEFAULT_SCENE}; see `osnerf scenes`)",
+    add_config_arguments(
+        p,
+        RunConfig,
+        CONFIG_FIELDS,
+        flags=FLAGS,
+        types={
+            "demand": _demand,
+            "snr_db": checks.snr_db,
+            "schemes": lambda text: _schemes(text, parse_schemes),
+            "seed": checks.seed,
+            "max_seconds": checks.seconds,
+            "resolution_px": checks.resolution,
+            "num_train_views": checks.count(2, 512),
+            "num_test_views": checks.count(1, 256),
+            "symbol_rate_hz": checks.number(0.0, 1e12, "Hz", low_open=True),
+            "nerf_steps": checks.count(1, MAX_NERF_STEPS),
+            "lightweight_seconds": checks.number(0.0, checks.MAX_BUDGET_S, "s"),
+            "refine_steps": checks.refine_steps,
+        },
+        choices={
+            "channel": RUN_CHANNELS,
+            "mcs": ("auto", *MCS_TABLE),
+            "image_codec": tuple(IMAGE_CODECS),
+            "ota_device": OTA_DEVICES,
+            "nerf_clock": ("wall", "cpu"),
+        },
     )
+    schemes = next(a for a in p._actions if a.dest == "schemes")
+    schemes.help += "; known: " + "; ".join(
+        f"{n}: {c.help}" for n, c in load_entry_points().items()
+    ).replace("%", "%%")
     p.add_argument(
-        "--demand",
-        default=None,
-        help="OBJECT[:WEIGHT][,OBJECT...] (default: the scene's default demand)",
+        "--out",
+        required=True,
+        help="RUN_DIR: report and stage cache; a run of the same config there is continued "
+        "from its cache (the same numbers); a folder holding anything else is refused "
+        "without --overwrite",
     )
-    p.add_argument(
-        "--channel",
-        default="rayleigh",
-        choices=RUN_CHANNELS,
-        help="phy's channels (flat ones with perfect CSI; tdl/cdl over OFDM with LS "
-        "estimates; raytraced per drone position) or ota (default rayleigh: block fading)",
-    )
-    p.add_argument("--snr-db", type=checks.snr_db, default=0.0, help="Es/N0 in dB (default 0)")
-    p.add_argument(
-        "--schemes",
-        type=parse_schemes,
-        default=DEFAULT_SCHEMES,
-        help="comma-separated schemes: "
-        + "; ".join(f"{n}: {c.help}" for n, c in schemes.items())
-        + f" (default {','.join(DEFAULT_SCHEMES)})",
-    )
-    p.add_argument("--seed", type=checks.seed, default=0)
-    p.add_argument("--out", required=True, help="RUN_DIR: report and stage cache")
-    p.add_argument(
-        "--max-seconds",
-        type=float,
-        default=600.0,
-        help="cap on NeRF training seconds per scheme (the budget itself with --nerf-steps 0; default 600)",
-    )
-    p.add_argument(
-        "--resolution",
-        type=checks.resolution,
-        default=80,
-        help="drone image size in pixels, 16..512 (default 80)",
-    )
-    p.add_argument("--views", type=int, default=24, help="drone views captured (default 24)")
-    p.add_argument(
-        "--test-views", type=int, default=8, help="held-out views for scoring (default 8)"
-    )
-    p.add_argument(
-        "--symbol-rate-hz", type=float, default=1e6, help="for air time (default 1e6 symbols/s)"
-    )
-    p.add_argument(
-        "--codec", default=None, help="codec checkpoint (default: semcodec's shipped one)"
-    )
-    p.add_argument(
-        "--receiver-codec", default=None, help="receiver's checkpoint (default: the same)"
-    )
-    p.add_argument(
-        "--mcs",
-        default="auto",
-        choices=("auto", *MCS_TABLE),
-        metavar="MCS",
-        help="the digital scheme's MCS: auto (from the average SNR alone, no CSI at the "
-        f"transmitter; default) or a fixed one of {', '.join(MCS_TABLE)}; digital_genie is the "
-        "bound that knows each draw",
-    )
-    p.add_argument(
-        "--image-codec",
-        default="avif",
-        choices=tuple(IMAGE_CODECS),
-        help=f"digital baseline image codec: {', '.join(IMAGE_CODECS)} (default avif)",
-    )
-    p.add_argument(
-        "--nerf-steps",
-        type=int,
-        default=6000,
-        help="NeRF steps per scheme, equal for all (default 6000; 0: the same --max-seconds instead)",
-    )
-    p.add_argument(
-        "--ota-device",
-        default="emulated",
-        choices=OTA_DEVICES,
-        help="--channel ota: two emulated HackRFs (default), two real ones on USB (hackrf) or "
-        "one Pluto (pluto: the first libiio finds, or ip:$IIOD_REMOTE)",
-    )
-    p.add_argument(
-        "--nerf-clock",
-        default="cpu",
-        help="what --max-seconds counts: wall, or cpu (CPU s / threads; for shared machines)",
-    )
-    p.add_argument(
-        "--lightweight-seconds",
-        type=float,
-        default=RunConfig.lightweight_seconds,
-        help="the learned renderers of renderer.RENDERERS (lightweight: keyframes + U-Net; "
-        "features: a feature field + decoder, paper 3.3) render the held-out views beside the "
-        "full render of each scheme's field after this many seconds of training each; the "
-        f"report gives each one's time per view and PSNR (default {RunConfig.lightweight_seconds:g}; "
-        "0: skip)",
-    )
-    p.add_argument(
-        "--refine-steps",
-        type=checks.refine_steps,
-        default=RunConfig.refine_steps,
-        help="the jscc transmitter refines each view's symbols with this many Adam steps on "
-        "the expected distortion over its own model of the channel (knows the decoder, the "
-        "channel kind and the view's SNR, not the draw; default "
-        f"{RunConfig.refine_steps}; 0: the encoder's symbols)",
-    )
+    checks.add_overwrite(p, "what a --out folder holds (another config's run, other files)")
     p.add_argument(
         "--cache-dir",
         default=None,
@@ -144,28 +128,7 @@ def run_config(args: argparse.Namespace):
     """The ``osnerf.run.RunConfig`` of parsed arguments (validates them)."""
     from osnerf.run import RunConfig
 
-    return RunConfig(
-        scene=args.scene,
-        demand=args.demand,
-        channel=args.channel,
-        snr_db=args.snr_db,
-        schemes=tuple(args.schemes),
-        seed=args.seed,
-        max_seconds=args.max_seconds,
-        resolution_px=args.resolution,
-        num_train_views=args.views,
-        num_test_views=args.test_views,
-        symbol_rate_hz=args.symbol_rate_hz,
-        codec=args.codec,
-        receiver_codec=args.receiver_codec,
-        mcs=args.mcs,
-        image_codec=args.image_codec,
-        nerf_clock=args.nerf_clock,
-        ota_device=args.ota_device,
-        nerf_steps=args.nerf_steps or None,
-        lightweight_seconds=args.lightweight_seconds,
-        refine_steps=args.refine_steps,
-    )
+    return config_from_args(RunConfig, args, CONFIG_FIELDS, flags=FLAGS)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -174,9 +137,18 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.run.cache import check_stage_files
 
     cfg = run_config(args)
-    out = checks.output_dir(args.out, "--out")
-    if args.cache_dir:
-        checks.output_dir(args.cache_dir, "--cache-dir")
+    out = checks.output_dir(
+        args.out,
+        "--out",
+        overwrite=args.overwrite,
+        resumable=lambda d: (d / "cache" / cfg.key()).is_dir(),  # this config's own run
+    )
+    from osnerf.scenes.dataset import default_cache_dir
+
+    cache_flag = "--cache-dir" if args.cache_dir else "$OSNERF_CACHE"
+    cache = args.cache_dir or (os.environ.get("OSNERF_CACHE") and default_cache_dir())
+    if cache:
+        checks.output_dir(cache, cache_flag, resumable=lambda _: True)
     check_stage_files(out / "cache" / cfg.key())
     report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None

@@ -11,10 +11,31 @@ from __future__ import annotations
 import argparse
 import sys
 
+from osnerf.commands import args as checks
+from osnerf.sweeps.spec import MAX_POINTS
+
+MAX_POINTS_LIMIT = 10_000_000
+MAX_WORKERS = 256
+
+
+def max_points(text: str) -> int:
+    """``--max-points``: an integer in [1, MAX_POINTS_LIMIT]."""
+    return checks.int_in(text, 1, MAX_POINTS_LIMIT)
+
+
+def workers(text: str) -> int:
+    """``--workers``: an integer in [1, MAX_WORKERS]."""
+    return checks.int_in(text, 1, MAX_WORKERS)
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", metavar="SPEC", help="sweep spec (.yaml, .yml or .toml)")
-    p.add_argument("--out", required=True, help="results file, JSON Lines (appended; resumed)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="results file, JSON Lines: an existing one of the same spec is resumed (finished "
+        "points kept, failed ones retried); any other existing file is refused",
+    )
     p.add_argument(
         "--executor",
         default="local",
@@ -23,9 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=workers,
         default=None,
-        help="points run in parallel (default: half the CPU cores)",
+        help=f"points run in parallel, 1..{MAX_WORKERS} (default: half the CPU cores)",
     )
     p.add_argument(
         "--ray-address",
@@ -38,19 +59,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="keep each point's own output (JSON, or run folder with views) in DIR (default: deleted)",
     )
+    p.add_argument(
+        "--max-points",
+        type=max_points,
+        default=MAX_POINTS,
+        help=f"refuse a spec with more points than this, counted before they are expanded "
+        f"(default {MAX_POINTS}; at most {MAX_POINTS_LIMIT})",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.commands import args as checks
     from osnerf.sweeps import errors_path, load_spec, run_sweep
 
-    checks.output_file(args.out, "--out")
+    checks.output_file(args.out, "--out", resume=True, inputs={"SPEC": args.spec})
     if args.keep_outputs:
-        checks.output_dir(args.keep_outputs, "--keep-outputs")
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
-    spec = load_spec(args.spec)
+        checks.output_dir(args.keep_outputs, "--keep-outputs", resumable=lambda _: True)
+    spec = load_spec(args.spec, args.max_points)
     summary = run_sweep(
         spec,
         args.out,

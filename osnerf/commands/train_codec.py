@@ -1,6 +1,11 @@
-"""`osnerf train-codec`: train the semantic codec (JSCC) through a channel on CPU.
+"""`osnerf train-codec`: train any registered semantic codec through a channel.
 
-Resumable: run the same command again and it continues from ``OUT/last_state.pt``.
+``--codec NAME[:CHECKPOINT]`` picks the codec (``semcodec.CODECS``, plugins included; a
+checkpoint starts from its weights). On one process it runs as is; under ``torchrun
+--nproc-per-node N -m osnerf.cli train-codec ...`` it trains with DDP (gloo on CPU, nccl on
+``--device cuda``), each rank taking its share of ``--batch-size``, rank 0 writing.
+Resumable at any world size: run the same command again and it continues from
+``OUT/last_state.pt``.
 Writes ``OUT/best.safetensors`` and ``last.safetensors`` (weights + model card),
 ``OUT/log.jsonl`` (loss, PSNR, learning rate) and ``OUT/summary.json``.
 """
@@ -9,18 +14,45 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 from pathlib import Path
 
 from osnerf.cli import UsageError
 from osnerf.commands import args as checks
+from osnerf.commands.config_cli import add_config_arguments, config_from_args, flag_of
 from osnerf.paths import shared_data_dir
+
+# TrainConfig fields that are options, in --help order; all but num_threads keep their name.
+CONFIG_FIELDS = (
+    "codec",
+    "model",
+    "channel",
+    "snr_min_db",
+    "snr_max_db",
+    "focus_snr_min_db",
+    "focus_snr_max_db",
+    "p_wide_snr",
+    "p_focus_m",
+    "decay_fraction",
+    "max_minutes",
+    "crop_px",
+    "batch_size",
+    "lr",
+    "save_every_s",
+    "eval_every_s",
+    "num_threads",
+    "seed",
+    "max_steps",
+    "device",
+    "ddp_backend",
+)
+FLAGS = {"num_threads": "--threads"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from semcodec.training import TrainConfig
 
-    d = TrainConfig()
     p.add_argument(
         "--data",
         action="append",
@@ -29,121 +61,126 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--val", default=None, help="validation image folder (default: BSDS500 test)")
     p.add_argument(
-        "--out", required=True, help="output folder (checkpoints, log.jsonl, summary.json)"
-    )
-    p.add_argument("--model", default=d.model, help=f"architecture (default: {d.model})")
-    from semcodec.channel_layers import TRAIN_CHANNELS
-
-    p.add_argument(
-        "--channel",
-        default=d.channel,
-        help=f"training channel, or a comma-separated mixture drawn per step: {', '.join(TRAIN_CHANNELS)} (default: {d.channel})",
-    )
-    for name in (
-        "snr_min_db",
-        "snr_max_db",
-        "focus_snr_min_db",
-        "focus_snr_max_db",
-        "p_wide_snr",
-        "p_focus_m",
-        "decay_fraction",
-    ):
-        p.add_argument(
-            "--" + name.replace("_", "-"),
-            type=float,
-            default=getattr(d, name),
-            help=f"TrainConfig.{name} (default: {getattr(d, name)})",
-        )
-    p.add_argument(
-        "--max-minutes", type=float, default=d.max_minutes, help="training time budget in minutes"
+        "--out",
+        required=True,
+        help="output folder (checkpoints, log.jsonl, summary.json); a folder holding an "
+        "earlier training (last_state.pt) is resumed, any other non-empty folder is refused "
+        "without --overwrite",
     )
     p.add_argument(
-        "--crop-px", type=int, default=d.crop_px, help=f"crop size (default: {d.crop_px})"
+        "--overwrite",
+        action="store_true",
+        help="train into an --out folder that holds other files, or start over with "
+        "--no-resume in one that holds a training; without it such a folder is refused (exit 2)",
     )
-    p.add_argument(
-        "--batch-size",
-        type=int,
-        default=d.batch_size,
-        help=f"crops per step (default: {d.batch_size})",
-    )
-    p.add_argument("--lr", type=float, default=d.lr, help=f"peak learning rate (default: {d.lr})")
-    p.add_argument(
-        "--save-every-s", type=float, default=d.save_every_s, help="seconds between checkpoints"
-    )
-    p.add_argument(
-        "--eval-every-s", type=float, default=d.eval_every_s, help="seconds between validations"
-    )
-    p.add_argument(
-        "--threads",
-        type=checks.threads,
-        default=d.num_threads,
-        help="torch CPU threads (default: 2)",
+    probability = checks.number(0.0, 1.0)
+    add_config_arguments(
+        p,
+        TrainConfig,
+        CONFIG_FIELDS,
+        flags=FLAGS,
+        types={
+            "channel": None,
+            "p_wide_snr": probability,
+            "p_focus_m": probability,
+            "decay_fraction": probability,
+            "max_minutes": checks.number(0.0, checks.MAX_BUDGET_S / 60, "min", low_open=True),
+            "crop_px": checks.count(16, 512),
+            "batch_size": checks.count(1, 256),
+            "lr": checks.number(0.0, 0.1, low_open=True),
+            "save_every_s": checks.seconds,
+            "eval_every_s": checks.seconds,
+            "num_threads": checks.count(1, 64),
+            "seed": checks.seed,
+            "max_steps": checks.count(0, 10_000_000),
+        },
     )
     p.add_argument(
         "--init", default=None, help="start from this checkpoint (fine-tuning, e.g. on rayleigh)"
     )
-    p.add_argument("--no-resume", action="store_true", help="start over even if OUT holds a run")
     p.add_argument(
-        "--seed", type=checks.seed, default=0, help="seed of crops, SNRs, rates and noise"
+        "--no-resume",
+        action="store_true",
+        help="start over even if OUT holds a training (needs --overwrite)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.provenance import result_header, write_json_atomic
-    from semcodec.model import MODELS
-    from semcodec.training import TrainConfig, load_train_state, train
+    cfg, data, val, init, out = parse(args)
+    summary = train_codec(cfg, data, val, init, out, resume=not args.no_resume)
+    report(cfg, summary, out)
+    return 0
 
-    if args.model not in MODELS:
-        raise KeyError(f"--model must be one of {sorted(MODELS)}, got {args.model!r}")
-    cfg = TrainConfig(
-        model=args.model,
-        channel=args.channel,
-        crop_px=args.crop_px,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        max_minutes=args.max_minutes,
-        save_every_s=args.save_every_s,
-        eval_every_s=args.eval_every_s,
-        seed=args.seed,
-        num_threads=args.threads,
-        snr_min_db=args.snr_min_db,
-        snr_max_db=args.snr_max_db,
-        focus_snr_min_db=args.focus_snr_min_db,
-        focus_snr_max_db=args.focus_snr_max_db,
-        p_wide_snr=args.p_wide_snr,
-        p_focus_m=args.p_focus_m,
-        decay_fraction=args.decay_fraction,
-    )
+
+def parse(args: argparse.Namespace):
+    """Check every input before any work: (config, data folders, validation folder, init
+    checkpoint or None, output folder)."""
+    from semcodec.training import TrainConfig, build_codec, load_train_state
+
+    cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
+    build_codec(cfg, None)  # an unknown codec, architecture or checkpoint: refused before work
     bsds = shared_data_dir() / "bsds500"
+    where = "$OSNERF_DATA" if os.environ.get("OSNERF_DATA") else "the shared data folder"
     data = [Path(d) for d in (args.data or [bsds / "train", bsds / "val"])]
     for d in data:
         if not d.is_dir():
-            raise FileNotFoundError(f"--data folder not found: {d}")
+            if args.data:
+                raise FileNotFoundError(f"--data folder not found: {d}")
+            raise FileNotFoundError(
+                f"{where} {str(shared_data_dir())!r} has no {d.name} in bsds500/; give --data"
+            )
     val = Path(args.val) if args.val else bsds / "test"
     if not val.is_dir():
-        raise FileNotFoundError(f"--val folder not found: {val}")
+        if args.val:
+            raise FileNotFoundError(f"--val folder not found: {val}")
+        raise FileNotFoundError(
+            f"{where} {str(shared_data_dir())!r} has no bsds500/test; give --val"
+        )
     init = Path(args.init) if args.init else None
-    out = checks.output_dir(args.out, "--out")
+    inputs = {**{f"--data {d}": str(d) for d in data}, "--val": str(val)}
+    out = checks.output_dir(
+        args.out,
+        "--out",
+        overwrite=args.overwrite,
+        resumable=lambda d: not args.no_resume and (d / "last_state.pt").is_file(),
+        inputs=inputs,
+    )
     state = out / "last_state.pt"
     if not args.no_resume and state.exists():
         try:
             load_train_state(state)
         except ValueError as e:
-            raise UsageError(f"{e}; start over with --no-resume (or delete it)") from None
-    summary = train(
-        cfg,
-        data,
-        out,
-        val_dir=val,
-        resume=not args.no_resume,
-        init=init,
-        card_extra={"name": f"{cfg.model}-{cfg.channel}"},
-    )
-    write_json_atomic(
-        out / "summary.json", {**result_header(dataclasses.asdict(cfg), args.seed), **summary}
-    )
+            raise UsageError(f"{e}; start over with --no-resume --overwrite") from None
+    return cfg, data, val, init, out
+
+
+def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
+    """Train (resuming when asked and possible); the summary with its result header."""
+    from osnerf.provenance import result_header
+    from semcodec.training import train
+
+    try:
+        summary = train(
+            cfg,
+            data,
+            out,
+            val_dir=val,
+            resume=resume,
+            init=init,
+            card_extra={"name": f"{cfg.codec.split(':')[0]}-{cfg.model}-{cfg.channel}"},
+        )
+    except ValueError as e:
+        raise checks.flag_error(e, {n: flag_of(n, FLAGS) for n in CONFIG_FIELDS}) from None
+    return {**result_header(dataclasses.asdict(cfg), cfg.seed), **summary}
+
+
+def report(cfg, summary: dict, out: Path) -> None:
+    from osnerf.provenance import write_json_atomic
+
+    if int(os.environ.get("RANK", "0")) != 0:  # under torchrun, rank 0 writes
+        return
+    write_json_atomic(out / "summary.json", summary)
     print(
         f"train-codec: {summary['steps']} steps, validation {summary['validation']}; {out}",
         file=sys.stderr,
     )
-    return 0

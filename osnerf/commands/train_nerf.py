@@ -13,6 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from common import write_png
 from osnerf.cli import UsageError
 from osnerf.commands import args as checks
 
@@ -25,6 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--data", required=True, help="dataset folder (transforms_train.json / transforms.json)"
     )
     p.add_argument("--out", required=True, help="run folder for metrics.json, test views, model.pt")
+    checks.add_overwrite(p, "the model, metrics and test views of an --out folder")
     p.add_argument(
         "--resolution",
         type=checks.resolution,
@@ -32,7 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="image width in pixels, 16..512 (default 100)",
     )
     p.add_argument(
-        "--max-seconds", type=float, default=120.0, help="training budget in seconds (default 120)"
+        "--max-seconds",
+        type=checks.seconds,
+        default=120.0,
+        help=f"training budget in seconds, up to {checks.MAX_BUDGET_S:g} (default 120)",
     )
     p.add_argument("--seed", type=checks.seed, default=0, help="random seed (default 0)")
     p.add_argument(
@@ -50,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--eval-every-seconds",
-        type=float,
+        type=checks.seconds,
         default=10.0,
         help="curve spacing in training seconds (default 10)",
     )
@@ -73,7 +78,6 @@ def _background(text: str | None):
 
 
 def run(args: argparse.Namespace) -> int:
-    import cv2
     import torch
 
     from osnerf.provenance import result_header, write_json_atomic
@@ -91,9 +95,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--field must be one of {', '.join(FIELDS)}, got {args.field!r}")
     if args.clock not in CLOCKS:
         raise UsageError(f"--clock must be one of {', '.join(CLOCKS)}, got {args.clock!r}")
-    if not args.max_seconds > 0:
-        raise UsageError(f"--max-seconds must be > 0, got {args.max_seconds}")
-    run_dir = checks.output_dir(args.out, "--out")
+    run_dir = checks.output_dir(
+        args.out, "--out", overwrite=args.overwrite, inputs={"--data": args.data}
+    )
     data = Path(args.data)
     if not data.is_dir():
         raise FileNotFoundError(f"--data {data}: folder not found")
@@ -124,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
     (run_dir / "test").mkdir(parents=True, exist_ok=True)
     for i, img in enumerate(out["rgb"]):
-        cv2.imwrite(str(run_dir / "test" / f"{i:03d}.png"), to_uint8(img)[..., ::-1])
+        write_png(run_dir / "test" / f"{i:03d}.png", to_uint8(img))
     save_model(result.model, run_dir / "model.pt")
     test = {"psnr": metrics["psnr"], "ssim": metrics["ssim"], "num_views": metrics["num_views"]}
     if "masked_psnr" in metrics:

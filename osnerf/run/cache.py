@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from common import write_bytes
 
 
 class StageCacheError(ValueError):
@@ -60,7 +63,7 @@ class StageCache:
     def save(self, stage: str, arrays: dict, info: dict) -> None:
         from osnerf.provenance import write_json_atomic
 
-        tmp = self.root / f".{stage}.tmp.npz"
-        np.savez_compressed(tmp, **arrays)
-        tmp.replace(self.root / f"{stage}.npz")
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **arrays)
+        write_bytes(self.root / f"{stage}.npz", buf.getvalue())
         write_json_atomic(self.root / f"{stage}.json", info)

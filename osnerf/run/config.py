@@ -38,9 +38,12 @@ class RunConfig:
         max_seconds: cap on each scheme's NeRF training, seconds of ``nerf_clock`` (> 0);
             with ``nerf_steps`` None, the budget itself.
         resolution_px: drone image size (16..512).
-        num_train_views, num_test_views: drone views captured and held out.
+        num_train_views: drone views captured (the candidates to send).
+        num_test_views: held-out drone views, for scoring (never sent).
         symbol_rate_hz: symbol rate used to turn symbols into air time (> 0).
-        codec, receiver_codec: codec checkpoints (None = semcodec's default; the same).
+        codec: the transmitter's semantic codec, NAME[:CHECKPOINT] of ``semcodec.CODECS``
+            (plugins included) or a checkpoint path (None: jscc, the shipped checkpoint).
+        receiver_codec: the receiver's codec, the same forms (None: the same as ``codec``).
         mcs: the digital scheme's MCS: "auto" (from the average SNR, no CSI at the
             transmitter) or a fixed phy.digital.MCS_TABLE name.
         image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).

@@ -168,15 +168,14 @@ def reconstruct_and_score(
 
 def export_views(folder: Path, ds) -> None:
     """The views a scheme received, as a nerfstudio folder (for people and other tools)."""
-    from PIL import Image
-
     import renderer
+    from common import write_png
 
     (folder / "images").mkdir(parents=True, exist_ok=True)
     names = []
     for k in range(ds.num_views):
         names.append(f"images/r_{k:03d}.png")
-        Image.fromarray(renderer.to_uint8(ds.images[k])).save(folder / names[-1])
+        write_png(folder / names[-1], renderer.to_uint8(ds.images[k]))
     renderer.write_transforms(
         folder / "transforms.json",
         ds.poses,

@@ -28,8 +28,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
+from common import read_image, write_png
 from osnerf.provenance import write_json_atomic
 from osnerf.scenes.cameras import Intrinsics, intrinsics_from_fov, look_at, ring_positions
 from osnerf.scenes.registry import get_scene
@@ -180,8 +180,7 @@ def dataset_key(scene: str, target: tuple[str, ...], config: RenderConfig) -> st
 
 
 def _png(path: Path, arr: np.ndarray) -> str:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(np.round(np.clip(arr, 0, 1) * 255).astype(np.uint8)).save(path)
+    write_png(path, np.round(np.clip(arr, 0, 1) * 255).astype(np.uint8))
     return str(path)
 
 
@@ -297,7 +296,7 @@ def build_scene_dataset(
 
 
 def _read_gray(path: Path) -> np.ndarray:
-    return np.asarray(Image.open(path).convert("L"), np.float32) / 255.0
+    return read_image(path, channels=1)[..., 0]
 
 
 def load_scene_views(folder: Path) -> SceneViews:
@@ -308,12 +307,7 @@ def load_scene_views(folder: Path) -> SceneViews:
         raise FileNotFoundError(f"no transforms.json in {folder}")
     meta = json.loads(path.read_text())
     frames = meta["frames"]
-    images = np.stack(
-        [
-            np.asarray(Image.open(folder / f["file_path"]).convert("RGB"), np.float32) / 255.0
-            for f in frames
-        ]
-    )
+    images = np.stack([read_image(folder / f["file_path"]) for f in frames])
     objs = meta["objects"]
     return SceneViews(
         folder=folder,

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_bytes
+
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
@@ -193,13 +195,7 @@ def write_ply(mesh: Mesh, path: str | Path) -> Path:
         + "".join(f"property float {n}\n" for n in "xyzuv")
         + f"element face {len(face)}\nproperty list uchar int vertex_indices\nend_header\n"
     )
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "wb") as f:
-        f.write(header.encode("ascii"))
-        f.write(vert.tobytes())
-        f.write(face.tobytes())
-    tmp.replace(path)
-    return path
+    return write_bytes(path, header.encode("ascii") + vert.tobytes() + face.tobytes())
 
 
 def read_ply(path: str | Path) -> Mesh:

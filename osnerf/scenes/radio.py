@@ -15,6 +15,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from common import write_text
 from osnerf.scenes.spec import SceneGeometry
 
 
@@ -42,8 +43,7 @@ def write_radio_scene(geometry: SceneGeometry, mesh_paths: dict[str, Path], fold
         ]
     lines.append("</scene>")
     path = folder / "scene.xml"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_text(path, "\n".join(lines) + "\n")
 
 
 @dataclass

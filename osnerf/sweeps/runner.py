@@ -38,6 +38,14 @@ Task = dict[str, Any]  # plain data, picklable: what a worker needs to run one p
 Outcome = dict[str, Any]  # {"ok", "result", "error", "seconds"}
 
 
+def _error_line(stderr: str, command: str) -> str | None:
+    """The command's one-line error (``osnerf X: error: ...``) from its stderr, without the
+    progress-bar redraws (``\r``-separated) that may follow it; else the last other line."""
+    lines = [ln.strip() for ln in stderr.replace("\r", "\n").splitlines() if ln.strip()]
+    ours = [ln for ln in lines if ln.startswith(f"osnerf {command}:")]
+    return (ours or lines or [None])[-1]
+
+
 def execute_point(task: Task) -> Outcome:
     """Run one point in this process and return its outcome (never raises).
 
@@ -75,8 +83,7 @@ def execute_point(task: Task) -> Outcome:
         except BaseException as e:  # noqa: BLE001 - SystemExit from a command, for example
             rc, msg = 1, f"{type(e).__name__}: {e}"
         else:
-            lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
-            msg = lines[-1] if lines else f"exit code {rc}"
+            msg = _error_line(err.getvalue(), task["command"]) or f"exit code {rc}"
         if rc == 130:  # osnerf.cli's code for an interrupted command: stop the sweep too
             raise KeyboardInterrupt
         seconds = time.perf_counter() - t0
@@ -304,7 +311,7 @@ def run_sweep(
             worker can write.
     Raises:
         ValueError / KeyError: a bad spec, executor or results file, before anything runs.
-        ValueError: during the run, a point's command rejected its arguments (exit 2); the
+        ValueError: during the run, a point's command refused its input (exit 2); the
             points finished before are kept.
     """
     run_executor = get_executor(executor)
@@ -457,11 +464,11 @@ def _run_points(
                     f"osnerf sweep: point {p.values} seed {p.seed} failed: {outcome['error']}",
                     file=sys.stderr,
                 )
-                if outcome.get("rc") == 2:  # the command rejected its arguments: a bad spec
+                if outcome.get("rc") == 2:  # bad input: every other point would fail the same
                     raise ValueError(
-                        f"point {p.values} seed {p.seed}: `osnerf {spec.command}` rejected its "
-                        f"arguments ({outcome['error'].partition(': ')[2]}); fix the spec "
-                        "(finished points are kept)"
+                        f"point {p.values} seed {p.seed}: `osnerf {spec.command}` refused its "
+                        f"input (exit 2: {outcome['error'].partition(': ')[2]}); fix the spec "
+                        "or the input (finished points are kept)"
                     )
             bar.update(1)
     finally:

@@ -28,7 +28,10 @@ from typing import Any
 import yaml
 
 RESERVED = ("out", "seed")  # set by the sweep itself, per point
+OUTPUT_OPTIONS = ("plot", "sigmf_dir", "keep_outputs")  # files every point would write alike
 SPEC_KEYS = ("command", "fixed", "axes", "seeds")
+MAX_POINTS = 10_000
+"""Points a sweep may have unless ``osnerf sweep --max-points`` raises the bound."""
 
 
 @dataclass(frozen=True)
@@ -127,8 +130,26 @@ def _norm(name: str) -> str:
     return str(name).replace("-", "_")
 
 
-def spec_from_dict(d: dict[str, Any]) -> SweepSpec:
-    """Build a :class:`SweepSpec` from a parsed YAML/TOML mapping (unknown keys refused)."""
+def count_points(d: dict[str, Any]) -> int:
+    """Points of a parsed spec mapping, counted without expanding them (seeds as a count or a
+    list times the length of every axis); 0 when a field is malformed (checked later)."""
+    seeds = d.get("seeds", [0])
+    n = seeds if isinstance(seeds, int) and not isinstance(seeds, bool) else None
+    if n is None:
+        n = len(seeds) if isinstance(seeds, list | tuple) else 0
+    axes = d.get("axes") or {}
+    for values in axes.values() if isinstance(axes, dict) else ():
+        n *= len(values) if isinstance(values, list | tuple) else 1
+    return max(int(n), 0)
+
+
+def spec_from_dict(d: dict[str, Any], max_points: int = MAX_POINTS) -> SweepSpec:
+    """Build a :class:`SweepSpec` from a parsed YAML/TOML mapping (unknown keys refused).
+
+    Raises:
+        ValueError: also when the spec has more than ``max_points`` points (counted first,
+            so a huge spec is refused at once, before any memory is spent on it).
+    """
     if not isinstance(d, dict):
         raise ValueError(
             f"a sweep spec must be a mapping with keys {list(SPEC_KEYS)}, got {type(d).__name__}"
@@ -138,6 +159,12 @@ def spec_from_dict(d: dict[str, Any]) -> SweepSpec:
         raise ValueError(f"unknown spec field(s) {unknown}; allowed: {list(SPEC_KEYS)}")
     if "command" not in d:
         raise ValueError(f"spec field 'command' is missing; allowed keys: {list(SPEC_KEYS)}")
+    n = count_points(d)
+    if n > max_points:
+        raise ValueError(
+            f"the spec has {n} points, more than --max-points {max_points}; "
+            "raise --max-points to run it, or shorten its axes and seeds"
+        )
     seeds = d.get("seeds", [0])
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         if seeds < 1:
@@ -155,8 +182,12 @@ def spec_from_dict(d: dict[str, Any]) -> SweepSpec:
     )
 
 
-def load_spec(path: str | Path) -> SweepSpec:
-    """Read a ``.yaml``/``.yml`` or ``.toml`` spec file (not yet checked against the command)."""
+def load_spec(path: str | Path, max_points: int = MAX_POINTS) -> SweepSpec:
+    """Read a ``.yaml``/``.yml`` or ``.toml`` spec file (not yet checked against the command).
+
+    Raises:
+        ValueError: not valid YAML/TOML (with the line and column), or a bad spec.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"SPEC: no such file {str(path)!r}")
@@ -169,11 +200,20 @@ def load_spec(path: str | Path) -> SweepSpec:
         else:
             raise ValueError(f"SPEC must end in .yaml, .yml or .toml, got {path.name!r}")
     except (yaml.YAMLError, tomllib.TOMLDecodeError) as e:
-        first = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise ValueError(
-            f"SPEC {path.name}: not valid {path.suffix[1:].upper()}: {first}"
+            f"SPEC {path.name}: not valid {path.suffix[1:].upper()}: {_syntax_error(e)}"
         ) from None
-    return spec_from_dict(d)
+    return spec_from_dict(d, max_points)
+
+
+def _syntax_error(e: Exception) -> str:
+    """One line: what is wrong and where (``line 3, column 7``) in a YAML/TOML error."""
+    mark = getattr(e, "problem_mark", None)
+    if mark is not None:  # yaml.MarkedYAMLError
+        what = getattr(e, "problem", None) or getattr(e, "context", None) or type(e).__name__
+        return f"line {mark.line + 1}, column {mark.column + 1}: {what}"
+    text = str(e).splitlines()[0] if str(e) else type(e).__name__
+    return text  # tomllib says "... (at line 3, column 7)" itself
 
 
 # --- checking against the command's own argparse options ----------------------------------
@@ -263,6 +303,12 @@ def expand(spec: SweepSpec) -> list[Point]:
                 raise ValueError(
                     f"unknown option {name!r} in '{kind}' for command "
                     f"{spec.command!r}; allowed: {allowed}"
+                )
+            if n in OUTPUT_OPTIONS:
+                raise ValueError(
+                    f"option {name!r} in '{kind}' names an output: every point would write "
+                    "the same file; leave it out (osnerf sweep --keep-outputs keeps each "
+                    "point's own output)"
                 )
     has_seed = "seed" in opts
     if not has_seed and any(s is not None for s in spec.seeds):

@@ -16,9 +16,9 @@ from typing import Any
 
 
 def _dumps(record: dict[str, Any]) -> str:
-    from osnerf.provenance import _default
+    from common.files import json_default
 
-    return json.dumps(record, default=_default, allow_nan=True, separators=(",", ":"))
+    return json.dumps(record, default=json_default, allow_nan=True, separators=(",", ":"))
 
 
 def read_results(path: str | Path) -> list[dict[str, Any]]:
@@ -63,18 +63,36 @@ def _parse(data: bytes, path: Path) -> tuple[list[dict[str, Any]], int]:
 
 
 def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
-    """Load a results file for appending; repair a torn last line; refuse another spec's file.
+    """Load a results file for appending; refuse a file that is not this spec's results; then
+    repair a torn last line.
+
+    Nothing is changed in a refused file: the checks come before the repair.
 
     Returns:
         The records already in the file (all from this spec).
     Raises:
-        ValueError: the file holds records of another spec (a different ``spec_hash``).
+        ValueError: the file is not a sweep's results (no records, or a record without a
+            ``spec_hash``), or holds records of another spec (a different ``spec_hash``).
     """
     path = Path(path)
     if not path.exists():
         return []
     data = path.read_bytes()
     records, good = _parse(data, path)
+    torn_first = not records and data.startswith(b'{"point":')  # a crash during the first write
+    if (data.strip() and not records and not torn_first) or any(
+        "spec_hash" not in r for r in records
+    ):
+        raise ValueError(
+            f"--out {str(path)!r} exists and is not the results file of a sweep; "
+            "give another --out (nothing was changed in it)"
+        )
+    others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
+    if others:
+        raise ValueError(
+            f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
+            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
+        )
     if good < len(data):
         torn = path.with_name(path.name + ".torn")
         with open(torn, "ab") as f:
@@ -84,12 +102,6 @@ def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
             f"osnerf sweep: repaired {path}: cut a partial last line ({len(data) - good} bytes, "
             f"saved to {torn.name}); {len(records)} finished points kept",
             file=sys.stderr,
-        )
-    others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
-    if others:
-        raise ValueError(
-            f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
-            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
         )
     return records
 

@@ -21,3 +21,15 @@ def env(tmp_path_factory):
     codec = str(default) if default.exists() else _checkpoint(root / "a.safetensors", 0)
     other = _checkpoint(root / "b.safetensors", 1)
     return {"root": root, "codec": codec, "other": other, "cache": str(root / "cache")}
+
+
+@pytest.fixture
+def one_line(capsys):
+    """``one_line()``: the captured stderr so far, asserted to be exactly one line."""
+
+    def read() -> str:
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1, err
+        return err
+
+    return read

@@ -123,7 +123,9 @@ def test_train_codec_names_a_corrupt_resume_state_and_no_resume(tmp_path, capsys
     out = tmp_path / "run"
     out.mkdir()
     (out / "last_state.pt").write_bytes(b"\x80\x02garbage")
-    argv = ["train-codec", "--data", str(tmp_path), "--val", str(tmp_path), "--out", str(out)]
+    data = tmp_path / "data"
+    data.mkdir()
+    argv = ["train-codec", "--data", str(data), "--val", str(data), "--out", str(out)]
     assert main(argv) == 2
     err = _one_line(capsys)
     assert "last_state.pt: cannot resume from it" in err and "--no-resume" in err

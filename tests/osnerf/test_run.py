@@ -43,8 +43,11 @@ def _run(env, out, *extra):
         (["--channel", "tdl", "--mcs", "foo"], "invalid choice: 'foo'"),
         (["--image-codec", "bmp"], "invalid choice: 'bmp'"),
         (["--snr-db", "55"], "outside the codec's range"),
-        (["--nerf-steps", "-1"], "nerf_steps must be an integer >= 1"),
-        (["--lightweight-seconds", "-1"], "lightweight_seconds must be >= 0"),
+        (["--nerf-steps", "0"], "argument --nerf-steps: must be an integer in [1, "),
+        (
+            ["--lightweight-seconds", "-1"],
+            "argument --lightweight-seconds: must be a number in [0,",
+        ),
     ],
 )
 def test_bad_input_is_one_clear_line_and_no_report(env, tmp_path, capsys, args, message):

@@ -272,3 +272,43 @@ def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, caps
     assert "not a readable model file" in err and len(err.strip().splitlines()) == 1
     assert "not an archive written by torch.save" in err  # not PyTorch's own (cut) text
     assert not out.exists()
+
+
+def test_render_refuses_an_existing_folder_and_overwrite_leaves_no_stale_frame(
+    run_dir, tmp_path, capsys
+):
+    out = tmp_path / "path"
+    argv = ["render", "--run", str(run_dir), "--out", str(out), "--resolution", "16"]
+    argv += ["--video", "gif", "--threads", "1"]
+    assert main([*argv, "--num-views", "3"]) == 0
+    before = {p.name: p.read_bytes() for p in (out / "frames").iterdir()}
+    assert main([*argv, "--num-views", "1"]) == 2
+    assert "--overwrite" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert {p.name: p.read_bytes() for p in (out / "frames").iterdir()} == before
+    assert main([*argv, "--num-views", "1", "--overwrite"]) == 0
+    assert sorted(p.name for p in (out / "frames").iterdir()) == ["000.png"]
+    assert json.loads((out / "render.json").read_text())["num_views"] == 1
+
+
+def test_train_nerf_on_a_full_disk_names_the_file_and_leaves_nothing_half_written(
+    sphere_dataset, tmp_path, capsys, monkeypatch
+):
+    import errno
+
+    import common.files
+
+    def full_disk(path, data):
+        with open(path, "wb") as f:
+            f.write(data[: len(data) // 2])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(common.files, "_write_file", full_disk)
+    out = tmp_path / "run"
+    argv = ["train-nerf", "--data", str(sphere_dataset), "--out", str(out), "--resolution", "16"]
+    argv += ["--max-seconds", "1", "--eval-every-seconds", "1", "--no-progress", "--clock", "cpu"]
+    assert main([*argv, "--threads", "1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "No space left on device" in err and str(out) in err, err
+    assert "inline_container" not in err
+    left = [p for p in out.rglob("*") if p.is_file()]
+    assert not [p for p in left if ".tmp" in p.name or p.stat().st_size == 0], left

@@ -7,6 +7,7 @@ import torch
 from smooth_images import smooth_image
 
 import phy
+from common import psnr
 from semcodec import (
     IMAGE_CODECS,
     LINK_SCHEMES,
@@ -17,7 +18,6 @@ from semcodec import (
     transmit_digital,
     transmit_ideal,
 )
-from semcodec.baselines import psnr
 from semcodec.evaluation import EvalContext
 
 

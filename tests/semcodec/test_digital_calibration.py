@@ -10,9 +10,9 @@ from scipy.integrate import quad
 from smooth_images import smooth_image
 
 import phy
+from common import psnr
 from phy.digital import MCS_TABLE, codeword_layout
 from semcodec import IMAGE_CODECS, transmit_digital
-from semcodec.baselines import psnr
 from semcodec.digital_calibration import (
     MEASURED,
     fade_grid,

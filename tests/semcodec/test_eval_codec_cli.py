@@ -80,11 +80,6 @@ def test_bad_input_one_line_errors(image_dir, tmp_path, capsys):
     (d / "x.png").write_bytes(b"not an image")
     _bad(tmp_path, images=d)
     assert "x.png: not a readable image" in capsys.readouterr().err
-    g = tmp_path / "grey"
-    g.mkdir()
-    Image.fromarray(np.zeros((32, 32), np.uint8)).save(g / "g.png")
-    _bad(tmp_path, images=g)
-    assert "not RGB" in capsys.readouterr().err
     s = tmp_path / "small"
     s.mkdir()
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(s / "s.png")
@@ -96,7 +91,7 @@ def test_bad_input_one_line_errors(image_dir, tmp_path, capsys):
     assert "outside the codec's range" in capsys.readouterr().err
     ck = tmp_path / "corrupt.safetensors"
     ck.write_bytes(b"\x01" * 64)
-    _bad(tmp_path, "--checkpoint", str(ck), "--schemes", "jscc", images=image_dir)
+    _bad(tmp_path, "--codec", str(ck), "--schemes", "jscc", images=image_dir)
     err = capsys.readouterr().err
     assert "corrupt" in err and err.count("\n") == 1
     _bad(tmp_path, "--channel", "mars", images=image_dir)
@@ -140,7 +135,7 @@ def test_draws_give_mean_and_interval_and_the_genie_is_a_bound(image_dir, tmp_pa
     out = tmp_path / "draws.json"
     argv = ["eval-codec", "--images", str(image_dir), "--channel", "rayleigh", "--draws", "3"]
     argv += ["--snr-db", "4", "--schemes", "jscc,digital,digital_genie", "--no-lpips"]
-    argv += ["--checkpoint", str(tiny_ckpt), "--out", str(out)]
+    argv += ["--codec", str(tiny_ckpt), "--out", str(out)]
     assert main(argv) == 0
     doc = json.loads(out.read_text())
     assert doc["config"]["draws"] == 3 and "Student-t" in doc["config"]["interval"]
@@ -172,7 +167,9 @@ def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeyp
     monkeypatch.setattr(semcodec.evaluation, "load_image_folder", boom)
     for n in ("0", "-2"):
         _bad(tmp_path, "--draws", n, images=image_dir)
-        assert f"--draws must be >= 1, got {n}" in capsys.readouterr().err
+        assert f"argument --draws: must be an integer in [1, 10000], got {n!r}" in (
+            capsys.readouterr().err
+        )
     for n in ("-1", "1.5", "20000"):
         _bad(tmp_path, "--refine-steps", n, images=image_dir)
         err = capsys.readouterr().err
@@ -195,7 +192,7 @@ def test_checkpoint_for_another_snr_range_is_refused_naming_both(image_dir, tmp_
     save_checkpoint(ck, JSCCModel(cfg), {"name": "high-snr"})
     out = tmp_path / "bad.json"
     argv = ["eval-codec", "--images", str(image_dir), "--snr-db", "1,10", "--schemes", "jscc"]
-    rc = main([*argv, "--checkpoint", str(ck), "--out", str(out)])
+    rc = main([*argv, "--codec", str(ck), "--out", str(out)])
     err = capsys.readouterr().err
     assert rc == 2 and not out.exists()
     assert "[1, 10] dB" in err and "[5, 20] dB" in err and "high-snr" in err

@@ -237,7 +237,10 @@ def test_plot_cli(tmp_path, capsys):
     assert (
         "psnr_vs_cbr.png" in err and (tmp_path / "figs" / "psnr_vs_cbr.png").stat().st_size > 5000
     )
-    assert osnerf.cli.main(["plot", str(tmp_path / "missing.jsonl"), "--out", str(tmp_path)]) == 2
+    assert (
+        osnerf.cli.main(["plot", str(tmp_path / "missing.jsonl"), "--out", str(tmp_path / "m")])
+        == 2
+    )
     assert "does not exist" in capsys.readouterr().err
     (tmp_path / "empty.jsonl").write_text("")
     assert (

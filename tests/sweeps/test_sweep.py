@@ -205,8 +205,8 @@ def test_a_value_only_the_command_rejects_stops_the_sweep_with_its_message(tmp_p
     out = tmp_path / "r.jsonl"
     with pytest.raises(
         ValueError,
-        match=r"point \{'level': 'loud'\} seed 0: `osnerf fake` rejected its "
-        r"arguments \(osnerf fake: error: --level must be one of low, high; got 'loud'\)",
+        match=r"point \{'level': 'loud'\} seed 0: `osnerf fake` refused its input \(exit 2: "
+        r"osnerf fake: error: --level must be one of low, high; got 'loud'\)",
     ):
         run_sweep(spec, out, executor="serial", progress=False)
     assert [r["point"] for r in read_results(out)] == [{"level": "low"}]  # kept; 'high' never ran
@@ -217,7 +217,7 @@ def test_a_value_only_the_command_rejects_stops_the_sweep_with_its_message(tmp_p
         )
         == 2
     )
-    assert "rejected its arguments" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert "refused its input" in capsys.readouterr().err.strip().splitlines()[-1]
 
 
 # --- results file ---------------------------------------------------------------------------

@@ -1,0 +1,46 @@
+"""common: the few facts every package shares, each decided once.
+
+* ``common.files``: the one atomic writer. Every output file is written beside its target
+  and renamed over it, so a reader sees the old file or the new one, never half of one; a
+  path that names anything but a regular file (device, FIFO, symlink) is never replaced; a
+  failed write (a full disk) raises one ``OSError`` naming the file and leaves nothing behind.
+* ``common.images``: the one image loader (8- and 16-bit, grayscale, palette, alpha, EXIF
+  orientation) and the one list of image file suffixes.
+* ``common.quality``: the one PSNR (peak 1.0).
+
+Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
+may all import it.
+"""
+
+from common.files import (
+    atomic_path,
+    check_replaceable,
+    path_kind,
+    to_json,
+    write_bytes,
+    write_figure,
+    write_json,
+    write_png,
+    write_text,
+    write_torch,
+)
+from common.images import IMAGE_SUFFIXES, list_images, read_image
+from common.quality import PSNR_MAX_DB, psnr
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "PSNR_MAX_DB",
+    "atomic_path",
+    "check_replaceable",
+    "list_images",
+    "path_kind",
+    "psnr",
+    "read_image",
+    "to_json",
+    "write_bytes",
+    "write_json",
+    "write_png",
+    "write_text",
+    "write_figure",
+    "write_torch",
+]
