@@ -52,7 +52,9 @@ class RunConfig:
             threads: the same work on a busy machine as on an idle one) or "wall".
         nerf_steps: NeRF optimiser steps per scheme (>= 1): every scheme's field gets the
             same steps (the fair default); None: the same ``max_seconds`` instead.
-        ota_device: for channel "ota": "emulated" or "hackrf".
+        ota_device: for channel "ota": "emulated" (two emulated HackRFs), or a real front end
+            of ``hil.DEVICES``: "hackrf" (two boards) or "pluto" (one board, full duplex: the
+            first libiio finds, or ``ip:$IIOD_REMOTE``).
         lightweight_seconds: training budget (s) of each learned renderer of
             ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
             beside the full render of each scheme's field (time per view and PSNR of each in
