@@ -120,3 +120,7 @@ def _first_line(e: BaseException) -> str:
 
 def entry() -> None:
     sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()
