@@ -194,7 +194,7 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
         problem = f"unknown {next(n for n in names if n not in known)!r}"
     if problem:
         raise SchemeListError(
-            f"schemes must be a comma-separated subset of {','.join(known)}, got {text!r} "
+            f"must be a comma-separated subset of {','.join(known)}, got {text!r} "
             f"({problem})"
         )
     return names

@@ -289,12 +289,6 @@ class _Run:
     def resume(self) -> None:
         """Continue from ``last_state.pt`` (written at any world size)."""
         st = load_train_state(self.state_path)
-        if st["config"] != dataclasses.asdict(self.cfg) | {
-            "max_minutes": st["config"].get("max_minutes"),
-            "max_steps": st["config"].get("max_steps", 0),
-        }:
-            if self.place.rank == 0:
-                print("train-codec: resuming with a changed config", file=sys.stderr)
         try:
             self.codec.module.load_state_dict(st["model"])
         except RuntimeError:  # another architecture: one line, not torch's key-by-key dump
@@ -303,6 +297,12 @@ class _Run:
                 f"architecture {st['config'].get('model')!r}, not {self.cfg.model!r}: resume it "
                 "with that architecture or train into a new folder"
             ) from None
+        if st["config"] != dataclasses.asdict(self.cfg) | {
+            "max_minutes": st["config"].get("max_minutes"),
+            "max_steps": st["config"].get("max_steps", 0),
+        }:
+            if self.place.rank == 0:
+                print("train-codec: resuming with a changed config", file=sys.stderr)
         self.opt.load_state_dict(st["optimizer"])
         self.step, self.elapsed, self.best = st["step"], st["elapsed_s"], st["best"]
         if self.place.rank == 0:

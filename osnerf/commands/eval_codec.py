@@ -154,7 +154,10 @@ def run(args: argparse.Namespace) -> int:
     channels = eval_channels()
     if args.channel not in channels:
         raise KeyError(f"--channel: unknown channel {args.channel!r}; known: {channels}")
-    schemes = parse_schemes(args.schemes, LINK_SCHEMES)
+    try:
+        schemes = parse_schemes(args.schemes, LINK_SCHEMES)
+    except ValueError as e:
+        raise ValueError(f"--schemes {e}") from None
     snrs = list(args.snr_db)
     try:
         cbr = parse_cbr(args.cbr)
@@ -172,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         lo, hi = codec.cbr_range
         if not lo * 0.999 <= cbr <= hi * 1.001:
             raise ValueError(
-                f"--cbr {args.cbr} is outside codec {codec.name!r}'s range [{lo:.4g}, {hi:.4g}]"
+                f"--cbr {args.cbr} is outside the codec's range [{lo:.4g}, {hi:.4g}] ({codec.name})"
             )
         slo, shi = codec.snr_range_db
         if not slo <= min(snrs) <= max(snrs) <= shi:

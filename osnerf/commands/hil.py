@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         if _pluto_info():  # no HackRF, but a Pluto
             return 0
         which = f" with a serial ending in {args.serial!r}" if args.serial else ""
-        raise RuntimeError(f"no HackRF or Pluto board found{which}")
+        raise RuntimeError(f"no HackRF board found{which}, and no Pluto")
     print("osnerf hil info (pure pyusb, no libhackrf)")
     for i, serial in enumerate(serials):
         try:

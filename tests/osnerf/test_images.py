@@ -33,7 +33,7 @@ def test_ota_reads_16_bit_grayscale_as_it_is_not_white(gray16):
 
 
 def test_train_codec_reads_16_bit_grayscale_as_it_is(gray16):
-    from semcodec.training import load_uint8_images
+    from semcodec.training_data import load_uint8_images
 
     path, a = gray16
     (img,) = load_uint8_images([path])

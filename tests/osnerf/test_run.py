@@ -39,7 +39,7 @@ def _run(env, out, *extra):
         (["--scene", "atlantis"], "known scenes: firefighter"),
         (["--demand", "crate,piano"], "known objects: crate, post, cable"),
         (["--channel", "carrier-pigeon"], "invalid choice: 'carrier-pigeon'"),
-        (["--schemes", "jscc,telepathy"], "schemes must be a comma-separated subset"),
+        (["--schemes", "jscc,telepathy"], "argument --schemes: must be a comma-separated subset"),
         (["--channel", "tdl", "--mcs", "foo"], "invalid choice: 'foo'"),
         (["--image-codec", "bmp"], "invalid choice: 'bmp'"),
         (["--snr-db", "55"], "outside the codec's range"),
