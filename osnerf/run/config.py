@@ -84,7 +84,7 @@ class RunConfig:
     render_spp: int = 32
     nerf_clock: str = "cpu"
     ota_device: str = "emulated"
-    nerf_steps: int | None = 6000
+    nerf_steps: int | None = 1000
     lightweight_seconds: float = 15.0
     refine_steps: int = 30
 
