@@ -59,11 +59,9 @@ def scheme_entry(row: dict[str, Any]):
     name = row.get("scheme")
     if name is None:
         return None
-    run_level = load_entry_points()
-    tables = [LINK_SCHEMES, run_level] if row.get("command") != "run" else [run_level]
-    if row.get("command") in ("eval-codec", "ota"):
-        tables = [LINK_SCHEMES]
-    return next((t[str(name)] for t in tables if str(name) in t), None)
+    tables = {"run": [load_entry_points()], "eval-codec": [LINK_SCHEMES], "ota": [LINK_SCHEMES]}
+    chosen = tables.get(row.get("command"), [LINK_SCHEMES, load_entry_points()])
+    return next((t[str(name)] for t in chosen if str(name) in t), None)
 
 
 def _mcs_of(row: dict[str, Any], entry) -> str | None:

@@ -13,3 +13,16 @@ def shared_data() -> Path:
     if not DATA.is_dir():
         pytest.skip(f"shared data not found at {DATA}")
     return DATA
+
+
+@pytest.fixture
+def plugin(tmp_path, monkeypatch):
+    """The codec package ``semcodec_plugin_demo`` (``tests/codec_plugin.py``) installed on a
+    tmp sys.path with its ``semcodec.codecs`` entry points; removed afterwards."""
+    from semcodec import CODECS
+    from tests import codec_plugin
+
+    before = dict(CODECS)
+    codec_plugin.install(tmp_path, monkeypatch)
+    yield
+    codec_plugin.uninstall(before)

@@ -7,16 +7,6 @@ import json
 import pytest
 
 from osnerf.cli import main
-from semcodec import CODECS
-from tests import codec_plugin
-
-
-@pytest.fixture
-def plugin(tmp_path, monkeypatch):
-    before = dict(CODECS)
-    codec_plugin.install(tmp_path, monkeypatch)
-    yield
-    codec_plugin.uninstall(before)
 
 
 @pytest.fixture

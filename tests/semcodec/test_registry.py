@@ -16,7 +16,6 @@ from semcodec import (
     TrainableCodec,
     make_codec,
 )
-from tests import codec_plugin
 
 
 def smooth_images(n: int, h: int, w: int) -> torch.Tensor:
@@ -104,15 +103,6 @@ def test_focus_by_box_sends_the_box_at_the_budget():
         semcodec.focus_by_box(codec, x, mask, 0, 5.0)
     with pytest.raises(ValueError, match="budget_symbols 3 is below the smallest message"):
         semcodec.focus_by_box(codec, x, mask, 3, 5.0)
-
-
-@pytest.fixture
-def plugin(tmp_path, monkeypatch):
-    """The package ``semcodec_plugin_demo`` installed on a tmp sys.path with its entry points."""
-    before = dict(CODECS)
-    codec_plugin.install(tmp_path, monkeypatch)
-    yield
-    codec_plugin.uninstall(before)
 
 
 def test_a_plugin_codec_runs_over_awgn_and_block_rayleigh(plugin):
