@@ -60,7 +60,7 @@ def _link(channel: str) -> torch.nn.Module:
 
 def channel_mask(m: Tensor, num_complex_channels: int) -> Tensor:
     """[batch, 2*C, 1, 1] float32: 1 for the real/imag planes of the first m[i] channels."""
-    k = torch.arange(num_complex_channels).repeat_interleave(2)  # [2*C]
+    k = torch.arange(num_complex_channels, device=m.device).repeat_interleave(2)  # [2*C]
     return (k[None, :] < m[:, None]).float()[:, :, None, None]
 
 

@@ -81,6 +81,8 @@ class TrainConfig:
         focus_m: 1-based index into the codec's ``rate_levels`` drawn with probability
             ``p_focus_m`` (the JSCC: m = 3 complex channels, CBR 1/16).
         p_focus_m: probability of ``focus_m``; otherwise a rate level drawn uniformly.
+        warmup_steps: steps of linear learning-rate warm-up (Adam's first steps move every
+            weight by about ``lr`` whatever its gradient, which dents a warm start).
         save_every_s: seconds between checkpoints.
         eval_every_s: seconds between validation runs.
         seed: seed of crops, SNRs, rates and noise.
@@ -107,6 +109,7 @@ class TrainConfig:
     p_wide_snr: float = 0.25
     focus_m: int = 3
     p_focus_m: float = 0.5
+    warmup_steps: int = 0
     save_every_s: float = 180.0
     eval_every_s: float = 300.0
     seed: int = 0
@@ -141,6 +144,7 @@ class TrainConfig:
             ("focus_m", 1 <= self.focus_m <= 24, "in [1, 24]"),
             ("num_threads", 1 <= self.num_threads <= 64, "in [1, 64]"),
             ("max_steps", 0 <= self.max_steps <= 10**9, "in [0, 1e9]"),
+            ("warmup_steps", 0 <= self.warmup_steps <= 10**6, "in [0, 1e6]"),
             ("ddp_backend", self.ddp_backend in distributed.BACKENDS, str(distributed.BACKENDS)),
         ]
         for name, ok, allowed in checks:
@@ -151,8 +155,14 @@ class TrainConfig:
 
 
 def lr_at(cfg: TrainConfig, elapsed_s: float, step: int = 0) -> float:
-    """Constant, then cosine to lr/20 over the last ``decay_fraction`` of the budget (of
-    ``max_steps`` when set, else of ``max_minutes``)."""
+    """Linear warm-up over the first ``warmup_steps`` steps, constant, then cosine to lr/20
+    over the last ``decay_fraction`` of the budget (of ``max_steps`` when set, else of
+    ``max_minutes``)."""
+    warm = min(1.0, (step + 1) / cfg.warmup_steps) if cfg.warmup_steps else 1.0
+    return warm * _scheduled_lr(cfg, elapsed_s, step)
+
+
+def _scheduled_lr(cfg: TrainConfig, elapsed_s: float, step: int) -> float:
     if cfg.max_steps:
         frac = min(step / cfg.max_steps, 1.0)
     else:

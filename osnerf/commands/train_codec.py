@@ -34,6 +34,7 @@ CONFIG_FIELDS = (
     "focus_snr_max_db",
     "p_wide_snr",
     "p_focus_m",
+    "warmup_steps",
     "decay_fraction",
     "max_minutes",
     "crop_px",
@@ -93,6 +94,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "num_threads": checks.count(1, 64),
             "seed": checks.seed,
             "max_steps": checks.count(0, 10_000_000),
+            "warmup_steps": checks.count(0, 1_000_000),
         },
     )
     p.add_argument(
