@@ -328,8 +328,9 @@ def transmit_and_capture(
     the virtual clock makes this irrelevant: both start at virtual time 0).
 
     Returns:
-        [num_rx_samples] complex64. Errors of either side are raised here; a receive
-        error carries the capture so far as ``error.capture`` (see :func:`save_partial_capture`).
+        [num_rx_samples] complex64. Errors of either side are raised here, the receive
+        error when both sides fail (a board that is gone); it carries the capture so far as
+        ``error.capture`` (see :func:`save_partial_capture`).
     """
     out: dict = {}
 
@@ -347,8 +348,13 @@ def transmit_and_capture(
     time.sleep(lead_s)
     try:
         tx.tx(burst)
-    finally:
+    except BaseException as tx_error:
+        # a board that dies fails both sides; the receive error carries what arrived
         thread.join(timeout=120)
+        if isinstance(out.get("error"), HilError):
+            raise out["error"] from tx_error
+        raise
+    thread.join(timeout=120)
     if "error" in out:
         raise out["error"]
     if "capture" not in out:

@@ -100,8 +100,8 @@ class Pluto:
         uri: its libiio URI.
         rx_chunk_samples: samples per receive buffer (refill), > 0.
         tx_start_latency_s: how long after ``tx`` is called the first samples may leave
-            (buffer set-up over the network or USB); an over-the-air capture starts that
-            much earlier (:func:`hil.send_blocks`).
+            (buffer set-up over the network or USB, a busy host's thread scheduling); an
+            over-the-air capture runs that much longer (:func:`hil.send_blocks`).
         tx_chunk_samples: samples per transmit buffer of a streamed burst, > 0.
         kernel_buffers: the driver's buffer queue depth (a burst's tail plays out of it).
         timeout_ms: libiio's timeout of each request and buffer, ms.
@@ -114,7 +114,7 @@ class Pluto:
         *,
         rx_chunk_samples: int = 1 << 14,
         tx_chunk_samples: int = 1 << 16,
-        tx_start_latency_s: float = 0.1,
+        tx_start_latency_s: float = 0.3,
         timeout_ms: int = 5000,
         kernel_buffers: int = 4,
         configure: bool = True,

@@ -134,6 +134,9 @@ class EmulatedPluto:
         self.rx_cursor = 0  # samples received since the board was made
         self.rx_open = False
         self.rx_opened_at = (0.0, 0)  # (monotonic s, rx_cursor) when the RX buffer opened
+        # end of the samples the receiver is rendering now (rx_cursor once a read returns): a
+        # transmission that starts meanwhile starts after them, never inside a read in flight
+        self.rx_frontier = 0
         self.tx_open = False
         self.tx_is_cyclic = False
         self.tx_cyclic: np.ndarray | None = None
@@ -390,6 +393,7 @@ class EmulatedPluto:
             if m.transmitter is not None:  # the same clock: TX and RX samples are simultaneous
                 self.rx_cursor = max(self.rx_cursor, m.tx_len)
             m.idle_until(self.rx_cursor)
+            self.rx_frontier = self.rx_cursor
             self.rx_open = True
             self.rx_opened_at = (time.monotonic(), self.rx_cursor)
 
@@ -419,6 +423,8 @@ class EmulatedPluto:
         wait = due - time.monotonic()
         if wait > 0:
             time.sleep(wait)
+        with self.lock:
+            self.rx_frontier = self.rx_cursor + num_samples
         self._extend_cyclic(num_samples)
         if self.tx_starved and self.medium.tx_streaming:  # still dry: silence, no waiting
             self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
@@ -457,7 +463,8 @@ class EmulatedPluto:
             self.tx_open = True
             self.tx_cyclic = None
             self.tx_is_cyclic = bool(cyclic)
-            self.medium.idle_until(self.rx_cursor)  # what is sent starts at the receiver's now
+            # what is sent starts at the receiver's now: after the read in flight, if any
+            self.medium.idle_until(max(self.rx_cursor, self.rx_frontier))
             self.medium.start_tx(self.tx_port)
 
     def write_tx(self, raw: np.ndarray) -> None:

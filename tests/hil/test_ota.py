@@ -182,3 +182,35 @@ def test_ota_config_validation():
         OtaConfig(symbols_per_frame=10)
     with pytest.raises(ValueError, match="max_papr_db must be in"):
         OtaConfig(max_papr_db=1)
+
+
+def test_a_board_gone_on_both_sides_raises_the_receive_error_with_its_capture():
+    """When the transmitter and the receiver both fail (the board is gone), the receive
+    error, which holds what arrived, is the one raised; alone, a transmit error is raised."""
+    from hil.errors import DisconnectedError
+    from hil.ota import transmit_and_capture
+
+    class Rx:
+        receiving = True
+
+        def rx(self, n, max_shortfalls=None):
+            e = DisconnectedError("receive: the board is gone")
+            e.capture = np.ones(100, np.complex64)
+            raise e
+
+    class Tx:
+        def tx(self, burst):
+            raise DisconnectedError("transmit: the board is gone")
+
+    with pytest.raises(DisconnectedError, match="receive") as err:
+        transmit_and_capture(Tx(), Rx(), np.zeros(10, np.complex64), 10)
+    assert len(err.value.capture) == 100 and "transmit" in str(err.value.__cause__)
+
+    class RxFine:
+        receiving = True
+
+        def rx(self, n, max_shortfalls=None):
+            return [np.zeros(n, np.complex64)]
+
+    with pytest.raises(DisconnectedError, match="transmit"):
+        transmit_and_capture(Tx(), RxFine(), np.zeros(10, np.complex64), 10)

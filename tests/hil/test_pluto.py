@@ -171,3 +171,31 @@ def test_a_tx_buffer_fed_late_underruns_instead_of_stalling_the_receiver(server)
     noise = min(first + later)
     assert sum(p > 10 * noise for p in first) == 1  # the first buffer's worth, then silence
     assert sum(p > 10 * noise for p in later) == 1  # the late one arrives, once
+
+
+def test_a_transmission_starting_during_a_receive_read_is_heard_whole():
+    """The TX buffer opens while a receive read is being rendered (the two run on separate
+    connections): the burst starts after the samples of that read, none of it is lost."""
+    board = EmulatedPluto.for_link(20.0, seed=1)
+    board.tx_lo_hz = board.rx_lo_hz  # (the board starts with them 50 MHz apart)
+    board.open_rx()
+    render = board.medium.render_iq
+    burst = np.zeros(2 * 4096, np.int16)
+    burst[0::2] = 16000  # a 4096-sample tone at DC, about -6 dBFS
+    started = []
+
+    def render_then_start_tx(*args, **kwargs):
+        y = render(*args, **kwargs)  # this read's samples are decided ...
+        if not started:  # ... and then the transmitter starts, before the read returns
+            started.append(True)
+            board.open_tx(cyclic=False)
+            board.write_tx(burst)
+            board.close_tx()
+        return y
+
+    board.medium.render_iq = render_then_start_tx
+    iq = np.concatenate([board.read_rx(8192) for _ in range(4)]).astype(np.float32)
+    power = iq[0::2] ** 2 + iq[1::2] ** 2
+    loud = power > 30 * np.median(power)
+    assert not loud[:8192].any()  # the read in flight is noise alone
+    assert abs(int(loud.sum()) - 4096) <= 64  # the whole burst (filter edges aside)

@@ -23,10 +23,6 @@ pytestmark = [
         ),
         reason="phy's frame API is not in this checkout",
     ),
-    # Timing-dependent: the emulated board runs in its own process and a frame is sometimes
-    # lost (or a drop lands in the transmit phase) when the two processes are scheduled
-    # unevenly; about one run in two failed one test on this 2-core machine. Run with -m slow.
-    pytest.mark.slow,
 ]
 
 from hil import EmulatedPluto, IiodServer  # noqa: E402
