@@ -60,7 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="comma-separated Es/N0 values in dB",
     )
     p.add_argument(
-        "--cbr", default="1/16", help="channel bandwidth ratio, e.g. 1/16 (JSCC: 1/48..1/6)"
+        "--cbr",
+        default="1/16",
+        help="channel bandwidth ratio, e.g. 1/16, within the codec's cbr_range (its model card)",
     )
     p.add_argument(
         "--schemes",

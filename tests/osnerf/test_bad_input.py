@@ -1,4 +1,4 @@
-"""Bad input and faults across commands (#16): one-line errors with exit 2, raised before any
+"""Bad input and faults across commands: one-line errors with exit 2, raised before any
 heavy work, leaving no partial output; loaders that name the file and say what to do."""
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def _ber(*extra) -> int:
 
 
 def test_ber_out_and_plot_naming_one_file_is_refused(tmp_path, capsys):
-    """#16: the plot was overwritten by the JSON, with "wrote" and exit 0."""
+    """--plot naming the --out file is refused: the JSON would overwrite the plot."""
     same = tmp_path / "same.png"
     assert _ber("--out", str(same), "--plot", str(same)) == 2
     assert "--out and --plot are the same file" in _one_line(capsys)
@@ -46,8 +46,7 @@ def test_ber_out_and_plot_naming_one_file_is_refused(tmp_path, capsys):
 
 
 def test_ber_output_paths_are_checked_before_computing(tmp_path, capsys):
-    """#16: --out a folder computed, then failed; --plot under a file computed, then wrote
-    nothing."""
+    """--out naming a folder and --plot under a file are refused before any work."""
     assert _ber("--out", str(tmp_path)) == 2
     assert "is a folder; give a file path" in _one_line(capsys)
     a_file = tmp_path / "file"
@@ -72,8 +71,8 @@ def test_ber_output_paths_are_checked_before_computing(tmp_path, capsys):
     ],
 )
 def test_bad_values_are_refused_while_parsing(tmp_path, capsys, command, extra):
-    """#16: --snr-db 0,,5, --seed -1 and --threads 0 were accepted silently; --seed 1e23
-    printed "Overflow when unpacking long long"."""
+    """--snr-db 0,,5, --seed -1, --threads 0 and --seed 1e23 are refused naming the flag and
+    its range."""
     out = tmp_path / ("o.json" if command in ("ber", "eval-codec") else "o")
     assert main([command, *extra, "--out", str(out)]) == 2
     err = _one_line(capsys)
@@ -90,8 +89,8 @@ def test_bad_values_are_refused_while_parsing(tmp_path, capsys, command, extra):
     ],
 )
 def test_run_refuses_bad_flags_before_any_stage(tmp_path, capsys, extra, match):
-    """#16: --mcs foo and --image-codec bmp were refused only after the scene and jscc
-    stages, leaving a partial run folder."""
+    """--mcs foo and --image-codec bmp are refused before the scene and jscc stages: no run
+    folder is left."""
     out = tmp_path / "run"
     assert main(["run", "--out", str(out), *extra]) == 2
     assert match in _one_line(capsys)
@@ -99,7 +98,7 @@ def test_run_refuses_bad_flags_before_any_stage(tmp_path, capsys, extra, match):
 
 
 def test_run_names_a_corrupt_cached_stage_and_how_to_clear_it(tmp_path, capsys):
-    """#16: a truncated cache .npz printed "BadZipFile" with no path and no hint."""
+    """A truncated cache .npz is named, with what to do about it."""
     import numpy as np
 
     from osnerf.commands.run import run_config
@@ -119,7 +118,7 @@ def test_run_names_a_corrupt_cached_stage_and_how_to_clear_it(tmp_path, capsys):
 
 
 def test_train_codec_names_a_corrupt_resume_state_and_no_resume(tmp_path, capsys):
-    """#16: a corrupt last_state.pt printed "unpickling stack underflow", no file, no hint."""
+    """A corrupt last_state.pt is named, with what to do about it."""
     out = tmp_path / "run"
     out.mkdir()
     (out / "last_state.pt").write_bytes(b"\x80\x02garbage")
@@ -132,7 +131,7 @@ def test_train_codec_names_a_corrupt_resume_state_and_no_resume(tmp_path, capsys
 
 
 def test_train_codec_corrupt_image_is_bad_input(tmp_path, capsys, monkeypatch):
-    """#16: a corrupt image exited 1 in train-codec (2 in eval-codec)."""
+    """A corrupt image exits 2 in train-codec as in eval-codec."""
     import semcodec.training
 
     monkeypatch.setattr(semcodec.training, "train", REAL_TRAIN)  # it reads the images

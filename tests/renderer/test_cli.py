@@ -122,9 +122,8 @@ def _one_line(capsys) -> str:
 
 
 def test_render_names_an_unusable_model_file_and_says_what_to_do(run_dir, tmp_path, capsys):
-    """#16: a corrupt model.pt printed PyTorch's loader text asking to "file an issue"; a
-    torch file with other keys printed "error: aabb"; NaN density rendered black frames
-    with exit 0."""
+    """A corrupt model.pt, a torch file with other keys and a field with NaN density are
+    each refused in one line naming the file."""
     import torch
 
     out = tmp_path / "r"
@@ -147,7 +146,7 @@ def test_render_names_an_unusable_model_file_and_says_what_to_do(run_dir, tmp_pa
 
 
 def test_render_path_with_a_singular_pose_names_the_frame(run_dir, tmp_path, capsys):
-    """#16: an all-zero transform_matrix printed an SVD error without the frame."""
+    """An all-zero transform_matrix is refused naming the frame."""
     eye = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4], [0, 0, 0, 1]]
     path = tmp_path / "path.json"
     path.write_text(
