@@ -5,7 +5,13 @@ import json
 import pytest
 import torch
 
-from semcodec import KnowledgeBaseMismatch, load_codec, make_model, save_checkpoint
+from semcodec import (
+    DEFAULT_CHECKPOINT,
+    KnowledgeBaseMismatch,
+    load_codec,
+    make_model,
+    save_checkpoint,
+)
 
 
 def test_round_trip_same_outputs_and_hash(tiny_ckpt, tiny_codec, tmp_path):
@@ -61,11 +67,22 @@ def test_shipped_default_loads_offline():
     codec = load_codec()
     card = codec.card
     assert card["sha256"] == codec.sha256
-    assert codec.cbr_range == pytest.approx((1 / 48, 1 / 6))
+    assert codec.cbr_range == pytest.approx((1 / 48, 1 / 3))  # one model up to CBR 1/3
     assert codec.snr_range_db[0] <= -2 and codec.snr_range_db[1] >= 13
     assert "data_sha256" in card["training"]
     side = json.loads((codec.path.parent / "default.card.json").read_text())
     assert side["sha256"] == codec.sha256
+    x = torch.rand(1, 3, 32, 48, generator=torch.Generator().manual_seed(0))
+    enc = codec.encode(x, 10.0, 1 / 3)
+    assert enc.meta.num_channels == 16 and enc.symbols.shape[-1] == 16 * 8 * 12
+
+
+@pytest.mark.parametrize(
+    "name, cbr_max", [("mix-v2.2.safetensors", 1 / 6), ("awgn-v1.1.safetensors", 1 / 6)]
+)
+def test_earlier_shipped_checkpoints_still_load(name, cbr_max):
+    codec = load_codec(DEFAULT_CHECKPOINT.parent / name)
+    assert codec.cbr_range[1] == pytest.approx(cbr_max) and codec.card["sha256"] == codec.sha256
 
 
 def test_knowledge_base_versions(tmp_path):
