@@ -29,12 +29,12 @@ import hashlib
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
 from typing import ClassVar
 
 import numpy as np
 import torch
 
+from common.plugins import load_plugins
 from semcodec.evaluation import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
@@ -146,16 +146,9 @@ def load_entry_points() -> dict[str, type[Scheme]]:
     global _loaded_entry_points
     if not _loaded_entry_points:
         _loaded_entry_points = True
-        for ep in entry_points(group=ENTRY_POINT_GROUP):
-            if ep.name in SCHEMES:
-                continue
-            try:
-                cls = ep.load()
-            except Exception as e:  # a broken plugin must not break the built-ins
-                raise ValueError(
-                    f"scheme entry point {ep.name} = {ep.value} failed to load ({type(e).__name__}: {e})"
-                ) from None
-            register(ep.name)(cls)
+        load_plugins(
+            ENTRY_POINT_GROUP, SCHEMES, lambda name, cls, _value: register(name)(cls), "scheme"
+        )
     return SCHEMES
 
 
@@ -194,8 +187,7 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
         problem = f"unknown {next(n for n in names if n not in known)!r}"
     if problem:
         raise SchemeListError(
-            f"must be a comma-separated subset of {','.join(known)}, got {text!r} "
-            f"({problem})"
+            f"must be a comma-separated subset of {','.join(known)}, got {text!r} ({problem})"
         )
     return names
 

@@ -15,9 +15,9 @@ shipped checkpoint). Other packages add codecs through the entry-point group
 from __future__ import annotations
 
 from collections.abc import Callable
-from importlib.metadata import entry_points
 from pathlib import Path
 
+from common.plugins import load_plugins
 from semcodec.contract import CODEC_MEMBERS, missing_members
 
 ENTRY_POINT_GROUP = "semcodec.codecs"
@@ -56,19 +56,14 @@ def load_codec_entry_points(force: bool = False) -> dict[str, CodecFactory]:
     if _entry_points_loaded and not force:
         return CODECS
     _entry_points_loaded = True
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name in CODECS:
-            continue
-        try:
-            factory = ep.load()
-        except Exception as e:  # noqa: BLE001 - a broken plugin must be named, not crash
-            raise CodecPluginError(
-                f"codec plugin {ep.name} = {ep.value} failed to load ({type(e).__name__}: {e})"
-            ) from None
+
+    def add(name: str, factory, value: str) -> None:
         if not callable(factory):
-            raise CodecPluginError(f"codec plugin {ep.name} = {ep.value} is not callable")
-        CODECS[ep.name] = factory
-        PLUGINS[ep.name] = ep.value
+            raise CodecPluginError(f"codec plugin {name} = {value} is not callable")
+        CODECS[name] = factory
+        PLUGINS[name] = value
+
+    load_plugins(ENTRY_POINT_GROUP, CODECS, add, "codec", CodecPluginError)
     return CODECS
 
 
