@@ -216,7 +216,7 @@ def test_decode_received_hands_the_noise_variance_to_the_codec():
         pytest.skip("semcodec's shipped default checkpoint is not in this checkout")
     import torch
 
-    from osnerf.commands.ota import decode_received
+    from osnerf.commands.ota_schemes import decode_received
 
     codec = semcodec.load_codec()
     g = torch.Generator().manual_seed(0)
