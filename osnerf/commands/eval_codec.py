@@ -130,21 +130,78 @@ def mean_ci95(values) -> tuple[float, float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.provenance import result_header, write_json_atomic
+    from semcodec.evaluation import LINK_SCHEMES, EvalContext
+
+    out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
+    ctx = EvalContext(
+        channel=args.channel,
+        codec=codec,
+        fixed_mcs=mcs,
+        refine_steps=args.refine_steps,
+        refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
+    )
+    ctx.link()  # builds the channel (bad channel settings fail before any work)
+    config = {
+        "images": str(args.images),
+        "image_names": names,
+        "channel": args.channel,
+        "receiver": ctx.receiver,
+        "draws": args.draws,
+        "interval": "95% Student-t interval of the mean over images x draws",
+        "bounds": {s: LINK_SCHEMES[s].bound for s in schemes if LINK_SCHEMES[s].bound},
+        "snr_db": snrs,
+        "cbr": cbr,
+        "schemes": schemes,
+        "fixed_mcs": mcs,
+        "refine_steps": args.refine_steps
+        if any(LINK_SCHEMES[s].refines for s in schemes)
+        else None,
+        "codec": args.codec,
+        "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
+        "lpips": score_lpips,
+        "lost_image": "mid-grey 0.5",
+    }
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=len(schemes) * len(snrs) * len(images) * args.draws,
+        desc="eval-codec",
+        file=sys.stderr,
+    )
+    results = [
+        _point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar)
+        for scheme in schemes
+        for ki, snr in enumerate(snrs)
+    ]
+    bar.close()
+    doc = {
+        **result_header(config, args.seed),
+        "checkpoint": {"name": codec.name, "sha256": codec.sha256} if codec else None,
+        "results": results,
+    }
+    if args.plot:
+        title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"
+        _plot(results, Path(args.plot), title)
+    write_json_atomic(out, doc)
+    print(f"eval-codec: {len(results)} points -> {out}", file=sys.stderr)
+    return 0
+
+
+def _inputs(args: argparse.Namespace):
+    """Every input checked before any work: (out path, schemes, SNRs, CBR, fixed MCS, codec or
+    None, image names, images, whether LPIPS is scored)."""
     import torch
 
-    from common import psnr
-    from osnerf.provenance import result_header, write_json_atomic
     from osnerf.schemes import parse_schemes
     from phy import num_symbols_for_cbr, parse_cbr
-    from renderer import LPIPS_MIN_SIDE_PX, lpips, lpips_weights
+    from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
     from semcodec import open_codec
     from semcodec.evaluation import (
         DEFAULT_FIXED_MCS,
         LINK_SCHEMES,
-        EvalContext,
         eval_channels,
         load_image_folder,
-        ssim,
     )
 
     inputs = {"--images": args.images}
@@ -203,113 +260,76 @@ def run(args: argparse.Namespace) -> int:
         except FileNotFoundError as e:
             raise FileNotFoundError(f"{e}, or pass --no-lpips") from None
 
-    ctx = EvalContext(
-        channel=args.channel,
-        codec=codec,
-        fixed_mcs=mcs,
-        refine_steps=args.refine_steps,
-        refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
-    )
-    ctx.link()  # builds the channel (bad channel settings fail before any work)
-    config = {
-        "images": str(args.images),
-        "image_names": names,
-        "channel": args.channel,
-        "receiver": ctx.receiver,
-        "draws": args.draws,
-        "interval": "95% Student-t interval of the mean over images x draws",
-        "bounds": {s: LINK_SCHEMES[s].bound for s in schemes if LINK_SCHEMES[s].bound},
-        "snr_db": snrs,
-        "cbr": cbr,
-        "schemes": schemes,
-        "fixed_mcs": mcs,
-        "refine_steps": args.refine_steps
-        if any(LINK_SCHEMES[s].refines for s in schemes)
-        else None,
-        "codec": args.codec,
-        "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
-        "lpips": score_lpips,
-        "lost_image": "mid-grey 0.5",
-    }
-    results = []
-    from tqdm import tqdm
+    return out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips
 
-    bar = tqdm(
-        total=len(schemes) * len(snrs) * len(images) * args.draws,
-        desc="eval-codec",
+
+def _point(
+    ctx, scheme: str, ki: int, snr: float, cbr: float, images, args, score_lpips, bar
+) -> dict:
+    """One (scheme, SNR) row of the result: every image over ``args.draws`` draws."""
+    import torch
+
+    from common import psnr
+    from renderer import lpips
+    from semcodec.evaluation import LINK_SCHEMES, ssim
+
+    ps, ss, ls, t0 = [], [], [], time.perf_counter()
+    extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
+    lost = {"budget": 0, "channel": 0}
+    mcs_used: dict[str, int] = {}
+    stats_keys = {}
+    separate = False  # the scheme reported views lost (a separate source-channel code)
+    for ii, img in enumerate(images):
+        row = []
+        for d in range(args.draws):
+            gen = torch.Generator().manual_seed(draw_seed(args.seed, ki, ii, d))
+            res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen)
+            row.append(psnr(res.images, img))
+            ss.append(ssim(res.images, img))
+            if score_lpips:
+                ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
+            for k in extra:
+                extra[k] += int(res.stats.get(k, 0) or 0)
+            separate = separate or "views_lost" in res.stats
+            for k, v in (res.stats.get("views_lost") or {}).items():
+                lost[k] += int(v)
+            for m in res.stats.get("mcs") or []:
+                mcs_used[str(m)] = mcs_used.get(str(m), 0) + 1
+            for k in ("mcs_choice", "calibration"):
+                if k in res.stats:
+                    stats_keys[k] = res.stats[k]
+            bar.update(1)
+        ps.append(row)
+    flat = [v for row in ps for v in row]
+    mean, lo, hi = mean_ci95(flat)
+    r = {
+        "scheme": scheme,
+        "snr_db": snr,
+        "cbr": cbr,
+        "psnr": mean,
+        "psnr_ci95": [lo, hi],
+        "ssim": float(np.mean(ss)),
+        "lpips": float(np.mean(ls)) if ls else None,
+        "num_images": len(images),
+        "draws": args.draws,
+        "psnr_per_image": [float(np.mean(row)) for row in ps],
+        "psnr_per_draw": ps,
+        **extra,
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
+    if separate:
+        r["views_lost"] = lost
+        r["mcs_used"] = mcs_used
+        r.update(stats_keys)
+    if LINK_SCHEMES[scheme].bound:
+        r["bound"] = LINK_SCHEMES[scheme].bound
+    lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
+    print(
+        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB [{lo:.2f}, {hi:.2f}], "
+        f"SSIM {np.mean(ss):.4f}{lp}",
         file=sys.stderr,
     )
-    for scheme in schemes:
-        for ki, snr in enumerate(snrs):
-            ps, ss, ls, t0 = [], [], [], time.perf_counter()
-            extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
-            lost = {"budget": 0, "channel": 0}
-            mcs_used: dict[str, int] = {}
-            stats_keys = {}
-            separate = False  # the scheme reported views lost (a separate source-channel code)
-            for ii, img in enumerate(images):
-                row = []
-                for d in range(args.draws):
-                    gen = torch.Generator().manual_seed(draw_seed(args.seed, ki, ii, d))
-                    res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen)
-                    row.append(psnr(res.images, img))
-                    ss.append(ssim(res.images, img))
-                    if score_lpips:
-                        ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
-                    for k in extra:
-                        extra[k] += int(res.stats.get(k, 0) or 0)
-                    separate = separate or "views_lost" in res.stats
-                    for k, v in (res.stats.get("views_lost") or {}).items():
-                        lost[k] += int(v)
-                    for m in res.stats.get("mcs") or []:
-                        mcs_used[str(m)] = mcs_used.get(str(m), 0) + 1
-                    for k in ("mcs_choice", "calibration"):
-                        if k in res.stats:
-                            stats_keys[k] = res.stats[k]
-                    bar.update(1)
-                ps.append(row)
-            flat = [v for row in ps for v in row]
-            mean, lo, hi = mean_ci95(flat)
-            r = {
-                "scheme": scheme,
-                "snr_db": snr,
-                "cbr": cbr,
-                "psnr": mean,
-                "psnr_ci95": [lo, hi],
-                "ssim": float(np.mean(ss)),
-                "lpips": float(np.mean(ls)) if ls else None,
-                "num_images": len(images),
-                "draws": args.draws,
-                "psnr_per_image": [float(np.mean(row)) for row in ps],
-                "psnr_per_draw": ps,
-                **extra,
-                "seconds": round(time.perf_counter() - t0, 2),
-            }
-            if separate:
-                r["views_lost"] = lost
-                r["mcs_used"] = mcs_used
-                r.update(stats_keys)
-            if LINK_SCHEMES[scheme].bound:
-                r["bound"] = LINK_SCHEMES[scheme].bound
-            results.append(r)
-            lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
-            print(
-                f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB [{lo:.2f}, {hi:.2f}], "
-                f"SSIM {np.mean(ss):.4f}{lp}",
-                file=sys.stderr,
-            )
-    bar.close()
-    doc = {
-        **result_header(config, args.seed),
-        "checkpoint": {"name": codec.name, "sha256": codec.sha256} if codec else None,
-        "results": results,
-    }
-    if args.plot:
-        title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"
-        _plot(results, Path(args.plot), title)
-    write_json_atomic(out, doc)
-    print(f"eval-codec: {len(results)} points -> {out}", file=sys.stderr)
-    return 0
+    return r
 
 
 def _plot(results: list[dict], path: Path, title: str) -> None:
