@@ -132,18 +132,14 @@ def _path_poses(path: Path):
 
 
 def run(args: argparse.Namespace) -> int:
-    import cv2
     import torch
 
     from osnerf.provenance import result_header, write_json_atomic
     from renderer import (
         LIGHTWEIGHT_PRESETS,
         RENDERERS,
-        FeatureConfig,
-        Intrinsics,
         load_model,
         make_renderer,
-        orbit_path,
         to_uint8,
     )
 
@@ -168,33 +164,9 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(model_path)
     except ValueError as e:
         raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
-    cam = model.spec.get("camera", {})
-    k = cam.get(
-        "intrinsics", {"fl_x": 100.0, "fl_y": 100.0, "cx": 50.0, "cy": 50.0, "w": 100, "h": 100}
-    )
-    intr = Intrinsics(k["fl_x"], k["fl_y"], k["cx"], k["cy"], int(k["h"]), int(k["w"]))
-    if args.resolution is not None:
-        intr = intr.resized(
-            max(1, round(intr.height * args.resolution / intr.width)), args.resolution
-        )
-    if args.path is not None:
-        poses = _path_poses(Path(args.path))
-    else:
-        center = torch.tensor(cam.get("center", model.aabb.mean(0).tolist()))
-        radius = args.radius_m or cam.get("radius_m", 4.0)
-        up = torch.tensor(cam.get("up", [0.0, 0.0, 1.0]))
-        poses = orbit_path(
-            args.num_views, radius, args.elevation_deg, center, 0.0, args.arc_deg, up
-        )
+    intr, poses = _camera_path(args, model)
 
-    config = None
-    budget = {} if args.lightweight_seconds is None else {"train_seconds": args.lightweight_seconds}
-    if args.renderer == "lightweight":
-        config = dataclasses.replace(
-            LIGHTWEIGHT_PRESETS[args.lightweight_preset], progress=True, **budget
-        )
-    elif args.renderer == "features":
-        config = FeatureConfig(progress=True, **budget)
+    config = _renderer_config(args)
     t0 = time.perf_counter()
     rend, _ = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)
@@ -214,28 +186,7 @@ def run(args: argparse.Namespace) -> int:
         frame = to_uint8(rgb)
         write_png(out_dir / "frames" / f"{i:03d}.png", frame)
         frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
-    video = None
-    if args.video == "mp4":
-        video = out_dir / "path.mp4"
-        with atomic_path(video) as tmp:
-            writer = cv2.VideoWriter(
-                str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), args.fps, (intr.width, intr.height)
-            )
-            if not writer.isOpened():
-                raise RuntimeError(f"OpenCV could not write {video}")
-            for f in frames:
-                writer.write(f)
-            writer.release()
-            if os.path.getsize(tmp) == 0:
-                raise OSError(errno.EIO, "OpenCV wrote an empty video", str(video))
-    elif args.video == "gif":
-        video = out_dir / "path.gif"
-        anim = cv2.Animation()
-        anim.frames = frames
-        anim.durations = [int(round(1000 / args.fps))] * len(frames)
-        with atomic_path(video) as tmp:
-            if not cv2.imwriteanimation(str(tmp), anim):
-                raise OSError(errno.EIO, "OpenCV could not write the animation", str(video))
+    video = _write_video(frames, out_dir, args.video, args.fps, intr.width, intr.height)
     cfg = {k: v for k, v in vars(args).items() if k != "func"}
     record = result_header(cfg, None)
     record.update(
@@ -258,3 +209,76 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _camera_path(args: argparse.Namespace, model):
+    """(intrinsics, poses) of the views to render: the field's stored camera, resized to
+    ``--resolution``; the poses of ``--path`` or an orbit around the stored centre."""
+    import torch
+
+    from renderer import Intrinsics, orbit_path
+
+    cam = model.spec.get("camera", {})
+    k = cam.get(
+        "intrinsics", {"fl_x": 100.0, "fl_y": 100.0, "cx": 50.0, "cy": 50.0, "w": 100, "h": 100}
+    )
+    intr = Intrinsics(k["fl_x"], k["fl_y"], k["cx"], k["cy"], int(k["h"]), int(k["w"]))
+    if args.resolution is not None:
+        intr = intr.resized(
+            max(1, round(intr.height * args.resolution / intr.width)), args.resolution
+        )
+    if args.path is not None:
+        poses = _path_poses(Path(args.path))
+    else:
+        center = torch.tensor(cam.get("center", model.aabb.mean(0).tolist()))
+        radius = args.radius_m or cam.get("radius_m", 4.0)
+        up = torch.tensor(cam.get("up", [0.0, 0.0, 1.0]))
+        poses = orbit_path(
+            args.num_views, radius, args.elevation_deg, center, 0.0, args.arc_deg, up
+        )
+    return intr, poses
+
+
+def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, height: int):
+    """``path.mp4`` or ``path.gif`` of the BGR frames (atomically), or None for no video."""
+    import cv2
+
+    video = None
+    if kind == "mp4":
+        video = out_dir / "path.mp4"
+        with atomic_path(video) as tmp:
+            writer = cv2.VideoWriter(
+                str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height)
+            )
+            if not writer.isOpened():
+                raise RuntimeError(f"OpenCV could not write {video}")
+            for f in frames:
+                writer.write(f)
+            writer.release()
+            if os.path.getsize(tmp) == 0:
+                raise OSError(errno.EIO, "OpenCV wrote an empty video", str(video))
+    elif kind == "gif":
+        video = out_dir / "path.gif"
+        anim = cv2.Animation()
+        anim.frames = frames
+        anim.durations = [int(round(1000 / fps))] * len(frames)
+        with atomic_path(video) as tmp:
+            if not cv2.imwriteanimation(str(tmp), anim):
+                raise OSError(errno.EIO, "OpenCV could not write the animation", str(video))
+    return video
+
+
+def _renderer_config(args: argparse.Namespace):
+    """The learned renderer's settings from --lightweight-preset / --lightweight-seconds (None
+    for the full renderer)."""
+    from renderer import LIGHTWEIGHT_PRESETS, FeatureConfig
+
+    config = None
+    budget = {} if args.lightweight_seconds is None else {"train_seconds": args.lightweight_seconds}
+    if args.renderer == "lightweight":
+        config = dataclasses.replace(
+            LIGHTWEIGHT_PRESETS[args.lightweight_preset], progress=True, **budget
+        )
+    elif args.renderer == "features":
+        config = FeatureConfig(progress=True, **budget)
+    return config
