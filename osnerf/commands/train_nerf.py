@@ -80,14 +80,12 @@ def _background(text: str | None):
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from osnerf.provenance import result_header, write_json_atomic
+    from osnerf.provenance import write_json_atomic
     from renderer import (
         TrainConfig,
         image_metrics,
         load_dataset,
         render_views,
-        save_model,
-        to_uint8,
         train,
     )
 
@@ -126,6 +124,21 @@ def run(args: argparse.Namespace) -> int:
     out = render_views(result.model, test_set.poses, test_set.intrinsics)
     metrics = image_metrics(out["rgb"], test_set.images, test_set.masks)
 
+    record = _write_run(run_dir, args, data, train_set, config, result, out, metrics)
+    test = record["test"]
+    path = write_json_atomic(run_dir / "metrics.json", record)
+    print(
+        f"train-nerf: test PSNR {test['psnr']:.2f} dB, SSIM {test['ssim']:.3f} -> {path}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _write_run(run_dir: Path, args, data: Path, train_set, config, result, out, metrics) -> dict:
+    """Write the test renders and ``model.pt``; return the ``metrics.json`` record."""
+    from osnerf.provenance import result_header
+    from renderer import save_model, to_uint8
+
     (run_dir / "test").mkdir(parents=True, exist_ok=True)
     for i, img in enumerate(out["rgb"]):
         write_png(run_dir / "test" / f"{i:03d}.png", to_uint8(img))
@@ -156,9 +169,4 @@ def run(args: argparse.Namespace) -> int:
             "model": "model.pt",
         }
     )
-    path = write_json_atomic(run_dir / "metrics.json", record)
-    print(
-        f"train-nerf: test PSNR {test['psnr']:.2f} dB, SSIM {test['ssim']:.3f} -> {path}",
-        file=sys.stderr,
-    )
-    return 0
+    return record
