@@ -323,7 +323,7 @@ def open_pair(args, ota_cfg):
 # ----------------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
     from hil import HilError, OtaConfig, save_partial_capture, save_sigmf, send_blocks
-    from osnerf.provenance import result_header, write_json_atomic
+    from osnerf.provenance import write_json_atomic
     from phy import parse_cbr
     from semcodec.image_codecs import IMAGE_CODECS
 
@@ -373,6 +373,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"ota: warning: {w.message}", file=sys.stderr)
     per_image = trx.receive(result, state, images, args, cfg)
     sigmf_paths = save_sigmf(result, sigmf_dir / "ota", cfg, hw=hw)
+    record = _record(args, cfg, names, per_image, result, sigmf_paths, t0)
+    write_json_atomic(out, record)
+    print(
+        f"ota: wrote {out} ({result.frames_lost}/{result.frames_sent} frames lost)", file=sys.stderr
+    )
+    return 0
+
+
+def _record(args, cfg, names, per_image, result, sigmf_paths, t0: float) -> dict:
+    """The result file's record: per image, the summary, every frame, the SigMF paths."""
+    from osnerf.provenance import result_header
+
     results = []
     for b, (name, stats) in enumerate(zip(names, per_image)):
         frames = result.block_frames(b)
@@ -411,8 +423,4 @@ def run(args: argparse.Namespace) -> int:
             "frames": [vars(f) for f in result.frames],
         }
     )
-    write_json_atomic(out, record)
-    print(
-        f"ota: wrote {out} ({result.frames_lost}/{result.frames_sent} frames lost)", file=sys.stderr
-    )
-    return 0
+    return record
