@@ -13,7 +13,9 @@ Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI Z
 ``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
 variance. Draw ``d`` of image ``i`` at SNR ``k`` uses the same seed in every scheme (common
 random numbers: ``digital`` and ``digital_genie`` see the same fades). All input is checked
-before any work; the result file is written once, atomically, at the end.
+before any work; the result file is written once, atomically, at the end. Until then every
+finished (scheme, SNR) point is kept in ``OUT.partial``: the same command run again after an
+interruption resumes from it (a partial file of another evaluation is ignored and replaced).
 """
 
 from __future__ import annotations
@@ -80,7 +82,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "CPU second each for a Kodak image)",
     )
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
-    p.add_argument("--out", required=True, help="result JSON path")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="result JSON path (finished points wait in OUT.partial; rerun to resume)",
+    )
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
     checks.add_overwrite(p, "--out and --plot")
     from semcodec import codec_names
@@ -169,23 +175,56 @@ def run(args: argparse.Namespace) -> int:
         desc="eval-codec",
         file=sys.stderr,
     )
-    results = [
-        _point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar)
-        for scheme in schemes
-        for ki, snr in enumerate(snrs)
-    ]
+    checkpoint = {"name": codec.name, "sha256": codec.sha256} if codec else None
+    partial = partial_path(out)
+    done = _resumable(partial, config, args.seed, checkpoint)
+    if done:
+        print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
+    results = []
+    for scheme in schemes:
+        for ki, snr in enumerate(snrs):
+            r = done.get((scheme, snr))
+            if r is None:
+                r = _point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar)
+            else:
+                bar.update(len(images) * args.draws)
+            results.append(r)
+            # each finished point is kept: an interrupted run resumes from here
+            doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": results}
+            write_json_atomic(partial, {**doc, "partial": True})
     bar.close()
-    doc = {
-        **result_header(config, args.seed),
-        "checkpoint": {"name": codec.name, "sha256": codec.sha256} if codec else None,
-        "results": results,
-    }
     if args.plot:
         title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"
         _plot(results, Path(args.plot), title)
     write_json_atomic(out, doc)
+    partial.unlink(missing_ok=True)
     print(f"eval-codec: {len(results)} points -> {out}", file=sys.stderr)
     return 0
+
+
+def partial_path(out: Path) -> Path:
+    """Where a run keeps its finished points until it completes: ``<out>.partial``."""
+    return out.with_name(out.name + ".partial")
+
+
+def _resumable(partial: Path, config: dict, seed: int, checkpoint) -> dict:
+    """{(scheme, snr_db): row} of an interrupted run of the same evaluation (same config, seed
+    and codec); {} when there is none or it was of another evaluation."""
+    import json
+
+    if not partial.is_file():
+        return {}
+    try:
+        old = json.loads(partial.read_text())
+    except (OSError, ValueError):
+        return {}
+    if (
+        old.get("config") != json.loads(json.dumps(config))
+        or old.get("seed") != seed
+        or old.get("checkpoint") != checkpoint
+    ):
+        return {}
+    return {(r["scheme"], r["snr_db"]): r for r in old.get("results", [])}
 
 
 def _inputs(args: argparse.Namespace):

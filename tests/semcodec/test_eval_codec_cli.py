@@ -208,3 +208,38 @@ def test_refined_jscc_runs_alone_and_records_its_steps(image_dir, tmp_path):
     doc = json.loads(out.read_text())
     assert doc["config"]["refine_steps"] == 2
     assert [r["scheme"] for r in doc["results"]] == ["jscc_refined"]
+
+
+def test_an_interrupted_evaluation_resumes_from_its_finished_points(tmp_path, monkeypatch):
+    """The first point finishes, the second is interrupted: OUT.partial holds the first; the
+    same command again computes only the second and writes the same first row."""
+    from osnerf.commands import eval_codec
+
+    img = tmp_path / "img"
+    img.mkdir()
+    rng = np.random.default_rng(0)
+    Image.fromarray((rng.random((32, 32, 3)) * 255).astype(np.uint8)).save(img / "a.png")
+    out = tmp_path / "r.json"
+    argv = ["eval-codec", "--images", str(img), "--snr-db", "1,10", "--schemes", "analog"]
+    argv += ["--no-lpips", "--out", str(out)]
+    real = eval_codec._point
+    calls = []
+
+    def interrupted(ctx, scheme, ki, snr, *a):
+        calls.append(snr)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(ctx, scheme, ki, snr, *a)
+
+    monkeypatch.setattr(eval_codec, "_point", interrupted)
+    assert main(argv) == 130  # Ctrl-C: "interrupted"
+    partial = eval_codec.partial_path(out)
+    assert not out.exists() and partial.is_file()
+    first = json.loads(partial.read_text())["results"]
+    assert [r["snr_db"] for r in first] == [1.0]
+    calls.clear()
+    monkeypatch.setattr(eval_codec, "_point", lambda *a: calls.append(a[3]) or real(*a))
+    assert main(argv) == 0
+    assert calls == [10.0] and not partial.exists()
+    rows = json.loads(out.read_text())["results"]
+    assert [r["snr_db"] for r in rows] == [1.0, 10.0] and rows[0] == first[0]
