@@ -63,12 +63,10 @@ def check_codec_snr(spec: str | None, snr_db: float) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from hil import OtaConfig
-    from hil.air import MAX_DELAY_S, SNR_DB_RANGE
+    from hil.air import SNR_DB_RANGE
     from hil.emulator import FAULT_NAMES
     from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
-    from phy.digital import MCS_TABLE
     from semcodec.evaluation import LINK_SCHEMES
-    from semcodec.image_codecs import IMAGE_CODECS
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
     p.add_argument(
@@ -99,6 +97,49 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--sigmf-dir", default=None, help="SigMF folder (default: <out>_sigmf beside --out)"
     )
     checks.add_overwrite(p, "--out and the SigMF files in --sigmf-dir")
+    _add_air_arguments(p)
+    p.add_argument(
+        "--size",
+        type=checks.count(8, 1024),
+        default=64,
+        help="images are centre-cropped and resized to SIZE x SIZE, 8..1024 px; never "
+        "upscaled (default 64)",
+    )
+    p.add_argument(
+        "--max-images",
+        type=checks.count(1, MAX_IMAGES),
+        default=4,
+        help=f"send at most this many images, 1..{MAX_IMAGES} (default 4)",
+    )
+    _add_scheme_arguments(p)
+    add_config_arguments(
+        p,
+        OtaConfig,
+        OTA_CONFIG_FIELDS,
+        flags=OTA_FLAGS,
+        types={
+            "sample_rate_hz": checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
+            "center_freq_hz": checks.number(*FREQ_RANGE_HZ, "Hz"),
+            "max_papr_db": finite,  # OtaConfig's own check names its range
+            "symbols_per_frame": checks.count(64, 1 << 20),
+            "detection_threshold": checks.number(0.0, 1.0),
+            "max_rx_overruns": checks.count(0, 1_000_000),
+        },
+        defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
+    )
+    p.add_argument(
+        "--fault",
+        default=None,
+        choices=FAULT_NAMES,
+        help="emulated boards: inject this USB fault into the receiver, to see how a run "
+        "reports it (exit 1; the capture so far is saved as SigMF)",
+    )
+
+
+def _add_air_arguments(p: argparse.ArgumentParser) -> None:
+    """The emulated air between the boards: seed, crystal errors, echoes, delay."""
+    from hil.air import MAX_DELAY_S
+
     p.add_argument(
         "--seed", type=checks.seed, default=0, help="seed of the emulated air (default 0)"
     )
@@ -116,19 +157,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=5.0,
         help="propagation delay, microseconds (default 5)",
     )
-    p.add_argument(
-        "--size",
-        type=checks.count(8, 1024),
-        default=64,
-        help="images are centre-cropped and resized to SIZE x SIZE, 8..1024 px; never "
-        "upscaled (default 64)",
-    )
-    p.add_argument(
-        "--max-images",
-        type=checks.count(1, MAX_IMAGES),
-        default=4,
-        help=f"send at most this many images, 1..{MAX_IMAGES} (default 4)",
-    )
+
+
+def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of the digital scheme (MCS, image codec, quality) and of jscc (CBR, codec)."""
+    from phy.digital import MCS_TABLE
+    from semcodec.image_codecs import IMAGE_CODECS
+
     p.add_argument(
         "--mcs",
         default="qpsk-1/2",
@@ -157,28 +192,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"jscc: the semantic codec, one of {', '.join(codec_names())} (plugins through "
         "the semcodec.codecs entry points), optionally with a checkpoint, or a checkpoint path "
         "(default: jscc with the shipped checkpoint)",
-    )
-    add_config_arguments(
-        p,
-        OtaConfig,
-        OTA_CONFIG_FIELDS,
-        flags=OTA_FLAGS,
-        types={
-            "sample_rate_hz": checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
-            "center_freq_hz": checks.number(*FREQ_RANGE_HZ, "Hz"),
-            "max_papr_db": finite,  # OtaConfig's own check names its range
-            "symbols_per_frame": checks.count(64, 1 << 20),
-            "detection_threshold": checks.number(0.0, 1.0),
-            "max_rx_overruns": checks.count(0, 1_000_000),
-        },
-        defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
-    )
-    p.add_argument(
-        "--fault",
-        default=None,
-        choices=FAULT_NAMES,
-        help="emulated boards: inject this USB fault into the receiver, to see how a run "
-        "reports it (exit 1; the capture so far is saved as SigMF)",
     )
 
 
