@@ -54,6 +54,7 @@ def run(out_dir: Path) -> dict:
                         "0",
                         "--out",
                         str(tmp / "direct.json"),
+                        "--overwrite",  # the same scratch file for every point
                     ]
                 )
                 assert rc == 0

@@ -464,7 +464,7 @@ class EmulatedPluto:
             self.tx_cyclic = None
             self.tx_is_cyclic = bool(cyclic)
             # what is sent starts at the receiver's now: after the read in flight, if any
-            self.medium.idle_until(max(self.rx_cursor, self.rx_frontier))
+            self.medium.idle_until(self.rx_frontier)
             self.medium.start_tx(self.tx_port)
 
     def write_tx(self, raw: np.ndarray) -> None:

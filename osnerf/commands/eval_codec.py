@@ -180,19 +180,19 @@ def run(args: argparse.Namespace) -> int:
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:
         print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
-    results = []
+    doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": []}
     for scheme in schemes:
         for ki, snr in enumerate(snrs):
             r = done.get((scheme, snr))
-            if r is None:
-                r = _point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar)
-            else:
+            if r is not None:
+                doc["results"].append(r)
                 bar.update(len(images) * args.draws)
-            results.append(r)
+                continue
+            doc["results"].append(_point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar))
             # each finished point is kept: an interrupted run resumes from here
-            doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": results}
             write_json_atomic(partial, {**doc, "partial": True})
     bar.close()
+    results = doc["results"]
     if args.plot:
         title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"
         _plot(results, Path(args.plot), title)
