@@ -32,7 +32,7 @@ def _over_the_air(out_dir: Path) -> dict:
     for seed in OTA_SEEDS:
         run_dir = Path(out_dir) / f"pipeline_tiny_ota_{seed}"
         args = ["run", "--scene", "tiny", "--channel", "ota", "--snr-db", "0"]
-        args += ["--schemes", "jscc,digital,gt", "--lightweight-seconds", "0"]
+        args += ["--schemes", "jscc,digital,gt", "--renderer-steps", "0"]
         t = time.perf_counter()
         if main([*args, "--seed", str(seed), "--out", str(run_dir)]) != 0:
             raise RuntimeError(f"osnerf run (tiny, ota, seed {seed}) failed")
@@ -56,7 +56,7 @@ def _over_the_air(out_dir: Path) -> dict:
         )
     return {
         "command": "osnerf run --scene tiny --channel ota --snr-db 0 --schemes jscc,digital,gt "
-        "--lightweight-seconds 0 --seed S",
+        "--renderer-steps 0 --seed S",
         "goal": f"jscc within {OTA_GOAL_DB:g} dB of gt (object PSNR)",
         "rows": rows,
         "mean_jscc_minus_gt_db": sum(r["jscc_minus_gt_db"] for r in rows) / len(rows),

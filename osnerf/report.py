@@ -42,11 +42,12 @@ class SchemeReport:
         nerf_steps, nerf_curve, nerf_wall_seconds: the radiance field's training.
         bound: None, or what this scheme bounds (not a real system).
         training_bounds: "demanded objects" or "whole scene".
-        renderers: None (skipped), or per renderer of ``renderer.RENDERERS`` ("full",
-            "lightweight", "features") on the held-out views in order: psnr_object (as above),
-            seconds_per_view (keyframes included), setup_seconds (training a learned
-            renderer), speedup_vs_full, settings; psnr and ssim (against the ground-truth
-            views) for whole-scene schemes only.
+        renderers: None (skipped), or for the full render and the learned renderer
+            ("full", "features" of ``renderer.RENDERERS``) on the held-out views in order:
+            psnr_object (as above), seconds_per_view, setup_seconds and setup_cpu_seconds
+            (distilling the learned renderer), setup_stats (its steps and teachers),
+            speedup_vs_full, settings; psnr and ssim (against the ground-truth views) for
+            whole-scene schemes only.
     """
 
     psnr: float

@@ -1,5 +1,5 @@
 """renderer: radiance fields that train in minutes on 2 CPU cores, and the paper's
-lightweight renderer. Imports nothing else of ours.
+lightweight (feature) renderer. Imports nothing else of ours.
 
 Data (``renderer.dataset``)
     ``load_dataset(root, split="train", resolution=100, background=None, aabb=None) -> Dataset``
@@ -26,26 +26,19 @@ Training and rendering
     values); ``save_model(model, path)`` / ``load_model(path)``.
 
 Renderers (one table)
-    ``RENDERERS``: name ("full", "lightweight", "features") -> builder; ``make_renderer(name, model,
+    ``RENDERERS``: name ("full", "features") -> builder; ``make_renderer(name, model,
     dataset=None, config=None) -> (renderer, stats)``; every renderer has
     ``render_path(poses, intrinsics) -> {"rgb", "seconds_per_view", ...}`` and ``settings()``.
     ``score_renderers(model, test_dataset, train_dataset=None) -> {name: {"psnr", "ssim",
-    "seconds_per_view", "setup_seconds", "num_views", "settings"[, "speedup_vs_full"]}}``.
+    "seconds_per_view", "setup_seconds", "setup_cpu_seconds", "setup_stats", "num_views",
+    "settings"[, "speedup_vs_full"]}}``.
 
-Lightweight renderer (§3.3)
-    ``train_lightweight(model, dataset=None, LightweightConfig(...)) -> (LightweightRenderer,
-    stats)`` (None: around the cameras the field stores, :func:`stored_cameras`);
-    ``LIGHTWEIGHT_PRESETS`` ("keyframes", the default; "coarse_step");
-    ``LightweightRenderer.render_path(poses, intrinsics) -> {"rgb", "seconds_per_view",
-    "keyframes", "empty_fraction", "rerendered_fraction"}``; :func:`empty_pixels` (what the
-    low-resolution pass shows empty);
-    :func:`reproject` warps a previous frame into the current view by depth;
-    :func:`surface_points` and :func:`splat_depth` carry a frame's depth into another view.
-
-Feature renderer (§3.3, eq. 5)
+Lightweight renderer (§3.3, eq. 5)
     ``train_features(model, dataset=None, FeatureConfig(...)) -> (FeatureRenderer, stats)``:
     a K-channel feature grid (the field's density kept) rendered at low resolution and a
-    decoder with sub-pixel upsampling, both distilled from the field's own renders.
+    decoder with sub-pixel upsampling, both distilled from the field's own renders
+    (streamed through a bounded :class:`TeacherPool`; None: around the cameras the field
+    stores, :func:`stored_cameras`).
 
 Metrics
     :func:`psnr`, :func:`ssim` (scikit-image, data_range=1.0), :func:`masked_psnr`,
@@ -67,25 +60,22 @@ from renderer.cameras import (
     look_at,
     orbit_path,
     project_points,
+    rotate_pose_about,
 )
 from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
-from renderer.features import FeatureConfig, FeatureRenderer, train_features
-from renderer.fields import GridField, MLPField, positional_encoding
-from renderer.lightweight import (
-    LIGHTWEIGHT_PRESETS,
-    LightweightConfig,
-    LightweightRenderer,
-    UNetDecoder,
-    empty_pixels,
+from renderer.features import (
+    FeatureConfig,
+    FeatureRenderer,
+    TeacherPool,
     stored_cameras,
-    train_lightweight,
+    train_features,
 )
+from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lpips_weights import lpips_weights_path
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
 from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
 from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
-from renderer.reprojection import reproject, rotate_pose_about, splat_depth, surface_points
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
 from renderer.volume import (
@@ -102,7 +92,6 @@ from renderer.volume import (
 __all__ = [
     "FIELDS",
     "LPIPS_MIN_SIDE_PX",
-    "LIGHTWEIGHT_PRESETS",
     "RENDERERS",
     "Dataset",
     "FeatureConfig",
@@ -110,21 +99,18 @@ __all__ = [
     "FullRenderer",
     "GridField",
     "Intrinsics",
-    "LightweightConfig",
-    "LightweightRenderer",
     "MLPField",
     "OccupancyGrid",
     "RadianceField",
     "RaySamples",
+    "TeacherPool",
     "TrainConfig",
     "TrainResult",
-    "UNetDecoder",
     "alexnet_features",
     "alpha_from_density",
     "camera_rays",
     "composite",
     "default_aabb",
-    "empty_pixels",
     "evaluate",
     "expected_depth",
     "image_metrics",
@@ -146,9 +132,6 @@ __all__ = [
     "psnr",
     "render_views",
     "render_weights",
-    "reproject",
-    "splat_depth",
-    "surface_points",
     "rotate_pose_about",
     "sample_along_rays",
     "save_model",
@@ -159,6 +142,5 @@ __all__ = [
     "write_transforms",
     "train",
     "train_features",
-    "train_lightweight",
     "transmittance",
 ]

@@ -195,3 +195,24 @@ def orbit_path(
         )
         poses.append(look_at(eye, center, up))
     return torch.stack(poses)
+
+
+def rotate_pose_about(pose: Tensor, center: Tensor, axis: Tensor, angle_rad: float) -> Tensor:
+    """Rotate a camera pose rigidly about the line through ``center`` along ``axis``.
+
+    Args:
+        pose: [4, 4]; center, axis: [3].
+    Returns:
+        [4, 4] float32.
+    """
+    k = F.normalize(axis.float(), dim=0)
+    kx = torch.tensor([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    rot = (
+        torch.eye(3)
+        + torch.sin(torch.tensor(angle_rad)) * kx
+        + (1 - torch.cos(torch.tensor(angle_rad))) * (kx @ kx)
+    )
+    out = torch.eye(4)
+    out[:3, :3] = rot @ pose[:3, :3].float()
+    out[:3, 3] = rot @ (pose[:3, 3].float() - center.float()) + center.float()
+    return out

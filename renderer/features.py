@@ -1,4 +1,4 @@
-"""The lightweight renderer with a learned feature field (the paper's eq. 5).
+"""The lightweight renderer (the paper's §3.3, eq. 5): a learned feature field and a decoder.
 
 A trained radiance field keeps its density; a grid of ``K`` feature channels over the same
 box replaces its colour. A view is volume-rendered at ``1 / downsample`` resolution with
@@ -6,35 +6,19 @@ the field's own weights (eq. 4, coarser marching step), but only the samples tha
 weight look up features, and a small convolutional decoder maps the ``K`` feature planes
 plus opacity to the full-resolution image (sub-pixel shuffle). The feature grid and the
 decoder are distilled from the field itself: teacher renders at full resolution of the
-training cameras and of jittered copies of them (no images are needed).
+training cameras and of jittered copies of them (no images are needed). The teachers are
+streamed through a :class:`TeacherPool` of bounded size, so setup memory does not grow
+with the number of teachers or, beyond the pool, with the image size.
 
 The first ``3 (d + 1)^2`` channels start as the field's colour coefficients (SH degree d)
 and stay view-dependent: the ray's direction is the same at every sample, so compositing
 the coefficients and applying each pixel's SH basis afterwards equals compositing the
 view-dependent colour sample by sample. The other channels are free features.
 
-``python -m benchmarks renderer`` on lego's first 64 test views at 100 px with the views loaded
-correctly (no dark edge halos) and a field at 31.13 dB: 6.6 ms per view against 37.5 ms,
-5.7x faster, but **2.39 dB under** the full render against ground truth (28.73 dB; 2.14
-after 1000 s of training, 2.21 with 24 channels): the half-resolution pass cannot carry the
-detail of the sharper field. At 200 px (a field on the same 128-vertex grid, 480 s, one
-thread, 29.82 dB on the path; 2000 s of training) it is at the 5x / 1 dB edge: 6.0x and 1.02
-dB under at the defaults, 5.0x and 0.98 with 24 channels, 5.4x and 1.00 with width 48.
-Before the loader fix, against views with dark edge halos
-(numbers below): a field at 27.91 dB
-against ground truth (120 s, one thread), side by side with its full render in one run (one
-thread; the other core was training the codec), defaults (K = 16, downsample 2, step factor
-1.75, decoder width 32, 3900 jittered teachers, 500 s of training after 170 s of teacher
-renders, 8 views per render call): **0.81 dB under the full render** against ground truth
-(27.09 vs 27.91 dB), 6.5 ms per view against 37.7 ms, **5.8x faster** (the keyframe renderer of
-:mod:`renderer.lightweight` in the same run: 3.2x, 4.7 dB under). Measured on the way (same
-field, dB under the full render): 300 teachers at step 2.5, 2.0; 1900 at step 2.5, 1.35; 1900
-at step 1.5, 1.18 with 12 channels and width 32, 0.97 with 16 and 48; 3900 with width 32 at
-step 1.5: 1.06 after 300 s, 0.75 after 500 s. The speed-up is against a full render that
-became about 3x faster in the same change (120 -> 42 ms per view: the sampler tests
-candidates in cell units, and inference reads are one ``embedding_bag`` over a vertex-major
-copy of the grid, :func:`renderer.fields.read_rows`); the old defaults measure 4.4-4.8x
-against it.
+The grid is stored vertex-major and read with one ``F.embedding_bag`` per batch
+(:func:`~renderer.fields.read_rows`); its gradient is added into the eight corner rows of
+each sample in place (:class:`_GridRead`). Measurements of speed and fidelity against the
+full render are in the README ("The renderer") and ``python -m benchmarks renderer``.
 """
 
 from __future__ import annotations
@@ -48,19 +32,16 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from renderer.cameras import Intrinsics, camera_rays
+from renderer.cameras import Intrinsics, camera_rays, look_at, rotate_pose_about
 from renderer.dataset import Dataset
 from renderer.fields import (
     GridField,
-    VertexRows,
     read_rows,
     sh_basis,
     trilinear,
     trilinear_corners,
 )
-from renderer.lightweight import scene_up_and_center, stored_cameras
 from renderer.model import RadianceField, render_views
-from renderer.reprojection import rotate_pose_about
 from renderer.sampler import sample_along_rays
 from renderer.volume import packed_sum, packed_weights
 
@@ -96,7 +77,17 @@ class FeatureConfig:
     """Largest turn of a jittered camera about the scene's up axis (and half of it about a
     horizontal axis), degrees, > 0."""
     train_seconds: float = 500.0
-    """Training budget after the teacher renders, > 0."""
+    """Training budget (s) after the first ``pool_views`` teacher renders, > 0; the later
+    teachers are rendered within it. With ``train_steps`` it is only a cap."""
+    train_steps: int | None = None
+    """Optimiser steps (>= 1), or None to train for ``train_seconds``. When given, the
+    steps drive the teacher schedule: the same work on a busy machine as on an idle one."""
+    pool_views: int = 256
+    """Teacher renders held in memory at once (8-bit), >= 1. Teachers beyond the pool are
+    rendered while training, evenly over the first 80 % of the budget, each replacing the
+    oldest; the low-resolution pass of a training view is recomputed at each step. Setup
+    memory is therefore bounded at any size: ``pool_views * height * width * 3`` bytes of
+    teachers (400 px: 123 MB) plus the feature grid and one batch."""
     batch_size: int = 4
     """Views per optimiser step, >= 1."""
     grid_lr: float = 0.1
@@ -119,9 +110,12 @@ class FeatureConfig:
             ("hidden_channels", 1),
             ("batch_size", 1),
             ("extra_views", 0),
+            ("pool_views", 1),
         ):
             if getattr(self, name) < low:
                 raise ValueError(f"{name} must be >= {low}, got {getattr(self, name)}")
+        if self.train_steps is not None and self.train_steps < 1:
+            raise ValueError(f"train_steps must be >= 1 or None, got {self.train_steps}")
         if not self.step_factor >= 1:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
         if not 0 <= self.weight_threshold < 1:
@@ -186,6 +180,30 @@ class LowResPass:
     size: tuple[int, int]  # low-resolution (height, width)
 
 
+class _GridRead(torch.autograd.Function):
+    """``read_rows`` whose backward adds ``w * grad`` into the eight corner rows of each
+    point of ``target`` (the grid's ``.grad``) in place, corner by corner, and returns no
+    gradient for the grid itself.
+
+    Autograd's own path (``F.embedding_bag``'s dense backward, or the channel-major reads
+    it replaces) builds a zero gradient the size of the whole grid (tens of MB of fresh
+    pages) at every step and adds it to ``.grad``: most of a training step at 80 px."""
+
+    @staticmethod
+    def forward(ctx, grid: Tensor, index: Tensor, weights: Tensor, target: Tensor) -> Tensor:
+        ctx.save_for_backward(index, weights)
+        ctx.target = target
+        return read_rows(grid, index, weights)
+
+    @staticmethod
+    def backward(ctx, grad: Tensor):
+        index, weights = ctx.saved_tensors
+        index = index.view(-1, 8)
+        for c in range(8):
+            ctx.target.index_add_(0, index[:, c], grad * weights[:, c, None])
+        return None, None, None, None
+
+
 class FeatureRenderer:
     """Renders views of a field through its feature grid and decoder."""
 
@@ -220,10 +238,11 @@ class FeatureRenderer:
             else:
                 rgb = torch.cat([field(p, None)[1] for p in points.split(65536)])
                 coef = torch.logit(rgb.clamp(1e-3, 1 - 1e-3))
-        grid = torch.zeros(1, config.channels, nz, ny, nx)
-        grid[0, : 3 * kc] = coef.t().reshape(3 * kc, nz, ny, nx)
+        self.grid_shape = (nz, ny, nx)
+        grid = torch.zeros(nz * ny * nx, config.channels)
+        grid[:, : 3 * kc] = coef
         self.grid = nn.Parameter(grid)
-        self._rows = VertexRows()  # the grid's vertex-major copy for inference (read)
+        """The feature grid, vertex-major: [num_vertices, K], vertices in (z, y, x) order."""
         bg = torch.zeros(config.channels)
         bg[0 : 3 * kc : kc] = torch.logit(model.background.clamp(1e-3, 1 - 1e-3))
         self.background = nn.Parameter(bg)
@@ -273,15 +292,16 @@ class FeatureRenderer:
         ]
 
     def read(self, positions: Tensor) -> Tensor:
-        """The feature grid at world points [n, 3] -> [n, K] (trilinear).
-
-        Training reads the channel-major grid (its backward is one ``index_add``). Without
-        gradients the grid is read from a vertex-major copy, rebuilt whenever the grid
-        changes, by :func:`~renderer.fields.read_rows` (lego, per view: 4.5 -> 1.7 ms)."""
-        if torch.is_grad_enabled():
-            return trilinear(self.grid, self.model.aabb, positions)
-        index, weights = trilinear_corners(self.model.aabb, self.grid.shape[2:], positions)
-        return read_rows(self._rows(self.grid), index, weights)
+        """The feature grid at world points [n, 3] -> [n, K] (trilinear): one
+        ``F.embedding_bag`` over the vertex-major grid (:func:`~renderer.fields.read_rows`).
+        With gradients enabled, backward adds into ``grid.grad`` in place (:class:`_GridRead`;
+        created at the first read): zero it between steps, not set it to None."""
+        index, weights = trilinear_corners(self.model.aabb, self.grid_shape, positions)
+        if torch.is_grad_enabled() and self.grid.requires_grad:
+            if self.grid.grad is None:
+                self.grid.grad = torch.zeros_like(self.grid)
+            return _GridRead.apply(self.grid, index, weights, self.grid.grad)
+        return read_rows(self.grid.detach(), index, weights)
 
     def features(self, p: LowResPass, values: Tensor | None = None) -> Tensor:
         """[1, K + 1, h, w]: the composited feature planes (background where transparent)
@@ -333,6 +353,42 @@ class FeatureRenderer:
         return {"rgb": rgb.clamp(0, 1), "seconds_per_view": seconds}
 
 
+def scene_up_and_center(model: RadianceField, poses: Tensor) -> tuple[Tensor, Tensor]:
+    """World up (mean of the cameras' up axes) and the scene box centre: ([3], [3])."""
+    up = F.normalize(poses[:, :3, 1].float().mean(0), dim=0)
+    return up, model.aabb.mean(0)
+
+
+def stored_cameras(model: RadianceField, num_views: int = 64) -> tuple[Tensor, Intrinsics]:
+    """Training-like cameras from what the field stores (``model.spec["camera"]``): its
+    training poses when stored, else ``num_views`` cameras at the mean training distance
+    from the centre, at elevations 10-60 degrees above the horizon (golden-angle spiral).
+
+    Returns:
+        (poses [num_views, 4, 4], intrinsics).
+    """
+    cam = model.spec.get("camera")
+    if not cam:
+        raise ValueError("the field stores no cameras (spec['camera']); pass a dataset")
+    k = cam["intrinsics"]
+    intr = Intrinsics(k["fl_x"], k["fl_y"], k["cx"], k["cy"], int(k["h"]), int(k["w"]))
+    if cam.get("poses"):
+        return torch.tensor(cam["poses"], dtype=torch.float32), intr
+    center, up = torch.tensor(cam["center"]), F.normalize(torch.tensor(cam["up"]), dim=0)
+    seed = torch.tensor([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else torch.tensor([0.0, 1.0, 0.0])
+    e1 = F.normalize(seed - (seed @ up) * up, dim=0)
+    e2 = torch.linalg.cross(up, e1)
+    poses = []
+    for i in range(num_views):
+        az = i * math.pi * (3.0 - math.sqrt(5.0))
+        el = math.radians(10.0 + 50.0 * (i + 0.5) / num_views)
+        eye = center + cam["radius_m"] * (
+            math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up
+        )
+        poses.append(look_at(eye, center, up))
+    return torch.stack(poses), intr
+
+
 def jittered_poses(
     poses: Tensor, up: Tensor, center: Tensor, count: int, max_deg: float, generator
 ) -> Tensor:
@@ -351,6 +407,46 @@ def jittered_poses(
     return torch.stack(out) if out else poses.new_zeros(0, 4, 4)
 
 
+class TeacherPool:
+    """Teacher renders (8-bit) of a list of cameras, at most ``capacity`` held at once:
+    :meth:`render_next` renders the next ``count`` cameras, each replacing the oldest."""
+
+    def __init__(self, model: RadianceField, poses: Tensor, intrinsics: Intrinsics, capacity: int):
+        self.model, self.poses, self.intrinsics = model, poses, intrinsics
+        self.capacity = max(1, min(capacity, poses.shape[0]))
+        self.images = torch.zeros(
+            self.capacity, intrinsics.height, intrinsics.width, 3, dtype=torch.uint8
+        )
+        self.index = torch.zeros(self.capacity, dtype=torch.long)  # camera of each slot
+        self.rendered = 0  # cameras rendered so far
+
+    @property
+    def held(self) -> int:
+        return min(self.rendered, self.capacity)
+
+    @property
+    def remaining(self) -> int:
+        return self.poses.shape[0] - self.rendered
+
+    @torch.no_grad()
+    def render_next(self, count: int) -> None:
+        count = min(count, self.remaining)
+        if count <= 0:
+            return
+        cams = torch.arange(self.rendered, self.rendered + count)
+        rgb = render_views(self.model, self.poses[cams], self.intrinsics)["rgb"]
+        slots = cams % self.capacity
+        self.images[slots] = (rgb.clamp(0, 1) * 255).round().to(torch.uint8)
+        self.index[slots] = cams
+        self.rendered += count
+
+    def sample(self, count: int, generator: torch.Generator) -> tuple[Tensor, Tensor]:
+        """(poses [count, 4, 4], images [count, height, width, 3] float in [0, 1]) drawn
+        uniformly from the held teachers."""
+        slots = torch.randint(self.held, (count,), generator=generator)
+        return self.poses[self.index[slots]], self.images[slots].float() / 255.0
+
+
 def train_features(
     model: RadianceField,
     dataset: Dataset | None = None,
@@ -358,14 +454,17 @@ def train_features(
     generator: torch.Generator | None = None,
 ) -> tuple[FeatureRenderer, dict]:
     """Distil the feature grid and decoder from the field's own full-resolution renders of
-    ``dataset``'s cameras (None: the cameras the field stores) and of jittered copies.
+    ``dataset``'s cameras (None: the cameras the field stores) and of jittered copies
+    (streamed through a :class:`TeacherPool` of ``config.pool_views``).
 
     Returns:
-        (renderer, stats {"teacher_views", "teacher_seconds", "train_seconds", "steps",
-        "final_loss"}).
+        (renderer, stats {"teacher_views", "teacher_seconds" (the first pool's renders),
+        "train_seconds" (the training, later teachers included), "cpu_seconds" (this
+        process's CPU time for all of it), "steps", "final_loss"}).
     """
     config = config or FeatureConfig()
     generator = generator or torch.Generator().manual_seed(0)
+    cpu0 = time.process_time()
     if dataset is None:
         poses, intr = stored_cameras(model)
     else:
@@ -376,11 +475,11 @@ def train_features(
         [poses, jittered_poses(poses, up, center, config.extra_views, config.jitter_deg, generator)]
     )
     rend = FeatureRenderer(model, config)
-    teacher = render_views(model, poses, intr)["rgb"].clamp(0, 1)
-    b = config.render_batch
-    passes = [
-        p for i in range(0, len(poses), b) for p in rend.low_res_passes(poses[i : i + b], intr)
-    ]
+    pool = TeacherPool(model, poses, intr, config.pool_views)
+    bar = _setup_bar(config)
+    while pool.held < pool.capacity:
+        pool.render_next(min(config.render_batch, pool.capacity - pool.held))
+        _show(bar, pool, 0.0, None, 0)
     teacher_seconds = time.perf_counter() - t0
     opt = torch.optim.Adam(
         [
@@ -389,34 +488,56 @@ def train_features(
         ],
         fused=True,  # one pass over the 8M-value grid instead of five: 40 % of a step before
     )
+    first = pool.rendered
     steps, loss = 0, float("nan")
     t0 = time.perf_counter()
-    bar = None
-    if config.progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=int(config.train_seconds), desc="train features", unit="s", file=sys.stderr
-        )
-    while time.perf_counter() - t0 < config.train_seconds:
-        idx = torch.randint(len(passes), (config.batch_size,), generator=generator).tolist()
-        out = rend.decode([passes[i] for i in idx], intr.height, intr.width)
-        err = F.mse_loss(out, teacher[idx])
-        opt.zero_grad()
+    while (frac := _progress(config, steps, time.perf_counter() - t0)) < 1.0:
+        due = first + math.ceil((poses.shape[0] - first) * min(frac / 0.8, 1.0))
+        if due > pool.rendered:
+            pool.render_next(max(due - pool.rendered, config.render_batch))
+        batch_poses, target = pool.sample(config.batch_size, generator)
+        out = rend.decode(rend.low_res_passes(batch_poses, intr), intr.height, intr.width)
+        err = F.mse_loss(out, target)
+        opt.zero_grad(set_to_none=False)
         err.backward()
         opt.step()
-        rend._rows.clear()  # the fused step does not move the grid's version counter
         steps, loss = steps + 1, float(err.detach())
-        if bar is not None:
-            bar.n = min(int(time.perf_counter() - t0), bar.total)
-            bar.set_postfix(loss=f"{loss:.5f}", step=steps)
+        _show(bar, pool, frac, loss, steps)
     if bar is not None:
         bar.close()
     stats = {
-        "teacher_views": int(poses.shape[0]),
+        "teacher_views": int(pool.rendered),
         "teacher_seconds": teacher_seconds,
         "train_seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - cpu0,
         "steps": steps,
         "final_loss": loss,
     }
     return rend, stats
+
+
+def _progress(config: FeatureConfig, steps: int, seconds: float) -> float:
+    """Fraction of the training budget used: by steps when given (seconds then cap it)."""
+    frac = seconds / config.train_seconds
+    if config.train_steps is not None:
+        frac = max(frac, steps / config.train_steps)
+    return frac
+
+
+def _setup_bar(config: FeatureConfig):
+    """Percent of the training budget, with teachers rendered, steps and loss."""
+    if not config.progress:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=100, desc="features setup", unit="%", file=sys.stderr)
+
+
+def _show(bar, pool: TeacherPool, frac: float, loss: float | None, steps: int) -> None:
+    if bar is None:
+        return
+    post = {"teachers": f"{pool.rendered}/{pool.poses.shape[0]}", "step": steps}
+    if loss is not None:
+        post["loss"] = f"{loss:.5f}"
+    bar.set_postfix(post, refresh=False)
+    bar.update(min(int(100 * frac), 100) - bar.n)  # redraws at most every mininterval

@@ -1,7 +1,7 @@
 """The renderers a trained field is viewed with: one table, one interface, one scorer.
 
 ``RENDERERS[name](model, dataset=None, config=None, generator=None) -> (renderer, stats)``
-builds a renderer (the lightweight one trains its decoder first; ``dataset`` gives the
+builds a renderer (a learned one is distilled first; ``dataset`` gives the
 training cameras, None the cameras the field stores). Every renderer has
 ``render_path(poses [num_views, 4, 4], intrinsics) -> {"rgb": [num_views, height, width,
 3] float32, "seconds_per_view": float, ...}`` and ``settings() -> dict``.
@@ -19,7 +19,6 @@ from torch import Tensor
 from renderer.cameras import Intrinsics
 from renderer.dataset import Dataset
 from renderer.features import FeatureConfig, train_features
-from renderer.lightweight import LightweightConfig, train_lightweight
 from renderer.metrics import image_metrics
 from renderer.model import RadianceField, render_views
 
@@ -50,11 +49,6 @@ def _full(model, dataset=None, config=None, generator=None):
     return FullRenderer(model), {}
 
 
-def _lightweight(model, dataset=None, config=None, generator=None):
-    config = LightweightConfig(progress=False) if config is None else config
-    return train_lightweight(model, dataset, config, generator)
-
-
 def _features(model, dataset=None, config=None, generator=None):
     config = FeatureConfig(progress=False) if config is None else config
     return train_features(model, dataset, config, generator)
@@ -62,14 +56,12 @@ def _features(model, dataset=None, config=None, generator=None):
 
 RENDERERS: dict[str, Callable] = {
     "full": _full,
-    "lightweight": _lightweight,
     "features": _features,
 }
 """name -> builder ``(model, dataset=None, config=None, generator=None) -> (renderer,
 stats)``: the one table of renderers (the CLI's ``--renderer`` choices). ``full``: volume
-rendering of every pixel; ``lightweight``: low-resolution colour, reprojected keyframes and
-a U-Net (:mod:`renderer.lightweight`); ``features``: a learned feature field rendered at
-low resolution and decoded (:mod:`renderer.features`, the paper's eq. 5)."""
+rendering of every pixel; ``features``: a learned feature field rendered at low resolution
+and decoded (:mod:`renderer.features`, the paper's eq. 5 lightweight renderer)."""
 
 
 def make_renderer(
@@ -97,27 +89,28 @@ def score_renderers(
     configs: dict | None = None,
     generator: torch.Generator | None = None,
 ) -> dict:
-    """Render ``test_dataset``'s views in their order (a camera path: the lightweight
-    renderer reuses keyframes) with each renderer and compare with its images.
+    """Render ``test_dataset``'s views in their order with each renderer and compare with
+    its images.
 
     Args:
-        train_dataset: the cameras the lightweight decoder trains around (None: the
+        train_dataset: the cameras a learned renderer is distilled around (None: the
             cameras the field stores).
         names: renderers to score (default: all of :data:`RENDERERS`).
-        configs: name -> config (e.g. ``{"lightweight": LightweightConfig(...)}``).
+        configs: name -> config (e.g. ``{"features": FeatureConfig(...)}``).
     Returns:
         {name: {"psnr", "ssim" (means of per-view values against the images),
-        "seconds_per_view" (keyframes included, after one warm-up view), "setup_seconds"
-        (building it: the decoder's training), "num_views", "settings"[, "masked_psnr"]
+        "seconds_per_view" (after one warm-up view), "setup_seconds"
+        and "setup_cpu_seconds" (building it: the decoder's training; wall and this
+        process's CPU), "setup_stats" (the builder's), "num_views", "settings"[, "masked_psnr"]
         [, "speedup_vs_full"]}}.
     """
     if generator is None:
         generator = torch.Generator().manual_seed(0)
     results: dict = {}
     for name in names or list(RENDERERS):
-        t0 = time.perf_counter()
-        r, _ = make_renderer(name, model, train_dataset, (configs or {}).get(name), generator)
-        setup = time.perf_counter() - t0
+        t0, c0 = time.perf_counter(), time.process_time()
+        r, stats = make_renderer(name, model, train_dataset, (configs or {}).get(name), generator)
+        setup, setup_cpu = time.perf_counter() - t0, time.process_time() - c0
         r.render_path(test_dataset.poses[:1], test_dataset.intrinsics)  # warm-up
         out = r.render_path(test_dataset.poses, test_dataset.intrinsics)
         m = image_metrics(out["rgb"], test_dataset.images, test_dataset.masks)
@@ -126,6 +119,8 @@ def score_renderers(
             "ssim": m["ssim"],
             "seconds_per_view": out["seconds_per_view"],
             "setup_seconds": setup,
+            "setup_cpu_seconds": setup_cpu,
+            "setup_stats": stats,
             "num_views": m["num_views"],
             "settings": r.settings(),
         }

@@ -2,19 +2,17 @@
 
 The path is an orbit around the scene centre (radius, up axis and intrinsics default to
 the training cameras') or the ``frames[].transform_matrix`` of a JSON file (``--path``).
-``--renderer`` names one of ``renderer.RENDERERS``: ``full`` volume rendering, the
-``lightweight`` renderer (keyframes reprojected + U-Net) or ``features`` (a learned feature
-field at low resolution + decoder); the learned ones train first, around the cameras the
-field stores; that time is ``setup_seconds``, not part of the time per view.
+``--renderer`` names one of ``renderer.RENDERERS``: ``full`` volume rendering or
+``features`` (the lightweight renderer: a learned feature field at low resolution + decoder),
+which is distilled first around the cameras the field stores; that time is
+``setup_seconds`` (and ``setup_cpu_seconds``, ``peak_memory_mb``), not part of the time per view.
 Writes ``OUT/frames/NNN.png``, ``OUT/path.mp4`` or ``OUT/path.gif`` (OpenCV), and
-``OUT/render.json`` (config, ``seconds_per_view`` with keyframe renders included, the
-renderer's settings).
+``OUT/render.json`` (config, ``seconds_per_view``, the renderer's settings and setup stats).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import errno
 import json
 import os
@@ -75,21 +73,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--renderer",
         default="full",
-        help="a renderer of renderer.RENDERERS: full (default), lightweight (keyframes "
-        "reprojected + U-Net) or features (learned feature field at low resolution + decoder)",
+        help="a renderer of renderer.RENDERERS: full (default) or features (the lightweight "
+        "renderer: learned feature field at low resolution + decoder)",
     )
     p.add_argument(
-        "--lightweight-preset",
-        default="keyframes",
-        help="lightweight renderer: settings of renderer.LIGHTWEIGHT_PRESETS: keyframes "
-        "(default, fastest) or coarse_step (closest to the full render)",
-    )
-    p.add_argument(
-        "--lightweight-seconds",
-        type=checks.seconds,
+        "--renderer-steps",
+        type=checks.count(1, 1_000_000),
         default=None,
-        help="lightweight and features renderers: training budget in seconds (default: "
-        "the renderer's own, 60 and 180)",
+        help="features renderer: distillation steps (default: the renderer's own budget, "
+        "renderer.FeatureConfig)",
     )
     p.add_argument(
         "--seed", type=checks.seed, default=0, help="learned renderers' seed (default 0)"
@@ -135,21 +127,10 @@ def run(args: argparse.Namespace) -> int:
     import torch
 
     from osnerf.provenance import result_header, write_json_atomic
-    from renderer import (
-        LIGHTWEIGHT_PRESETS,
-        RENDERERS,
-        load_model,
-        make_renderer,
-        to_uint8,
-    )
+    from renderer import RENDERERS, load_model, make_renderer, to_uint8
 
     if args.renderer not in RENDERERS:
         raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
-    if args.lightweight_preset not in LIGHTWEIGHT_PRESETS:
-        raise UsageError(
-            f"--lightweight-preset must be one of {', '.join(LIGHTWEIGHT_PRESETS)}, "
-            f"got {args.lightweight_preset!r}"
-        )
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
     run_path = Path(args.run)
@@ -167,11 +148,11 @@ def run(args: argparse.Namespace) -> int:
     intr, poses = _camera_path(args, model)
 
     config = _renderer_config(args)
-    t0 = time.perf_counter()
-    rend, _ = make_renderer(
+    t0, c0 = time.perf_counter(), time.process_time()
+    rend, setup_stats = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)
     )
-    setup_seconds = time.perf_counter() - t0
+    setup_seconds, setup_cpu = time.perf_counter() - t0, time.process_time() - c0
     rendered = rend.render_path(poses, intr)
 
     out_dir = Path(args.out)
@@ -195,10 +176,12 @@ def run(args: argparse.Namespace) -> int:
             "width": intr.width,
             "height": intr.height,
             "seconds_per_view": rendered["seconds_per_view"],
-            "seconds_per_view_note": "rendering only (keyframe renders included), no file I/O",
+            "seconds_per_view_note": "rendering only, no file I/O",
             "setup_seconds": setup_seconds,
+            "setup_cpu_seconds": setup_cpu,
+            "setup_stats": setup_stats,
+            "peak_memory_mb": peak_memory_mb(),
             "renderer": rend.settings(),
-            "keyframes": rendered.get("keyframes"),
             "video": None if video is None else video.name,
         }
     )
@@ -269,16 +252,19 @@ def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, heigh
 
 
 def _renderer_config(args: argparse.Namespace):
-    """The learned renderer's settings from --lightweight-preset / --lightweight-seconds (None
-    for the full renderer)."""
-    from renderer import LIGHTWEIGHT_PRESETS, FeatureConfig
+    """The learned renderer's settings from --renderer-steps (None for the full renderer)."""
+    from renderer import FeatureConfig
 
-    config = None
-    budget = {} if args.lightweight_seconds is None else {"train_seconds": args.lightweight_seconds}
-    if args.renderer == "lightweight":
-        config = dataclasses.replace(
-            LIGHTWEIGHT_PRESETS[args.lightweight_preset], progress=True, **budget
-        )
-    elif args.renderer == "features":
-        config = FeatureConfig(progress=True, **budget)
-    return config
+    if args.renderer != "features":
+        return None
+    budget = {}
+    if args.renderer_steps is not None:  # the steps are the budget; no time cap
+        budget = {"train_steps": args.renderer_steps, "train_seconds": checks.MAX_BUDGET_S}
+    return FeatureConfig(progress=True, **budget)
+
+
+def peak_memory_mb() -> float:
+    """This process's peak resident memory so far (MB; Linux reports ru_maxrss in kB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

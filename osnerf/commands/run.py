@@ -39,7 +39,7 @@ CONFIG_FIELDS = (
     "nerf_steps",
     "ota_device",
     "nerf_clock",
-    "lightweight_seconds",
+    "renderer_steps",
     "refine_steps",
 )
 FLAGS = {
@@ -94,7 +94,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "num_test_views": checks.count(1, 256),
             "symbol_rate_hz": checks.number(0.0, 1e12, "Hz", low_open=True),
             "nerf_steps": checks.count(1, MAX_NERF_STEPS),
-            "lightweight_seconds": checks.number(0.0, checks.MAX_BUDGET_S, "s"),
+            "renderer_steps": checks.count(0, 100_000),
             "refine_steps": checks.refine_steps,
         },
         choices={
@@ -166,10 +166,11 @@ def run(args: argparse.Namespace) -> int:
         )
         for rname, r in (s.renderers or {}).items():
             speed = f"  {r['speedup_vs_full']:.1f}x full" if "speedup_vs_full" in r else ""
+            setup = f", set up in {r['setup_cpu_seconds']:.0f} CPU-s" if r["setup_stats"] else ""
             rpo = "n/a" if r.get("psnr_object") is None else f"{r['psnr_object']:.2f}"
             print(
                 f"{'':8s}  {rname} render: {1e3 * r['seconds_per_view']:.0f} ms/view  "
-                f"psnr_object {rpo} dB{speed}",
+                f"psnr_object {rpo} dB{speed}{setup}",
                 file=sys.stderr,
             )
     print(f"report: {out / 'report.json'} and {out / 'report.html'}", file=sys.stderr)

@@ -55,10 +55,11 @@ class RunConfig:
         ota_device: for channel "ota": "emulated" (two emulated HackRFs), or a real front end
             of ``hil.DEVICES``: "hackrf" (two boards) or "pluto" (one board, full duplex: the
             first libiio finds, or ``ip:$IIOD_REMOTE``).
-        lightweight_seconds: training budget (s) of each learned renderer of
-            ``renderer.RENDERERS`` (lightweight, features), which render the held-out views
-            beside the full render of each scheme's field (time per view and PSNR of each in
-            the report); 0 skips them.
+        renderer_steps: optimiser steps of the learned renderer (``renderer.FeatureConfig``:
+            a feature grid and decoder distilled from the field's own renders) built for each
+            scheme's field; it renders the held-out views beside the full render (time per
+            view, PSNR and setup CPU seconds of each in the report). Steps, not seconds: the
+            same renderer on a busy machine as on an idle one. 0 skips it.
         refine_steps: the semantic schemes' transmitter (jscc, full) refines each view's
             symbols with this many Adam steps on the expected squared error over its own
             model of the channel at the view's measured SNR (:func:`semcodec.refine_symbols`,
@@ -85,7 +86,7 @@ class RunConfig:
     nerf_clock: str = "cpu"
     ota_device: str = "emulated"
     nerf_steps: int | None = 1000
-    lightweight_seconds: float = 15.0
+    renderer_steps: int = 300
     refine_steps: int = 30
 
     def __post_init__(self):
@@ -116,9 +117,10 @@ class RunConfig:
             raise ValueError(
                 f"refine_steps must be an integer in [0, 10000], got {self.refine_steps!r}"
             )
-        if not (self.lightweight_seconds >= 0 and math.isfinite(self.lightweight_seconds)):
+        if not (isinstance(self.renderer_steps, int) and 0 <= self.renderer_steps <= 100_000):
             raise ValueError(
-                f"lightweight_seconds must be >= 0 (0: skip), got {self.lightweight_seconds!r}"
+                f"renderer_steps must be an integer in [0, 100000] (0: skip), "
+                f"got {self.renderer_steps!r}"
             )
         if self.ota_device not in OTA_DEVICES:
             raise ValueError(

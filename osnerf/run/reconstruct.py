@@ -109,7 +109,7 @@ def reconstruct(
             views.intrinsics.width,
         )
     renderers = None
-    if config.lightweight_seconds > 0:
+    if config.renderer_steps > 0:
         renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
     rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
     op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
@@ -141,20 +141,19 @@ def reconstruct(
 
 
 def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool) -> dict:
-    """Every renderer of ``renderer.RENDERERS`` on the held-out views (in their order):
-    psnr_object exactly as the scheme's (against the ground-truth views over the objects'
-    pixels of the views showing them), and for whole-scene schemes psnr and ssim of the
-    whole view. The learned renderers train around the received views' cameras for
-    ``config.lightweight_seconds`` each."""
-    budget = float(config.lightweight_seconds)
-    configs = {
-        "lightweight": renderer.LightweightConfig(
-            train_seconds=budget, num_sequences=32, progress=False
-        ),
-        "features": renderer.FeatureConfig(train_seconds=budget, extra_views=64, progress=False),
-    }
+    """The full render and the learned renderer (``features``, distilled for
+    ``config.renderer_steps`` steps from renders of the received views' cameras and
+    jittered copies) on the held-out views, in their order: psnr_object exactly as the
+    scheme's (against the ground-truth views over the objects' pixels of the views showing
+    them), and for whole-scene schemes psnr and ssim of the whole view."""
+    configs = {"features": learned_renderer_config(config.renderer_steps)}
     out = renderer.score_renderers(
-        model, held_out, ds, configs=configs, generator=torch.Generator().manual_seed(seed)
+        model,
+        held_out,
+        ds,
+        names=["full", "features"],
+        configs=configs,
+        generator=torch.Generator().manual_seed(seed),
     )
     for r in out.values():
         po = r.pop("masked_psnr", None)
@@ -163,6 +162,15 @@ def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool)
             r.pop("psnr")
             r.pop("ssim")
     return out
+
+
+def learned_renderer_config(steps: int) -> renderer.FeatureConfig:
+    """The feature renderer as the pipeline builds it: ``steps`` optimiser steps (the
+    seconds cap only guards against a pathological machine), and fewer teachers than the
+    standalone defaults, sized for the pipeline's small views."""
+    return renderer.FeatureConfig(
+        train_steps=steps, train_seconds=3600.0, extra_views=64, progress=False
+    )
 
 
 def view_metrics(received: np.ndarray, sent: np.ndarray, masks: np.ndarray | None) -> dict:

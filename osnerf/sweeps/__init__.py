@@ -5,8 +5,8 @@ See :mod:`osnerf.sweeps.spec` for the spec, :mod:`osnerf.sweeps.metrics` for wha
 command's point records, :mod:`osnerf.sweeps.store` for the results file.
 """
 
-from osnerf.sweeps.metrics import METRIC_RULES, MetricRule, metric_rule
 from osnerf.sweeps.executors import EXECUTORS, execute_point
+from osnerf.sweeps.metrics import METRIC_RULES, MetricRule, metric_rule
 from osnerf.sweeps.runner import SweepSummary, errors_path, run_sweep
 from osnerf.sweeps.spec import Point, SweepSpec, expand, load_spec, point_key, spec_from_dict
 from osnerf.sweeps.store import append_record, open_results, read_results

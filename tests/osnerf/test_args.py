@@ -74,14 +74,14 @@ def test_nonsense_is_refused_naming_the_flag(one_line, tmp_path, capsys, images,
         (["train-codec", "--crop-px", "18"], "--crop-px must be a multiple of 4"),
         (["train-codec", "--batch-size", "0"], "--batch-size"),
         (["run", "--max-seconds", "0"], "--max-seconds"),
-        (["run", "--lightweight-seconds", "-1"], "--lightweight-seconds"),
+        (["run", "--renderer-steps", "-1"], "--renderer-steps"),
     ],
 )
 def test_messages_name_the_flags_not_the_config_fields(one_line, tmp_path, capsys, argv, flag):
     assert main([*argv, "--out", str(tmp_path / "o")]) == 2
     err = one_line()
     assert flag in err, err
-    for field in ("crop_px", "batch_size", "max_seconds", "num_train_views", "lightweight_seconds"):
+    for field in ("crop_px", "batch_size", "max_seconds", "num_train_views", "renderer_steps"):
         assert field not in err, err
 
 

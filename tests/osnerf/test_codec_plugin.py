@@ -50,7 +50,7 @@ def test_plugin_over_the_air_between_emulated_hackrfs(plugin, kodak1, tmp_path):
 def test_plugin_in_osnerf_run_and_the_knowledge_base_check(plugin, tmp_path, capsys):
     """The plugin cannot focus: the pipeline sends the objects' box at the view's budget."""
     base = ["run", "--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
-    base += ["--nerf-steps", "60", "--lightweight-seconds", "0", "--schemes", "jscc,gt"]
+    base += ["--nerf-steps", "60", "--renderer-steps", "0", "--schemes", "jscc,gt"]
     base += ["--cache-dir", str(tmp_path / "cache")]
     out = tmp_path / "run"
     assert main([*base, "--codec", "demo", "--out", str(out)]) == 0

@@ -44,7 +44,7 @@ def test_run_over_the_air_reports_the_frames(tmp_path):
     rc = main(
         ["run", "--scene", "tiny", "--channel", "ota", "--snr-db", "15", "--schemes", "jscc"]
         + ["--resolution", "32", "--views", "4", "--test-views", "2", "--max-seconds", "2"]
-        + ["--lightweight-seconds", "0"]
+        + ["--renderer-steps", "0"]
         + ["--cache-dir", str(tmp_path / "cache"), "--out", str(out)]
     )
     assert rc == 0

@@ -12,7 +12,7 @@ import pytest
 from osnerf.cli import main
 
 SMALL = ["--resolution", "32", "--views", "4", "--test-views", "2", "--nerf-steps", "60"]
-SMALL += ["--lightweight-seconds", "0"]  # scored in the report-structure test only
+SMALL += ["--renderer-steps", "0"]  # scored in the report-structure test only
 
 
 def _run(env, out, *extra):
@@ -45,8 +45,8 @@ def _run(env, out, *extra):
         (["--snr-db", "55"], "outside the codec's range"),
         (["--nerf-steps", "0"], "argument --nerf-steps: must be an integer in [1, "),
         (
-            ["--lightweight-seconds", "-1"],
-            "argument --lightweight-seconds: must be a number in [0,",
+            ["--renderer-steps", "-1"],
+            "argument --renderer-steps: must be an integer in [0,",
         ),
     ],
 )
@@ -77,7 +77,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     out = tmp_path / "tiny"
     schemes = "jscc,digital,digital_genie,full,gt"
     args = ["--channel", "awgn", "--snr-db", "10", "--schemes", schemes, "--seed", "3"]
-    args += ["--lightweight-seconds", "1"]
+    args += ["--renderer-steps", "5"]
     assert _run(env, out, *args) == 0
     report = json.loads((out / "report.json").read_text())
     for key in (
@@ -113,8 +113,8 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         if s["psnr_object"] is not None:
             assert curve[-1]["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-3)
         # both renderers on the held-out views: the full one is the render scored above
-        assert set(s["renderers"]) == {"full", "lightweight", "features"}
-        full, light = s["renderers"]["full"], s["renderers"]["lightweight"]
+        assert set(s["renderers"]) == {"full", "features"}
+        full, light = s["renderers"]["full"], s["renderers"]["features"]
         if s["psnr_object"] is not None:
             assert full["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-4), name
         if s["training_bounds"] == "whole scene":
@@ -125,8 +125,8 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         assert light["speedup_vs_full"] == pytest.approx(
             full["seconds_per_view"] / light["seconds_per_view"]
         )
-        assert light["settings"]["train_seconds"] == 1.0
-        assert s["renderers"]["features"]["settings"]["train_seconds"] == 1.0
+        assert light["settings"]["train_steps"] == 5 and light["setup_stats"]["steps"] == 5
+        assert light["setup_cpu_seconds"] > 0 and not full["setup_stats"]
     sch = report["schemes"]
     assert sch["gt"]["symbols_sent"] == 0 and sch["gt"]["views_sent"] == len(sent)
     assert sch["jscc"]["views_sent"] == len(sent) and sch["full"]["views_sent"] == len(
@@ -166,8 +166,8 @@ def test_cache_key_does_not_depend_on_how_a_number_is_written():
     so a run started from the CLI resumes from Python and back; a real change still moves it."""
     from osnerf.run import RunConfig
 
-    a = RunConfig(snr_db=0, max_seconds=60, lightweight_seconds=0, symbol_rate_hz=1_000_000)
-    b = RunConfig(snr_db=0.0, max_seconds=60.0, lightweight_seconds=0.0, symbol_rate_hz=1e6)
+    a = RunConfig(snr_db=0, max_seconds=60, renderer_steps=0, symbol_rate_hz=1_000_000)
+    b = RunConfig(snr_db=0.0, max_seconds=60.0, renderer_steps=0, symbol_rate_hz=1e6)
     assert a.key() == b.key()
     assert RunConfig(snr_db=1.0).key() != b.key()
     assert RunConfig(schemes=("jscc",)).key() == RunConfig(schemes=("gt", "jscc")).key()

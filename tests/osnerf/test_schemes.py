@@ -19,7 +19,7 @@ from osnerf.cli import main
 from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
-TINY += ["--lightweight-seconds", "0"]
+TINY += ["--renderer-steps", "0"]
 STEPS = ["--max-seconds", "600", "--nerf-steps", "40"]  # step-limited: deterministic
 
 

@@ -16,6 +16,7 @@ from renderer import (
     train_features,
 )
 from renderer.features import jittered_poses, low_res_intrinsics
+from renderer.fields import trilinear
 
 
 def test_composite_uses_the_fields_weights(sphere_model):
@@ -27,7 +28,7 @@ def test_composite_uses_the_fields_weights(sphere_model):
     rend = FeatureRenderer(model, cfg)
     v = torch.tensor([0.3, -1.0, 2.0, 0.5, 4.0])
     with torch.no_grad():
-        rend.grid.copy_(v.reshape(1, 5, 1, 1, 1).expand_as(rend.grid))
+        rend.grid.copy_(v.expand_as(rend.grid))
         rend.background.copy_(torch.tensor([1.0, 0.0, -2.0, 0.0, 0.0]))
     pose, intr = train_set.poses[3], train_set.intrinsics
     with torch.no_grad():
@@ -105,7 +106,10 @@ def test_view_dependent_colour_starts_as_the_fields(sphere_model):
         FeatureRenderer(model, FeatureConfig(channels=8))
 
 
-def test_inference_reads_equal_training_reads_and_follow_grid_updates(sphere_model):
+def test_reads_are_trilinear_and_their_sparse_gradient_is_the_dense_one(sphere_model):
+    """The vertex-major read equals ``F.grid_sample``'s trilinear interpolation of the same
+    grid, and its sparse gradient, added into a zeroed ``.grad``, equals autograd's dense
+    gradient of that interpolation."""
     model, train_set = sphere_model
     rend = FeatureRenderer(model, FeatureConfig(channels=5, progress=False))
     g = torch.Generator().manual_seed(1)
@@ -113,11 +117,18 @@ def test_inference_reads_equal_training_reads_and_follow_grid_updates(sphere_mod
     with torch.no_grad():
         rend.grid.normal_(generator=g)
         fast = rend.read(pts)
-    with torch.enable_grad():
-        assert torch.allclose(fast, rend.read(pts).detach(), atol=1e-5)
-    with torch.no_grad():
-        rend.grid.add_(1.0)  # an optimiser step: the vertex-major copy is rebuilt
-        assert torch.allclose(rend.read(pts), fast + 1.0, atol=1e-5)
+    nz, ny, nx = rend.grid_shape
+    dense = rend.grid.detach().t().reshape(1, 5, nz, ny, nx).clone().requires_grad_()
+    ref = trilinear(dense, model.aabb, pts)
+    assert torch.allclose(fast, ref.detach(), atol=1e-5)
+    upstream = torch.randn(500, 5, generator=g)
+    (ref * upstream).sum().backward()
+    rend.grid.grad = torch.zeros_like(rend.grid)
+    (rend.read(pts) * upstream).sum().backward()
+    expect = dense.grad[0].permute(1, 2, 3, 0).reshape(-1, 5)
+    assert not rend.grid.grad.is_sparse
+    assert torch.allclose(rend.grid.grad, expect, atol=1e-5)
+    assert int((rend.grid.grad.abs().sum(1) > 0).sum()) <= 8 * 500
 
 
 def test_views_rendered_together_equal_views_rendered_one_by_one(sphere_model):

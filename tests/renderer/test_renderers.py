@@ -5,20 +5,15 @@ import torch
 from sphere_scene import exact_sphere_field
 
 from renderer import (
-    LIGHTWEIGHT_PRESETS,
     RENDERERS,
     FeatureConfig,
-    LightweightConfig,
     load_dataset,
     make_renderer,
     render_views,
     score_renderers,
 )
 
-QUICK = {
-    "lightweight": LightweightConfig(train_seconds=1, num_sequences=2, progress=False),
-    "features": FeatureConfig(train_seconds=2, extra_views=8, progress=False),
-}
+QUICK = {"features": FeatureConfig(train_steps=6, extra_views=8, progress=False)}
 
 
 @pytest.mark.parametrize("name", list(RENDERERS))
@@ -29,8 +24,7 @@ def test_every_registered_renderer_renders_a_path(name, sphere_dataset):
     out = r.render_path(train_set.poses[:3], train_set.intrinsics)
     assert out["rgb"].shape == (3, 32, 32, 3) and out["seconds_per_view"] > 0
     assert r.settings()["renderer"] == name
-    if name in ("full", "lightweight"):
-        # the first frame is the full render for both (a keyframe for the lightweight one)
+    if name == "full":
         full = render_views(model, train_set.poses[:1], train_set.intrinsics)["rgb"]
         assert torch.equal(out["rgb"][:1], full)
 
@@ -44,24 +38,13 @@ def test_score_renderers_reports_each_against_the_images(sphere_dataset):
     train_set = load_dataset(sphere_dataset, "train", resolution=None)
     test_set = load_dataset(sphere_dataset, "test", resolution=None)
     model = exact_sphere_field(train_set)
-    config = QUICK["lightweight"]
     res = score_renderers(model, test_set, train_set, configs=QUICK)
     assert set(res) == set(RENDERERS)
     for r in res.values():
         assert r["num_views"] == 4 and r["seconds_per_view"] > 0 and r["psnr"] > 20
-    assert res["lightweight"]["speedup_vs_full"] > 0
-    assert res["lightweight"]["settings"]["keyframe_every"] == config.keyframe_every
-
-
-@pytest.mark.parametrize("preset", list(LIGHTWEIGHT_PRESETS))
-def test_every_lightweight_preset_renders_a_path(preset, sphere_dataset):
-    import dataclasses
-
-    train_set = load_dataset(sphere_dataset, "train", resolution=None)
-    model = exact_sphere_field(train_set)
-    config = dataclasses.replace(
-        LIGHTWEIGHT_PRESETS[preset], train_seconds=1, num_sequences=2, progress=False
+    feat = res["features"]
+    assert feat["speedup_vs_full"] == pytest.approx(
+        res["full"]["seconds_per_view"] / feat["seconds_per_view"]
     )
-    r, _ = make_renderer("lightweight", model, train_set, config)
-    out = r.render_path(train_set.poses[:3], train_set.intrinsics)
-    assert out["rgb"].shape == (3, 32, 32, 3) and out["rgb"].isfinite().all()
+    assert feat["setup_stats"]["steps"] == 6 and feat["settings"]["train_steps"] == 6
+    assert res["full"]["setup_stats"] == {} and "speedup_vs_full" not in res["full"]

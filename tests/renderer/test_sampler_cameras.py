@@ -1,5 +1,5 @@
 """Occupancy never skips an occupied cell; samples lie on the rays inside the box;
-projection inverts ray generation; reprojection warps by depth."""
+projection inverts ray generation."""
 
 import math
 
@@ -13,7 +13,6 @@ from renderer import (
     intersect_aabb,
     look_at,
     project_points,
-    reproject,
     sample_along_rays,
 )
 
@@ -82,33 +81,6 @@ def test_project_points_inverts_camera_rays():
         -pose[:3, 2],
         atol=1e-6,
     )
-
-
-def test_reprojection_of_a_plane_shifts_by_the_parallax():
-    """A fronto-parallel plane 4 m away, camera moved 0.5 m to the right: fx * 0.5 / 4 px."""
-    intr = Intrinsics(32.0, 32.0, 16.0, 16.0, 32, 32)
-    pose0 = torch.eye(4)
-    pose1 = torch.eye(4)
-    pose1[0, 3] = 0.5
-    _, d1 = camera_rays(pose1[None], intr)
-    depth1 = 4.0 / (-d1[0, ..., 2])  # distance along each ray to z = -4
-    _, d0 = camera_rays(pose0[None], intr)
-    depth0 = 4.0 / (-d0[0, ..., 2])
-    ramp = torch.arange(32.0).expand(32, 32)[None] / 32  # value = column / 32
-    warped, valid = reproject(ramp, depth0, pose0, depth1, pose1, intr)
-    shift = 32.0 * 0.5 / 4.0  # 4 px
-    cols = valid[0].nonzero()[:, 0]
-    assert cols.min() == 0 and cols.max() == 31 - int(shift)
-    assert torch.allclose(
-        warped[0, :, :27], (torch.arange(27.0) + shift).expand(32, 27) / 32, atol=1e-5
-    )
-    assert valid[:, 28:].sum() == 0
-    # identity warp returns the frame
-    same, v = reproject(ramp, depth0, pose0, depth0, pose0, intr)
-    assert torch.allclose(same, ramp, atol=1e-5) and v.all()
-    # an occluder: the previous frame saw something nearer -> invalid
-    w2, v2 = reproject(ramp, depth0 * 0.5, pose0, depth1, pose1, intr)
-    assert v2.sum() == 0 and w2.abs().sum() == 0
 
 
 def test_carving_keeps_every_cell_the_object_touches_and_empties_the_rest():
@@ -211,32 +183,6 @@ def test_adding_view_dependence_keeps_the_field_and_then_depends_on_direction():
     _, a = field(pts, dirs)
     _, b = field(pts, -dirs)
     assert (a[:, 0] - b[:, 0]).abs().max() > 0.05 and torch.equal(a[:, 1:], b[:, 1:])
-
-
-def test_splatted_depth_of_a_plane_matches_the_analytic_depth():
-    from renderer.reprojection import splat_depth, surface_points
-
-    intr = Intrinsics(60.0, 60.0, 32.0, 32.0, 64, 64)
-
-    def plane_depth(pose):  # distance along each unit ray to the plane z = 0
-        o, d = camera_rays(pose[None], intr)
-        return (-o[0, ..., 2] / d[0, ..., 2]).clamp_min(0.0)
-
-    prev = look_at(torch.tensor([0.3, -2.0, 3.0]), torch.tensor([0.0, 0.0, 0.0]))
-    cur = look_at(torch.tensor([0.8, -1.8, 3.1]), torch.tensor([0.1, 0.0, 0.0]))
-    points = surface_points(plane_depth(prev), torch.ones(64, 64), prev, intr)
-    assert torch.allclose(points[:, 2], torch.zeros(1), atol=1e-4)  # on the plane
-    splat = splat_depth(points, cur, intr)
-    truth = plane_depth(cur)
-    landed = torch.isfinite(splat)
-    assert landed.float().mean() > 0.8
-    # a point lands anywhere inside its pixel (and cracks take a neighbour's depth): off
-    # by the depth change across a pixel or two, large only at grazing angles
-    rel = (splat[landed] - truth[landed]).abs() / truth[landed]
-    assert rel.median() < 0.005 and rel.max() < 0.05
-    # a frame's own points splat back onto its own depth
-    own = splat_depth(points, prev, intr)
-    assert torch.allclose(own, plane_depth(prev), rtol=1e-4)
 
 
 def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
