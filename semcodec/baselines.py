@@ -182,8 +182,9 @@ def _grey(shape) -> Tensor:
     return torch.full(shape, LOST_IMAGE_VALUE)
 
 
-def _decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
-    """Wire bytes -> ([3, H, W] image, True), or (mid-grey, False) when undecodable."""
+def decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
+    """Wire bytes -> ([3, H, W] float32 image, True), or (mid-grey, False) when they are
+    None (nothing arrived) or undecodable."""
     if data is None:
         return _grey(shape), False
     try:
@@ -216,7 +217,7 @@ def transmit_ideal(
     out, qualities, sizes = [], [], []
     for img in x:
         data, q = encode_to_budget(img, bits // 8, image_codec)
-        rec, _ = _decode_or_grey(data, img.shape, image_codec)
+        rec, _ = decode_or_grey(data, img.shape, image_codec)
         out.append(rec)
         qualities.append(q)
         sizes.append(0 if data is None else len(data))
@@ -256,7 +257,7 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
     r = transmit_bytes(
         data, mcs, link, snr_db, generator=torch.Generator().manual_seed(seed), num_symbols=n
     )
-    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
+    rec, ok = decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
     failed = (
         len([c for c in r.failed_codewords if c < r.num_payload_codewords])
         if r.num_payload_codewords
