@@ -145,7 +145,8 @@ def test_bad_arguments_exit_2(tmp_path, images):
 def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
     tmp_path, images, capsys, monkeypatch, flag, value, match
 ):
-    """#16: these were refused after ~4.5 s of encoding, in internal names (delay_s ...)."""
+    """A bad value is refused before any image is loaded or encoded, in one line that names
+    the flag as the user typed it (--delay-us, not an internal name such as delay_s)."""
     import osnerf.commands.ota as ota_cmd
 
     def no_work(*a, **k):
@@ -161,7 +162,7 @@ def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
 
 
 def test_corrupt_image_is_bad_input(tmp_path, capsys):
-    """#16: a corrupt image exited 1 in ota (2 in eval-codec)."""
+    """A corrupt image is bad input (exit 2, naming the file), as in eval-codec."""
     folder = tmp_path / "imgs"
     folder.mkdir()
     (folder / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
