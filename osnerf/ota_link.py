@@ -1,4 +1,4 @@
-"""An over-the-air link for the pipeline: symbols through two HackRFs (emulated or real).
+"""An over-the-air link: symbols through two radios (emulated or real HackRFs, a Pluto).
 
 :class:`OtaLink` has the interface of ``phy``'s links (``link(x, snr_db, generator) ->
 phy.LinkOutput``), so every scheme of ``osnerf run`` can cross the air: each call sends
@@ -9,6 +9,11 @@ variance ``hil.ota.ERASED_NOISE_VAR``). A decoder should get that variance
 (``codec.decode(x_hat, meta, snr_db, noise_var=out.noise_var)``) and, as its SNR, the
 receiver's measured one (``snr_db_measured``) rather than ``1 / mean(noise_var)``, which
 one erased frame dominates.
+
+:meth:`OtaLink.send_blocks` is the same burst for blocks of any length (one per image,
+what ``semcodec``'s framed schemes send): it returns ``hil``'s :class:`hil.BurstResult`
+(one report per frame, the burst and the capture), and :func:`received_blocks` turns that
+into ``semcodec.ReceivedBlock`` s for a framed scheme's receiver.
 """
 
 from __future__ import annotations
@@ -94,8 +99,27 @@ class OtaLink:
     frames_lost: int = 0
     snr_db_measured: list = field(default_factory=list)
 
-    def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
+    def send_blocks(self, blocks: list):
+        """Blocks of any length as one burst; updates the frame counters and the measured SNR.
+
+        Args:
+            blocks: one [num_symbols] complex64 array per image, unit mean power each.
+        Returns:
+            ``hil.BurstResult``: per block ``(x_hat, noise_var)`` and one ``hil.FrameReport``
+            per frame (``hil.HilError`` and subclasses propagate, with what was captured).
+        """
         from hil import send_blocks
+
+        if self.emulator is not None:  # deterministic: receivers wait for this next burst
+            medium = self.emulator.medium
+            medium.wait_for_bursts = medium.bursts_completed + 1
+        result = send_blocks(self.tx, self.rx, blocks, self.ota_cfg)
+        self.frames_sent += result.frames_sent
+        self.frames_lost += result.frames_lost
+        self.snr_db_measured.append(result.snr_db_measured())
+        return result
+
+    def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
         from phy import LinkOutput
 
         if snr_db is not None and abs(float(snr_db) - self.snr_db) > 1e-9:
@@ -106,20 +130,31 @@ class OtaLink:
         if x.dim() != 2:
             raise ValueError(f"x must be [batch, num_symbols] complex64, got {tuple(x.shape)}")
         blocks = [x[i].detach().cpu().numpy().astype(np.complex64) for i in range(x.shape[0])]
-        if self.emulator is not None:  # deterministic: receivers wait for this next burst
-            medium = self.emulator.medium
-            medium.wait_for_bursts = medium.bursts_completed + 1
-        result = send_blocks(self.tx, self.rx, blocks, self.ota_cfg)
-        self.frames_sent += result.frames_sent
-        self.frames_lost += result.frames_lost
-        self.snr_db_measured.append(result.snr_db_measured())
+        result = self.send_blocks(blocks)
         x_hat = torch.from_numpy(np.stack([np.asarray(b[0], np.complex64) for b in result.blocks]))
         nv = torch.from_numpy(np.stack([np.asarray(b[1], np.float32) for b in result.blocks]))
         return LinkOutput(x_hat, nv, None)
 
     def close(self) -> None:
-        for dev in (self.tx, self.rx):
+        """Close each radio once (a full-duplex board is both ends); best effort."""
+        for dev in (self.tx, self.rx) if self.rx is not self.tx else (self.tx,):
             try:
                 dev.close()
             except Exception:  # noqa: BLE001 - closing is best effort
                 pass
+
+
+def received_blocks(result) -> list:
+    """``hil.BurstResult`` -> one ``semcodec.ReceivedBlock`` per block sent: its symbols,
+    noise variance, which of its frames were detected and its measured SNR."""
+    from semcodec import ReceivedBlock
+
+    return [
+        ReceivedBlock(
+            np.asarray(x_hat, np.complex64),
+            np.asarray(noise_var, np.float32),
+            [bool(f.detected) for f in result.block_frames(b)],
+            result.snr_db_measured(b),
+        )
+        for b, (x_hat, noise_var) in enumerate(result.blocks)
+    ]

@@ -251,7 +251,55 @@ def load_dataset(
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     if resolution is not None and resolution < 1:
         raise ValueError(f"resolution must be >= 1 pixel or None, got {resolution}")
-    root = Path(root)
+    path, meta, frames = _read_transforms(Path(root), split)
+    if background is None:
+        background = tuple(float(c) for c in meta.get("background", (1.0, 1.0, 1.0)))
+    if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
+        raise ValueError(f"background must be 3 values in [0, 1], got {background}")
+    bg = np.asarray(background, dtype=np.float32)
+
+    images, masks, poses, names, alpha_masks = [], [], [], [], []
+    stored_size = None
+    out_h = out_w = None
+    for i, f in enumerate(frames):
+        pose = _frame_pose(f, i, path)
+        img_path = _resolve_image(path.parent, f["file_path"], path, i, "file_path")
+        img = read_image(img_path, channels=None)  # RGBA when the file has alpha
+        size = img.shape[:2]
+        if stored_size is None:
+            stored_size = size
+            out_h, out_w = _output_size(size, resolution)
+        elif size != stored_size:
+            raise ValueError(
+                f"{path}: frames[{i}].file_path {img_path.name} is {size[1]}x{size[0]}, "
+                f"other images are {stored_size[1]}x{stored_size[0]}"
+            )
+        img, mask = _frame_image(img, f, i, path, bg, (out_h, out_w))
+        images.append(np.clip(img, 0.0, 1.0))
+        alpha_masks.append(mask is not None and "mask_path" not in f)
+        masks.append(mask)
+        poses.append(pose)
+        names.append(str(f["file_path"]))
+
+    if any(m is None for m in masks) and not all(m is None for m in masks):
+        masks = [np.ones((out_h, out_w), np.float32) if m is None else m for m in masks]
+    intr = _intrinsics(meta, stored_size[1], stored_size[0], path).resized(out_h, out_w)
+    poses_t = torch.from_numpy(np.stack(poses)).float()
+    return Dataset(
+        images=torch.from_numpy(np.stack(images)).float(),
+        poses=poses_t,
+        intrinsics=intr,
+        background=tuple(float(c) for c in background),
+        aabb=_scene_bounds(aabb, meta, path, poses_t, intr),
+        masks=None if masks[0] is None else torch.from_numpy(np.stack(masks)).float(),
+        names=tuple(names),
+        composited=all(alpha_masks),
+    )
+
+
+def _read_transforms(root: Path, split: str) -> tuple[Path, dict, list]:
+    """The transforms file of ``split`` under ``root``: (its path, its JSON object, the
+    split's frames, at least one)."""
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: dataset folder not found")
     path, split_filter = _find_transforms(root, split)
@@ -269,96 +317,79 @@ def load_dataset(
     frames = _select_frames(meta, frames, split_filter, path)
     if not frames:
         raise ValueError(f"{path}: no frames in split {split!r}")
-    if background is None:
-        background = tuple(float(c) for c in meta.get("background", (1.0, 1.0, 1.0)))
-    if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
-        raise ValueError(f"background must be 3 values in [0, 1], got {background}")
-    bg = np.asarray(background, dtype=np.float32)
+    return path, meta, frames
 
-    images, masks, poses, names, alpha_masks = [], [], [], [], []
-    stored_size = None
-    out_h = out_w = None
-    for i, f in enumerate(frames):
-        for field in ("file_path", "transform_matrix"):
-            if field not in f:
-                raise ValueError(f"{path}: frames[{i}] has no field '{field}'")
-        try:
-            pose = np.asarray(f["transform_matrix"], dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"{path}: frames[{i}].transform_matrix is not a 4x4 matrix") from e
-        problem = pose_problem(pose) if pose.ndim == 2 else f"has shape {pose.shape}"
-        if problem:
-            raise ValueError(f"{path}: frames[{i}].transform_matrix {problem}")
-        far = float(np.abs(pose[:3, 3]).max())
-        if far > MAX_CAMERA_DISTANCE:
-            raise ValueError(
-                f"{path}: frames[{i}].transform_matrix puts the camera {far:g} from the origin; "
-                f"positions must be within {MAX_CAMERA_DISTANCE:g} (scene units)"
-            )
-        if pose.shape == (3, 4):
-            pose = np.vstack([pose, [0.0, 0.0, 0.0, 1.0]])
-        img_path = _resolve_image(path.parent, f["file_path"], path, i, "file_path")
-        img = read_image(img_path, channels=None)  # RGBA when the file has alpha
-        size = img.shape[:2]
-        if stored_size is None:
-            stored_size = size
-            if resolution is None:
-                out_h, out_w = size
-            else:
-                out_w = int(resolution)
-                out_h = max(1, int(round(size[0] * resolution / size[1])))
-        elif size != stored_size:
-            raise ValueError(
-                f"{path}: frames[{i}].file_path {img_path.name} is {size[1]}x{size[0]}, "
-                f"other images are {stored_size[1]}x{stored_size[0]}"
-            )
-        mask = None
-        if img.shape[2] == 4:
-            # composite at the stored resolution, then downsample: resizing straight RGBA
-            # first averages the (often black) colour of transparent pixels into the edges
-            # (lego at 100 px: its edge pixels came out darker than the images' own
-            # downsampled composite)
-            alpha = img[..., 3:]
-            img = img[..., :3] * alpha + bg * (1.0 - alpha)
-            mask = _resize(alpha, out_h, out_w)[..., 0]
-        img = _resize(img, out_h, out_w)
-        if "mask_path" in f:
-            mpath = _resolve_image(path.parent, f["mask_path"], path, i, "mask_path")
-            m = read_image(mpath, channels=1)
-            if m.shape[:2] != stored_size:
-                raise ValueError(
-                    f"{path}: frames[{i}].mask_path {mpath.name} is {m.shape[1]}x{m.shape[0]}, "
-                    f"its image is {stored_size[1]}x{stored_size[0]}"
-                )
-            mask = _resize(m, out_h, out_w)[..., 0]
-        images.append(np.clip(img, 0.0, 1.0))
-        alpha_masks.append(mask is not None and "mask_path" not in f)
-        masks.append(mask)
-        poses.append(pose)
-        names.append(str(f["file_path"]))
 
-    if any(m is None for m in masks) and not all(m is None for m in masks):
-        masks = [np.ones((out_h, out_w), np.float32) if m is None else m for m in masks]
-    intr = _intrinsics(meta, stored_size[1], stored_size[0], path).resized(out_h, out_w)
-    poses_t = torch.from_numpy(np.stack(poses)).float()
+def _frame_pose(frame: dict, i: int, path: Path) -> np.ndarray:
+    """Frame ``i``'s camera-to-world matrix, checked: [4, 4] float64 (a 3 x 4 one gets its
+    last row), a rotation, the camera within :data:`MAX_CAMERA_DISTANCE` of the origin."""
+    for field in ("file_path", "transform_matrix"):
+        if field not in frame:
+            raise ValueError(f"{path}: frames[{i}] has no field '{field}'")
+    try:
+        pose = np.asarray(frame["transform_matrix"], dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{path}: frames[{i}].transform_matrix is not a 4x4 matrix") from e
+    problem = pose_problem(pose) if pose.ndim == 2 else f"has shape {pose.shape}"
+    if problem:
+        raise ValueError(f"{path}: frames[{i}].transform_matrix {problem}")
+    far = float(np.abs(pose[:3, 3]).max())
+    if far > MAX_CAMERA_DISTANCE:
+        raise ValueError(
+            f"{path}: frames[{i}].transform_matrix puts the camera {far:g} from the origin; "
+            f"positions must be within {MAX_CAMERA_DISTANCE:g} (scene units)"
+        )
+    if pose.shape == (3, 4):
+        pose = np.vstack([pose, [0.0, 0.0, 0.0, 1.0]])
+    return pose
+
+
+def _output_size(size: tuple[int, int], resolution: int | None) -> tuple[int, int]:
+    """(height, width) of the loaded images: ``resolution`` wide with the stored aspect
+    ratio, or the stored ``size`` when ``resolution`` is None."""
+    if resolution is None:
+        return size
+    return max(1, int(round(size[0] * resolution / size[1]))), int(resolution)
+
+
+def _frame_image(img: np.ndarray, frame: dict, i: int, path: Path, bg: np.ndarray, out_size):
+    """Frame ``i``'s stored image [h, w, 3 or 4] -> (RGB [height, width, 3] at ``out_size``,
+    its mask [height, width] or None): RGBA composited on ``bg`` with its alpha as the mask;
+    a ``mask_path`` overrides that mask."""
+    out_h, out_w = out_size
+    stored_size = img.shape[:2]
+    mask = None
+    if img.shape[2] == 4:
+        # composite at the stored resolution, then downsample: resizing straight RGBA
+        # first averages the (often black) colour of transparent pixels into the edges
+        # (lego at 100 px: its edge pixels came out darker than the images' own
+        # downsampled composite)
+        alpha = img[..., 3:]
+        img = img[..., :3] * alpha + bg * (1.0 - alpha)
+        mask = _resize(alpha, out_h, out_w)[..., 0]
+    img = _resize(img, out_h, out_w)
+    if "mask_path" in frame:
+        mpath = _resolve_image(path.parent, frame["mask_path"], path, i, "mask_path")
+        m = read_image(mpath, channels=1)
+        if m.shape[:2] != stored_size:
+            raise ValueError(
+                f"{path}: frames[{i}].mask_path {mpath.name} is {m.shape[1]}x{m.shape[0]}, "
+                f"its image is {stored_size[1]}x{stored_size[0]}"
+            )
+        mask = _resize(m, out_h, out_w)[..., 0]
+    return img, mask
+
+
+def _scene_bounds(aabb, meta: dict, path: Path, poses: Tensor, intr: Intrinsics) -> Tensor:
+    """[2, 3] float32 bounds: the caller's ``aabb``, else the file's, else
+    :func:`default_aabb` of the poses."""
     if aabb is None:
         aabb_t = _aabb(meta, path)
-        if aabb_t is None:
-            aabb_t = default_aabb(poses_t, intr)
-    else:
-        aabb_t = torch.as_tensor(aabb, dtype=torch.float32).reshape(2, 3)
-        if not (aabb_t[1] > aabb_t[0]).all():
-            raise ValueError(f"aabb must have max > min on every axis, got {aabb_t.tolist()}")
-    return Dataset(
-        images=torch.from_numpy(np.stack(images)).float(),
-        poses=poses_t,
-        intrinsics=intr,
-        background=tuple(float(c) for c in background),
-        aabb=aabb_t,
-        masks=None if masks[0] is None else torch.from_numpy(np.stack(masks)).float(),
-        names=tuple(names),
-        composited=all(alpha_masks),
-    )
+        return default_aabb(poses, intr) if aabb_t is None else aabb_t
+    aabb_t = torch.as_tensor(aabb, dtype=torch.float32).reshape(2, 3)
+    if not (aabb_t[1] > aabb_t[0]).all():
+        raise ValueError(f"aabb must have max > min on every axis, got {aabb_t.tolist()}")
+    return aabb_t
 
 
 def write_transforms(

@@ -22,6 +22,9 @@ entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` build
 ``encode_with_focus`` / ``decode_received`` serve a focus demand with any codec (a codec
 without ``supports_focus`` sends the objects' box at the same symbol budget,
 ``focus_by_box`` / ``decode_box``).
+``LINK_SCHEMES`` is the one table of link-level schemes; those that cross a framed link
+(two radios) carry their transmitter and receiver apart (``LinkScheme.framed``,
+:mod:`semcodec.framed`).
 
 Imports only ``phy`` of osnerf.
 """
@@ -65,6 +68,13 @@ from semcodec.contract import (
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
 from semcodec.focus_eval import focus_gain
+from semcodec.framed import (
+    FramedReception,
+    FramedScheme,
+    FramedSettings,
+    ReceivedBlock,
+    frame_payload_bytes,
+)
 from semcodec.grid import (
     BLOCK_PX,
     focus_blocks,
@@ -115,6 +125,11 @@ __all__ = [
     "IMAGE_CODECS",
     "LOST_IMAGE_VALUE",
     "LINK_SCHEMES",
+    "FramedReception",
+    "FramedScheme",
+    "FramedSettings",
+    "ReceivedBlock",
+    "frame_payload_bytes",
     "TRAIN_CHANNELS",
     "TransmitResult",
     "decode_image",

@@ -182,8 +182,9 @@ def _grey(shape) -> Tensor:
     return torch.full(shape, LOST_IMAGE_VALUE)
 
 
-def _decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
-    """Wire bytes -> ([3, H, W] image, True), or (mid-grey, False) when undecodable."""
+def decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
+    """Wire bytes -> ([3, H, W] float32 image, True), or (mid-grey, False) when they are
+    None (nothing arrived) or undecodable."""
     if data is None:
         return _grey(shape), False
     try:
@@ -216,7 +217,7 @@ def transmit_ideal(
     out, qualities, sizes = [], [], []
     for img in x:
         data, q = encode_to_budget(img, bits // 8, image_codec)
-        rec, _ = _decode_or_grey(data, img.shape, image_codec)
+        rec, _ = decode_or_grey(data, img.shape, image_codec)
         out.append(rec)
         qualities.append(q)
         sizes.append(0 if data is None else len(data))
@@ -256,7 +257,7 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
     r = transmit_bytes(
         data, mcs, link, snr_db, generator=torch.Generator().manual_seed(seed), num_symbols=n
     )
-    rec, ok = _decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
+    rec, ok = decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
     failed = (
         len([c for c in r.failed_codewords if c < r.num_payload_codewords])
         if r.num_payload_codewords
@@ -353,68 +354,26 @@ def transmit_digital(
         mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
         calibrated).
     """
-    from phy import assumed_channel, channel_kind
-    from phy.digital import MCS_TABLE, get_mcs
-    from semcodec.digital_calibration import load_calibration
-
     x = check_images(images)
     n = _check_num_symbols(num_symbols)
     _check_codec(image_codec)
-    mode = GENIE if mcs == ENVELOPE else mcs
-    names = list(MCS_TABLE)
-    if mode not in MCS_MODES:
-        try:
-            get_mcs(mode)
-        except KeyError:
-            raise KeyError(f"mcs must be 'auto', 'genie' or one of {names}, got {mcs!r}") from None
-    kind = None
-    if mode == AUTO:
-        kind = assumed_channel(channel or channel_kind(link))
-    elif mode == GENIE:  # the genie needs no calibration: without one it searches from the bottom
-        try:
-            kind = assumed_channel(channel or channel_kind(link))
-        except KeyError:
-            kind = None
+    mode = _mcs_mode(mcs)
+    kind = _calibrated_channel(mode, link, channel)
+    table = calibration = None
     if kind is not None:
+        from semcodec.digital_calibration import load_calibration
+
         table = load_calibration()
         calibration = table.source(kind)
     gen = generator or torch.Generator().manual_seed(0)
-    lo = get_image_codec(image_codec).quality_range[0]
     out, infos = [], []
     for img in x:
         seed = int(torch.randint(0, 2**62, (1,), generator=gen))
-        if mode not in MCS_MODES:
-            rec, ok, info = _send_digital(img, mode, link, snr_db, n, image_codec, seed)
-        else:
-            choice, expected = names[0], None
-            if kind is not None:
-                h, w = img.shape[1:]
-                min_bytes = len(encode_image(img, image_codec, lo))
-                choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
-                expected = round(expected, 3)
-            if mode == AUTO:
-                rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
-            else:
-                start = names.index(choice)
-                rec, ok, info = _genie(img, start, names, link, snr_db, n, image_codec, seed)
-            info["expected_psnr"] = expected
+        rec, ok, info = _send_image(img, mode, kind, table, link, snr_db, n, image_codec, seed)
         info["ok"] = ok
         out.append(rec)
         infos.append(info)
-    lost = {"budget": 0, "channel": 0}
-    for i in infos:
-        if i["lost"]:
-            lost[i["lost"]] += 1
-    stats = {
-        "bits": sum(i["bits"] for i in infos),
-        "num_symbols": n * len(x),
-        "failed_codewords": sum(i["failed_codewords"] for i in infos),
-        "lost_images": sum(not i["ok"] for i in infos),
-        "views_lost": lost,
-        "mcs": [i["mcs"] for i in infos],
-        "quality": [i["quality"] for i in infos],
-        "mcs_choice": {AUTO: "auto", GENIE: "genie (bound)"}.get(mode, "fixed"),
-    }
+    stats = _digital_stats(infos, n * len(x), mode)
     if kind is not None:
         stats["channel"] = kind
         stats["calibration"] = calibration
@@ -422,6 +381,81 @@ def transmit_digital(
     if mode == GENIE:
         stats["tries"] = sum(i["tries"] for i in infos)
     return TransmitResult(torch.stack(out), stats)
+
+
+def _send_image(img, mode, kind, table, link, snr_db, n: int, image_codec: str, seed: int):
+    """One image at the MCS that ``mode`` gives it: a fixed one; ``"auto"``'s choice from the
+    calibration ``table`` for channel ``kind``; or the genie's search from that choice (from
+    the lowest MCS without a ``kind``). Returns :func:`_send_digital`'s (received, ok, info),
+    with ``info["expected_psnr"]`` where the table chose."""
+    from phy.digital import MCS_TABLE
+
+    if mode not in MCS_MODES:
+        return _send_digital(img, mode, link, snr_db, n, image_codec, seed)
+    names = list(MCS_TABLE)
+    choice, expected = names[0], None
+    if kind is not None:
+        h, w = img.shape[1:]
+        lo = get_image_codec(image_codec).quality_range[0]
+        min_bytes = len(encode_image(img, image_codec, lo))
+        choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
+        expected = round(expected, 3)
+    if mode == AUTO:
+        rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
+    else:
+        start = names.index(choice)
+        rec, ok, info = _genie(img, start, names, link, snr_db, n, image_codec, seed)
+    info["expected_psnr"] = expected
+    return rec, ok, info
+
+
+def _mcs_mode(mcs: str) -> str:
+    """``"auto"``, ``"genie"`` (also for its old name ``"envelope"``) or a fixed MCS name;
+    KeyError listing the choices for anything else."""
+    from phy.digital import MCS_TABLE, get_mcs
+
+    mode = GENIE if mcs == ENVELOPE else mcs
+    if mode not in MCS_MODES:
+        try:
+            get_mcs(mode)
+        except KeyError:
+            names = list(MCS_TABLE)
+            raise KeyError(f"mcs must be 'auto', 'genie' or one of {names}, got {mcs!r}") from None
+    return mode
+
+
+def _calibrated_channel(mode: str, link, channel: str | None) -> str | None:
+    """The calibration table's channel kind the MCS is chosen for: ``"auto"`` needs one
+    (KeyError when the link does not tell), the genie uses it when there is one (without it
+    the genie searches from the lowest MCS), a fixed MCS none."""
+    from phy import assumed_channel, channel_kind
+
+    if mode == AUTO:
+        return assumed_channel(channel or channel_kind(link))
+    if mode == GENIE:
+        try:
+            return assumed_channel(channel or channel_kind(link))
+        except KeyError:
+            return None
+    return None
+
+
+def _digital_stats(infos: list[dict], num_symbols: int, mode: str) -> dict:
+    """The batch's stats from each image's info: sums, losses by cause, per-image lists."""
+    lost = {"budget": 0, "channel": 0}
+    for i in infos:
+        if i["lost"]:
+            lost[i["lost"]] += 1
+    return {
+        "bits": sum(i["bits"] for i in infos),
+        "num_symbols": num_symbols,
+        "failed_codewords": sum(i["failed_codewords"] for i in infos),
+        "lost_images": sum(not i["ok"] for i in infos),
+        "views_lost": lost,
+        "mcs": [i["mcs"] for i in infos],
+        "quality": [i["quality"] for i in infos],
+        "mcs_choice": {AUTO: "auto", GENIE: "genie (bound)"}.get(mode, "fixed"),
+    }
 
 
 def transmit_analog(

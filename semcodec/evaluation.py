@@ -27,6 +27,7 @@ from semcodec.baselines import (
     transmit_jscc,
 )
 from semcodec.codec import MIN_SIDE_PX, Codec
+from semcodec.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
 
@@ -142,7 +143,9 @@ class LinkScheme:
         help: one line for ``--help``, plots and reports.
         kind: one of :data:`SCHEME_KINDS`.
         bound: what it bounds when it is not a real system (shown as such), else None.
-        over_the_air: ``osnerf ota`` can send it between two radios.
+        framed: its transmitter and receiver apart around a framed link
+            (:mod:`semcodec.framed`: what ``osnerf ota`` sends between two radios), or None
+            when it cannot cross one.
         mcs: how a digital scheme picks its modulation and code rate: ``"auto"`` (from the
             average SNR), ``"genie"`` (from the draw: a bound) or ``"fixed"`` (``--mcs``);
             None for the other kinds.
@@ -154,12 +157,17 @@ class LinkScheme:
     help: str
     kind: str
     bound: str | None = None
-    over_the_air: bool = False
+    framed: FramedScheme | None = None
     mcs: str | None = None
     image_codec: str | None = None
 
     refines: bool = False
     """The transmitter refines each image's symbols (``ctx.refine_steps``)."""
+
+    @property
+    def over_the_air(self) -> bool:
+        """Whether ``osnerf ota`` can send it between two radios (it has a framed pair)."""
+        return self.framed is not None
 
     @property
     def needs_codec(self) -> bool:
@@ -174,7 +182,7 @@ _GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on 
 _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
 LINK_SCHEMES: dict[str, LinkScheme] = {
-    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, over_the_air=True),
+    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, framed=JSCC_FRAMED),
     "jscc_refined": LinkScheme(
         _send_jscc(True),
         "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
@@ -187,7 +195,7 @@ LINK_SCHEMES: dict[str, LinkScheme] = {
         _digital("avif"),
         "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",
         DIGITAL,
-        over_the_air=True,
+        framed=DIGITAL_FRAMED,
         mcs=AUTO,
         image_codec="avif",
     ),

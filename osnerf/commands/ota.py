@@ -2,10 +2,12 @@
 
     osnerf ota --tx emulated --rx emulated --scheme digital --snr-db 15 --images DIR --out ota.json
 
-Schemes: ``digital`` (image codec bytes -> per-frame CRC + 5G LDPC + QAM from
-``phy.digital``) and ``jscc`` (the semantic codec's symbols). Either way the symbols go in
-``phy``'s OFDM frames (preamble, pilots), through ``hil``'s PAPR control and int8 scaling,
-out of the TX HackRF and into the RX HackRF. Emulated boards sit ``--ppm`` apart with
+Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
+receiver (``LinkScheme.framed``, :mod:`semcodec.framed`): ``digital`` (image codec bytes ->
+per-frame CRC + 5G LDPC + QAM from ``phy.digital``) and ``jscc`` (the semantic codec's
+symbols). Either way the symbols cross an :class:`osnerf.ota_link.OtaLink`: ``phy``'s OFDM
+frames (preamble, pilots), ``hil``'s PAPR control and int8 scaling, out of the TX HackRF
+and into the RX HackRF. Emulated boards sit ``--ppm`` apart with
 ``--multipath`` and ``--delay-us`` at ``--snr-db``. The result file reports per image the
 PSNR, the SNR measured from the pilots, frames sent and lost, and lists the SigMF files.
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
@@ -32,7 +34,6 @@ import numpy as np
 from hil.devices import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
-from osnerf.commands.ota_schemes import transceiver
 
 DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
@@ -48,11 +49,9 @@ OTA_CONFIG_FIELDS = (
 OTA_FLAGS = {"max_rx_overruns": "--max-overruns"}
 
 
-def check_codec_snr(spec: str | None, snr_db: float) -> None:
-    """Refuse an ``--snr-db`` outside the SNR range the codec declares."""
-    from semcodec import open_codec
-
-    codec = open_codec(spec)
+def check_codec_snr(codec, snr_db: float) -> None:
+    """Refuse an ``--snr-db`` outside the SNR range the codec (``semcodec.open_codec``)
+    declares."""
     lo, hi = codec.snr_range_db
     if not lo <= snr_db <= hi:
         raise _usage(
@@ -334,10 +333,12 @@ def open_pair(args, ota_cfg):
 
 
 # ----------------------------------------------------------------------------- run
-def run(args: argparse.Namespace) -> int:
-    from hil import HilError, OtaConfig, save_partial_capture, save_sigmf, send_blocks
-    from osnerf.provenance import write_json_atomic
+def framed_settings(args, symbols_per_frame: int):
+    """The scheme's ``semcodec.FramedSettings`` from the flags, checked: ``--quality`` in the
+    image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
+    digital: a frame holds payload at ``--mcs``."""
     from phy import parse_cbr
+    from semcodec import LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
     from semcodec.image_codecs import IMAGE_CODECS
 
     qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
@@ -345,46 +346,57 @@ def run(args: argparse.Namespace) -> int:
         raise _usage(
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
+    cbr, codec = FramedSettings.cbr, None
+    if LINK_SCHEMES[args.scheme].needs_codec:
+        try:
+            cbr = parse_cbr(args.cbr)
+        except ValueError as e:
+            raise _usage(f"--{e}") from None
+        codec = open_codec(args.codec)
+        check_codec_snr(codec, args.snr_db)
+    elif frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
+        raise _usage(
+            f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
+        )
+    return FramedSettings(
+        snr_db=args.snr_db,
+        symbols_per_frame=symbols_per_frame,
+        mcs=args.mcs,
+        image_codec=args.image_codec,
+        quality=args.quality,
+        cbr=cbr,
+        codec=codec,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from hil import OtaConfig, save_sigmf
+    from osnerf.ota_link import received_blocks
+    from osnerf.provenance import write_json_atomic
+    from semcodec import LINK_SCHEMES
+
     device_kinds(args)
     parse_ppm(args.ppm)
     parse_multipath(args.multipath)
-    trx = transceiver(args.scheme)
-    if trx.uses_cbr:
-        try:
-            parse_cbr(args.cbr)
-        except ValueError as e:
-            raise _usage(f"--{e}") from None
-        check_codec_snr(args.codec, args.snr_db)
     cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
+    settings = framed_settings(args, cfg.symbols_per_frame)
     inputs = {"--images": args.images}
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
     t0 = time.perf_counter()
-    blocks, state = trx.send(images, args, cfg)
+    scheme = LINK_SCHEMES[args.scheme].framed
+    blocks, state = scheme.transmit(images, settings)
     print(
         f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {args.scheme}",
         file=sys.stderr,
     )
-    kind = device_kinds(args)[0]
-    tx, rx, emu = open_pair(args, cfg)
-    hw = "HackRF One (emulated)" if emu is not None else HARDWARE[kind].label
-    try:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            result = send_blocks(tx, rx, blocks, cfg)
-    except HilError as e:  # keep what arrived, then report the fault in one line (exit 1)
-        saved = save_partial_capture(e, sigmf_dir / "ota", cfg, hw=hw)
-        kept = f"; capture so far saved to {saved}" if saved else "; nothing was received"
-        raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
-    finally:
-        tx.close()
-        if rx is not tx:
-            rx.close()
-    for w in caught:  # one line each, not a Python warning with its source line
-        print(f"ota: warning: {w.message}", file=sys.stderr)
-    per_image = trx.receive(result, state, images, args, cfg)
+    result, hw = send_over_the_air(args, cfg, blocks, sigmf_dir)
+    per_image = scheme.receive(received_blocks(result), state, images, settings)
+    for b, rec in enumerate(per_image):  # the receiver's CRC verdicts go with the frames
+        for frame, crc_ok in zip(result.block_frames(b), rec.frames_crc_ok):
+            frame.crc_ok = crc_ok
     sigmf_paths = save_sigmf(result, sigmf_dir / "ota", cfg, hw=hw)
     record = _record(args, cfg, names, per_image, result, sigmf_paths, t0)
     write_json_atomic(out, record)
@@ -394,22 +406,48 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path):
+    """One burst of ``blocks`` over an :class:`osnerf.ota_link.OtaLink` between the --tx/--rx
+    radios: (``hil.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
+    in one line, with what the receiver got so far saved as SigMF; warnings are printed one
+    line each."""
+    from hil import HilError, save_partial_capture
+    from osnerf.ota_link import OtaLink
+
+    kind = device_kinds(args)[0]
+    tx, rx, emu = open_pair(args, cfg)
+    hw = "HackRF One (emulated)" if emu is not None else HARDWARE[kind].label
+    link = OtaLink(tx, rx, float(args.snr_db), cfg, emu)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = link.send_blocks(blocks)
+    except HilError as e:  # keep what arrived, then report the fault in one line (exit 1)
+        saved = save_partial_capture(e, sigmf_dir / "ota", cfg, hw=hw)
+        kept = f"; capture so far saved to {saved}" if saved else "; nothing was received"
+        raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
+    finally:
+        link.close()
+    for w in caught:  # one line each, not a Python warning with its source line
+        print(f"ota: warning: {w.message}", file=sys.stderr)
+    return result, hw
+
+
 def _record(args, cfg, names, per_image, result, sigmf_paths, t0: float) -> dict:
     """The result file's record: per image, the summary, every frame, the SigMF paths."""
     from osnerf.provenance import result_header
 
     results = []
-    for b, (name, stats) in enumerate(zip(names, per_image)):
+    for b, (name, rec) in enumerate(zip(names, per_image)):
         frames = result.block_frames(b)
-        snr = result.snr_db_measured(b)
         results.append(
             {
                 "image": name,
-                "psnr": stats.pop("psnr"),
-                "snr_db_measured": snr,
+                "psnr": rec.psnr,
+                "snr_db_measured": result.snr_db_measured(b),
                 "frames_sent": len(frames),
                 "frames_lost": sum(not f.detected for f in frames),
-                **stats,
+                **rec.stats,
             }
         )
     config = {k: v for k, v in vars(args).items() if k not in ("command",)}

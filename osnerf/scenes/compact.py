@@ -16,9 +16,20 @@ HYDRANT_XY_M = (0.8, 0.0)
 
 def build_firefighter() -> SceneGeometry:
     """Hydrant (about 0.9 m tall), building (1.0 x 1.6 x 1.5 m) 0.8 m from it, tree, 5.2 m plot."""
+    return SceneGeometry(
+        name="firefighter",
+        parts=tuple(_hydrant() + _building() + _tree() + _ground()),
+        ground_station_m=(8.0, -6.0, 1.5),
+        sky_radiance=(1.0, 1.0, 1.0),
+        scorable_objects=("hydrant", "building", "tree"),
+    )
+
+
+def _hydrant() -> list[Part]:
+    """Base, body, bonnet and nozzles at :data:`HYDRANT_XY_M`, about 0.9 m tall."""
     hx, hy = HYDRANT_XY_M
     paint = tx.painted_metal()
-    hydrant = [
+    return [
         Part(
             "hydrant",
             "hydrant_base",
@@ -58,7 +69,11 @@ def build_firefighter() -> SceneGeometry:
             "metal",
         ),
     ]
-    building = [
+
+
+def _building() -> list[Part]:
+    """Brick walls (1.0 x 1.6 x 1.5 m), a two-step roof and a door facing the hydrant."""
+    return [
         Part(
             "building",
             "building_walls",
@@ -86,7 +101,11 @@ def build_firefighter() -> SceneGeometry:
             "wood",
         ),
     ]
-    tree = [
+
+
+def _tree() -> list[Part]:
+    """A trunk and a conical crown: clutter beside the building."""
+    return [
         Part(
             "tree",
             "tree_trunk",
@@ -102,7 +121,11 @@ def build_firefighter() -> SceneGeometry:
             "wood",
         ),
     ]
-    ground = [
+
+
+def _ground() -> list[Part]:
+    """The paved plot, a disk 5.2 m across."""
+    return [
         Part(
             "ground",
             "ground_paving",
@@ -111,13 +134,6 @@ def build_firefighter() -> SceneGeometry:
             "concrete",
         ),
     ]
-    return SceneGeometry(
-        name="firefighter",
-        parts=tuple(hydrant + building + tree + ground),
-        ground_station_m=(8.0, -6.0, 1.5),
-        sky_radiance=(1.0, 1.0, 1.0),
-        scorable_objects=("hydrant", "building", "tree"),
-    )
 
 
 def build_tiny() -> SceneGeometry:

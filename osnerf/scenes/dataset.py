@@ -212,49 +212,28 @@ def build_scene_dataset(
     if (root / "transforms.json").exists():
         return root
     from osnerf.scenes.radio import write_radio_scene
-    from osnerf.scenes.render import MitsubaRenderer, background_rgb, write_meshes
+    from osnerf.scenes.render import MitsubaRenderer, write_meshes
 
     t0 = time.perf_counter()
     tmp = root.with_name(root.name + f".partial-{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     geometry = info.build()
     mesh_paths = write_meshes(geometry, tmp / "meshes")
-    radio_xml = write_radio_scene(geometry, mesh_paths, tmp / "radio")
+    write_radio_scene(geometry, mesh_paths, tmp / "radio")
     intr = intrinsics_from_fov(info.fov_deg, config.resolution_px, config.resolution_px)
     train, test, centre, radius = trajectory(
         geometry, target, info.fov_deg, info.elevations_deg, info.min_radius_m, config
     )
     renderer = MitsubaRenderer(geometry, mesh_paths, intr, spp=config.spp)
-    frames = []
     positions = [("train", p) for p in train] + [("test", p) for p in test]
-    iterator = positions
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(positions, desc=f"render {scene}", file=sys.stderr, leave=False)
-    for k, (split, pos) in enumerate(iterator):
-        pose = look_at(pos, centre)
-        view = renderer.render(pose, seed=k, mask_spp=config.mask_spp)
-        name = f"v_{k:03d}"
-        _png(tmp / "images" / f"{name}.png", view.rgb)
-        frame = {
-            "file_path": f"images/{name}.png",
-            "transform_matrix": pose.tolist(),
-            "split": split,
-            "drone_position_m": [float(x) for x in pos],
-            "object_masks": {},
-            "visible_fraction": {},
-            "pixel_fraction": {},
-        }
-        for obj in geometry.objects:
-            _png(tmp / "masks" / obj / f"{name}.png", view.masks[obj])
-            frame["object_masks"][obj] = f"masks/{obj}/{name}.png"
-            sil = float(view.silhouettes[obj].sum())
-            frame["visible_fraction"][obj] = float(view.masks[obj].sum() / sil) if sil > 0 else 0.0
-            frame["pixel_fraction"][obj] = float(view.masks[obj].mean())
-        frames.append(frame)
-    b = geometry.bounds_m
-    pad = 0.05 * (b[1] - b[0]).max()
+        positions = tqdm(positions, desc=f"render {scene}", file=sys.stderr, leave=False)
+    frames = [
+        _render_frame(renderer, geometry, k, split, pos, centre, config.mask_spp, tmp)
+        for k, (split, pos) in enumerate(positions)
+    ]
     meta = {
         "scene": scene,
         "format_version": FORMAT_VERSION,
@@ -263,6 +242,52 @@ def build_scene_dataset(
         "trajectory_target": list(target),
         "trajectory_center_m": centre.tolist(),
         "trajectory_radius_m": float(radius),
+        **_camera_and_scene_fields(geometry, intr, info),
+        "render_config": asdict(config),
+        "render_seconds": time.perf_counter() - t0,
+        "frames": frames,
+    }
+    _write_transforms(tmp, meta)
+    if root.exists():  # another process finished first
+        shutil.rmtree(tmp, ignore_errors=True)
+    else:
+        tmp.rename(root)
+    return root
+
+
+def _render_frame(renderer, geometry, k: int, split: str, pos, centre, mask_spp: int, tmp: Path):
+    """Render view ``k`` from drone position ``pos`` looking at ``centre``; write its image
+    and object masks under ``tmp``. Returns its ``transforms.json`` frame."""
+    pose = look_at(pos, centre)
+    view = renderer.render(pose, seed=k, mask_spp=mask_spp)
+    name = f"v_{k:03d}"
+    _png(tmp / "images" / f"{name}.png", view.rgb)
+    frame = {
+        "file_path": f"images/{name}.png",
+        "transform_matrix": pose.tolist(),
+        "split": split,
+        "drone_position_m": [float(x) for x in pos],
+        "object_masks": {},
+        "visible_fraction": {},
+        "pixel_fraction": {},
+    }
+    for obj in geometry.objects:
+        _png(tmp / "masks" / obj / f"{name}.png", view.masks[obj])
+        frame["object_masks"][obj] = f"masks/{obj}/{name}.png"
+        sil = float(view.silhouettes[obj].sum())
+        frame["visible_fraction"][obj] = float(view.masks[obj].sum() / sil) if sil > 0 else 0.0
+        frame["pixel_fraction"][obj] = float(view.masks[obj].mean())
+    return frame
+
+
+def _camera_and_scene_fields(geometry: SceneGeometry, intr: Intrinsics, info) -> dict:
+    """The pinhole camera (nerfstudio's fields), the bounds (``aabb`` padded by 5 % of the
+    largest side), the background, the ground station and the radio scene."""
+    from osnerf.scenes.render import background_rgb
+
+    b = geometry.bounds_m
+    pad = 0.05 * (b[1] - b[0]).max()
+    return {
         "camera_model": "PINHOLE",
         "fl_x": intr.fx,
         "fl_y": intr.fy,
@@ -277,22 +302,17 @@ def build_scene_dataset(
         "ground_station_m": list(geometry.ground_station_m),
         "carrier_frequency_hz": info.carrier_frequency_hz,
         "radio_scene": geometry.radio_scene or "radio/scene.xml",
-        "render_config": asdict(config),
-        "render_seconds": time.perf_counter() - t0,
-        "frames": frames,
     }
-    del radio_xml
+
+
+def _write_transforms(folder: Path, meta: dict) -> None:
+    """``transforms.json`` (every frame) and ``transforms_{train,test}.json`` (Blender-style)."""
     for split in ("train", "test"):
         write_json_atomic(
-            tmp / f"transforms_{split}.json",
-            {**meta, "frames": [f for f in frames if f["split"] == split]},
+            folder / f"transforms_{split}.json",
+            {**meta, "frames": [f for f in meta["frames"] if f["split"] == split]},
         )
-    write_json_atomic(tmp / "transforms.json", meta)
-    if root.exists():  # another process finished first
-        shutil.rmtree(tmp, ignore_errors=True)
-    else:
-        tmp.rename(root)
-    return root
+    write_json_atomic(folder / "transforms.json", meta)
 
 
 def _read_gray(path: Path) -> np.ndarray:

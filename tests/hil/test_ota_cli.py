@@ -145,7 +145,8 @@ def test_bad_arguments_exit_2(tmp_path, images):
 def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
     tmp_path, images, capsys, monkeypatch, flag, value, match
 ):
-    """#16: these were refused after ~4.5 s of encoding, in internal names (delay_s ...)."""
+    """A bad value is refused before any image is loaded or encoded, in one line that names
+    the flag as the user typed it (--delay-us, not an internal name such as delay_s)."""
     import osnerf.commands.ota as ota_cmd
 
     def no_work(*a, **k):
@@ -161,7 +162,7 @@ def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
 
 
 def test_corrupt_image_is_bad_input(tmp_path, capsys):
-    """#16: a corrupt image exited 1 in ota (2 in eval-codec)."""
+    """A corrupt image is bad input (exit 2, naming the file), as in eval-codec."""
     folder = tmp_path / "imgs"
     folder.mkdir()
     (folder / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
@@ -207,23 +208,28 @@ def test_fault_exits_1_in_one_line_and_keeps_the_capture(tmp_path, images, capsy
     assert rec.get_global_field("core:datatype") == "ci8" and len(samples) > 50_000
 
 
-def test_decode_received_hands_the_noise_variance_to_the_codec():
-    """osnerf ota decodes through the codec's one receiver convention: with the nominal noise
-    on every symbol a version-1 codec decodes the symbols as received (the relative-LMMSE
-    rule for uneven noise is tested in tests/semcodec/test_power_snr.py)."""
+def test_the_framed_jscc_receiver_hands_the_noise_variance_to_the_codec():
+    """osnerf ota decodes through the codec's one receiver convention (semcodec's framed jscc
+    receiver): with the nominal noise on every symbol a version-1 codec decodes the symbols
+    as received (the relative-LMMSE rule for uneven noise is tested in
+    tests/semcodec/test_power_snr.py)."""
     semcodec = pytest.importorskip("semcodec")
     if not semcodec.DEFAULT_CHECKPOINT.is_file():
         pytest.skip("semcodec's shipped default checkpoint is not in this checkout")
     import torch
 
-    from osnerf.commands.ota_schemes import decode_received
-
     codec = semcodec.load_codec()
     g = torch.Generator().manual_seed(0)
-    enc = codec.encode(torch.rand(1, 3, 32, 32, generator=g), 0.0, 1 / 16)
-    y = (enc.symbols + 0.7 * torch.randn(enc.symbols.shape, generator=g, dtype=torch.complex64))[0]
+    images = torch.rand(1, 3, 32, 32, generator=g).numpy()
+    settings = semcodec.FramedSettings(snr_db=0.0, symbols_per_frame=1024, codec=codec)
+    framed = semcodec.LINK_SCHEMES["jscc"].framed
+    blocks, encoded = framed.transmit(images, settings)
+    noise = 0.7 * torch.randn(blocks[0].shape, generator=g, dtype=torch.complex64)
+    y = blocks[0] + noise.numpy()
     nv = np.ones(y.shape[0], np.float32)  # 0 dB
-    torch.testing.assert_close(
-        decode_received(codec, y.numpy(), nv, enc.meta, 0.0),
-        codec.decode(y[None], enc.meta, 0.0, noise_var=torch.from_numpy(nv)[None]),
+    (rec,) = framed.receive([semcodec.ReceivedBlock(y, nv, [True], 0.0)], encoded, images, settings)
+    expected = codec.decode(
+        torch.from_numpy(y)[None], encoded[0].meta, 0.0, noise_var=torch.from_numpy(nv)[None]
     )
+    torch.testing.assert_close(torch.from_numpy(rec.image), expected[0])
+    assert rec.frames_crc_ok == [None] and rec.stats["num_symbols"] == y.shape[0]
