@@ -76,10 +76,10 @@ class FeatureConfig:
     jitter_deg: float = 17.0
     """Largest turn of a jittered camera about the scene's up axis (and half of it about a
     horizontal axis), degrees, > 0."""
-    train_seconds: float = 500.0
+    train_seconds: float = 3600.0
     """Training budget (s) after the first ``pool_views`` teacher renders, > 0; the later
     teachers are rendered within it. With ``train_steps`` it is only a cap."""
-    train_steps: int | None = None
+    train_steps: int | None = 3000
     """Optimiser steps (>= 1), or None to train for ``train_seconds``. When given, the
     steps drive the teacher schedule: the same work on a busy machine as on an idle one."""
     pool_views: int = 256
@@ -90,6 +90,11 @@ class FeatureConfig:
     teachers (400 px: 123 MB) plus the feature grid and one batch."""
     batch_size: int = 4
     """Views per optimiser step, >= 1."""
+    grid_scale: float = 1.0
+    """Vertices of the feature grid per axis relative to the field's occupancy cells
+    (``ceil(cells * grid_scale) + 1``), in (0, 1]: a coarser grid costs proportionally less
+    per step (its gradient and Adam update touch every vertex) where the views have fewer
+    pixels than the field has cells."""
     grid_lr: float = 0.1
     """Adam learning rate of the feature grid, > 0."""
     decoder_lr: float = 3e-3
@@ -116,6 +121,8 @@ class FeatureConfig:
                 raise ValueError(f"{name} must be >= {low}, got {getattr(self, name)}")
         if self.train_steps is not None and self.train_steps < 1:
             raise ValueError(f"train_steps must be >= 1 or None, got {self.train_steps}")
+        if not 0 < self.grid_scale <= 1:
+            raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
         if not self.step_factor >= 1:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
         if not 0 <= self.weight_threshold < 1:
@@ -126,6 +133,25 @@ class FeatureConfig:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def for_resolution(cls, width_px: int, **overrides) -> FeatureConfig:
+        """The settings for views ``width_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
+        largest size not above it), then ``overrides``. Teacher renders cost the square of
+        the size, so larger views get fewer teachers; at 400 px and above the
+        low-resolution pass is a quarter of the width."""
+        size = max((s for s in FEATURES_BY_SIZE if s <= width_px), default=0)
+        return cls(**{**FEATURES_BY_SIZE.get(size, {}), **overrides})
+
+
+FEATURES_BY_SIZE: dict[int, dict] = {
+    0: {},
+    150: {"extra_views": 1500},
+    300: {"extra_views": 700, "downsample": 4, "train_steps": 1500},
+}
+"""Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
+defaults (:meth:`FeatureConfig.for_resolution`); measured in ``python -m benchmarks
+renderer``."""
 
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
@@ -213,7 +239,9 @@ class FeatureRenderer:
         self.model = model
         self.config = config
         aabb = model.aabb
-        nx, ny, nz = (int(c) + 1 for c in model.occupancy.cells)
+        nx, ny, nz = (
+            max(2, math.ceil(int(c) * config.grid_scale) + 1) for c in model.occupancy.cells
+        )
         # the field's colour at the grid vertices starts the first channels: a grid field's
         # SH coefficients [3, (d + 1)^2] (logits), else the colour logits
         field = model.field

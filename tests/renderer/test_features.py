@@ -193,3 +193,48 @@ def test_jittered_cameras_keep_their_distance_and_stay_within_the_jitter(sphere_
 def test_config_validation_names_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         FeatureConfig(**{field: value})
+
+
+def test_teacher_pool_holds_at_most_its_capacity_and_replaces_the_oldest(sphere_model):
+    """Each held image is the 8-bit full render of the camera it is filed under, the pool
+    never holds more than its capacity, and the newest renders replace the oldest."""
+    from renderer import TeacherPool
+
+    model, train_set = sphere_model
+    poses, intr = train_set.poses[:7], train_set.intrinsics
+    pool = TeacherPool(model, poses, intr, capacity=3)
+    assert pool.images.shape == (3, intr.height, intr.width, 3)
+    assert pool.images.dtype == torch.uint8
+    pool.render_next(2)
+    assert (pool.held, pool.rendered, pool.remaining) == (2, 2, 5)
+    pool.render_next(3)  # cameras 2, 3, 4: camera 3 and 4 replace 0 and 1
+    assert (pool.held, pool.rendered) == (3, 5) and sorted(pool.index.tolist()) == [2, 3, 4]
+    pool.render_next(100)  # only what is left
+    assert pool.rendered == 7 and pool.remaining == 0
+    full = render_views(model, poses, intr)["rgb"].clamp(0, 1)
+    for slot, cam in enumerate(pool.index.tolist()):
+        assert (pool.images[slot].float() / 255 - full[cam]).abs().max() <= 0.5 / 255 + 1e-6
+    drawn, images = pool.sample(16, torch.Generator().manual_seed(0))
+    for pose, image in zip(drawn, images):
+        cam = int(((poses - pose).abs().flatten(1).sum(1) < 1e-6).nonzero()[0])
+        assert cam in pool.index.tolist()
+        assert (image - full[cam]).abs().max() <= 0.5 / 255 + 1e-6
+
+
+def test_training_streams_every_teacher_through_a_small_pool_in_its_steps(sphere_model):
+    model, train_set = sphere_model
+    cfg = FeatureConfig(
+        channels=5, extra_views=20, pool_views=4, train_steps=12, batch_size=2, progress=False
+    )
+    rend, stats = train_features(model, train_set, cfg, torch.Generator().manual_seed(0))
+    assert stats["steps"] == 12
+    assert stats["teacher_views"] == train_set.num_views + 20  # all rendered, 4 held at once
+    assert stats["cpu_seconds"] > 0
+
+
+def test_settings_by_image_size():
+    small, mid, large = (FeatureConfig.for_resolution(px) for px in (100, 200, 400))
+    assert small == FeatureConfig()
+    assert mid.extra_views < small.extra_views and mid.downsample == small.downsample
+    assert large.extra_views < mid.extra_views and large.downsample == 4
+    assert FeatureConfig.for_resolution(400, downsample=2).downsample == 2
