@@ -22,7 +22,8 @@ part), OSNERF_BENCH_SIZES (default "100,200,400"), OSNERF_BENCH_FIELD_SECONDS (b
 each size's field, CPU clock, default 150 s per 100 px of width), OSNERF_BENCH_MODEL_<px> (a
 field saved by `osnerf train-nerf` on lego at that size: used instead of training one),
 OSNERF_FEATURES_STEPS (the feature renderer's distillation steps; default its own for the
-size, ``renderer.FeatureConfig.for_resolution``).
+size, ``renderer.FeatureConfig.for_resolution``), OSNERF_BENCH_THREADS (threads of the field
+training, default 2; the renderers are always timed on one).
 """
 
 from __future__ import annotations
@@ -190,7 +191,7 @@ def _field(root: Path, px: int, train_set, clock: str) -> tuple[object, dict]:
     if saved:
         return load_model(saved), {"loaded_from": saved}
     seconds = float(os.environ.get("OSNERF_BENCH_FIELD_SECONDS", 1.5 * px))
-    torch.set_num_threads(2)
+    torch.set_num_threads(int(os.environ.get("OSNERF_BENCH_THREADS", "2")))
     cfg = TrainConfig.for_resolution(px, max_seconds=seconds, clock=clock, progress=False)
     w0 = time.perf_counter()
     res = train(train_set, cfg, torch.Generator().manual_seed(0))

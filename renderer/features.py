@@ -87,9 +87,12 @@ class FeatureConfig:
     rendered while training, evenly over the first 80 % of the budget, each replacing the
     oldest; the low-resolution pass of a training view is recomputed at each step. Setup
     memory is therefore bounded at any size: ``pool_views * height * width * 3`` bytes of
-    teachers (400 px: 123 MB) plus the feature grid and one batch."""
+    teachers (400 px: 123 MB), ``pass_cache_mb``, the feature grid and one batch."""
     batch_size: int = 4
     """Views per optimiser step, >= 1."""
+    pass_cache_mb: int = 512
+    """Memory (MB) for keeping the held teachers' low-resolution passes instead of
+    recomputing one whenever its teacher is drawn, >= 0; part of the setup bound."""
     grid_scale: float = 1.0
     """Vertices of the feature grid per axis relative to the field's occupancy cells
     (``ceil(cells * grid_scale) + 1``), in (0, 1]: a coarser grid costs proportionally less
@@ -116,6 +119,7 @@ class FeatureConfig:
             ("batch_size", 1),
             ("extra_views", 0),
             ("pool_views", 1),
+            ("pass_cache_mb", 0),
         ):
             if getattr(self, name) < low:
                 raise ValueError(f"{name} must be >= {low}, got {getattr(self, name)}")
@@ -437,9 +441,21 @@ def jittered_poses(
 
 class TeacherPool:
     """Teacher renders (8-bit) of a list of cameras, at most ``capacity`` held at once:
-    :meth:`render_next` renders the next ``count`` cameras, each replacing the oldest."""
+    :meth:`render_next` renders the next ``count`` cameras, each replacing the oldest.
 
-    def __init__(self, model: RadianceField, poses: Tensor, intrinsics: Intrinsics, capacity: int):
+    With ``passes`` (``poses -> [LowResPass]``) the low-resolution pass of each held camera
+    is kept beside its image while their total stays under ``pass_bytes``; the others are
+    recomputed when drawn (:meth:`passes_of`)."""
+
+    def __init__(
+        self,
+        model: RadianceField,
+        poses: Tensor,
+        intrinsics: Intrinsics,
+        capacity: int,
+        passes=None,
+        pass_bytes: int = 0,
+    ):
         self.model, self.poses, self.intrinsics = model, poses, intrinsics
         self.capacity = max(1, min(capacity, poses.shape[0]))
         self.images = torch.zeros(
@@ -447,6 +463,9 @@ class TeacherPool:
         )
         self.index = torch.zeros(self.capacity, dtype=torch.long)  # camera of each slot
         self.rendered = 0  # cameras rendered so far
+        self._passes_fn, self._pass_bytes = passes, pass_bytes
+        self._passes: dict[int, LowResPass] = {}  # slot -> its camera's pass
+        self._held_bytes = 0
 
     @property
     def held(self) -> int:
@@ -467,12 +486,42 @@ class TeacherPool:
         self.images[slots] = (rgb.clamp(0, 1) * 255).round().to(torch.uint8)
         self.index[slots] = cams
         self.rendered += count
+        for slot in slots.tolist():
+            old = self._passes.pop(slot, None)
+            self._held_bytes -= 0 if old is None else _pass_size(old)
+        if self._passes_fn is not None and self._held_bytes < self._pass_bytes:
+            for slot, p in zip(slots.tolist(), self._passes_fn(self.poses[cams])):
+                if self._held_bytes + _pass_size(p) > self._pass_bytes:
+                    break
+                self._passes[slot] = p
+                self._held_bytes += _pass_size(p)
 
-    def sample(self, count: int, generator: torch.Generator) -> tuple[Tensor, Tensor]:
-        """(poses [count, 4, 4], images [count, height, width, 3] float in [0, 1]) drawn
-        uniformly from the held teachers."""
-        slots = torch.randint(self.held, (count,), generator=generator)
-        return self.poses[self.index[slots]], self.images[slots].float() / 255.0
+    def sample(self, count: int, generator: torch.Generator) -> Tensor:
+        """``count`` slots [count] drawn uniformly from the held teachers."""
+        return torch.randint(self.held, (count,), generator=generator)
+
+    def poses_of(self, slots: Tensor) -> Tensor:
+        return self.poses[self.index[slots]]
+
+    def images_of(self, slots: Tensor) -> Tensor:
+        """[len(slots), height, width, 3] float in [0, 1]."""
+        return self.images[slots].float() / 255.0
+
+    def passes_of(self, slots: Tensor) -> list[LowResPass]:
+        """The slots' low-resolution passes: kept ones, the rest computed together."""
+        slots = slots.tolist()
+        missing = [s for s in slots if s not in self._passes]
+        fresh = {}
+        if missing:
+            computed = self._passes_fn(self.poses[self.index[torch.tensor(missing)]])
+            fresh = dict(zip(missing, computed))
+        return [self._passes[s] if s in self._passes else fresh[s] for s in slots]
+
+
+def _pass_size(p: LowResPass) -> int:
+    return sum(
+        t.numel() * t.element_size() for t in (p.positions, p.basis, p.weights, p.rays, p.opacity)
+    )
 
 
 def train_features(
@@ -503,7 +552,14 @@ def train_features(
         [poses, jittered_poses(poses, up, center, config.extra_views, config.jitter_deg, generator)]
     )
     rend = FeatureRenderer(model, config)
-    pool = TeacherPool(model, poses, intr, config.pool_views)
+    pool = TeacherPool(
+        model,
+        poses,
+        intr,
+        config.pool_views,
+        passes=lambda p: rend.low_res_passes(p, intr),
+        pass_bytes=config.pass_cache_mb << 20,
+    )
     bar = _setup_bar(config)
     while pool.held < pool.capacity:
         pool.render_next(min(config.render_batch, pool.capacity - pool.held))
@@ -523,9 +579,9 @@ def train_features(
         due = first + math.ceil((poses.shape[0] - first) * min(frac / 0.8, 1.0))
         if due > pool.rendered:
             pool.render_next(max(due - pool.rendered, config.render_batch))
-        batch_poses, target = pool.sample(config.batch_size, generator)
-        out = rend.decode(rend.low_res_passes(batch_poses, intr), intr.height, intr.width)
-        err = F.mse_loss(out, target)
+        slots = pool.sample(config.batch_size, generator)
+        out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
+        err = F.mse_loss(out, pool.images_of(slots))
         opt.zero_grad(set_to_none=False)
         err.backward()
         opt.step()

@@ -152,6 +152,23 @@ class TrainConfig:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def for_resolution(cls, width_px: int, **overrides) -> TrainConfig:
+        """The settings for views ``width_px`` wide (:data:`GRIDS_BY_SIZE`: the row of the
+        largest size not above it), then ``overrides``: a grid whose voxels stay about one
+        pixel of the views, so the field can hold what the views show."""
+        size = max((s for s in GRIDS_BY_SIZE if s <= width_px), default=0)
+        return cls(**{**GRIDS_BY_SIZE.get(size, {}), **overrides})
+
+
+GRIDS_BY_SIZE: dict[int, dict] = {
+    0: {},
+    150: {"grid_resolutions": (64, 128, 192)},
+    300: {"grid_resolutions": (64, 128, 256)},
+}
+"""Smallest image width (px) -> :class:`TrainConfig` settings that differ from the defaults
+(:meth:`TrainConfig.for_resolution`); up to 149 px the defaults."""
+
 
 @dataclass
 class TrainResult:

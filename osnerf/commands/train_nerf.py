@@ -106,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
     test_set = load_dataset(
         data, "test", args.resolution, train_set.background, aabb=train_set.aabb
     )
-    config = TrainConfig(
+    config = TrainConfig.for_resolution(
+        train_set.width,
         field=args.field,
         max_seconds=args.max_seconds,
         clock=args.clock,

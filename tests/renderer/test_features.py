@@ -10,11 +10,13 @@ from renderer import (
     FeatureConfig,
     FeatureRenderer,
     Intrinsics,
+    TeacherPool,
     image_metrics,
     orbit_path,
     render_views,
     train_features,
 )
+from renderer.features import _pass_size as _pass_bytes
 from renderer.features import jittered_poses, low_res_intrinsics
 from renderer.fields import trilinear
 
@@ -198,8 +200,6 @@ def test_config_validation_names_the_field(field, value):
 def test_teacher_pool_holds_at_most_its_capacity_and_replaces_the_oldest(sphere_model):
     """Each held image is the 8-bit full render of the camera it is filed under, the pool
     never holds more than its capacity, and the newest renders replace the oldest."""
-    from renderer import TeacherPool
-
     model, train_set = sphere_model
     poses, intr = train_set.poses[:7], train_set.intrinsics
     pool = TeacherPool(model, poses, intr, capacity=3)
@@ -214,8 +214,8 @@ def test_teacher_pool_holds_at_most_its_capacity_and_replaces_the_oldest(sphere_
     full = render_views(model, poses, intr)["rgb"].clamp(0, 1)
     for slot, cam in enumerate(pool.index.tolist()):
         assert (pool.images[slot].float() / 255 - full[cam]).abs().max() <= 0.5 / 255 + 1e-6
-    drawn, images = pool.sample(16, torch.Generator().manual_seed(0))
-    for pose, image in zip(drawn, images):
+    slots = pool.sample(16, torch.Generator().manual_seed(0))
+    for pose, image in zip(pool.poses_of(slots), pool.images_of(slots)):
         cam = int(((poses - pose).abs().flatten(1).sum(1) < 1e-6).nonzero()[0])
         assert cam in pool.index.tolist()
         assert (image - full[cam]).abs().max() <= 0.5 / 255 + 1e-6
@@ -238,3 +238,24 @@ def test_settings_by_image_size():
     assert mid.extra_views < small.extra_views and mid.downsample == small.downsample
     assert large.extra_views < mid.extra_views and large.downsample == 4
     assert FeatureConfig.for_resolution(400, downsample=2).downsample == 2
+
+
+def test_kept_passes_equal_recomputed_ones_and_stay_within_their_budget(sphere_model):
+    model, train_set = sphere_model
+    poses, intr = train_set.poses[:6], train_set.intrinsics
+    rend = FeatureRenderer(model, FeatureConfig(channels=5, progress=False))
+
+    def passes(p):
+        return rend.low_res_passes(p, intr)
+
+    one = _pass_bytes(passes(poses[:1])[0])
+    pool = TeacherPool(model, poses, intr, capacity=4, passes=passes, pass_bytes=2 * one + 1)
+    pool.render_next(4)
+    assert len(pool._passes) <= 2 and pool._held_bytes <= 2 * one + 1
+    slots = torch.arange(4)
+    for slot, p in zip(slots.tolist(), pool.passes_of(slots)):
+        ref = passes(pool.poses_of(torch.tensor([slot])))[0]
+        assert torch.equal(p.rays, ref.rays)
+        assert torch.allclose(p.weights, ref.weights, atol=1e-4)
+    pool.render_next(2)  # replaces slots 0 and 1: their kept passes go with them
+    assert pool._held_bytes == sum(_pass_bytes(p) for p in pool._passes.values())

@@ -135,3 +135,15 @@ def test_config_validation():
         TrainConfig(grid_resolutions=(32, 64), stage_starts=(0.5, 0.1))
     with pytest.raises(KeyError, match="wall"):
         TrainConfig(clock="gpu")
+
+
+def test_grid_settings_by_image_size():
+    """Up to 149 px the defaults (the pipeline's views); larger views get finer last grids."""
+    from renderer import TrainConfig
+
+    assert TrainConfig.for_resolution(100) == TrainConfig()
+    assert TrainConfig.for_resolution(128) == TrainConfig()
+    mid, large = TrainConfig.for_resolution(200), TrainConfig.for_resolution(400)
+    assert TrainConfig().grid_resolutions[-1] < mid.grid_resolutions[-1]
+    assert mid.grid_resolutions[-1] < large.grid_resolutions[-1]
+    assert TrainConfig.for_resolution(400, max_seconds=5.0).max_seconds == 5.0
