@@ -36,6 +36,14 @@ MAX_IMAGES = 100_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options, in ``--help`` order: what is sent over which link, then where the results
+    go and how the work runs."""
+    _add_link_arguments(p)
+    _add_output_arguments(p)
+
+
+def _add_link_arguments(p: argparse.ArgumentParser) -> None:
+    """--images, --channel, --draws, --snr-db, --cbr, --schemes, --mcs, --refine-steps, --seed."""
     from semcodec.evaluation import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
 
     side = f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} px"
@@ -88,6 +96,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "CPU second each for a Kodak image)",
     )
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
+
+
+def _add_output_arguments(p: argparse.ArgumentParser) -> None:
+    """--out, --plot, --overwrite, --codec, --max-images, --no-lpips, --threads."""
     p.add_argument(
         "--out",
         required=True,
