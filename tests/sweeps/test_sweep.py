@@ -439,8 +439,8 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_a_pool_sweep_killed_with_sigkill_takes_its_workers_along(tmp_path):
-    """#16: after kill -9 of `osnerf sweep`, its pool workers ran on (and then blocked on a
-    pipe holding their result), and a resource_tracker was left too."""
+    """After kill -9 of `osnerf sweep`, its pool workers and the multiprocessing
+    resource_tracker exit too: none runs on, or blocks on a pipe holding its result."""
     log = tmp_path / "calls.log"
     spec_d = {
         "command": "fake",
