@@ -19,6 +19,7 @@ from common.files import (
     to_json,
     write_bytes,
     write_figure,
+    write_files,
     write_json,
     write_png,
     write_text,
@@ -42,5 +43,6 @@ __all__ = [
     "write_png",
     "write_text",
     "write_figure",
+    "write_files",
     "write_torch",
 ]

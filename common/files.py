@@ -11,6 +11,8 @@ or a resumed run, sees the old file or the new one, never a torn one.
   on device: 'run/model.pt'``, whatever library produced the bytes. Writers that build the
   bytes in memory first (:func:`write_bytes` and the helpers on it) turn a library's own
   failure text (torch's ``inline_container.cc``, OpenCV's ``False``) into that one line.
+* Files that belong together (a report and its pictures) go through :func:`write_files`:
+  all are written in full before any is renamed, so a failure leaves the old set whole.
 """
 
 from __future__ import annotations
@@ -111,6 +113,46 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_path(path) as tmp:
         _write_file(tmp, bytes(data))
     return Path(path)
+
+
+def write_files(files: dict[str | os.PathLike, bytes]) -> list[Path]:
+    """Write several files as one set: every new file, or (after a failure) every old one.
+
+    Each file is first written in full to a temporary file beside its target; only when all
+    of them are on disk are they renamed over their targets, in the order given (put the
+    file that says the set is complete, e.g. ``report.json``, last). A failed write (a full
+    disk) removes every temporary file and raises one :class:`OSError` naming the target
+    whose bytes did not fit, before any target is touched. Renames need no free space.
+
+    Returns:
+        The targets, in the order given.
+    Raises:
+        FileExistsError: a target names something other than a regular file (nothing written).
+        OSError: a failed write, ``filename`` = its target (nothing replaced, nothing left).
+    """
+    targets = [check_replaceable(path) for path in files]
+    staged: list[tuple[str, Path]] = []
+    try:
+        for target, data in zip(targets, files.values()):
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
+                )
+                os.close(fd)
+                staged.append((tmp, target))
+                _write_file(Path(tmp), bytes(data))
+                os.chmod(tmp, 0o644)  # mkstemp makes 0600; results are meant to be shared
+            except OSError as e:
+                raise OSError(e.errno, e.strerror or str(e), str(target)) from e
+        for tmp, target in staged:
+            check_replaceable(target)
+            os.replace(tmp, target)
+    except BaseException:
+        for tmp, _ in staged:
+            _unlink(tmp)  # the ones already renamed are gone: nothing to remove
+        raise
+    return targets
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:

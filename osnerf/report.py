@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from common import write_bytes, write_text
-from osnerf.provenance import result_header, write_json_atomic
+from common import path_kind, to_json, write_files
+from osnerf.provenance import result_header
 
 QUALITY_METRICS = ("psnr", "ssim", "lpips", "psnr_object")
 """Per-scheme quality metrics of a run (LPIPS: lower is better)."""
@@ -293,8 +293,24 @@ symbol rate {report.symbol_rate_hz:g} Hz.</p>
 """
 
 
+REPORT_PICTURES = {
+    "novel views (held out)": "grid.png",
+    "received views": "received.png",
+    "plot: schemes": "plot_schemes.png",
+    "plot: views": "plot_views.png",
+}
+"""Picture title -> its file beside ``report.json``."""
+
+
 def write_report(out_dir: Path, config: dict, seed: int, report: Report, pictures: dict) -> dict:
-    """Write report.json, grid.png, received.png, plots and report.html into ``out_dir``."""
+    """Write report.json, grid.png, received.png, plots and report.html into ``out_dir``.
+
+    The files are one set (:func:`common.write_files`): every byte is made in memory and
+    written before any file is replaced, report.json last; a full disk raises one
+    ``OSError`` naming the file and leaves the previous report whole. A picture that this
+    report has no data for (``plot_views.png`` without per-view measurements) is removed
+    once the new set is in place, so no picture of an earlier run stays beside it.
+    """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     header = result_header(config, seed)
@@ -305,15 +321,12 @@ def write_report(out_dir: Path, config: dict, seed: int, report: Report, picture
     }
     for k, v in plots(report).items():
         images[f"plot: {k}"] = v
-    files = {
-        "novel views (held out)": "grid.png",
-        "received views": "received.png",
-        "plot: schemes": "plot_schemes.png",
-        "plot: views": "plot_views.png",
-    }
-    for k, data in images.items():
-        write_bytes(out_dir / files[k], data)
-    write_text(out_dir / "report.html", render_html(report, header, images))
     full = {**header, **report.to_dict()}
-    write_json_atomic(out_dir / "report.json", full)
+    files = {out_dir / REPORT_PICTURES[k]: data for k, data in images.items()}
+    files[out_dir / "report.html"] = render_html(report, header, images).encode("utf-8")
+    files[out_dir / "report.json"] = to_json(full).encode("utf-8")
+    write_files(files)
+    for k, name in REPORT_PICTURES.items():
+        if k not in images and path_kind(out_dir / name) == "a file":
+            (out_dir / name).unlink()
     return full

@@ -1,6 +1,7 @@
 """`osnerf eval-codec`: image transmission quality, JSCC vs digital vs ideal (vs analog).
 
-Reads every PNG/JPEG of ``--images``, sends each image (one at a time, its own size)
+Reads every PNG/JPEG of ``--images`` (each at least 11x11 px: SSIM's Gaussian window, see
+``semcodec.evaluation.EVAL_MIN_SIDE_PX``), sends each image (one at a time, its own size)
 through every scheme at every SNR, ``--draws`` times over independent noise and fading
 draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
 "sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
@@ -35,10 +36,23 @@ MAX_IMAGES = 100_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options, in ``--help`` order: what is sent over which link, then where the results
+    go and how the work runs."""
+    _add_link_arguments(p)
+    _add_output_arguments(p)
+
+
+def _add_link_arguments(p: argparse.ArgumentParser) -> None:
+    """--images, --channel, --draws, --snr-db, --cbr, --schemes, --mcs, --refine-steps, --seed."""
+    from semcodec.evaluation import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
+
+    side = f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} px"
     p.add_argument(
-        "--images", required=True, help="an image file, or a folder of images (png, jpg, ...)"
+        "--images",
+        required=True,
+        help=f"an image file, or a folder of images (png, jpg, ...), each at least {side} "
+        "(SSIM's Gaussian window); a smaller one is refused",
     )
-    from semcodec.evaluation import eval_channels, schemes_help
 
     p.add_argument(
         "--channel",
@@ -82,6 +96,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "CPU second each for a Kodak image)",
     )
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
+
+
+def _add_output_arguments(p: argparse.ArgumentParser) -> None:
+    """--out, --plot, --overwrite, --codec, --max-images, --no-lpips, --threads."""
     p.add_argument(
         "--out",
         required=True,
@@ -170,28 +188,26 @@ def run(args: argparse.Namespace) -> int:
     }
     from tqdm import tqdm
 
-    bar = tqdm(
-        total=len(schemes) * len(snrs) * len(images) * args.draws,
-        desc="eval-codec",
-        file=sys.stderr,
-    )
     checkpoint = {"name": codec.name, "sha256": codec.sha256} if codec else None
     partial = partial_path(out)
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:
         print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
     doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": []}
-    for scheme in schemes:
-        for ki, snr in enumerate(snrs):
-            r = done.get((scheme, snr))
-            if r is not None:
-                doc["results"].append(r)
-                bar.update(len(images) * args.draws)
-                continue
-            doc["results"].append(_point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar))
-            # each finished point is kept: an interrupted run resumes from here
-            write_json_atomic(partial, {**doc, "partial": True})
-    bar.close()
+    total = len(schemes) * len(snrs) * len(images) * args.draws
+    # the bar is closed on the way out, by an error too: it never redraws after the message
+    with tqdm(total=total, desc="eval-codec", file=sys.stderr) as bar:
+        for scheme in schemes:
+            for ki, snr in enumerate(snrs):
+                r = done.get((scheme, snr))
+                if r is None:
+                    r = _point(ctx, scheme, ki, snr, cbr, images, args, score_lpips, bar)
+                    doc["results"].append(r)
+                    # each finished point is kept: an interrupted run resumes from here
+                    write_json_atomic(partial, {**doc, "partial": True})
+                else:
+                    doc["results"].append(r)
+                    bar.update(len(images) * args.draws)
     results = doc["results"]
     if args.plot:
         title = f"{args.channel}, CBR {args.cbr}, {args.draws} draw(s) per image"

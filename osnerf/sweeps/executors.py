@@ -9,6 +9,7 @@ import io
 import json
 import multiprocessing
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -22,12 +23,20 @@ Task = dict[str, Any]  # plain data, picklable: what a worker needs to run one p
 Outcome = dict[str, Any]  # {"ok", "result", "error", "seconds"}
 
 
+_PROGRESS_BAR = re.compile(r"\d+%\|.*\| *\d+(\.\d+)?\S*/\S+ \[")
+"""A tqdm bar as drawn on stderr: ``desc:  25%|##5       | 1/4 [00:00<00:00, 9.8it/s]``."""
+
+
 def _error_line(stderr: str, command: str) -> str | None:
-    """The command's one-line error (``osnerf X: error: ...``) from its stderr, without the
-    progress-bar redraws (``\r``-separated) that may follow it; else the last other line."""
+    """The command's one-line error (``osnerf X: error: ...`` / ``osnerf X: failed: ...``)
+    from its stderr, without any progress-bar text: a bar left drawn when the command failed
+    shares the error's line (tqdm ends a draw with ``\r``, not a newline), and its redraws may
+    follow. Without such a line, the last line that is not a progress bar."""
     lines = [ln.strip() for ln in stderr.replace("\r", "\n").splitlines() if ln.strip()]
-    ours = [ln for ln in lines if ln.startswith(f"osnerf {command}:")]
-    return (ours or lines or [None])[-1]
+    tag = f"osnerf {command}:"
+    ours = [ln[ln.index(tag) :] for ln in lines if tag in ln]
+    others = [ln for ln in lines if not _PROGRESS_BAR.search(ln)]
+    return (ours or others or [None])[-1]
 
 
 def execute_point(task: Task) -> Outcome:

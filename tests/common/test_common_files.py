@@ -92,3 +92,24 @@ def test_write_png_round_trips_through_the_loader(tmp_path):
     assert np.array_equal(
         np.round(common.read_image(tmp_path / "a.png") * 255).astype(np.uint8), rgb
     )
+
+
+def test_write_files_replaces_all_or_none(tmp_path, monkeypatch):
+    """A full disk at the second file of a set leaves both old files and no temporary file."""
+    a, b = tmp_path / "a.png", tmp_path / "b.json"
+    a.write_bytes(b"old a")
+    b.write_bytes(b"old b")
+    write = common.files._write_file
+
+    def full_at_b(path, data):
+        return (_full_disk if path.name.startswith(".b.json.") else write)(path, data)
+
+    monkeypatch.setattr(common.files, "_write_file", full_at_b)
+    with pytest.raises(OSError) as info:
+        common.write_files({a: b"new a", b: b"new b"})
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(b)
+    assert (a.read_bytes(), b.read_bytes()) == (b"old a", b"old b")
+    assert sorted(os.listdir(tmp_path)) == ["a.png", "b.json"]
+    monkeypatch.setattr(common.files, "_write_file", write)
+    assert common.write_files({a: b"new a", b: b"new b"}) == [a, b]
+    assert (a.read_bytes(), b.read_bytes()) == (b"new a", b"new b")

@@ -246,8 +246,9 @@ def test_stream_iterator_is_continuous():
 
 
 def test_timeout_before_any_data_is_a_timeout_and_writes_nothing(emu, tmp_path):
-    """#16: a timeout inside the stale first buffer raised "cannot mmap an empty file" and
-    left a 0-byte .sigmf-data without its .sigmf-meta."""
+    """A USB timeout inside the stale first buffer, before any sample arrived, raises a
+    UsbTimeoutError saying no capture was saved, with an empty capture, and writes no SigMF
+    file (no 0-byte .sigmf-data without its .sigmf-meta)."""
     emu.radios[0].faults.read_timeout_after_bytes = 100_000
     with HackRF.open(backend=emu.backend) as sdr:
         with pytest.raises(UsbTimeoutError, match="no capture was saved") as ei:

@@ -4,6 +4,7 @@ image set, sizes are stated truly, nothing is upscaled silently; train-codec's i
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -58,7 +59,7 @@ def test_ota_refuses_to_upscale_a_1x1_image(one_line, tmp_path, capsys):
     assert "dot.png is 1x1 px, smaller than --size 64" in err and not out.exists()
 
 
-@pytest.mark.parametrize("w, h", [(8, 8), (64, 8), (10, 64)])
+@pytest.mark.parametrize("w, h", [(8, 8), (64, 8), (10, 64), (11, 10), (10, 11)])
 def test_eval_codec_states_its_true_minimum_size(one_line, tmp_path, capsys, w, h):
     from semcodec.evaluation import EVAL_MIN_SIDE_PX
 
@@ -73,12 +74,47 @@ def test_eval_codec_states_its_true_minimum_size(one_line, tmp_path, capsys, w, 
     assert "win_size" not in err and not out.exists()
 
 
-def test_eval_codec_runs_at_its_stated_minimum(tmp_path):
+@pytest.mark.parametrize("cbr", ["1/48", "1/3"])  # the ends of the shipped codec's range
+def test_eval_codec_runs_at_its_stated_minimum(tmp_path, capsys, cbr):
+    """An 11x11 image (and 11 px on one side) passes every kind of scheme at both ends of
+    the codec's bandwidth ratios: the stated minimum is the true one."""
     d = tmp_path / "img"
     d.mkdir()
-    Image.fromarray(np.full((11, 11, 3), 128, np.uint8)).save(d / "s.png")
-    argv = ["eval-codec", "--images", str(d), "--snr-db", "10", "--schemes", "jscc", "--no-lpips"]
-    assert main([*argv, "--out", str(tmp_path / "o.json")]) == 0
+    rng = np.random.default_rng(0)
+    for name, (h, w) in {"s.png": (11, 11), "t.png": (11, 40), "u.png": (29, 11)}.items():
+        Image.fromarray(rng.integers(0, 256, (h, w, 3), dtype=np.uint8)).save(d / name)
+    schemes = "jscc,jscc_refined,digital,digital_genie,ideal,analog,digital_jpeg"
+    argv = ["eval-codec", "--images", str(d), "--snr-db", "-5,10", "--cbr", cbr, "--no-lpips"]
+    argv += ["--schemes", schemes, "--refine-steps", "1", "--out", str(tmp_path / "o.json")]
+    assert main(argv) == 0
+    rows = json.loads((tmp_path / "o.json").read_text())["results"]
+    assert len(rows) == 14 and all(np.isfinite([r["psnr"], r["ssim"]]).all() for r in rows)
+    capsys.readouterr()
+    assert main(["eval-codec", "--help"]) == 0
+    assert "each at least 11x11 px" in " ".join(capsys.readouterr().out.split())
+
+
+def test_eval_codec_failing_mid_run_leaves_its_error_as_the_last_line(
+    tmp_path, capsys, monkeypatch
+):
+    """A scheme that fails at run time: exit 1 with one error line, and the progress bar is
+    closed before it, never drawn again after it."""
+    from semcodec import evaluation
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("the modem caught fire")
+
+    scheme = dataclasses.replace(evaluation.LINK_SCHEMES["analog"], run=fails)
+    monkeypatch.setitem(evaluation.LINK_SCHEMES, "analog", scheme)
+    d = tmp_path / "img"
+    d.mkdir()
+    Image.fromarray(np.full((16, 16, 3), 128, np.uint8)).save(d / "s.png")
+    argv = ["eval-codec", "--images", str(d), "--snr-db", "10", "--schemes", "analog"]
+    assert main([*argv, "--no-lpips", "--out", str(tmp_path / "o.json")]) == 1
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]  # \r (a bar redraw) splits too
+    assert lines[-1] == "osnerf eval-codec: failed: RuntimeError: the modem caught fire", err
+    assert sum("the modem caught fire" in ln for ln in lines) == 1 and "Traceback" not in err
 
 
 def test_train_codec_with_images_smaller_than_the_crop_writes_nothing(one_line, tmp_path, capsys):

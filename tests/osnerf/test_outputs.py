@@ -4,6 +4,7 @@ never touches a file that is not its own. Refusals exit 2 with one line and writ
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -216,3 +217,110 @@ def test_osnerf_cache_naming_a_file_is_refused_before_anything_is_written(
     assert main(["run", "--scene", "tiny", "--out", str(out)]) == 2
     assert "$OSNERF_CACHE" in one_line()
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------ a full disk
+def _fake_report(psnr: float, views: bool):
+    """A small run report of two schemes (and its pictures) as the pipeline returns them;
+    ``views=False`` has no per-view measurements, so no ``plot_views.png``."""
+    from osnerf.report import Report, SchemeReport
+
+    seconds = {"encode": 0.1, "air": 0.2, "decode": 0.1, "nerf": 1.0}
+    schemes = {
+        name: SchemeReport(psnr, 0.5, None, psnr, None, 100, 2, seconds, 1.2)
+        for name in ("jscc", "digital")
+    }
+    ids = {"3": 5.0, "4": 6.0} if views else {}
+    report = Report(
+        scene={"name": "tiny"},
+        demand={"objects": ["crate"]},
+        link={"channel": "awgn"},
+        snr_db=10.0,
+        symbol_rate_hz=1e6,
+        codec=None,
+        views={
+            "measured_snr_db": ids,
+            "link_snr_db": ids,
+            "cbr": dict.fromkeys(ids, 0.1),
+            "sent_on_demand": [3],
+        },
+        schemes=schemes,
+        comparisons={},
+        scu_decisions=[{"stage": "collector", "decision": "views 3, 4"}],
+        metric_notes="",
+        seconds_total=2.0,
+        scene_seconds=0.5,
+    )
+    img = np.full((8, 8, 3), psnr / 40, np.float32)
+    pictures = {
+        "gt": [img, img],
+        "renders": dict.fromkeys(schemes, [img, img]),
+        "received": dict.fromkeys(schemes, [img]),
+    }
+    return report, pictures
+
+
+@pytest.fixture
+def fake_pipeline(monkeypatch):
+    """``osnerf run``'s pipeline replaced by one that returns ``fake_pipeline.report`` (and
+    keeps its stage cache, so the same command continues in its folder)."""
+    import osnerf.run
+
+    class Fake:
+        report = _fake_report(10.0, views=True)
+
+    def run_pipeline(cfg, out, cache_dir=None):
+        (out / "cache" / cfg.key()).mkdir(parents=True, exist_ok=True)
+        return Fake.report
+
+    monkeypatch.setattr(osnerf.run, "run_pipeline", run_pipeline)
+    return Fake
+
+
+def _report_files(out) -> dict:
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.is_file()}
+
+
+@pytest.mark.parametrize("full_at", ["grid.png", "plot_schemes.png", "report.html", "report.json"])
+def test_run_on_a_full_disk_names_the_file_and_keeps_the_last_report_whole(
+    one_line, tmp_path, capsys, monkeypatch, fake_pipeline, full_at
+):
+    """The disk fills while the report stage writes ``full_at``: exit 1 with one line naming
+    that file; the previous report (json, html, pictures) is left whole and no temporary file
+    stays, so report.json never describes pictures of another run."""
+    import common.files
+
+    out = tmp_path / "run"
+    argv = ["run", "--scene", "tiny", "--out", str(out)]
+    assert main(argv) == 0
+    before = _report_files(out)
+    assert {"report.json", "report.html", "grid.png", "plot_views.png"} <= set(before)
+    capsys.readouterr()
+
+    write = common.files._write_file
+
+    def full_disk(path, data):
+        if not path.name.startswith(f".{full_at}."):
+            return write(path, data)
+        with open(path, "wb") as f:
+            f.write(data[: len(data) // 2])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(common.files, "_write_file", full_disk)
+    fake_pipeline.report = _fake_report(20.0, views=True)
+    assert main(argv) == 1
+    err = one_line()
+    assert "No space left on device" in err and repr(str(out / full_at)) in err, err
+    assert _report_files(out) == before  # the same files, byte for byte: nothing half-new
+
+
+def test_a_report_without_view_plots_removes_the_last_ones(tmp_path, fake_pipeline):
+    """A report is one set: a picture the new report has no data for is not left behind
+    from the previous run in the same folder."""
+    out = tmp_path / "run"
+    argv = ["run", "--scene", "tiny", "--out", str(out)]
+    assert main(argv) == 0 and (out / "plot_views.png").is_file()
+    fake_pipeline.report = _fake_report(20.0, views=False)
+    assert main(argv) == 0
+    assert not (out / "plot_views.png").exists()
+    assert json.loads((out / "report.json").read_text())["schemes"]["jscc"]["psnr"] == 20.0

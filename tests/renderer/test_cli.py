@@ -185,8 +185,8 @@ def test_dataset_with_an_all_zero_pose_names_the_frame(sphere_dataset, tmp_path,
 def test_train_nerf_refuses_bad_values_at_parse_time(
     sphere_dataset, tmp_path, capsys, monkeypatch, extra, match
 ):
-    """#16: --resolution had no upper bound (30000 tried to allocate 14.4 GB); --threads 0
-    and --seed -1 were accepted silently."""
+    """Out-of-range --resolution (30000 px would allocate 14.4 GB), --threads 0 and --seed -1
+    are refused while parsing, with one line and exit 2, before the dataset is loaded."""
     import renderer
 
     def refuse(*a, **k):  # a late check fails the test instead of allocating gigabytes
@@ -202,7 +202,8 @@ def test_train_nerf_refuses_bad_values_at_parse_time(
 def test_train_nerf_checks_its_output_folder_before_training(
     sphere_dataset, tmp_path, capsys, monkeypatch
 ):
-    """#16: --out naming an existing file trained for the whole budget, then failed."""
+    """--out naming an existing file is refused before training starts (exit 2), and the
+    file is left as it was."""
     import renderer
 
     def no_training(*a, **k):

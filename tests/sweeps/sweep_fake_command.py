@@ -2,7 +2,8 @@
 
 Its metric is a known function of its options and seed, so tests can check every point's
 result. It appends one line per invocation to --log (to count how often a point ran), can
-sleep (to be killed mid-sweep) and can fail on purpose at one SNR.
+sleep (to be killed mid-sweep), can fail on purpose at one SNR, and can leave a progress bar
+drawn on stderr when it fails (as a command that fails mid-loop does).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interrupt-snr-db", type=float, default=None, help="Ctrl-C at this SNR")
     p.add_argument("--level", default="low", help="low or high, checked in run() only")
     p.add_argument("--log", default=None)
+    p.add_argument("--bar", action="store_true", help="draw a progress bar, left open")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
 
@@ -46,6 +48,13 @@ def run(args: argparse.Namespace) -> int:
         with open(args.log, "a") as f:
             f.write(f"{args.snr_db} {args.mode} {args.seed} {os.getpid()}\n")
     time.sleep(args.sleep_s)
+    if args.bar:
+        import sys
+
+        from tqdm import tqdm
+
+        bar = tqdm(total=4, desc="fake", file=sys.stderr)
+        bar.update(1)
     if args.fail_snr_db is not None and args.snr_db == args.fail_snr_db:
         if args.fail_once_flag is None or not os.path.exists(args.fail_once_flag):
             raise RuntimeError(f"planned failure at snr_db={args.snr_db}")

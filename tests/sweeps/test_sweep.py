@@ -220,6 +220,33 @@ def test_a_value_only_the_command_rejects_stops_the_sweep_with_its_message(tmp_p
     assert "refused its input" in capsys.readouterr().err.strip().splitlines()[-1]
 
 
+def test_error_records_say_how_each_point_failed_without_progress_bar_text(tmp_path, capsys):
+    """A point that fails at run time (exit 1) is recorded as failed and the sweep goes on; a
+    point whose input is refused (exit 2) stops it. Each record holds the command's one-line
+    error, never the progress bar the command left drawn on stderr."""
+    spec = _write_yaml(
+        tmp_path / "s.yaml",
+        {
+            "command": "fake",
+            "fixed": {"fail_snr_db": 1, "bar": True},
+            "axes": {"snr_db": [1, 2], "level": ["loud"]},  # 1: run-time failure; 2: refused
+        },
+    )
+    out = tmp_path / "r.jsonl"
+    argv = ["sweep", str(spec), "--out", str(out), "--executor", "serial", "--no-progress"]
+    assert osnerf.cli.main(argv) == 2
+    records = [json.loads(line) for line in errors_path(out).read_text().splitlines()]
+    assert [(r["point"]["snr_db"], r["error"]) for r in records] == [
+        (1, "exit 1: osnerf fake: failed: RuntimeError: planned failure at snr_db=1.0"),
+        (2, "exit 2: osnerf fake: error: --level must be one of low, high; got 'loud'"),
+    ]
+    err = capsys.readouterr().err.strip().splitlines()
+    first = next(line for line in err if "'snr_db': 1}" in line)
+    assert "failed: exit 1:" in first and "refused" not in first and "reject" not in first
+    assert "'snr_db': 2} seed 0: `osnerf fake` refused its input (exit 2: " in err[-1]
+    assert "|" not in first + err[-1]
+
+
 # --- results file ---------------------------------------------------------------------------
 
 
@@ -412,8 +439,8 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 def test_a_pool_sweep_killed_with_sigkill_takes_its_workers_along(tmp_path):
-    """#16: after kill -9 of `osnerf sweep`, its pool workers ran on (and then blocked on a
-    pipe holding their result), and a resource_tracker was left too."""
+    """After kill -9 of `osnerf sweep`, its pool workers and the multiprocessing
+    resource_tracker exit too: none runs on, or blocks on a pipe holding its result."""
     log = tmp_path / "calls.log"
     spec_d = {
         "command": "fake",
