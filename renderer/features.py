@@ -90,6 +90,9 @@ class FeatureConfig:
     teachers (400 px: 123 MB), ``pass_cache_mb``, the feature grid and one batch."""
     batch_size: int = 4
     """Views per optimiser step, >= 1."""
+    width_px: int | None = None
+    """Width of the teacher renders (the cameras' intrinsics scaled to it, aspect kept), or
+    None for the cameras' own: the size the renderer will be used at, >= 8."""
     pass_cache_mb: int = 512
     """Memory (MB) for keeping the held teachers' low-resolution passes instead of
     recomputing one whenever its teacher is drawn, >= 0; part of the setup bound."""
@@ -123,6 +126,8 @@ class FeatureConfig:
         ):
             if getattr(self, name) < low:
                 raise ValueError(f"{name} must be >= {low}, got {getattr(self, name)}")
+        if self.width_px is not None and self.width_px < 8:
+            raise ValueError(f"width_px must be >= 8 or None, got {self.width_px}")
         if self.train_steps is not None and self.train_steps < 1:
             raise ValueError(f"train_steps must be >= 1 or None, got {self.train_steps}")
         if not 0 < self.grid_scale <= 1:
@@ -139,12 +144,12 @@ class FeatureConfig:
         return asdict(self)
 
     @classmethod
-    def for_resolution(cls, width_px: int, **overrides) -> FeatureConfig:
-        """The settings for views ``width_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
+    def for_resolution(cls, size_px: int, /, **overrides) -> FeatureConfig:
+        """The settings for views ``size_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``. Teacher renders cost the square of
         the size, so larger views get fewer teachers; at 400 px and above the
         low-resolution pass is a quarter of the width."""
-        size = max((s for s in FEATURES_BY_SIZE if s <= width_px), default=0)
+        size = max((s for s in FEATURES_BY_SIZE if s <= size_px), default=0)
         return cls(**{**FEATURES_BY_SIZE.get(size, {}), **overrides})
 
 
@@ -535,7 +540,8 @@ def train_features(
     (streamed through a :class:`TeacherPool` of ``config.pool_views``).
 
     Returns:
-        (renderer, stats {"teacher_views", "teacher_seconds" (the first pool's renders),
+        (renderer, stats {"teacher_views", "teacher_size" ([height, width]),
+        "teacher_seconds" (the first pool's renders),
         "train_seconds" (the training, later teachers included), "cpu_seconds" (this
         process's CPU time for all of it), "steps", "final_loss"}).
     """
@@ -546,6 +552,10 @@ def train_features(
         poses, intr = stored_cameras(model)
     else:
         poses, intr = dataset.poses, dataset.intrinsics
+    if config.width_px is not None and config.width_px != intr.width:
+        intr = intr.resized(
+            max(1, round(intr.height * config.width_px / intr.width)), config.width_px
+        )
     up, center = scene_up_and_center(model, poses)
     t0 = time.perf_counter()
     poses = torch.cat(
@@ -591,6 +601,7 @@ def train_features(
         bar.close()
     stats = {
         "teacher_views": int(pool.rendered),
+        "teacher_size": [intr.height, intr.width],
         "teacher_seconds": teacher_seconds,
         "train_seconds": time.perf_counter() - t0,
         "cpu_seconds": time.process_time() - cpu0,

@@ -153,11 +153,11 @@ class TrainConfig:
         return asdict(self)
 
     @classmethod
-    def for_resolution(cls, width_px: int, **overrides) -> TrainConfig:
-        """The settings for views ``width_px`` wide (:data:`GRIDS_BY_SIZE`: the row of the
+    def for_resolution(cls, size_px: int, /, **overrides) -> TrainConfig:
+        """The settings for views ``size_px`` wide (:data:`GRIDS_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``: a grid whose voxels stay about one
         pixel of the views, so the field can hold what the views show."""
-        size = max((s for s in GRIDS_BY_SIZE if s <= width_px), default=0)
+        size = max((s for s in GRIDS_BY_SIZE if s <= size_px), default=0)
         return cls(**{**GRIDS_BY_SIZE.get(size, {}), **overrides})
 
 

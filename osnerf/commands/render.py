@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
     intr, poses = _camera_path(args, model)
 
-    config = _renderer_config(args)
+    config = _renderer_config(args, intr.width)
     t0, c0 = time.perf_counter(), time.process_time()
     rend, setup_stats = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)
@@ -251,8 +251,9 @@ def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, heigh
     return video
 
 
-def _renderer_config(args: argparse.Namespace):
-    """The learned renderer's settings from --renderer-steps (None for the full renderer)."""
+def _renderer_config(args: argparse.Namespace, width_px: int):
+    """The learned renderer's settings for views ``width_px`` wide, with --renderer-steps
+    (None for the full renderer)."""
     from renderer import FeatureConfig
 
     if args.renderer != "features":
@@ -260,7 +261,7 @@ def _renderer_config(args: argparse.Namespace):
     budget = {}
     if args.renderer_steps is not None:  # the steps are the budget; no time cap
         budget = {"train_steps": args.renderer_steps, "train_seconds": checks.MAX_BUDGET_S}
-    return FeatureConfig(progress=True, **budget)
+    return FeatureConfig.for_resolution(width_px, width_px=width_px, progress=True, **budget)
 
 
 def peak_memory_mb() -> float:

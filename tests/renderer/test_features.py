@@ -229,7 +229,10 @@ def test_training_streams_every_teacher_through_a_small_pool_in_its_steps(sphere
     rend, stats = train_features(model, train_set, cfg, torch.Generator().manual_seed(0))
     assert stats["steps"] == 12
     assert stats["teacher_views"] == train_set.num_views + 20  # all rendered, 4 held at once
-    assert stats["cpu_seconds"] > 0
+    assert stats["cpu_seconds"] > 0 and stats["teacher_size"] == [32, 32]
+    small = FeatureConfig(channels=5, extra_views=2, train_steps=2, width_px=16, progress=False)
+    _, stats = train_features(model, train_set, small, torch.Generator().manual_seed(0))
+    assert stats["teacher_size"] == [16, 16]
 
 
 def test_settings_by_image_size():
