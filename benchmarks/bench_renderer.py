@@ -242,8 +242,8 @@ def _renderers_at(root: Path, px: int, clock: str) -> dict:
     full = out["renderers"]["full"]
     alts = _alternatives(model, path.poses, path.intrinsics, path.images)
     out["cheap_alternatives"] = alts
-    for name, r in out["renderers"].items():
-        if name == "full":
+    for r in out["renderers"].values():
+        if r is full:
             continue
         r["speedup_vs_full"] = full["seconds_per_view"] / r["seconds_per_view"]
         r["db_under_full"] = full["psnr"] - r["psnr"]

@@ -214,6 +214,12 @@ class LowResPass:
     opacity: Tensor  # [num_rays] sum of all weights
     size: tuple[int, int]  # low-resolution (height, width)
 
+    @property
+    def nbytes(self) -> int:
+        """Memory held by its tensors."""
+        tensors = (self.positions, self.basis, self.weights, self.rays, self.opacity)
+        return sum(t.numel() * t.element_size() for t in tensors)
+
 
 class _GridRead(torch.autograd.Function):
     """``read_rows`` whose backward adds ``w * grad`` into the eight corner rows of each
@@ -493,13 +499,13 @@ class TeacherPool:
         self.rendered += count
         for slot in slots.tolist():
             old = self._passes.pop(slot, None)
-            self._held_bytes -= 0 if old is None else _pass_size(old)
+            self._held_bytes -= 0 if old is None else old.nbytes
         if self._passes_fn is not None and self._held_bytes < self._pass_bytes:
             for slot, p in zip(slots.tolist(), self._passes_fn(self.poses[cams])):
-                if self._held_bytes + _pass_size(p) > self._pass_bytes:
+                if self._held_bytes + p.nbytes > self._pass_bytes:
                     break
                 self._passes[slot] = p
-                self._held_bytes += _pass_size(p)
+                self._held_bytes += p.nbytes
 
     def sample(self, count: int, generator: torch.Generator) -> Tensor:
         """``count`` slots [count] drawn uniformly from the held teachers."""
@@ -521,12 +527,6 @@ class TeacherPool:
             computed = self._passes_fn(self.poses[self.index[torch.tensor(missing)]])
             fresh = dict(zip(missing, computed))
         return [self._passes[s] if s in self._passes else fresh[s] for s in slots]
-
-
-def _pass_size(p: LowResPass) -> int:
-    return sum(
-        t.numel() * t.element_size() for t in (p.positions, p.basis, p.weights, p.rays, p.opacity)
-    )
 
 
 def train_features(

@@ -16,7 +16,6 @@ from renderer import (
     render_views,
     train_features,
 )
-from renderer.features import _pass_size as _pass_bytes
 from renderer.features import jittered_poses, low_res_intrinsics
 from renderer.fields import trilinear
 
@@ -251,7 +250,7 @@ def test_kept_passes_equal_recomputed_ones_and_stay_within_their_budget(sphere_m
     def passes(p):
         return rend.low_res_passes(p, intr)
 
-    one = _pass_bytes(passes(poses[:1])[0])
+    one = passes(poses[:1])[0].nbytes
     pool = TeacherPool(model, poses, intr, capacity=4, passes=passes, pass_bytes=2 * one + 1)
     pool.render_next(4)
     assert len(pool._passes) <= 2 and pool._held_bytes <= 2 * one + 1
@@ -261,4 +260,4 @@ def test_kept_passes_equal_recomputed_ones_and_stay_within_their_budget(sphere_m
         assert torch.equal(p.rays, ref.rays)
         assert torch.allclose(p.weights, ref.weights, atol=1e-4)
     pool.render_next(2)  # replaces slots 0 and 1: their kept passes go with them
-    assert pool._held_bytes == sum(_pass_bytes(p) for p in pool._passes.values())
+    assert pool._held_bytes == sum(p.nbytes for p in pool._passes.values())
