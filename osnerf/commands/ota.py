@@ -34,8 +34,14 @@ import numpy as np
 from hil.devices import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
+from osnerf.commands.ota_args import (
+    DEVICE_KINDS,
+    parse_device,
+    parse_multipath,
+    parse_ppm,
+    usage_error,
+)
 
-DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 MAX_IMAGES = 10_000
 OTA_CONFIG_FIELDS = (
@@ -54,7 +60,7 @@ def check_codec_snr(codec, snr_db: float) -> None:
     declares."""
     lo, hi = codec.snr_range_db
     if not lo <= snr_db <= hi:
-        raise _usage(
+        raise usage_error(
             f"--snr-db {snr_db:g} dB is not covered by checkpoint {codec.name!r}, trained for "
             f"SNR [{lo:g}, {hi:g}] dB"
         )
@@ -194,57 +200,6 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-# ----------------------------------------------------------------------------- parsing
-def _usage(msg: str):
-    from osnerf.cli import UsageError
-
-    return UsageError(msg)
-
-
-def parse_device(value: str, name: str) -> tuple[str, str | None]:
-    kind, _, serial = value.partition(":")
-    if kind not in DEVICE_KINDS or (serial and kind not in HARDWARE):
-        raise _usage(
-            f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
-        )
-    return kind, serial or None
-
-
-def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
-    if value.strip().lower() in ("", "none"):
-        return ()
-    from hil.air import MAX_MULTIPATH_DELAY
-
-    out = []
-    try:
-        for item in value.split(","):
-            d, g = item.split(":")
-            out.append((int(d), complex(g.replace(" ", ""))))
-            if not 1 <= out[-1][0] <= MAX_MULTIPATH_DELAY or not np.isfinite(out[-1][1]):
-                raise ValueError
-    except ValueError:
-        raise _usage(
-            f"--multipath must look like '2:0.4,5:0.2j' (delay_samples in [1, "
-            f"{MAX_MULTIPATH_DELAY}]:finite gain) or 'none', got {value!r}"
-        ) from None
-    return tuple(out)
-
-
-def parse_ppm(value: str) -> tuple[float, float]:
-    from hil.emulator import PPM_RANGE
-
-    lo, hi = PPM_RANGE
-    try:
-        a, b = (float(v) for v in value.split(","))
-        if not (lo <= a <= hi and lo <= b <= hi):  # also false for NaN
-            raise ValueError
-    except ValueError:
-        raise _usage(
-            f"--ppm must be two numbers 'TX,RX' in [{lo:g}, {hi:g}] ppm, e.g. 0,20, got {value!r}"
-        ) from None
-    return a, b
-
-
 def load_images(path: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
     """Centre-cropped, resized images of ``--images`` (a folder, or one file), read by
     :func:`common.read_image`: (names, [batch, 3, size, size] float32 in [0, 1]).
@@ -261,11 +216,11 @@ def load_images(path: str, size: int, max_images: int) -> tuple[list[str], np.nd
         try:
             a = read_image(f)
         except ValueError as e:
-            raise _usage(f"--images: {e}") from None
+            raise usage_error(f"--images: {e}") from None
         h, w = a.shape[:2]
         s = min(h, w)
         if s < size:
-            raise _usage(
+            raise usage_error(
                 f"--images: {f.name} is {w}x{h} px, smaller than --size {size}: it would be "
                 "upscaled; give a larger image or a smaller --size"
             )
@@ -290,21 +245,23 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
     if (tx_kind in simulated) != (rx_kind in simulated) or (
         tx_kind != rx_kind and tx_kind not in simulated
     ):
-        raise _usage(
+        raise usage_error(
             "--tx and --rx must both be simulated (emulated/loopback) or both the same hardware "
             f"({', '.join(HARDWARE)})"
         )
     uri = getattr(args, "uri", None)
     if uri is not None and tx_kind != "pluto":
-        raise _usage("--uri needs --tx pluto --rx pluto")
+        raise usage_error("--uri needs --tx pluto --rx pluto")
     if tx_kind == "pluto":
         tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
     if tx_kind != rx_kind and tx_kind in simulated:
-        raise _usage(
+        raise usage_error(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
         )
     if getattr(args, "fault", None) and tx_kind not in simulated:
-        raise _usage("--fault needs emulated boards (--tx emulated --rx emulated, or loopback)")
+        raise usage_error(
+            "--fault needs emulated boards (--tx emulated --rx emulated, or loopback)"
+        )
     return tx_kind, tx_serial, rx_serial
 
 
@@ -343,7 +300,7 @@ def framed_settings(args, symbols_per_frame: int):
 
     qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
     if not max(qlo, 1) <= args.quality <= qhi:
-        raise _usage(
+        raise usage_error(
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
     cbr, codec = FramedSettings.cbr, None
@@ -351,11 +308,11 @@ def framed_settings(args, symbols_per_frame: int):
         try:
             cbr = parse_cbr(args.cbr)
         except ValueError as e:
-            raise _usage(f"--{e}") from None
+            raise usage_error(f"--{e}") from None
         codec = open_codec(args.codec)
         check_codec_snr(codec, args.snr_db)
     elif frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
-        raise _usage(
+        raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
         )
     return FramedSettings(

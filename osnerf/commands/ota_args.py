@@ -1,0 +1,61 @@
+"""`osnerf ota`'s flag values that need more than a type: the radios (``--tx``/``--rx``), the
+emulated air's echoes (``--multipath``) and clock offsets (``--ppm``). Each refusal is one
+usage error naming the flag."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hil.devices import DEVICES as HARDWARE
+
+DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
+
+
+def usage_error(msg: str):
+    from osnerf.cli import UsageError
+
+    return UsageError(msg)
+
+
+def parse_device(value: str, name: str) -> tuple[str, str | None]:
+    kind, _, serial = value.partition(":")
+    if kind not in DEVICE_KINDS or (serial and kind not in HARDWARE):
+        raise usage_error(
+            f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
+        )
+    return kind, serial or None
+
+
+def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
+    if value.strip().lower() in ("", "none"):
+        return ()
+    from hil.air import MAX_MULTIPATH_DELAY
+
+    out = []
+    try:
+        for item in value.split(","):
+            d, g = item.split(":")
+            out.append((int(d), complex(g.replace(" ", ""))))
+            if not 1 <= out[-1][0] <= MAX_MULTIPATH_DELAY or not np.isfinite(out[-1][1]):
+                raise ValueError
+    except ValueError:
+        raise usage_error(
+            f"--multipath must look like '2:0.4,5:0.2j' (delay_samples in [1, "
+            f"{MAX_MULTIPATH_DELAY}]:finite gain) or 'none', got {value!r}"
+        ) from None
+    return tuple(out)
+
+
+def parse_ppm(value: str) -> tuple[float, float]:
+    from hil.emulator import PPM_RANGE
+
+    lo, hi = PPM_RANGE
+    try:
+        a, b = (float(v) for v in value.split(","))
+        if not (lo <= a <= hi and lo <= b <= hi):  # also false for NaN
+            raise ValueError
+    except ValueError:
+        raise usage_error(
+            f"--ppm must be two numbers 'TX,RX' in [{lo:g}, {hi:g}] ppm, e.g. 0,20, got {value!r}"
+        ) from None
+    return a, b
