@@ -12,6 +12,7 @@ import time
 from dataclasses import asdict, dataclass
 
 import torch
+from torch import Tensor
 
 from renderer.cameras import camera_rays
 from renderer.dataset import Dataset
@@ -292,128 +293,153 @@ def train(
         :class:`TrainResult`; ``curve`` holds PSNR on (up to ``eval_views``) views of
         ``eval_dataset`` every ``eval_every_seconds`` of training and at the end.
     """
-    if generator is None:
-        generator = torch.Generator().manual_seed(0)
-    aabb = dataset.aabb
-    origins, dirs = camera_rays(dataset.poses, dataset.intrinsics)
-    origins, dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
-    targets = _targets(dataset, config.use_masks)
-    num_pixels = targets.shape[0]
-    curve_set = _curve_subset(eval_dataset, config.eval_views) if eval_dataset is not None else None
+    return _Training(dataset, config, generator, eval_dataset).run()
 
-    model, lr, batch = _initial_model(dataset, config)
-    stage, res = 0, config.grid_resolutions[0]
 
-    def make_optimizer():
-        # fused: one pass over each grid per step instead of several (30 -> 12 ms at 8M values)
-        return torch.optim.Adam(model.field.parameters(), lr=lr, betas=(0.9, 0.99), fused=True)
+class _Training:
+    """The state of one :func:`train` call: the model, its optimiser, the schedule's
+    position (stage, step, seconds) and the curve."""
 
-    sh_stage = config.sh_stage % len(config.grid_resolutions)
-    if config.field == "grid" and sh_stage == 0:
-        model.field.set_sh_degree(config.sh_degree)
-    optimizer = make_optimizer()
-    threads = torch.get_num_threads()
+    def __init__(self, dataset, config, generator, eval_dataset):
+        self.dataset, self.config = dataset, config
+        self.generator = generator if generator is not None else torch.Generator().manual_seed(0)
+        origins, dirs = camera_rays(dataset.poses, dataset.intrinsics)
+        self.origins, self.dirs = origins.reshape(-1, 3), dirs.reshape(-1, 3)
+        self.targets = _targets(dataset, config.use_masks)
+        self.curve_set = (
+            _curve_subset(eval_dataset, config.eval_views) if eval_dataset is not None else None
+        )
+        self.model, self.lr, self.batch = _initial_model(dataset, config)
+        self.stage, self.res = 0, config.grid_resolutions[0]
+        self.sh_stage = config.sh_stage % len(config.grid_resolutions)
+        if config.field == "grid" and self.sh_stage == 0:
+            self.model.field.set_sh_degree(config.sh_degree)
+        self.optimizer = self.make_optimizer()
+        self.threads = torch.get_num_threads()
+        self.curve: list[dict] = []
+        self.train_seconds, self.next_eval, self.step = 0.0, 0.0, 0
 
-    def now() -> float:
-        return time.perf_counter() if config.clock == "wall" else time.process_time() / threads
+    def make_optimizer(self):
+        # fused: one pass over each grid per step instead of several
+        return torch.optim.Adam(
+            self.model.field.parameters(), lr=self.lr, betas=(0.9, 0.99), fused=True
+        )
 
-    curve: list[dict] = []
-    train_seconds = 0.0
-    next_eval = 0.0
-    step = 0
-    bar = _progress_bar(config)
+    def now(self) -> float:
+        if self.config.clock == "wall":
+            return time.perf_counter()
+        return time.process_time() / self.threads
 
-    def progress_fraction() -> float:
+    def progress_fraction(self) -> float:
         """Of the schedule: by steps when ``max_steps`` is given, else by seconds."""
-        if config.max_steps is not None:
-            return step / config.max_steps
-        return train_seconds / config.max_seconds
+        if self.config.max_steps is not None:
+            return self.step / self.config.max_steps
+        return self.train_seconds / self.config.max_seconds
 
-    def curve_due() -> bool:
-        if config.eval_every_steps is not None:
-            return step >= next_eval
-        return train_seconds >= next_eval
+    def curve_due(self) -> bool:
+        if self.config.eval_every_steps is not None:
+            return self.step >= self.next_eval
+        return self.train_seconds >= self.next_eval
 
-    def record_curve():
+    def record_curve(self) -> None:
+        model, cs = self.model, self.curve_set
         model.eval()
-        out = render_views(model, curve_set.poses, curve_set.intrinsics)
-        m = image_metrics(out["rgb"], curve_set.images, curve_set.masks)
-        point = {"seconds": round(train_seconds, 3), "step": step, "psnr": m["psnr"]}
+        out = render_views(model, cs.poses, cs.intrinsics)
+        m = image_metrics(out["rgb"], cs.images, cs.masks)
+        point = {"seconds": round(self.train_seconds, 3), "step": self.step, "psnr": m["psnr"]}
         if "masked_psnr" in m:
             point["masked_psnr"] = m["masked_psnr"]
-        curve.append(point)
+        self.curve.append(point)
         model.train()
 
-    while progress_fraction() < 1.0 and train_seconds < config.max_seconds:
-        if curve_set is not None and curve_due():
-            record_curve()
-            next_eval += config.eval_every_steps or config.eval_every_seconds
-        t0 = now()
-        frac = progress_fraction()
-        upsampled = False
-        if step == 0:  # inside the timed step: carving counts against the budget
-            _carve(model.occupancy, dataset, config)
+    def schedule(self, frac: float) -> bool:
+        """Carve and crop at the first step, move to the next coarse-to-fine stage when
+        due; True when the grids were just upsampled."""
+        config, model, aabb = self.config, self.model, self.dataset.aabb
+        if self.step == 0:  # inside the timed step: carving counts against the budget
+            _carve(model.occupancy, self.dataset, config)
             if config.field == "grid" and config.crop:
-                _move_grids(model, res, aabb, dataset, config)
-                optimizer = make_optimizer()
-        if (
+                _move_grids(model, self.res, aabb, self.dataset, config)
+                self.optimizer = self.make_optimizer()
+        if not (
             config.field == "grid"
-            and stage + 1 < len(config.grid_resolutions)
-            and frac >= config.stage_starts[stage + 1]
+            and self.stage + 1 < len(config.grid_resolutions)
+            and frac >= config.stage_starts[self.stage + 1]
         ):
-            stage += 1
-            res = config.grid_resolutions[stage]
-            _move_grids(model, res, aabb, dataset, config)
-            model.step_m = config.step_voxels * _voxel_m(aabb, res)
-            batch = config.batch_rays
-            if stage == sh_stage:
-                model.field.set_sh_degree(config.sh_degree)
-            optimizer = make_optimizer()
-            upsampled = True
-        current_lr = lr * config.lr_final_ratio ** min(frac, 1.0)
-        for g in optimizer.param_groups:
-            g["lr"] = current_lr
-        if step >= config.occupancy_warmup_steps and (
-            step % config.occupancy_every_steps == 0 or upsampled
+            return False
+        self.stage += 1
+        self.res = config.grid_resolutions[self.stage]
+        _move_grids(model, self.res, aabb, self.dataset, config)
+        model.step_m = config.step_voxels * _voxel_m(aabb, self.res)
+        self.batch = config.batch_rays
+        if self.stage == self.sh_stage:
+            model.field.set_sh_degree(config.sh_degree)
+        self.optimizer = self.make_optimizer()
+        return True
+
+    def optimise(self, frac: float, upsampled: bool) -> Tensor:
+        """One step: learning rate, occupancy when due, a batch of rays, Adam. The loss."""
+        config, model = self.config, self.model
+        for g in self.optimizer.param_groups:
+            g["lr"] = self.lr * config.lr_final_ratio ** min(frac, 1.0)
+        if self.step >= config.occupancy_warmup_steps and (
+            self.step % config.occupancy_every_steps == 0 or upsampled
         ):
             vd = model.field.vertex_density().detach() if config.field == "grid" else None
             model.occupancy.update(
                 model.field.density, model.step_m, config.occupancy_threshold, vertex_density=vd
             )
-        idx = torch.randint(0, num_pixels, (batch,), generator=generator)
+        idx = torch.randint(0, self.targets.shape[0], (self.batch,), generator=self.generator)
         out = model.render_rays(
-            origins[idx], dirs[idx], perturb=True, generator=generator, chunk=batch
+            self.origins[idx],
+            self.dirs[idx],
+            perturb=True,
+            generator=self.generator,
+            chunk=self.batch,
         )
-        loss = torch.mean((out["rgb"] - targets[idx]) ** 2)
+        loss = torch.mean((out["rgb"] - self.targets[idx]) ** 2)
         if (
             config.field == "grid"
             and config.tv_weight > 0
-            and stage == len(config.grid_resolutions) - 1
+            and self.stage == len(config.grid_resolutions) - 1
         ):
             loss = loss + config.tv_weight * model.field.total_variation()
-        optimizer.zero_grad(set_to_none=True)
+        self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        optimizer.step()
-        step += 1
-        dt = now() - t0
-        train_seconds += dt
+        self.optimizer.step()
+        return loss
+
+    def run(self) -> TrainResult:
+        config, model = self.config, self.model
+        bar = _progress_bar(config)
+        while self.progress_fraction() < 1.0 and self.train_seconds < config.max_seconds:
+            if self.curve_set is not None and self.curve_due():
+                self.record_curve()
+                self.next_eval += config.eval_every_steps or config.eval_every_seconds
+            t0 = self.now()
+            frac = self.progress_fraction()
+            loss = self.optimise(frac, self.schedule(frac))
+            self.step += 1
+            self.train_seconds += self.now() - t0
+            if bar is not None:
+                bar.n = min(int(self.train_seconds), int(config.max_seconds))
+                bar.set_postfix(
+                    step=self.step,
+                    loss=f"{loss.item():.4f}",
+                    occ=f"{model.occupancy.fraction_occupied:.2f}",
+                    refresh=False,
+                )
+                bar.refresh()
         if bar is not None:
-            bar.n = min(int(train_seconds), int(config.max_seconds))
-            bar.set_postfix(
-                step=step,
-                loss=f"{loss.item():.4f}",
-                occ=f"{model.occupancy.fraction_occupied:.2f}",
-                refresh=False,
-            )
-            bar.refresh()
-    if bar is not None:
-        bar.close()
-    if config.field == "grid":
-        model.spec["resolution"] = max(model.field.resolution)
-    if curve_set is not None:
-        record_curve()
-    model.eval()  # (record_curve switches back to training mode)
-    return TrainResult(model=model, steps=step, seconds=train_seconds, curve=curve)
+            bar.close()
+        if config.field == "grid":
+            model.spec["resolution"] = max(model.field.resolution)
+        if self.curve_set is not None:
+            self.record_curve()
+        model.eval()  # (record_curve switches back to training mode)
+        return TrainResult(
+            model=model, steps=self.step, seconds=self.train_seconds, curve=self.curve
+        )
 
 
 @torch.no_grad()
