@@ -44,7 +44,7 @@ class SchemeReport:
         training_bounds: "demanded objects" or "whole scene".
         renderers: None (skipped), or for the full render and the learned renderer
             ("full", "features" of ``renderer.RENDERERS``) on the held-out views in order:
-            psnr_object (as above), seconds_per_view, setup_seconds and setup_cpu_seconds
+            psnr_object (as above), seconds_per_view (one thread), setup_seconds and setup_cpu_seconds
             (distilling the learned renderer), setup_stats (its steps and teachers),
             speedup_vs_full, settings; psnr and ssim (against the ground-truth views) for
             whole-scene schemes only.

@@ -145,16 +145,22 @@ def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool)
     ``config.renderer_steps`` steps from renders of the received views' cameras and
     jittered copies) on the held-out views, in their order: psnr_object exactly as the
     scheme's (against the ground-truth views over the objects' pixels of the views showing
-    them), and for whole-scene schemes psnr and ssim of the whole view."""
+    them), and for whole-scene schemes psnr and ssim of the whole view. One thread: times
+    per view and setup CPU seconds are single-threaded."""
     configs = {"features": learned_renderer_config(config.renderer_steps)}
-    out = renderer.score_renderers(
-        model,
-        held_out,
-        ds,
-        names=["full", "features"],
-        configs=configs,
-        generator=torch.Generator().manual_seed(seed),
-    )
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small operations: a second thread costs CPU, saves little time
+    try:
+        out = renderer.score_renderers(
+            model,
+            held_out,
+            ds,
+            names=["full", "features"],
+            configs=configs,
+            generator=torch.Generator().manual_seed(seed),
+        )
+    finally:
+        torch.set_num_threads(threads)
     for r in out.values():
         po = r.pop("masked_psnr", None)
         r["psnr_object"] = None if po is None or not np.isfinite(po) else float(po)
