@@ -156,19 +156,20 @@ class TrainConfig:
     @classmethod
     def for_resolution(cls, size_px: int, /, **overrides) -> TrainConfig:
         """The settings for views ``size_px`` wide (:data:`GRIDS_BY_SIZE`: the row of the
-        largest size not above it), then ``overrides``: a grid whose voxels stay about one
-        pixel of the views, so the field can hold what the views show."""
+        largest size not above it), then ``overrides``: finer grids where the views have
+        detail a 128-vertex grid cannot hold."""
         size = max((s for s in GRIDS_BY_SIZE if s <= size_px), default=0)
         return cls(**{**GRIDS_BY_SIZE.get(size, {}), **overrides})
 
 
 GRIDS_BY_SIZE: dict[int, dict] = {
     0: {},
-    150: {"grid_resolutions": (64, 128, 192)},
-    300: {"grid_resolutions": (64, 128, 256)},
+    300: {"grid_resolutions": (48, 128, 256), "batch_rays": 8192},
 }
 """Smallest image width (px) -> :class:`TrainConfig` settings that differ from the defaults
-(:meth:`TrainConfig.for_resolution`); up to 149 px the defaults."""
+(:meth:`TrainConfig.for_resolution`); up to 299 px the defaults (at 200 px a 192-vertex grid
+did not beat them within 300 CPU-s). More rays per step amortise the finer grid's dense
+per-step work (README, "Why the defaults are what they are")."""
 
 
 @dataclass

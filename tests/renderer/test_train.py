@@ -138,12 +138,13 @@ def test_config_validation():
 
 
 def test_grid_settings_by_image_size():
-    """Up to 149 px the defaults (the pipeline's views); larger views get finer last grids."""
+    """Up to 299 px the defaults (the pipeline's views among them); from 300 px a finer last
+    grid with more rays per step."""
     from renderer import TrainConfig
 
-    assert TrainConfig.for_resolution(100) == TrainConfig()
-    assert TrainConfig.for_resolution(128) == TrainConfig()
-    mid, large = TrainConfig.for_resolution(200), TrainConfig.for_resolution(400)
-    assert TrainConfig().grid_resolutions[-1] < mid.grid_resolutions[-1]
-    assert mid.grid_resolutions[-1] < large.grid_resolutions[-1]
+    for px in (64, 100, 128, 200, 299):
+        assert TrainConfig.for_resolution(px) == TrainConfig()
+    large = TrainConfig.for_resolution(400)
+    assert large.grid_resolutions[-1] > TrainConfig().grid_resolutions[-1]
+    assert large.batch_rays > TrainConfig().batch_rays
     assert TrainConfig.for_resolution(400, max_seconds=5.0).max_seconds == 5.0
