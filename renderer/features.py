@@ -43,6 +43,7 @@ from renderer.fields import (
 )
 from renderer.model import RadianceField, render_views
 from renderer.sampler import sample_along_rays
+from renderer.train import settings_for_size
 from renderer.volume import packed_sum, packed_weights
 
 
@@ -57,22 +58,16 @@ class FeatureConfig:
     downsample: int = 2
     """Low-resolution factor per axis, >= 1 (the decoder upsamples by sub-pixel shuffle)."""
     step_factor: float = 1.75
-    """Marching step of the low-resolution pass relative to the field's own, >= 1 (lego,
-    1900 teachers: 2.5 -> 1.35 dB under the full render, 1.5 -> 1.18; 3900 teachers,
-    500 s: 1.5 -> 0.75, 1.75 -> 0.78; a coarser step misses thin parts that no feature
-    can bring back)."""
+    """Marching step of the low-resolution pass relative to the field's own, >= 1 (a
+    coarser step misses thin parts that no feature can bring back)."""
     weight_threshold: float = 1e-3
     """Samples whose volume-rendering weight is below this skip the feature lookup, in [0, 1)."""
     hidden_channels: int = 32
-    """Width of the decoder, >= 1 (lego, 1900 teachers, 300 s: 48 -> 0.96 dB under the full
-    render, 32 -> 1.01; 32 is about 10 % faster per view: widths between 32 and 48 cost
-    as much as 48 on one CPU thread)."""
+    """Width of the decoder, >= 1."""
     extra_views: int = 3900
-    """Jittered copies of the training cameras rendered as extra teachers, >= 0. More
-    teachers are the largest lever on unseen views (lego's test path, step factor 2.5,
-    dB under the full render: 300 -> 2.0, 900 -> 1.5, 1900 -> 1.35), given the training
-    time to use them (width 32, 3900 teachers: 300 s -> 1.06, 500 s -> 0.75); each costs
-    one full render before training (about 3 minutes for 4000 on lego, one thread)."""
+    """Jittered copies of the training cameras rendered as extra teachers, >= 0: the
+    largest lever on unseen views, given the steps to use them; each costs one full
+    render."""
     jitter_deg: float = 17.0
     """Largest turn of a jittered camera about the scene's up axis (and half of it about a
     horizontal axis), degrees, > 0."""
@@ -104,12 +99,10 @@ class FeatureConfig:
     grid_lr: float = 0.1
     """Adam learning rate of the feature grid, > 0."""
     decoder_lr: float = 3e-3
-    """Adam learning rate of the decoder, > 0 (constant: decaying both rates tenfold over
-    the budget made the renderer 0.28 dB worse on lego's test path)."""
+    """Adam learning rate of the decoder, > 0 (constant, as is the grid's)."""
     render_batch: int = 8
     """Views of a path rendered together (one sampler, density, feature read and decoder
-    call), >= 1: the same images, fewer and larger operations (lego, width 48, one thread,
-    per view: 10.8 ms one by one, 9.1 four at a time, 8.4 eight)."""
+    call), >= 1: the same images, fewer and larger operations."""
     progress: bool = True
     """Progress bar on stderr."""
 
@@ -149,8 +142,7 @@ class FeatureConfig:
         largest size not above it), then ``overrides``. Teacher renders cost the square of
         the size, so larger views get fewer teachers; at 400 px and above the
         low-resolution pass is a quarter of the width."""
-        size = max((s for s in FEATURES_BY_SIZE if s <= size_px), default=0)
-        return cls(**{**FEATURES_BY_SIZE.get(size, {}), **overrides})
+        return cls(**{**settings_for_size(FEATURES_BY_SIZE, size_px), **overrides})
 
 
 FEATURES_BY_SIZE: dict[int, dict] = {
@@ -543,7 +535,8 @@ def train_features(
         (renderer, stats {"teacher_views", "teacher_size" ([height, width]),
         "teacher_seconds" (the first pool's renders),
         "train_seconds" (the training, later teachers included), "cpu_seconds" (this
-        process's CPU time for all of it), "steps", "final_loss"}).
+        process's CPU time for all of it), "steps", "final_loss", "capped_by_seconds"
+        (``train_seconds`` ended the training before ``train_steps``; also said on stderr)}).
     """
     config = config or FeatureConfig()
     generator = generator or torch.Generator().manual_seed(0)
@@ -607,7 +600,14 @@ def train_features(
         "cpu_seconds": time.process_time() - cpu0,
         "steps": steps,
         "final_loss": loss,
+        "capped_by_seconds": config.train_steps is not None and steps < config.train_steps,
     }
+    if stats["capped_by_seconds"]:
+        print(
+            f"features setup: train_seconds ({config.train_seconds:g} s) reached after {steps}"
+            f" of {config.train_steps} steps",
+            file=sys.stderr,
+        )
     return rend, stats
 
 

@@ -158,8 +158,13 @@ class TrainConfig:
         """The settings for views ``size_px`` wide (:data:`GRIDS_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``: finer grids where the views have
         detail a 128-vertex grid cannot hold."""
-        size = max((s for s in GRIDS_BY_SIZE if s <= size_px), default=0)
-        return cls(**{**GRIDS_BY_SIZE.get(size, {}), **overrides})
+        return cls(**{**settings_for_size(GRIDS_BY_SIZE, size_px), **overrides})
+
+
+def settings_for_size(table: dict[int, dict], size_px: int) -> dict:
+    """The row of ``table`` (smallest image width in px -> settings) for views ``size_px``
+    wide: that of the largest width not above it, or {} below every row."""
+    return table.get(max((s for s in table if s <= size_px), default=None), {})
 
 
 GRIDS_BY_SIZE: dict[int, dict] = {

@@ -49,13 +49,16 @@ def test_composite_uses_the_fields_weights(sphere_model):
     assert float((g[:5] - f[:5]).abs().max()) <= 0.05 * float(v.abs().max())
 
 
-def test_starts_as_bilinear_and_learns_toward_the_full_render(sphere_model):
+def test_starts_as_bilinear_and_learns_toward_the_full_render(sphere_model, capsys):
     model, train_set = sphere_model
     cfg = FeatureConfig(
         channels=8, downsample=2, extra_views=8, train_seconds=4, batch_size=2, progress=False
     )
     rend, stats = train_features(model, train_set, cfg, torch.Generator().manual_seed(0))
     assert stats["steps"] > 5 and stats["teacher_views"] == train_set.num_views + 8
+    # the 4 s cap ended it long before the default steps, and it says so
+    assert stats["capped_by_seconds"] and stats["steps"] < cfg.train_steps
+    assert f"reached after {stats['steps']} of {cfg.train_steps} steps" in capsys.readouterr().err
     path = orbit_path(5, 2.5, 12.0, start_azimuth_deg=7.0, arc_deg=20.0)
     intr = train_set.intrinsics
     out = rend.render_path(path, intr)
@@ -226,7 +229,7 @@ def test_training_streams_every_teacher_through_a_small_pool_in_its_steps(sphere
         channels=5, extra_views=20, pool_views=4, train_steps=12, batch_size=2, progress=False
     )
     rend, stats = train_features(model, train_set, cfg, torch.Generator().manual_seed(0))
-    assert stats["steps"] == 12
+    assert stats["steps"] == 12 and not stats["capped_by_seconds"]
     assert stats["teacher_views"] == train_set.num_views + 20  # all rendered, 4 held at once
     assert stats["cpu_seconds"] > 0 and stats["teacher_size"] == [32, 32]
     small = FeatureConfig(channels=5, extra_views=2, train_steps=2, width_px=16, progress=False)
