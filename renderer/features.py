@@ -140,19 +140,20 @@ class FeatureConfig:
     def for_resolution(cls, size_px: int, /, **overrides) -> FeatureConfig:
         """The settings for views ``size_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``. Teacher renders cost the square of
-        the size, so larger views get fewer teachers; at 400 px and above the
-        low-resolution pass is a quarter of the width."""
+        the size, so larger views get fewer teachers; from 300 px the low-resolution pass
+        is a quarter of the width."""
         return cls(**{**settings_for_size(FEATURES_BY_SIZE, size_px), **overrides})
 
 
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
-    150: {"extra_views": 1500},
-    300: {"extra_views": 700, "downsample": 4, "train_steps": 1500},
+    150: {"train_steps": 8000},
+    300: {"extra_views": 1500, "downsample": 4},
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
-defaults (:meth:`FeatureConfig.for_resolution`); measured in ``python -m benchmarks
-renderer``."""
+defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
+detail; from 300 px fewer teachers (each a full render at that size) and a quarter-width
+pass. Measured on lego's test path (README, "Why the defaults are what they are")."""
 
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:

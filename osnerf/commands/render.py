@@ -80,8 +80,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--renderer-steps",
         type=checks.count(1, 1_000_000),
         default=None,
-        help="features renderer: distillation steps (default: the renderer's own budget, "
-        "renderer.FeatureConfig)",
+        help="features renderer: distillation steps (default: the rendered size's, "
+        "renderer.FeatureConfig.for_resolution)",
     )
     p.add_argument(
         "--seed", type=checks.seed, default=0, help="learned renderers' seed (default 0)"

@@ -240,7 +240,7 @@ def test_training_streams_every_teacher_through_a_small_pool_in_its_steps(sphere
 def test_settings_by_image_size():
     small, mid, large = (FeatureConfig.for_resolution(px) for px in (100, 200, 400))
     assert small == FeatureConfig()
-    assert mid.extra_views < small.extra_views and mid.downsample == small.downsample
+    assert mid.train_steps > small.train_steps and mid.downsample == small.downsample
     assert large.extra_views < mid.extra_views and large.downsample == 4
     assert FeatureConfig.for_resolution(400, downsample=2).downsample == 2
 
