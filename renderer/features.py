@@ -153,7 +153,7 @@ FEATURES_BY_SIZE: dict[int, dict] = {
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
 detail; from 300 px fewer teachers (each a full render at that size) and a quarter-width
-pass. Measured on lego's test path (README, "Why the defaults are what they are")."""
+pass. Measured on lego's test path (README, "The renderer")."""
 
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
