@@ -141,18 +141,18 @@ class FeatureConfig:
         """The settings for views ``size_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``. Teacher renders cost the square of
         the size, so larger views get fewer teachers; from 300 px the low-resolution pass
-        is a quarter of the width."""
+        is a third of the width."""
         return cls(**{**settings_for_size(FEATURES_BY_SIZE, size_px), **overrides})
 
 
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {"train_steps": 8000},
-    300: {"extra_views": 1500, "downsample": 4},
+    300: {"extra_views": 1500, "downsample": 3},
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
-detail; from 300 px fewer teachers (each a full render at that size) and a quarter-width
+detail; from 300 px fewer teachers (each a full render at that size) and a third-width
 pass. Measured on lego's test path (README, "The renderer")."""
 
 
