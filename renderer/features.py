@@ -148,12 +148,13 @@ class FeatureConfig:
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {"train_steps": 8000},
-    300: {"extra_views": 1500, "downsample": 3},
+    300: {"extra_views": 1500, "downsample": 3, "train_seconds": 7200.0},
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
-detail; from 300 px fewer teachers (each a full render at that size) and a third-width
-pass. Measured on lego's test path (README, "The renderer")."""
+detail; from 300 px fewer teachers (each a full render at that size), a third-width
+pass and a higher time cap for its slower steps. Measured on lego's test path (README,
+"The renderer")."""
 
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
