@@ -32,6 +32,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from common import trim_heap
 from renderer.cameras import Intrinsics, camera_rays, look_at, rotate_pose_about
 from renderer.dataset import Dataset
 from renderer.fields import (
@@ -527,6 +528,12 @@ class TeacherPool:
         return [self._passes[s] if s in self._passes else fresh[s] for s in slots]
 
 
+TRIM_EVERY_STEPS = 100
+"""Distillation steps between heap trims (:func:`common.trim_heap`): the freed temporaries
+of steps and teacher renders stay bounded, at a page fault per reused page a hundred steps
+apart."""
+
+
 def train_features(
     model: RadianceField,
     dataset: Dataset | None = None,
@@ -561,6 +568,7 @@ def train_features(
         [poses, jittered_poses(poses, up, center, config.extra_views, config.jitter_deg, generator)]
     )
     rend = FeatureRenderer(model, config)
+    trim_heap()  # filling the grid chunk by chunk leaves far more than the grid freed
     pool = TeacherPool(
         model,
         poses,
@@ -574,6 +582,7 @@ def train_features(
         pool.render_next(min(config.render_batch, pool.capacity - pool.held))
         _show(bar, pool, 0.0, None, 0)
     teacher_seconds = time.perf_counter() - t0
+    trim_heap()
     opt = torch.optim.Adam(
         [
             {"params": [rend.grid, rend.background], "lr": config.grid_lr},
@@ -595,6 +604,8 @@ def train_features(
         err.backward()
         opt.step()
         steps, loss = steps + 1, float(err.detach())
+        if steps % TRIM_EVERY_STEPS == 0:
+            trim_heap()
         _show(bar, pool, frac, loss, steps)
     if bar is not None:
         bar.close()
