@@ -449,6 +449,10 @@ def jittered_poses(
     return torch.stack(out) if out else poses.new_zeros(0, 4, 4)
 
 
+PASS_BATCH_VIEWS = 8
+"""Views whose low-resolution passes :class:`TeacherPool` computes in one call."""
+
+
 class TeacherPool:
     """Teacher renders (8-bit) of a list of cameras, at most ``capacity`` held at once:
     :meth:`render_next` renders the next ``count`` cameras, each replacing the oldest.
@@ -499,9 +503,16 @@ class TeacherPool:
         for slot in slots.tolist():
             old = self._passes.pop(slot, None)
             self._held_bytes -= 0 if old is None else old.nbytes
-        if self._passes_fn is not None and self._held_bytes < self._pass_bytes:
-            for slot, p in zip(slots.tolist(), self._passes_fn(self.poses[cams])):
+        # passes a few views at a time, none once the budget is full: a large batch of
+        # new teachers neither holds all its passes at once nor computes discarded ones
+        full = self._passes_fn is None
+        for start in range(0, count, PASS_BATCH_VIEWS):
+            if full or self._held_bytes >= self._pass_bytes:
+                break
+            chunk = slice(start, start + PASS_BATCH_VIEWS)
+            for slot, p in zip(slots[chunk].tolist(), self._passes_fn(self.poses[cams[chunk]])):
                 if self._held_bytes + p.nbytes > self._pass_bytes:
+                    full = True
                     break
                 self._passes[slot] = p
                 self._held_bytes += p.nbytes
