@@ -75,7 +75,7 @@ bench: setup
 	$(PY) -m benchmarks
 
 lint: setup
-	$(VENV)/bin/ruff check phy semcodec renderer hil osnerf tests benchmarks
+	$(VENV)/bin/ruff check common phy semcodec renderer hil osnerf tests benchmarks
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

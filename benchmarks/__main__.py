@@ -9,7 +9,8 @@ import time
 import traceback
 from pathlib import Path
 
-from osnerf import git_commit, result_header, tune_malloc, write_json_atomic
+from common import tune_malloc
+from osnerf import git_commit, result_header, write_json_atomic
 
 HERE = Path(__file__).resolve().parent
 

@@ -7,7 +7,7 @@
 * ``common.images``: the one image loader (8- and 16-bit, grayscale, palette, alpha, EXIF
   orientation) and the one list of image file suffixes.
 * ``common.quality``: the one PSNR (peak 1.0).
-* ``common.memory``: ``trim_heap``, freed heap memory given back to the kernel.
+* ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
 
 Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
 may all import it.
@@ -27,7 +27,7 @@ from common.files import (
     write_torch,
 )
 from common.images import IMAGE_SUFFIXES, list_images, read_image
-from common.memory import trim_heap
+from common.memory import trim_heap, tune_malloc
 from common.quality import PSNR_MAX_DB, psnr
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "read_image",
     "to_json",
     "trim_heap",
+    "tune_malloc",
     "write_bytes",
     "write_json",
     "write_png",

@@ -1,6 +1,5 @@
 """osnerf: the semantic control unit, the end-to-end pipeline, sweeps and the CLI."""
 
 from osnerf.provenance import git_commit, result_header, write_json_atomic
-from osnerf.runtime import tune_malloc
 
-__all__ = ["git_commit", "result_header", "tune_malloc", "write_json_atomic"]
+__all__ = ["git_commit", "result_header", "write_json_atomic"]

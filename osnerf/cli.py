@@ -13,8 +13,8 @@ import importlib
 import re
 import sys
 
+from common import tune_malloc
 from osnerf.provenance import git_commit
-from osnerf.runtime import tune_malloc
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
 COMMANDS: dict[str, tuple[str, str]] = {

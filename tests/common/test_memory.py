@@ -1,10 +1,12 @@
-"""trim_heap gives the heap's free pages back: a fragmented heap shrinks in resident size."""
+"""glibc's heap: tune_malloc applies its settings (and can be switched off); trim_heap gives
+the free pages back, so a fragmented heap shrinks in resident size."""
 
+import platform
 import sys
 
 import pytest
 
-from common import trim_heap
+from common import trim_heap, tune_malloc
 
 
 def _rss_mb() -> float:
@@ -27,3 +29,10 @@ def test_trim_heap_releases_freed_blocks_between_live_ones():
     after = _rss_mb()
     assert before - after > 150, (before, after)
     assert len(kept) == 256
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="mallopt is glibc's")
+def test_tune_malloc_applies_on_glibc_and_is_off_by_environment(monkeypatch):
+    assert tune_malloc() is True
+    monkeypatch.setenv("OSNERF_MALLOC_TUNE", "0")
+    assert tune_malloc() is False
