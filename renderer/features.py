@@ -142,19 +142,27 @@ class FeatureConfig:
         """The settings for views ``size_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
         largest size not above it), then ``overrides``. Teacher renders cost the square of
         the size, so larger views get fewer teachers; from 300 px the low-resolution pass
-        is a third of the width."""
+        is a third of the width and the feature grid three quarters of the field's."""
         return cls(**{**settings_for_size(FEATURES_BY_SIZE, size_px), **overrides})
 
 
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {"train_steps": 8000},
-    300: {"extra_views": 1500, "downsample": 3, "train_seconds": 7200.0},
+    300: {
+        "extra_views": 1500,
+        "downsample": 3,
+        "grid_scale": 0.75,
+        "pass_cache_mb": 256,
+        "train_seconds": 7200.0,
+    },
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
 detail; from 300 px fewer teachers (each a full render at that size), a third-width
-pass and a higher time cap for its slower steps. Measured on lego's test path (README,
+pass, a feature grid at three quarters of the field's vertices per axis and half the pass
+cache (the grid, its gradient and Adam moments and the cache held setup above 4 GB at
+400 px), and a higher time cap for its slower steps. Measured on lego's test path (README,
 "The renderer")."""
 
 

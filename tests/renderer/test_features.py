@@ -242,6 +242,9 @@ def test_settings_by_image_size():
     assert small == FeatureConfig()
     assert mid.train_steps > small.train_steps and mid.downsample == small.downsample
     assert large.extra_views < mid.extra_views and large.downsample > mid.downsample
+    # the grid (with gradient and two Adam moments) and the pass cache shrink where views are
+    # large: their memory, not the teachers', set the 400 px setup peak
+    assert large.grid_scale < mid.grid_scale and large.pass_cache_mb < mid.pass_cache_mb
     assert FeatureConfig.for_resolution(400, downsample=2).downsample == 2
 
 
