@@ -86,7 +86,7 @@ class RunConfig:
     nerf_clock: str = "cpu"
     ota_device: str = "emulated"
     nerf_steps: int | None = 1000
-    renderer_steps: int = 450
+    renderer_steps: int = 1200
     refine_steps: int = 30
 
     def __post_init__(self):

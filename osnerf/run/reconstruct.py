@@ -171,8 +171,8 @@ def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool)
 
 
 def learned_renderer_config(steps: int) -> renderer.FeatureConfig:
-    """The feature renderer as the pipeline builds it: ``steps`` optimiser steps of two
-    views (the seconds cap only guards against a pathological machine), 40 jittered
+    """The feature renderer as the pipeline builds it: ``steps`` optimiser steps of one
+    view each (the seconds cap only guards against a pathological machine), 40 jittered
     teachers beside the received views' cameras, and a feature grid at half the field's
     vertices per axis: the pipeline's views have fewer pixels than its fields have cells,
     and the coarser grid costs an eighth per step (README, "Why the defaults are what they
@@ -181,7 +181,7 @@ def learned_renderer_config(steps: int) -> renderer.FeatureConfig:
         train_steps=steps,
         train_seconds=3600.0,
         extra_views=40,
-        batch_size=2,
+        batch_size=1,
         grid_scale=0.5,
         progress=False,
     )
