@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import torch
 from torch import Tensor, nn
@@ -262,41 +263,42 @@ class JSCCModel(nn.Module):
         self.decoder = Decoder(cfg)
 
 
+_RELIABILITY = {"snr_min_db": -10.0, "decoder_reliability": True}
+"""The knowledge-base version 2 architectures: per-symbol reliability, trained down to -10 dB."""
+
 MODELS: dict[str, Callable[[], JSCCConfig]] = {
-    "adjscc_s4_w96_rel": lambda: JSCCConfig(
-        name="adjscc_s4_w96_rel",
-        width=96,
-        num_res_blocks=2,
-        snr_min_db=-10.0,
-        decoder_reliability=True,
+    "adjscc_s4_w96_rel": partial(
+        JSCCConfig, name="adjscc_s4_w96_rel", width=96, num_res_blocks=2, **_RELIABILITY
     ),
-    "adjscc_s4_w96_rel_c16": lambda: JSCCConfig(
+    "adjscc_s4_w96_rel_c16": partial(
+        JSCCConfig,
         name="adjscc_s4_w96_rel_c16",
         width=96,
         num_res_blocks=2,
         num_complex_channels=16,
-        snr_min_db=-10.0,
-        decoder_reliability=True,
+        **_RELIABILITY,
     ),
-    "adjscc_s4_w192_rel_c16": lambda: JSCCConfig(
+    # capacity candidates for the shipped default (semcodec/README.md, "Training on a lent
+    # GPU"); no checkpoint ships for them
+    "adjscc_s4_w192_rel_c16": partial(
+        JSCCConfig,
         name="adjscc_s4_w192_rel_c16",
         width=192,
         num_res_blocks=2,
         num_complex_channels=16,
-        snr_min_db=-10.0,
-        decoder_reliability=True,
+        **_RELIABILITY,
     ),
-    "adjscc_s4_w128_r4_rel_c16": lambda: JSCCConfig(
+    "adjscc_s4_w128_r4_rel_c16": partial(
+        JSCCConfig,
         name="adjscc_s4_w128_r4_rel_c16",
         width=128,
         num_res_blocks=4,
         num_complex_channels=16,
-        snr_min_db=-10.0,
-        decoder_reliability=True,
+        **_RELIABILITY,
     ),
-    "adjscc_s4_w96": lambda: JSCCConfig(name="adjscc_s4_w96", width=96, num_res_blocks=2),
-    "adjscc_s4_w64": lambda: JSCCConfig(name="adjscc_s4_w64", width=64, num_res_blocks=1),
-    "adjscc_s4_w128": lambda: JSCCConfig(name="adjscc_s4_w128", width=128, num_res_blocks=2),
+    "adjscc_s4_w96": partial(JSCCConfig, name="adjscc_s4_w96", width=96, num_res_blocks=2),
+    "adjscc_s4_w64": partial(JSCCConfig, name="adjscc_s4_w64", width=64, num_res_blocks=1),
+    "adjscc_s4_w128": partial(JSCCConfig, name="adjscc_s4_w128", width=128, num_res_blocks=2),
 }
 
 
