@@ -18,7 +18,6 @@ import semcodec
 from semcodec.training import TrainConfig, train
 
 ROOT = Path(__file__).resolve().parents[2]
-DATA = ROOT.parent / "shared" / "data"
 CFG = {"codec": "jscc", "model": "adjscc_s4_w64", "crop_px": 32, "batch_size": 4}
 CFG |= {"num_threads": 1, "eval_every_s": 1e9, "lr": 3e-3}
 DRIVER = """
@@ -40,14 +39,14 @@ more (asserted below)."""
 
 
 @pytest.fixture(scope="module")
-def folders(tmp_path_factory):
+def folders(tmp_path_factory, shared_data):
     """Six 64 px BSDS500 training crops and two 32 px Kodak validation crops."""
     root = tmp_path_factory.mktemp("ddp_data")
     (root / "train").mkdir()
     (root / "val").mkdir()
-    for i, p in enumerate(sorted((DATA / "bsds500" / "train").glob("*.jpg"))[:6]):
+    for i, p in enumerate(sorted((shared_data / "bsds500" / "train").glob("*.jpg"))[:6]):
         Image.open(p).convert("RGB").crop((0, 0, 64, 64)).save(root / "train" / f"{i}.png")
-    for i, p in enumerate(sorted((DATA / "kodak").glob("*.png"))[:2]):
+    for i, p in enumerate(sorted((shared_data / "kodak").glob("*.png"))[:2]):
         Image.open(p).convert("RGB").crop((100, 100, 132, 132)).save(root / "val" / f"{i}.png")
     return root / "train", root / "val"
 
