@@ -161,8 +161,8 @@ FEATURES_BY_SIZE: dict[int, dict] = {
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
 detail; from 300 px fewer teachers (each a full render at that size), a third-width
 pass, a feature grid at three quarters of the field's vertices per axis and half the pass
-cache (the grid, its gradient and Adam moments and the cache held setup above 4 GB at
-400 px), and a higher time cap for its slower steps. Measured on lego's test path (README,
+cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
+memory at these sizes), and a higher time cap for its slower steps. Measured on lego's test path (README,
 "The renderer")."""
 
 
