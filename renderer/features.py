@@ -162,8 +162,8 @@ defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the 
 detail; from 300 px fewer teachers (each a full render at that size), a third-width
 pass, a feature grid at three quarters of the field's vertices per axis and half the pass
 cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
-memory at these sizes), and a higher time cap for its slower steps. Measured on lego's test path (README,
-"The renderer")."""
+memory at these sizes), and a higher time cap for its slower steps. Measured on lego's
+test path (README, "The renderer")."""
 
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
