@@ -51,6 +51,7 @@ from semcodec.codec import (
     Encoded,
     EncodedMeta,
     check_images,
+    learned_only,
     load_codec,
     receiver_mask,
 )
@@ -115,6 +116,7 @@ __all__ = [
     "encode_with_focus",
     "focus_by_box",
     "is_trainable",
+    "learned_only",
     "load_codec_entry_points",
     "make_codec",
     "open_codec",

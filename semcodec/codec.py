@@ -13,6 +13,8 @@ their indices go to the receiver as side information (``meta.positions``). See
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import os
 from dataclasses import dataclass, field
@@ -24,6 +26,7 @@ from torch import Tensor
 from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
+from semcodec.analog import AnalogSide, decode_residual, encode_residual, side_symbols
 from semcodec.checkpoint import (
     KnowledgeBaseMismatch,
     load_checkpoint,
@@ -47,6 +50,10 @@ DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.
 MIN_SIDE_PX = 8
 FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
 FOCUS_REL_THRESHOLD = 0.05  # positions with >= 5 % of the peak attribution form the box
+LAYER_FRACTIONS = (1 / 8, 1 / 4, 3 / 8, 1 / 2, 5 / 8, 3 / 4)
+"""Learned channels, as fractions of the budget's, that :meth:`Codec._layer_plan` tries
+under the analog refinement layer."""
+PLAN_PROBE_PX = 192  # side of the central square the transmitter simulates the split on
 
 
 @dataclass(frozen=True)
@@ -67,6 +74,9 @@ class EncodedMeta:
             box, else None.
         crop: (top, left, height, width) in pixels of the box sent in focus mode (the
             positions holding the demand's attribution), else None (whole image).
+        analog: the analog refinement layer's side information when the last
+            ``analog.num_symbols`` symbols carry the base's residual
+            (:mod:`semcodec.analog`), else None.
     """
 
     height: int
@@ -77,13 +87,21 @@ class EncodedMeta:
     codec_sha256: str
     positions: Tensor | None = field(default=None, compare=False)
     crop: tuple[int, int, int, int] | None = None
+    analog: AnalogSide | None = None
+
+    @property
+    def base_symbols(self) -> int:
+        """Symbols of the learned channels (the first ones; the analog layer's follow)."""
+        return self.num_symbols - (self.analog.num_symbols if self.analog is not None else 0)
 
     def side_info_bits(self) -> int:
-        """Bits of side information per image for ``positions`` (a bitmap of the grid)."""
+        """Bits of side information per image: the focus box or a bitmap of the sent
+        ``positions``, plus the analog layer's chunk energies."""
+        layer = self.analog.side_info_bits() if self.analog is not None else 0
         if self.crop is not None:
-            return 4 * 16
+            return 4 * 16 + layer
         if self.positions is None:
-            return 0
+            return layer
         return math.ceil(self.height / 4) * math.ceil(self.width / 4)
 
 
@@ -198,6 +216,9 @@ class Codec(ChannelTruncationCodec):
     ``jscc``; architectures :data:`semcodec.MODELS`)."""
 
     supports_focus = True
+    analog_layer = True
+    """Whether :meth:`encode` may spend part of the budget on the analog refinement layer
+    (set False on an instance for learned channels only)."""
     architectures = ("adjscc_s4_w96", *(m for m in MODELS if m != "adjscc_s4_w96"))
     """Architectures :meth:`untrained` builds; the first is the default."""
 
@@ -265,12 +286,17 @@ class Codec(ChannelTruncationCodec):
         cfg = self.model.cfg
         xp = _pad4(x)
         hf, wf = xp.shape[2] // 4, xp.shape[3] // 4
+        analog = None
         if mask is None:
             m = self.channels_for_cbr(cbr)
-            with torch.no_grad():
-                feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
-            sym = power_normalize(features_to_symbols(feat, m))
             positions = crop = None
+            plan = self._layer_plan(xp, snr, m * hf * wf, hf * wf, m)
+            if plan is not None:
+                m, sym, analog = plan
+            else:
+                with torch.no_grad():
+                    feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
+                sym = power_normalize(features_to_symbols(feat, m))
         else:
             positions = crop = None
             lo, hi = self.cbr_range
@@ -292,14 +318,18 @@ class Codec(ChannelTruncationCodec):
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
                 crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
                 xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
-                extra = self._extra_symbols(budget, m, rows, cols)
-                with torch.no_grad():
-                    fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
-                sym = features_to_symbols(fc, m)
-                if extra:
-                    part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
-                    sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
-                sym = power_normalize(sym)
+                plan = self._layer_plan(xc, snr, budget, rows * cols, m)
+                extra = self._extra_symbols(budget, m, rows, cols) if plan is None else 0
+                if plan is not None:
+                    m, sym, analog = plan
+                else:
+                    with torch.no_grad():
+                        fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
+                    sym = features_to_symbols(fc, m)
+                    if extra:
+                        part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
+                        sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
+                    sym = power_normalize(sym)
             else:  # budget below one channel over the box: the top positions, one channel each
                 m, k = 1, min(budget, hf * wf)
                 positions = select_positions(heat, k)  # [batch, k]
@@ -315,8 +345,90 @@ class Codec(ChannelTruncationCodec):
             codec_sha256=self.sha256,
             positions=positions,
             crop=crop,
+            analog=analog,
         )
         return Encoded(sym.to(torch.complex64), meta)
+
+    def _layer_plan(
+        self, region: Tensor, snr: Tensor, budget: int, positions: int, m_full: int
+    ) -> tuple[int, Tensor, AnalogSide] | None:
+        """Split ``budget`` symbols over ``region`` between learned channels and the analog
+        refinement layer (:mod:`semcodec.analog`), or None to send learned channels only.
+
+        The transmitter simulates each option once on an AWGN channel at the nominal SNR,
+        with its own fixed-seed noise (it knows the decoder, not the draw), on the central
+        ``PLAN_PROBE_PX`` square of the region at the same symbols per position: ``m_full``
+        channels alone, and ``round(f * m_full)`` channels for each f in
+        :data:`LAYER_FRACTIONS` with the rest of the budget, less the side information's
+        symbols (at most one symbol per two coefficients), as the layer over the residual of
+        its own noiseless decode. The option with the smallest squared error over the batch
+        wins.
+
+        Args:
+            region: [batch, 3, 4*rows, 4*cols] the pixels the learned channels cover.
+            snr: [batch] nominal SNR in dB.
+            budget: complex symbols per image; positions: rows * cols.
+        Returns:
+            (learned channels, unit-power symbols [batch, budget - side], side information).
+        """
+        if not self.analog_layer:
+            return None
+        m = self._best_split(_centre(region, PLAN_PROBE_PX), snr, budget / positions, m_full)
+        if m is None:
+            return None
+        h, w = region.shape[2:]
+        with torch.no_grad():
+            sym, meta = self._base(region, snr, m)
+            residual = region - self.decode_differentiable(sym, meta, snr)
+            n = min(budget - m * positions - side_symbols(h, w), 3 * h * w // 2)
+            if n < 1:
+                return None
+            layer, side = encode_residual(residual, n)
+        return m, torch.cat([sym, layer], 1), side
+
+    def _base(self, region: Tensor, snr: Tensor, m: int) -> tuple[Tensor, EncodedMeta]:
+        """Unit-power symbols of ``m`` learned channels over a whole region, and their meta."""
+        b, _, h, w = region.shape
+        c = self.model.cfg.num_complex_channels
+        sym = power_normalize(
+            features_to_symbols(self.model.encoder(region, side_info(snr, m, c, b)), m)
+        )
+        n = sym.shape[1]
+        return sym, EncodedMeta(h, w, m, n / (3 * h * w), n, self.sha256)
+
+    def _best_split(
+        self, probe: Tensor, snr: Tensor, per_position: float, m_full: int
+    ) -> int | None:
+        """Learned channels under the layer with the least simulated error on ``probe`` at
+        ``per_position`` symbols per position, or None when ``m_full`` channels alone win."""
+        h, w = probe.shape[2:]
+        positions = h * w // 16
+        gen = torch.Generator().manual_seed(0)
+        nv = (10.0 ** (-snr / 10.0))[:, None]
+
+        def received(sym: Tensor) -> Tensor:
+            noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64)
+            return sym + noise * nv.sqrt()
+
+        best, choice = math.inf, None
+        with torch.no_grad():
+            sym, meta = self._base(probe, snr, m_full)
+            best = float(
+                ((self.decode_differentiable(received(sym), meta, snr) - probe) ** 2).mean()
+            )
+            for m in sorted({max(1, round(f * m_full)) for f in LAYER_FRACTIONS}):
+                n = int(per_position * positions) - m * positions - side_symbols(h, w)
+                n = min(n, 3 * h * w // 2)  # every coefficient once at most
+                if m >= m_full or n < side_symbols(h, w):
+                    continue
+                sym, meta = self._base(probe, snr, m)
+                layer, side = encode_residual(probe - self.decode_differentiable(sym, meta, snr), n)
+                y = self.decode_differentiable(received(sym), meta, snr)
+                y = (y + decode_residual(received(layer), nv, side)).clamp(0, 1)
+                err = float(((y - probe) ** 2).mean())
+                if err < best:
+                    best, choice = err, m
+        return choice
 
     def decode(
         self,
@@ -365,6 +477,8 @@ class Codec(ChannelTruncationCodec):
         """:meth:`decode` without its checks and with autograd on: the receiver as the
         transmitter simulates it (:func:`semcodec.baselines.refine_symbols`). ``snr`` [batch]."""
         b = x_hat.shape[0]
+        if meta.analog is not None:
+            return self._decode_layered(x_hat, meta, snr, noise_var)
         cfg = self.model.cfg
         hf, wf = math.ceil(meta.height / 4), math.ceil(meta.width / 4)
         m = meta.num_channels
@@ -423,6 +537,42 @@ class Codec(ChannelTruncationCodec):
             r = F.pad(r.reshape(b, m, hf, wf), (0, 0, 0, 0, 0, c - m))
         y = self.model.decoder(z, side, r)
         return y[:, :, : meta.height, : meta.width].clamp(0, 1)
+
+    def _decode_layered(self, x_hat: Tensor, meta: EncodedMeta, snr: Tensor, noise_var=None):
+        """The learned channels' decode plus the analog layer's residual estimate."""
+        b, nb = x_hat.shape[0], meta.base_symbols
+        base = dataclasses.replace(meta, num_symbols=nb, analog=None)
+        if noise_var is None:
+            nv, nv_base = (10.0 ** (-snr / 10.0))[:, None], None
+        else:
+            nv = torch.as_tensor(noise_var, dtype=torch.float32)
+            nv = nv.reshape(-1, 1) if nv.dim() <= 1 else nv
+            nv_base, nv = (nv, nv) if nv.shape[1] == 1 else (nv[:, :nb], nv[:, nb:])
+            nv = nv.expand(b, -1) if nv.shape[0] == 1 else nv
+        y = self.decode_differentiable(x_hat[:, :nb], base, snr, nv_base)
+        res = decode_residual(x_hat[:, nb:], nv, meta.analog)
+        top, left = meta.crop[:2] if meta.crop is not None else (0, 0)
+        rh, rw = res.shape[2:]
+        full = torch.zeros(b, 3, max(y.shape[2], top + rh), max(y.shape[3], left + rw))
+        full[:, :, top : top + rh, left : left + rw] = res
+        return (y + full[:, :, : meta.height, : meta.width]).clamp(0, 1)
+
+
+def learned_only(codec):
+    """``codec`` without the analog refinement layer (a copy; codecs without one as they are)."""
+    if not getattr(codec, "analog_layer", False):
+        return codec
+    out = copy.copy(codec)
+    out.analog_layer = False
+    return out
+
+
+def _centre(x: Tensor, side_px: int) -> Tensor:
+    """The central ``side_px`` square of [b, c, H, W] (multiples of 4 kept), or all of it."""
+    h, w = x.shape[2:]
+    ch, cw = min(h, side_px), min(w, side_px)
+    top, left = (h - ch) // 8 * 4, (w - cw) // 8 * 4
+    return x[:, :, top : top + ch, left : left + cw]
 
 
 def load_codec(path: str | os.PathLike | None = None) -> Codec:

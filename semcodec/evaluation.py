@@ -26,7 +26,7 @@ from semcodec.baselines import (
     transmit_ideal,
     transmit_jscc,
 )
-from semcodec.codec import MIN_SIDE_PX, Codec
+from semcodec.codec import MIN_SIDE_PX, Codec, learned_only
 from semcodec.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
@@ -78,12 +78,13 @@ def _n(img, cbr) -> int:
     return num_symbols_for_cbr(cbr, img.shape[2], img.shape[3])
 
 
-def _send_jscc(refine: bool):
+def _send_jscc(refine: bool, layer: bool = True):
     def run(ctx, img, snr, cbr, gen):
-        key = (id(img), float(snr), float(cbr), refine)
+        key = (id(img), float(snr), float(cbr), refine, layer)
         if key not in ctx.encodings:  # the transmitter's symbols: once for all draws
             ctx.encodings.clear()
-            enc = ctx.codec.encode(img, snr, cbr)
+            tx_codec = ctx.codec if layer else learned_only(ctx.codec)
+            enc = tx_codec.encode(img, snr, cbr)
             if refine and not hasattr(ctx.codec, "decode_differentiable"):
                 raise ValueError(
                     f"codec {ctx.codec.name} cannot refine symbols (no decode_differentiable)"
@@ -183,6 +184,11 @@ _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
 LINK_SCHEMES: dict[str, LinkScheme] = {
     "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, framed=JSCC_FRAMED),
+    "jscc_learned": LinkScheme(
+        _send_jscc(False, layer=False),
+        "semantic JSCC with its learned channels only (no analog refinement layer)",
+        JSCC,
+    ),
     "jscc_refined": LinkScheme(
         _send_jscc(True),
         "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "

@@ -1,0 +1,129 @@
+"""The analog refinement layer (semcodec.analog) and the codec's split between learned
+channels and the layer."""
+
+import math
+
+import pytest
+import torch
+from smooth_images import smooth_image
+
+import phy
+from semcodec import load_codec, transmit_jscc
+from semcodec.analog import (
+    POWER_SCALE_BITS,
+    REFERENCE_BITS,
+    VAR_BITS,
+    chunk_grid,
+    chunk_index,
+    decode_residual,
+    encode_residual,
+    inverse_transform,
+    side_symbols,
+    transform,
+)
+
+
+def _dct_energy_residual(h, w, log2_energies, seed=0):
+    """A residual whose DCT chunks have exactly the mean energies 2**log2_energies[k]."""
+    chunk = chunk_index(h, w, chunk_grid(h, w))
+    coef = torch.randn(3 * h * w, generator=torch.Generator().manual_seed(seed))
+    for k, e in enumerate(log2_energies):
+        sel = chunk == k
+        coef[sel] *= math.sqrt(2.0**e / float(coef[sel].pow(2).mean()))
+    return inverse_transform(coef[None], h, w), coef, chunk
+
+
+def test_transform_is_orthonormal():
+    x = torch.randn(2, 3, 24, 40, generator=torch.Generator().manual_seed(1))
+    c = transform(x)
+    assert float(c.pow(2).sum()) == pytest.approx(float(x.pow(2).sum()), rel=1e-5)
+    assert torch.allclose(inverse_transform(c, 24, 40), x, atol=1e-5)
+
+
+def test_noiseless_layer_with_every_coefficient_is_exact_and_unit_power():
+    x = torch.randn(1, 3, 16, 24, generator=torch.Generator().manual_seed(2)) * 0.05
+    n = 3 * 16 * 24 // 2
+    sym, side = encode_residual(x, n)
+    assert sym.shape == (1, n) and sym.dtype == torch.complex64
+    assert float(sym.abs().pow(2).mean()) == pytest.approx(1.0, rel=2e-3)  # float16 scale
+    assert torch.allclose(decode_residual(sym, torch.zeros(1, n), side), x, atol=1e-5)
+    bits = 3 * chunk_grid(16, 24) ** 2 * VAR_BITS + REFERENCE_BITS + POWER_SCALE_BITS
+    assert side.side_info_bits() == bits
+    assert side_symbols(16, 24) == math.ceil(side.side_info_bits() / 0.5)
+
+
+def test_mse_matches_the_lmmse_formula_and_the_strongest_chunks_are_sent():
+    h = w = 32  # G = 4: 48 chunks of 64 coefficients
+    rng = torch.Generator().manual_seed(3)
+    log2e = torch.randint(-16, -4, (48,), generator=rng).tolist()
+    res, coef, chunk = _dct_energy_residual(h, w, log2e)
+    n = 20 * 64 // 2  # the 20 strongest chunks
+    sym, side = encode_residual(res, n)
+    nv = 0.1  # 10 dB per complex symbol
+    g = side.sent_coefficients()[2][0]  # gain of each sent real
+    order = side.sent_coefficients()[0][0]
+    strongest = torch.argsort(
+        torch.tensor(log2e, dtype=torch.float64), descending=True, stable=True
+    )[:20]
+    assert set(chunk[order].tolist()) == set(strongest.tolist())
+    lam = torch.exp2(torch.tensor(log2e, dtype=torch.float32))[chunk[order]]
+    sent_err = float((lam * (nv / 2) / (g**2 * lam + nv / 2)).sum())
+    unsent = torch.ones(3 * h * w, dtype=torch.bool)
+    unsent[order] = False
+    expected = (sent_err + float(coef[unsent].pow(2).sum())) / (3 * h * w)
+    draws = []
+    gen = torch.Generator().manual_seed(4)
+    for _ in range(300):
+        noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64) * math.sqrt(nv)
+        draws.append(
+            float((decode_residual(sym + noise, torch.full((1, n), nv), side) - res).pow(2).mean())
+        )
+    assert sum(draws) / len(draws) == pytest.approx(expected, rel=0.03)
+
+
+def test_bad_layer_size_is_refused():
+    with pytest.raises(ValueError, match="num_symbols"):
+        encode_residual(torch.zeros(1, 3, 8, 8), 97)
+
+
+@pytest.fixture(scope="module")
+def codec():
+    return load_codec()
+
+
+def _psnr(a, b):
+    return -10 * math.log10(float(((a - b) ** 2).mean()))
+
+
+def test_layer_spends_the_budget_and_beats_learned_channels_at_high_rate_and_snr(codec):
+    x = smooth_image(5, 96, 128)
+    budget = round(3 * 96 * 128 / 3)
+    enc = codec.encode(x, 10.0, 1 / 3)
+    meta = enc.meta
+    assert meta.analog is not None and meta.num_channels < 16
+    assert meta.num_symbols + side_symbols(96, 128) == budget  # side information is charged
+    assert meta.base_symbols == meta.num_channels * 24 * 32
+    assert float(enc.symbols.abs().pow(2).mean()) == pytest.approx(1.0, rel=2e-3)
+    link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
+    out = {}
+    for layer in (True, False):
+        codec.analog_layer = layer
+        ps = []
+        for s in range(3):
+            gen = torch.Generator().manual_seed(s)
+            ps.append(_psnr(transmit_jscc(codec, x, link, 10.0, 1 / 3, generator=gen).images, x))
+        out[layer] = sum(ps) / 3
+    codec.analog_layer = True
+    assert out[True] > out[False] + 1.0
+
+
+def test_layer_decodes_per_symbol_noise_and_is_skipped_where_it_does_not_pay(codec):
+    x = smooth_image(6, 64, 64)
+    enc = codec.encode(x, 10.0, 1 / 3)
+    n = enc.meta.num_symbols
+    nv = torch.full((1, n), 0.1)
+    nv[:, n // 2 :] = 1e9  # an erased half: those symbols carry nothing, decode stays finite
+    y = codec.decode(enc.symbols, enc.meta, 10.0, noise_var=nv)
+    assert torch.isfinite(y).all() and y.shape == x.shape
+    low = codec.encode(x, -5.0, 1 / 16)  # low rate, low SNR: learned channels only
+    assert low.meta.analog is None and low.meta.num_symbols == 3 * 16 * 16
