@@ -49,7 +49,7 @@ from semcodec.model import (
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
 MIN_SIDE_PX = 8
 FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
-FOCUS_REL_THRESHOLD = 0.05  # positions with >= 5 % of the peak attribution form the box
+FOCUS_REL_THRESHOLD = 0.5  # positions with >= half the peak attribution form the box (focus.py)
 LAYER_FRACTIONS = (1 / 8, 1 / 4, 3 / 8, 1 / 2, 5 / 8, 3 / 4)
 """Learned channels, as fractions of the budget's, that :meth:`Codec._layer_plan` tries
 under the analog refinement layer."""

@@ -8,8 +8,9 @@ is the weighted masked reconstruction quality
 and the importance of feature position p is its Grad-CAM-style attribution
 ``sum_c f_pc * dS/df_pc``, averaged along the path ``alpha * f`` (alpha in (0, 1], i.e.
 integrated gradients, so the attributions add up to S(f) - S(0)). Positions are ranked by
-it; the transmitter sends the smallest box of the positions with at least 5 % of the peak
-attribution (the object and the rim its reconstruction depends on) and of every position
+it; the transmitter sends the smallest box of the positions with at least half the peak
+attribution (the core of the object and the rim its reconstruction depends on most: the
+attribution's long tail spreads over much of the view) and of every position
 showing a demanded object (a peaky attribution must not cut the object off: version-2
 models concentrate theirs on a part of it), at the rate the budget allows, or, when the
 budget is below one channel over that box, the top positions one channel each.
@@ -143,7 +144,7 @@ def select_positions(heat: Tensor, k: int) -> Tensor:
 
 
 def attribution_box(
-    heat: Tensor, rel_threshold: float = 0.05, include: Tensor | None = None
+    heat: Tensor, rel_threshold: float = 0.5, include: Tensor | None = None
 ) -> tuple[int, int, int, int]:
     """Smallest axis-aligned box (union over the batch) of the positions whose attribution
     is at least ``rel_threshold`` times the largest one, and of the positions ``include``
@@ -151,7 +152,8 @@ def attribution_box(
 
     The AF modules' global pooling spreads a thin tail of attribution over every position;
     a threshold relative to the peak cuts that tail and keeps the object and the rim its
-    reconstruction depends on (on the lego views: the object's box, ~86 % of the attribution).
+    reconstruction depends on most; a low threshold lets the tail stretch the box over most
+    of a small view, spending the symbols on background (README, "End to end").
 
     Args:
         heat: [batch, hf, wf] float32 >= 0.

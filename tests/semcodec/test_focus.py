@@ -114,7 +114,7 @@ def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
     model = make_model("adjscc_s4_w96_rel")
     codec = Codec(model, {"sha256": "t" * 64, "name": "tiny-v2"})
     x, mask = _object_scene()
-    cbr, snr = 1 / 16, 5.0
+    cbr, snr = 1 / 40, 5.0
     budget = round(cbr * 3 * 64 * 64)
     enc = codec.encode(x, snr, cbr, mask=mask, demand_weights=[1.0])
     top, left, h, w = enc.meta.crop
