@@ -10,6 +10,8 @@
   interval, with the published anchors beside each row and checks (jscc above digital,
   genie never below digital); the same on other photos (BSDS500's
   test split, block fading: :data:`OTHER_PHOTOS`).
+* The rate curve: Kodak (``OSNERF_BENCH_CODEC_RATE_IMAGES``, default 12) on AWGN at 1 and
+  10 dB, CBR 1/48 .. 1/3: jscc, its learned channels alone (``jscc_learned``) and digital.
 * On-demand focus on nerf_synthetic lego views (alpha = object mask): object-region PSNR
   at equal symbols and symbols saved.
 
@@ -230,6 +232,41 @@ def _codec_table(
     }
 
 
+RATE_CBRS = ("1/48", "1/16", "1/6", "1/4", "1/3")
+"""The rate curve's CBRs: the codec's range, through the analog refinement layer's."""
+RATE_SCHEMES = ("jscc", "jscc_learned", "digital")
+RATE_SNRS = (1.0, 10.0)
+
+
+def _rate_curve(out_dir: Path) -> dict:
+    """Kodak on AWGN at every CBR of :data:`RATE_CBRS`: jscc (with the analog refinement
+    layer where it pays), its learned channels alone and honest digital; checks that jscc
+    rises with the rate at every SNR and that CBR 1/3 is 2 dB above CBR 1/6 at 10 dB."""
+    from osnerf.paths import shared_data_dir
+
+    n = int(os.environ.get("OSNERF_BENCH_CODEC_RATE_IMAGES", "12"))
+    folder = str(shared_data_dir() / "kodak")
+    curve: dict = {}
+    for cbr in RATE_CBRS:
+        argv = ["--images", folder, "--channel", "awgn", "--cbr", cbr, "--seed", "0"]
+        argv += ["--snr-db=" + ",".join(f"{v:g}" for v in RATE_SNRS), "--max-images", str(n)]
+        argv += ["--no-lpips", "--threads", "1", "--schemes", ",".join(RATE_SCHEMES)]
+        doc = _eval(out_dir, f"rate_awgn_{cbr.replace('/', '_')}", argv)
+        for r in doc["results"]:
+            point = curve.setdefault(r["scheme"], {}).setdefault(f"{r['snr_db']:g}dB", {})
+            point[cbr] = round(r["psnr"], 2)
+    checks = {}
+    for snr, points in curve.get("jscc", {}).items():
+        values = [points[c] for c in RATE_CBRS]
+        checks[f"jscc_rises_with_rate_{snr}"] = all(b > a for a, b in zip(values, values[1:]))
+        for c in RATE_CBRS:
+            checks[f"jscc_above_digital_{snr}_cbr_{c}"] = points[c] > curve["digital"][snr][c]
+    ten = curve.get("jscc", {}).get("10dB", {})
+    if ten:
+        checks["jscc_cbr_1/3_2dB_above_1/6_at_10dB"] = ten["1/3"] >= ten["1/6"] + 2.0
+    return {"images": folder, "num_images": n, "channel": "awgn", "psnr": curve, "checks": checks}
+
+
 def _focus(codec) -> dict:
     from PIL import Image
 
@@ -289,5 +326,6 @@ def run(out_dir: Path) -> dict:
         "speed": _speed(codec),
         "focus": _focus(codec),
         "codec_table": _codec_table(out_dir),
+        "rate_curve": _rate_curve(out_dir),
         "codec_table_other_photos": _codec_table(out_dir, other, other_channels, "other_"),
     }

@@ -127,3 +127,22 @@ def test_layer_decodes_per_symbol_noise_and_is_skipped_where_it_does_not_pay(cod
     assert torch.isfinite(y).all() and y.shape == x.shape
     low = codec.encode(x, -5.0, 1 / 16)  # low rate, low SNR: learned channels only
     assert low.meta.analog is None and low.meta.num_symbols == 3 * 16 * 16
+
+
+def test_focus_box_gets_the_layer_at_its_offset(codec):
+    x = smooth_image(7, 96, 128)
+    mask = torch.zeros(1, 1, 96, 128)
+    mask[:, :, 36:84, 60:124] = 1.0  # off-centre, so a misplaced residual would show
+    budget_cbr = 1 / 3 * (48 * 64) / (96 * 128)  # CBR 1/3 over the box
+    out = {}
+    for layer in (True, False):
+        codec.analog_layer = layer
+        enc = codec.encode(x, 20.0, budget_cbr, mask=mask)
+        y = codec.decode(enc.symbols, enc.meta, 20.0)  # noiseless: the layer's best case
+        err = ((y - x) ** 2 * mask).sum() / (3 * mask.sum())
+        out[layer] = (enc.meta, -10 * math.log10(float(err)))
+    codec.analog_layer = True
+    meta, psnr = out[True]
+    assert meta.crop is not None and meta.analog is not None
+    assert (meta.analog.height, meta.analog.width) == meta.crop[2:]
+    assert psnr > out[False][1] + 2.0
