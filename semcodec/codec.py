@@ -410,17 +410,20 @@ class Codec(ChannelTruncationCodec):
             noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64)
             return sym + noise * nv.sqrt()
 
+        layer_symbols = {}  # candidate learned channels -> the layer's symbols
+        for m in sorted({max(1, round(f * m_full)) for f in LAYER_FRACTIONS}):
+            n = int(per_position * positions) - m * positions - side_symbols(h, w)
+            if m < m_full and n >= side_symbols(h, w):  # side information under half of it
+                layer_symbols[m] = min(n, 3 * h * w // 2)  # every coefficient once at most
+        if not layer_symbols:
+            return None
         best, choice = math.inf, None
         with torch.no_grad():
             sym, meta = self._base(probe, snr, m_full)
             best = float(
                 ((self.decode_differentiable(received(sym), meta, snr) - probe) ** 2).mean()
             )
-            for m in sorted({max(1, round(f * m_full)) for f in LAYER_FRACTIONS}):
-                n = int(per_position * positions) - m * positions - side_symbols(h, w)
-                n = min(n, 3 * h * w // 2)  # every coefficient once at most
-                if m >= m_full or n < side_symbols(h, w):
-                    continue
+            for m, n in layer_symbols.items():
                 sym, meta = self._base(probe, snr, m)
                 layer, side = encode_residual(probe - self.decode_differentiable(sym, meta, snr), n)
                 y = self.decode_differentiable(received(sym), meta, snr)
