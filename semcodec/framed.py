@@ -197,6 +197,7 @@ def _jscc_receive(received, encs, images, settings: FramedSettings):
             "decoded": True,
             "num_symbols": int(enc.meta.num_symbols),
             "cbr": float(enc.meta.cbr),
+            "side_info_bits": int(enc.meta.side_info_bits()),
         }
         crc = [None] * len(block.frames_detected)
         out.append(FramedReception(rec, psnr(rec, img), stats, crc))

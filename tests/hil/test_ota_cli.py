@@ -233,3 +233,4 @@ def test_the_framed_jscc_receiver_hands_the_noise_variance_to_the_codec():
     )
     torch.testing.assert_close(torch.from_numpy(rec.image), expected[0])
     assert rec.frames_crc_ok == [None] and rec.stats["num_symbols"] == y.shape[0]
+    assert rec.stats["side_info_bits"] == encoded[0].meta.side_info_bits()
