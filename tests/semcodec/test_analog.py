@@ -171,3 +171,16 @@ def test_refinement_differentiates_through_the_layer(codec, shared_data):
         return sum(ps) / 4
 
     assert mean_psnr(ref) > mean_psnr(enc)
+
+
+def test_jscc_learned_scheme_sends_the_learned_channels_only(codec):
+    from semcodec import LINK_SCHEMES, learned_only
+    from semcodec.evaluation import EvalContext
+
+    x = smooth_image(5, 96, 128)
+    ctx = EvalContext(channel="awgn", codec=codec)
+    with_layer = LINK_SCHEMES["jscc"](ctx, x, 10.0, 1 / 3, torch.Generator().manual_seed(0))
+    learned = LINK_SCHEMES["jscc_learned"](ctx, x, 10.0, 1 / 3, torch.Generator().manual_seed(0))
+    assert learned.stats["cbr"] == pytest.approx(1 / 3) and learned.stats["side_info_bits"] == 0
+    assert with_layer.stats["side_info_bits"] > 0 and with_layer.stats["cbr"] < 1 / 3
+    assert codec.analog_layer and not learned_only(codec).analog_layer  # a copy, not a switch
