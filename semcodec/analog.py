@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import torch
 from torch import Tensor
@@ -122,6 +122,12 @@ class AnalogSide:
 
     def sent_coefficients(self) -> tuple[Tensor, Tensor, Tensor]:
         """(coefficient order [b, 2n] int64, prior energy [b, 2n], gain [b, 2n]) of the sent reals."""
+        return self._plan
+
+    @cached_property
+    def _plan(self) -> tuple[Tensor, Tensor, Tensor]:
+        """:meth:`sent_coefficients`, derived once from the side information (the sort over
+        every coefficient is most of a decode, which refinement repeats every step)."""
         h, w = self.height, self.width
         lam = torch.exp2(self.codes.float() * _LOG2_STEP)  # [b, K]
         chunk = chunk_index(h, w, chunk_grid(h, w))  # [3hw]

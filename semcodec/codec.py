@@ -49,7 +49,6 @@ from semcodec.model import (
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
 MIN_SIDE_PX = 8
 FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
-FOCUS_REL_THRESHOLD = 0.5  # positions with >= half the peak attribution form the box (focus.py)
 LAYER_FRACTIONS = (1 / 8, 1 / 4, 3 / 8, 1 / 2, 5 / 8, 3 / 4)
 """Learned channels, as fractions of the budget's, that :meth:`Codec._layer_plan` tries
 under the analog refinement layer."""
@@ -312,7 +311,7 @@ class Codec(ChannelTruncationCodec):
             heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
             # feature-grid units; the demanded objects themselves are always in the box
             objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
-            top, left, rows, cols = attribution_box(heat, FOCUS_REL_THRESHOLD, objects)
+            top, left, rows, cols = attribution_box(heat, include=objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
             m = min(c, budget // (rows * cols))
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits

@@ -143,8 +143,12 @@ def select_positions(heat: Tensor, k: int) -> Tensor:
     return flat.topk(k, dim=1).indices.sort(dim=1).values
 
 
+FOCUS_REL_THRESHOLD = 0.5
+"""Positions with at least this fraction of the peak attribution form the focus box."""
+
+
 def attribution_box(
-    heat: Tensor, rel_threshold: float = 0.5, include: Tensor | None = None
+    heat: Tensor, rel_threshold: float = FOCUS_REL_THRESHOLD, include: Tensor | None = None
 ) -> tuple[int, int, int, int]:
     """Smallest axis-aligned box (union over the batch) of the positions whose attribution
     is at least ``rel_threshold`` times the largest one, and of the positions ``include``
