@@ -8,6 +8,7 @@ import torch
 from semcodec import (
     DEFAULT_CHECKPOINT,
     KnowledgeBaseMismatch,
+    learned_only,
     load_codec,
     make_model,
     save_checkpoint,
@@ -73,8 +74,7 @@ def test_shipped_default_loads_offline():
     side = json.loads((codec.path.parent / "default.card.json").read_text())
     assert side["sha256"] == codec.sha256
     x = torch.rand(1, 3, 32, 48, generator=torch.Generator().manual_seed(0))
-    codec.analog_layer = False
-    enc = codec.encode(x, 10.0, 1 / 3)
+    enc = learned_only(codec).encode(x, 10.0, 1 / 3)
     assert enc.meta.num_channels == 16 and enc.symbols.shape[-1] == 16 * 8 * 12
 
 
