@@ -8,13 +8,18 @@ at the nominal SNR, and sends ``residual = image - that decode`` uncoded, as Sof
 for whole frames (Jakubczak and Katabi, MobiCom 2011):
 
 * an orthonormal colour transform and a full-frame orthonormal 2-D DCT per colour plane;
-* each plane's coefficients split into ``G x G`` frequency chunks; the chunks' mean
-  energies ``lambda_k`` are the side information: ``VAR_BITS`` bits each, in half-octave
-  steps below the image's strongest chunk (whose code is sent in 16 bits), together with one
-  16-bit power scale per image;
+* each plane's coefficients split into ``G x G`` frequency chunks with mean energies
+  ``lambda_k``, coded in ``VAR_BITS`` bits each as half-octave steps below the image's
+  strongest chunk (whose code takes 16 bits);
 * the largest-energy chunks, in decreasing order, fill the layer's real dimensions (two per
   complex symbol); chunk ``k`` is scaled by ``g_k ~ lambda_k**(-1/4)`` (the power allocation
   minimising the linear MSE), all gains by one factor giving unit mean symbol power;
+* the side information is what the receiver needs to rebuild that plan: the sent chunks'
+  energies and which chunks they are, in the cheapest of three formats (every chunk's
+  energy; a bitmap of the sent chunks and their energies; a list of (index, energy) pairs,
+  usually far the cheapest: a small box's layer touches two or three of its 48 chunks),
+  plus one 16-bit power scale per image (:func:`side_info_bits`,
+  :meth:`AnalogSide.sent_chunks`, :meth:`AnalogSide.from_sent_chunks`);
 * the receiver's estimate is the per-coefficient LMMSE ``g lambda / (g**2 lambda + nv/2)
   * y`` from the unbiased symbol estimates and their effective noise variance (the codec's
   equaliser convention), then the inverse transforms.
@@ -38,6 +43,7 @@ from torch import Tensor
 VAR_BITS = 6  # bits per chunk energy: 64 half-octave steps below the strongest chunk
 REFERENCE_BITS = 16  # the strongest chunk's code
 POWER_SCALE_BITS = 16  # one float16 power scale per image
+FORMAT_BITS = 2  # which of the three formats the chunk energies are sent in
 SIDE_BITS_PER_SYMBOL = 0.5  # side information at QPSK with a rate-1/4 code
 _LOG2_STEP = 0.5  # quantisation step of log2(chunk energy)
 _LOG2_MIN = -60.0  # energies below 2**-60 (all-zero chunks) are coded as 2**-60
@@ -58,10 +64,48 @@ def chunk_grid(height: int, width: int) -> int:
     return int(min(16, max(4, math.isqrt(height * width) // 40)))
 
 
-def side_symbols(height: int, width: int) -> int:
-    """Channel symbols the layer's side information costs for one image of this size."""
-    bits = 3 * chunk_grid(height, width) ** 2 * VAR_BITS + REFERENCE_BITS + POWER_SCALE_BITS
-    return math.ceil(bits / SIDE_BITS_PER_SYMBOL)
+@lru_cache(maxsize=64)
+def _smallest_chunks_cumsum(height: int, width: int) -> Tensor:
+    """[3 G^2] cumulative coefficient counts of the chunks, smallest first."""
+    k = 3 * chunk_grid(height, width) ** 2
+    sizes = torch.bincount(chunk_index(height, width, chunk_grid(height, width)), minlength=k)
+    return torch.cumsum(torch.sort(sizes).values, 0)
+
+
+def max_sent_chunks(height: int, width: int, num_symbols: int) -> int:
+    """Most chunks a layer of ``num_symbols`` complex symbols can touch (whole chunks in
+    turn, the last one in part): as many as the smallest chunks that hold its reals."""
+    cum = _smallest_chunks_cumsum(height, width)
+    return min(int(torch.searchsorted(cum, 2 * int(num_symbols))) + 1, cum.numel())
+
+
+def side_info_bits(height: int, width: int, num_symbols: int) -> int:
+    """Bits of side information for a layer of ``num_symbols`` over a ``height x width``
+    region, for the worst case of which chunks are sent: the cheapest of every chunk's
+    energy code, a bitmap of the sent chunks with their codes, or (index, code) pairs."""
+    k_all = 3 * chunk_grid(height, width) ** 2
+    k = max_sent_chunks(height, width, num_symbols)
+    index_bits = math.ceil(math.log2(k_all))
+    energies = min(k_all * VAR_BITS, k_all + k * VAR_BITS, k * (index_bits + VAR_BITS))
+    return FORMAT_BITS + REFERENCE_BITS + POWER_SCALE_BITS + energies
+
+
+def side_symbols(height: int, width: int, num_symbols: int) -> int:
+    """Channel symbols the side information of a layer of ``num_symbols`` costs per image."""
+    return math.ceil(side_info_bits(height, width, num_symbols) / SIDE_BITS_PER_SYMBOL)
+
+
+def layer_symbols(height: int, width: int, available: int) -> int:
+    """The most layer symbols ``n`` (at most one per two coefficients) whose side
+    information fits beside them in ``available`` symbols; 0 when none does."""
+    lo, hi = 0, min(int(available), 3 * height * width // 2)
+    while lo < hi:  # n + side_symbols(n) is increasing in n
+        mid = (lo + hi + 1) // 2
+        if mid + side_symbols(height, width, mid) <= available:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
 
 
 @lru_cache(maxsize=16)
@@ -116,9 +160,29 @@ class AnalogSide:
     power_scale: Tensor = field(compare=False)
 
     def side_info_bits(self) -> int:
-        """Bits of side information per image."""
-        grid = chunk_grid(self.height, self.width)
-        return 3 * grid**2 * VAR_BITS + REFERENCE_BITS + POWER_SCALE_BITS
+        """Bits of side information per image (:func:`side_info_bits`)."""
+        return side_info_bits(self.height, self.width, self.num_symbols)
+
+    def sent_chunks(self) -> tuple[Tensor, Tensor]:
+        """What crosses the channel of the chunk energies: ([b, k] chunk indices in sending
+        order, [b, k] their codes), k = :func:`max_sent_chunks` (entries past an image's
+        last sent chunk repeat the next-ranked chunks and are not needed)."""
+        k = max_sent_chunks(self.height, self.width, self.num_symbols)
+        rank = torch.argsort(-self.codes.float(), dim=1, stable=True)[:, :k]
+        return rank, torch.gather(self.codes, 1, rank)
+
+    @classmethod
+    def from_sent_chunks(
+        cls, height: int, width: int, num_symbols: int, index: Tensor, codes: Tensor,
+        power_scale: Tensor,
+    ) -> AnalogSide:
+        """The receiver's side information from :meth:`sent_chunks`: the chunks not listed
+        rank below every listed one, so the plan (order, priors, gains) is the sender's."""
+        k_all = 3 * chunk_grid(height, width) ** 2
+        floor = codes.min(dim=1, keepdim=True).values.to(torch.int32) - 1
+        full = floor.expand(codes.shape[0], k_all).clone()
+        full.scatter_(1, index, codes.to(torch.int32))
+        return cls(height, width, num_symbols, full.to(torch.int16), power_scale)
 
     def sent_coefficients(self) -> tuple[Tensor, Tensor, Tensor]:
         """(coefficient order [b, 2n] int64, prior energy [b, 2n], gain [b, 2n]) of the sent reals."""

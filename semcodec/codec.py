@@ -26,7 +26,13 @@ from torch import Tensor
 from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
-from semcodec.analog import AnalogSide, decode_residual, encode_residual, side_symbols
+from semcodec.analog import (
+    AnalogSide,
+    decode_residual,
+    encode_residual,
+    layer_symbols,
+    side_symbols,
+)
 from semcodec.checkpoint import (
     KnowledgeBaseMismatch,
     load_checkpoint,
@@ -379,7 +385,7 @@ class Codec(ChannelTruncationCodec):
         with torch.no_grad():
             sym, meta = self._base(region, snr, m)
             residual = region - self.decode_differentiable(sym, meta, snr)
-            n = min(budget - m * positions - side_symbols(h, w), 3 * h * w // 2)
+            n = layer_symbols(h, w, budget - m * positions)
             if n < 1:
                 return None
             layer, side = encode_residual(residual, n)
@@ -409,12 +415,12 @@ class Codec(ChannelTruncationCodec):
             noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64)
             return sym + noise * nv.sqrt()
 
-        layer_symbols = {}  # candidate learned channels -> the layer's symbols
+        candidates = {}  # learned channels -> the layer's symbols
         for m in sorted({max(1, round(f * m_full)) for f in LAYER_FRACTIONS}):
-            n = int(per_position * positions) - m * positions - side_symbols(h, w)
-            if m < m_full and n >= side_symbols(h, w):  # side information under half of it
-                layer_symbols[m] = min(n, 3 * h * w // 2)  # every coefficient once at most
-        if not layer_symbols:
+            n = layer_symbols(h, w, int(per_position * positions) - m * positions)
+            if m < m_full and n >= side_symbols(h, w, n):  # side information under half of it
+                candidates[m] = n
+        if not candidates:
             return None
         best, choice = math.inf, None
         with torch.no_grad():
@@ -422,7 +428,7 @@ class Codec(ChannelTruncationCodec):
             best = float(
                 ((self.decode_differentiable(received(sym), meta, snr) - probe) ** 2).mean()
             )
-            for m, n in layer_symbols.items():
+            for m, n in candidates.items():
                 sym, meta = self._base(probe, snr, m)
                 layer, side = encode_residual(probe - self.decode_differentiable(sym, meta, snr), n)
                 y = self.decode_differentiable(received(sym), meta, snr)

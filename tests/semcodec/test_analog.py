@@ -10,14 +10,18 @@ from smooth_images import smooth_image
 import phy
 from semcodec import learned_only, load_codec, transmit_jscc
 from semcodec.analog import (
+    FORMAT_BITS,
     POWER_SCALE_BITS,
     REFERENCE_BITS,
     VAR_BITS,
+    AnalogSide,
     chunk_grid,
     chunk_index,
     decode_residual,
     encode_residual,
     inverse_transform,
+    layer_symbols,
+    max_sent_chunks,
     side_symbols,
     transform,
 )
@@ -47,9 +51,38 @@ def test_noiseless_layer_with_every_coefficient_is_exact_and_unit_power():
     assert sym.shape == (1, n) and sym.dtype == torch.complex64
     assert float(sym.abs().pow(2).mean()) == pytest.approx(1.0, rel=2e-3)  # float16 scale
     assert torch.allclose(decode_residual(sym, torch.zeros(1, n), side), x, atol=1e-5)
-    bits = 3 * chunk_grid(16, 24) ** 2 * VAR_BITS + REFERENCE_BITS + POWER_SCALE_BITS
+    # every chunk sent: all 48 energies are the cheapest format
+    bits = FORMAT_BITS + 3 * chunk_grid(16, 24) ** 2 * VAR_BITS + REFERENCE_BITS + POWER_SCALE_BITS
     assert side.side_info_bits() == bits
-    assert side_symbols(16, 24) == math.ceil(side.side_info_bits() / 0.5)
+    assert side_symbols(16, 24, n) == math.ceil(side.side_info_bits() / 0.5)
+
+
+def test_side_information_lists_only_the_sent_chunks_and_the_receiver_rebuilds_the_plan():
+    h, w = 40, 60  # G = 4: 48 chunks of 10 x 15 = 150 coefficients
+    fixed = FORMAT_BITS + REFERENCE_BITS + POWER_SCALE_BITS
+    # 160 symbols = 320 reals touch at most 3 chunks: 3 (index, code) pairs of 6 + 6 bits
+    assert max_sent_chunks(h, w, 160) == 3 and max_sent_chunks(h, w, 150) == 2
+    side_bits = fixed + 3 * (6 + VAR_BITS)
+    assert side_symbols(h, w, 160) == math.ceil(side_bits / 0.5)
+    # 30 chunks: a bitmap of 48 and 30 codes beats 30 pairs and 48 codes
+    assert side_symbols(h, w, 30 * 75) == math.ceil((fixed + 48 + 30 * VAR_BITS) / 0.5)
+    # the layer and its side information fill the available symbols and no more
+    for available in (100, 1000, 3000, 3 * h * w):
+        n = layer_symbols(h, w, available)
+        assert n + side_symbols(h, w, n) <= available
+        assert n == 3 * h * w // 2 or n + 1 + side_symbols(h, w, n + 1) > available
+    assert layer_symbols(h, w, 20) == 0
+    res, _, _ = _dct_energy_residual(h, w, [-10 - (k * 7) % 13 for k in range(48)], seed=5)
+    res = torch.cat([res, res.flip(-1)])  # two images, different chunk rankings
+    sym, side = encode_residual(res, 160)
+    index, codes = side.sent_chunks()
+    assert index.shape == (2, 3)
+    rx = AnalogSide.from_sent_chunks(h, w, 160, index, codes, side.power_scale)
+    for a, b in zip(rx.sent_coefficients(), side.sent_coefficients(), strict=True):
+        assert torch.equal(a, b)
+    noise = torch.randn(sym.shape, generator=torch.Generator().manual_seed(6), dtype=torch.complex64)
+    y = sym + 0.3 * noise
+    assert torch.equal(decode_residual(y, 0.09, rx), decode_residual(y, 0.09, side))
 
 
 def test_mse_matches_the_lmmse_formula_and_the_strongest_chunks_are_sent():
@@ -101,7 +134,9 @@ def test_layer_spends_the_budget_and_beats_learned_channels_at_high_rate_and_snr
     enc = codec.encode(x, 10.0, 1 / 3)
     meta = enc.meta
     assert meta.analog is not None and meta.num_channels < 16
-    assert meta.num_symbols + side_symbols(96, 128) == budget  # side information is charged
+    n_layer = meta.analog.num_symbols  # the side information is charged to the budget
+    assert meta.num_symbols + side_symbols(96, 128, n_layer) <= budget
+    assert meta.num_symbols + side_symbols(96, 128, n_layer + 1) + 1 > budget
     assert meta.base_symbols == meta.num_channels * 24 * 32
     assert float(enc.symbols.abs().pow(2).mean()) == pytest.approx(1.0, rel=2e-3)
     link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
