@@ -173,7 +173,12 @@ class AnalogSide:
 
     @classmethod
     def from_sent_chunks(
-        cls, height: int, width: int, num_symbols: int, index: Tensor, codes: Tensor,
+        cls,
+        height: int,
+        width: int,
+        num_symbols: int,
+        index: Tensor,
+        codes: Tensor,
         power_scale: Tensor,
     ) -> AnalogSide:
         """The receiver's side information from :meth:`sent_chunks`: the chunks not listed
