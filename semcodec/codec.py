@@ -224,6 +224,12 @@ class Codec(ChannelTruncationCodec):
     analog_layer = True
     """Whether :meth:`encode` may spend part of the budget on the analog refinement layer
     (set False on an instance for learned channels only)."""
+    layer_fusion = 1.0
+    """The receiver's estimate of the analog layer is the LMMSE against the noise variance
+    divided by this (>= 1). 1: each image's own LMMSE. Where a later estimator averages about
+    this many independently received images of the same surface (a radiance field fusing the
+    views), shrinking each image's estimate less leaves it noisier but less biased, and the
+    average better (:func:`for_fusion`)."""
     architectures = ("adjscc_s4_w96", *(m for m in MODELS if m != "adjscc_s4_w96"))
     """Architectures :meth:`untrained` builds; the first is the default."""
 
@@ -558,7 +564,7 @@ class Codec(ChannelTruncationCodec):
             nv_base, nv = (nv, nv) if nv.shape[1] == 1 else (nv[:, :nb], nv[:, nb:])
             nv = nv.expand(b, -1) if nv.shape[0] == 1 else nv
         y = self.decode_differentiable(x_hat[:, :nb], base, snr, nv_base)
-        res = decode_residual(x_hat[:, nb:], nv, meta.analog)
+        res = decode_residual(x_hat[:, nb:], nv / self.layer_fusion, meta.analog)
         top, left = meta.crop[:2] if meta.crop is not None else (0, 0)
         rh, rw = res.shape[2:]
         full = torch.zeros(b, 3, max(y.shape[2], top + rh), max(y.shape[3], left + rw))
@@ -572,6 +578,19 @@ def learned_only(codec):
         return codec
     out = copy.copy(codec)
     out.analog_layer = False
+    return out
+
+
+def for_fusion(codec, views: float):
+    """``codec`` as a receiver whose images are averaged over about ``views`` independent
+    receptions (:attr:`Codec.layer_fusion`; a copy; codecs without the layer as they are)."""
+    views = float(views)
+    if not (math.isfinite(views) and views >= 1):
+        raise ValueError(f"views must be a finite number >= 1, got {views!r}")
+    if not hasattr(codec, "layer_fusion") or views == codec.layer_fusion:
+        return codec
+    out = copy.copy(codec)
+    out.layer_fusion = views
     return out
 
 

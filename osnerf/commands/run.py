@@ -41,6 +41,7 @@ CONFIG_FIELDS = (
     "nerf_clock",
     "renderer_steps",
     "refine_steps",
+    "layer_fusion",
 )
 FLAGS = {
     "resolution_px": "--resolution",
@@ -96,6 +97,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "nerf_steps": checks.count(1, MAX_NERF_STEPS),
             "renderer_steps": checks.count(0, 100_000),
             "refine_steps": checks.refine_steps,
+            "layer_fusion": checks.number(1.0, 1000.0),
         },
         choices={
             "channel": RUN_CHANNELS,

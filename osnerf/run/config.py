@@ -17,7 +17,7 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
-CACHE_VERSION = 9
+CACHE_VERSION = 10
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,11 @@ class RunConfig:
             model of the channel at the view's measured SNR (:func:`semcodec.refine_symbols`,
             :func:`osnerf.run.jscc.refine_model_link`), on demand weighted to the demanded
             objects (:data:`osnerf.run.jscc.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
+        layer_fusion: the semantic schemes' receiver estimates the codec's analog refinement
+            layer as if the radiance field averaged each surface over about this many
+            independently received views (:func:`semcodec.for_fusion`, in [1, 1000]): a
+            noisier, less shrunk estimate per view and a better field. 1: each view's own
+            LMMSE.
     """
 
     scene: str = DEFAULT_SCENE
@@ -88,6 +93,7 @@ class RunConfig:
     nerf_steps: int | None = 1000
     renderer_steps: int = 1200
     refine_steps: int = 30
+    layer_fusion: float = 4.0
 
     def __post_init__(self):
         from osnerf.schemes import load_entry_points
@@ -117,6 +123,12 @@ class RunConfig:
             raise ValueError(
                 f"refine_steps must be an integer in [0, 10000], got {self.refine_steps!r}"
             )
+        if not (
+            isinstance(self.layer_fusion, (int, float))
+            and math.isfinite(self.layer_fusion)
+            and 1 <= self.layer_fusion <= 1000
+        ):
+            raise ValueError(f"layer_fusion must be in [1, 1000], got {self.layer_fusion!r}")
         if not (isinstance(self.renderer_steps, int) and 0 <= self.renderer_steps <= 100_000):
             raise ValueError(
                 f"renderer_steps must be an integer in [0, 100000] (0: skip), "

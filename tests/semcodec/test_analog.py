@@ -8,7 +8,7 @@ import torch
 from smooth_images import smooth_image
 
 import phy
-from semcodec import learned_only, load_codec, transmit_jscc
+from semcodec import for_fusion, learned_only, load_codec, transmit_jscc
 from semcodec.analog import (
     FORMAT_BITS,
     POWER_SCALE_BITS,
@@ -80,7 +80,9 @@ def test_side_information_lists_only_the_sent_chunks_and_the_receiver_rebuilds_t
     rx = AnalogSide.from_sent_chunks(h, w, 160, index, codes, side.power_scale)
     for a, b in zip(rx.sent_coefficients(), side.sent_coefficients(), strict=True):
         assert torch.equal(a, b)
-    noise = torch.randn(sym.shape, generator=torch.Generator().manual_seed(6), dtype=torch.complex64)
+    noise = torch.randn(
+        sym.shape, generator=torch.Generator().manual_seed(6), dtype=torch.complex64
+    )
     y = sym + 0.3 * noise
     assert torch.equal(decode_residual(y, 0.09, rx), decode_residual(y, 0.09, side))
 
@@ -112,6 +114,39 @@ def test_mse_matches_the_lmmse_formula_and_the_strongest_chunks_are_sent():
             float((decode_residual(sym + noise, torch.full((1, n), nv), side) - res).pow(2).mean())
         )
     assert sum(draws) / len(draws) == pytest.approx(expected, rel=0.03)
+
+
+def test_fused_estimate_averages_better_over_views_than_each_views_lmmse():
+    """K receptions of one residual, each decoded against noise_var / K and then averaged, is
+    the LMMSE of their mean: its error is the closed form, below the average of the per-view
+    LMMSE estimates (which keep each view's shrinkage), while each view alone is worse."""
+    h = w = 32
+    res, _, _ = _dct_energy_residual(h, w, [-6 - (k % 12) for k in range(48)], seed=7)
+    n = 16 * 64 // 2
+    sym, side = encode_residual(res, n)
+    nv, views = 1.0, 8
+    _, prior, g = side.sent_coefficients()
+    prior, g = prior[0], g[0]
+    gen = torch.Generator().manual_seed(8)
+    fused, own, fused_single, own_single = [], [], [], []
+    for _ in range(60):
+        rx = [
+            sym + torch.randn(sym.shape, generator=gen, dtype=torch.complex64) * math.sqrt(nv)
+            for _ in range(views)
+        ]
+        f = [decode_residual(y, nv / views, side) for y in rx]
+        o = [decode_residual(y, nv, side) for y in rx]
+        fused.append(float((sum(f) / views - res).pow(2).mean()))
+        own.append(float((sum(o) / views - res).pow(2).mean()))
+        fused_single.append(float((f[0] - res).pow(2).mean()))
+        own_single.append(float((o[0] - res).pow(2).mean()))
+    mean = lambda v: sum(v) / len(v)  # noqa: E731
+    assert mean(fused) < 0.8 * mean(own) and mean(fused_single) > mean(own_single)
+    sent = prior * (nv / 2 / views) / (g**2 * prior + nv / 2 / views)  # LMMSE of the mean
+    order = side.sent_coefficients()[0][0]
+    unsent = float(transform(res).pow(2).sum()) - float(transform(res)[0, order].pow(2).sum())
+    expected = (float(sent.sum()) + unsent) / (3 * h * w)
+    assert mean(fused) == pytest.approx(expected, rel=0.1)
 
 
 def test_bad_layer_size_is_refused():
@@ -203,6 +238,29 @@ def test_refinement_differentiates_through_the_layer(codec, shared_data):
         return sum(ps) / 4
 
     assert mean_psnr(ref) > mean_psnr(enc)
+
+
+def test_fusion_receiver_changes_only_the_layers_estimate(codec):
+    x = smooth_image(5, 96, 128)
+    enc = codec.encode(x, 10.0, 1 / 3)
+    assert enc.meta.analog is not None
+    assert for_fusion(codec, 1) is codec and for_fusion(learned_only(codec), 4).layer_fusion == 4
+    rx = for_fusion(codec, 4)
+    assert rx.layer_fusion == 4 and codec.layer_fusion == 1 and rx.sha256 == codec.sha256
+    y = enc.symbols + 0.5 * torch.randn(
+        enc.symbols.shape, generator=torch.Generator().manual_seed(9), dtype=torch.complex64
+    )
+    a, b = codec.decode(y, enc.meta, 10.0), rx.decode(y, enc.meta, 10.0)
+    assert not torch.equal(a, b)
+    # without the layer the decode is the learned decoder's, untouched
+    enc = learned_only(codec).encode(x, 10.0, 1 / 3)
+    y = enc.symbols + 0.5 * torch.randn(
+        enc.symbols.shape, generator=torch.Generator().manual_seed(9), dtype=torch.complex64
+    )
+    assert torch.equal(codec.decode(y, enc.meta, 10.0), rx.decode(y, enc.meta, 10.0))
+    for bad in (0.5, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="views"):
+            for_fusion(codec, bad)
 
 
 def test_jscc_learned_scheme_sends_the_learned_channels_only(codec):
