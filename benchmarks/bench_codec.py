@@ -21,7 +21,8 @@ shipped one); ``OSNERF_BENCH_CODEC_FOLDER``: another image folder;
 ``OSNERF_BENCH_CODEC_ONLY``: ``jscc`` or ``separate`` to run one half;
 ``OSNERF_BENCH_CODEC_CHANNELS``: comma-separated subset of the channels. Each eval-codec run
 is written to ``codec_<channel>_<part>.json`` in the output folder and reused when its
-arguments match (the LDPC chain takes the better part of an hour here).
+arguments match and the same clean commit made it (the LDPC chain takes the better part of an
+hour here).
 """
 
 from __future__ import annotations
@@ -104,14 +105,20 @@ def _anchors_at(channel: str, snr_db: float) -> dict[str, float]:
 
 
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
-    """One ``osnerf eval-codec`` run, reused when its result file has the same config."""
+    """One ``osnerf eval-codec`` run, reused when its result file has the same config and
+    was made by the same code (git commit of a clean tree)."""
     from osnerf.cli import main
+    from osnerf.provenance import git_commit
 
     path = out_dir / f"codec_{tag}.json"
     want = argv + ["--out", str(path)]
     if path.exists():
         doc = json.loads(path.read_text())
-        if doc.get("argv") == want[:-2]:
+        commit = git_commit()
+        same_code = (
+            doc.get("git_commit") == commit and commit != "unknown" and "-dirty" not in commit
+        )
+        if doc.get("argv") == want[:-2] and same_code:
             return doc
     if main(["eval-codec", *want]) != 0:
         raise RuntimeError(f"eval-codec failed: {' '.join(want)}")
