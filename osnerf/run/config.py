@@ -68,9 +68,8 @@ class RunConfig:
         layer_fusion: the semantic schemes' receiver estimates the codec's analog refinement
             layer as if the radiance field averaged each surface over about this many
             independently received views (:func:`semcodec.for_fusion`, in [1, 1000]): a
-            noisier, less shrunk estimate per view and a better field; the transmitter
-            simulates its split between learned channels and the layer for that receiver.
-            1: each view's own LMMSE and split.
+            noisier, less shrunk estimate per view and a better field. 1: each view's own
+            LMMSE.
     """
 
     scene: str = DEFAULT_SCENE

@@ -77,7 +77,6 @@ def prepare(cfg: RunConfig) -> Prepared:
         rx = semcodec.open_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
         scu.check_knowledge_base(codec.sha256, rx.sha256)
         rx = semcodec.for_fusion(rx, cfg.layer_fusion)
-        codec = semcodec.for_fusion(codec, cfg.layer_fusion, "transmitter")
     return Prepared(demand, schemes, codec, rx, scu)
 
 
