@@ -236,6 +236,11 @@ class Codec(ChannelTruncationCodec):
     this many independently received images of the same surface (a radiance field fusing the
     views), shrinking each image's estimate less leaves it noisier but less biased, and the
     average better (:func:`for_fusion`)."""
+    split_fusion = 1.0
+    """The transmitter simulates the split between learned channels and the layer at the
+    noise variance divided by this (>= 1): the noise left once the receiver has fused about
+    this many receptions. Its refinement still targets each image's own error (refining
+    against the fused receiver did worse end to end)."""
     architectures = ("adjscc_s4_w96", *(m for m in MODELS if m != "adjscc_s4_w96"))
     """Architectures :meth:`untrained` builds; the first is the default."""
 
@@ -421,7 +426,7 @@ class Codec(ChannelTruncationCodec):
         h, w = probe.shape[2:]
         positions = h * w // 16
         gen = torch.Generator().manual_seed(0)
-        nv = (10.0 ** (-snr / 10.0))[:, None]
+        nv = (10.0 ** (-snr / 10.0))[:, None] / self.split_fusion  # after the receiver's fusion
 
         def received(sym: Tensor) -> Tensor:
             noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64)
@@ -587,16 +592,21 @@ def learned_only(codec):
     return out
 
 
-def for_fusion(codec, views: float):
-    """``codec`` as a receiver whose images are averaged over about ``views`` independent
-    receptions (:attr:`Codec.layer_fusion`; a copy; codecs without the layer as they are)."""
+def for_fusion(codec, views: float, end: str = "receiver"):
+    """``codec`` for images averaged over about ``views`` independent receptions after
+    decoding (a copy; codecs without the analog layer as they are): as the ``"receiver"``
+    (:attr:`Codec.layer_fusion`) or as the ``"transmitter"`` that splits its budget for
+    such a receiver (:attr:`Codec.split_fusion`)."""
     views = float(views)
     if not (math.isfinite(views) and views >= 1):
         raise ValueError(f"views must be a finite number >= 1, got {views!r}")
-    if not hasattr(codec, "layer_fusion") or views == codec.layer_fusion:
+    attr = {"receiver": "layer_fusion", "transmitter": "split_fusion"}.get(end)
+    if attr is None:
+        raise ValueError(f"end must be 'receiver' or 'transmitter', got {end!r}")
+    if not hasattr(codec, attr) or views == getattr(codec, attr):
         return codec
     out = copy.copy(codec)
-    out.layer_fusion = views
+    setattr(out, attr, views)
     return out
 
 

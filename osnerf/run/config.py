@@ -17,7 +17,7 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
-CACHE_VERSION = 10
+CACHE_VERSION = 11
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,10 @@ class RunConfig:
         layer_fusion: the semantic schemes' receiver estimates the codec's analog refinement
             layer as if the radiance field averaged each surface over about this many
             independently received views (:func:`semcodec.for_fusion`, in [1, 1000]): a
-            noisier, less shrunk estimate per view and a better field. 1: each view's own
-            LMMSE.
+            noisier, less shrunk estimate per view and a better field. On a static link
+            (the SCU's pilot copies do not fade independently) the transmitter also simulates
+            its split between learned channels and the layer for that receiver. 1: each
+            view's own LMMSE and split.
     """
 
     scene: str = DEFAULT_SCENE

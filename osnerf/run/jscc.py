@@ -131,10 +131,12 @@ def _view_input(ctx, x, k: int, s_up: int, on_demand: bool) -> tuple[torch.Tenso
 def _encode(ctx, p, x, kw: dict, on_demand: bool):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
-    from semcodec import refine_symbols
+    from semcodec import for_fusion, refine_symbols
     from semcodec.contract import encode_with_focus
 
     codec = ctx.codec
+    if ctx.plan.static_link:  # the split's AWGN simulation holds: simulate it after fusion
+        codec = for_fusion(codec, ctx.config.layer_fusion, "transmitter")
     with torch.no_grad():
         enc = encode_with_focus(
             codec, x, p.encoder_snr_db, p.focus_cbr if on_demand else p.cbr, **kw

@@ -56,12 +56,15 @@ class RunPlan:
         views: one plan per candidate view, in view order (outage views included, flagged).
         oversampling: factor by which on-demand views are upsampled before encoding.
         height, width: captured view size, pixels.
+        static_link: the pilot copies did not fade independently (``phy.CopyFading``): a
+            static link, which the codec's AWGN simulation of its split represents.
     """
 
     views: tuple[ViewPlan, ...]
     oversampling: int
     height: int
     width: int
+    static_link: bool = False
 
     def on_demand(self) -> list[ViewPlan]:
         """Views sent on demand (not in outage)."""
@@ -91,6 +94,7 @@ class RunPlan:
             "oversampling": self.oversampling,
             "height": self.height,
             "width": self.width,
+            "static_link": self.static_link,
         }
 
     @classmethod
@@ -100,4 +104,5 @@ class RunPlan:
             int(d["oversampling"]),
             d["height"],
             d["width"],
+            bool(d.get("static_link", False)),
         )

@@ -333,7 +333,9 @@ class SemanticControlUnit:
             )
         if outage:
             self.log("link", "views in outage are not sent", views=sorted(outage))
-        return RunPlan(tuple(plans), int(s), int(height), int(width))
+        pol = self.rate_policy
+        static = not copy_fading.independent(pol.copy_spread_db, pol.max_copy_correlation)
+        return RunPlan(tuple(plans), int(s), int(height), int(width), static)
 
     def plan_run(
         self,

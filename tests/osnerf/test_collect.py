@@ -189,3 +189,31 @@ def test_on_demand_copies_only_where_they_fade_independently():
 def test_rate_policy_refuses_a_correlation_outside_minus_one_to_one():
     with pytest.raises(ValueError, match="max_copy_correlation must be in"):
         RatePolicy(max_copy_correlation=2.0)
+
+
+def test_plan_records_a_static_link_and_keeps_it_through_its_cache():
+    """A static link (copies do not fade independently) is what the codec's AWGN simulation
+    of its split represents; the plan says which one it is, also when read back."""
+    from osnerf.run.plan import RunPlan
+
+    m = np.zeros((3, 16, 16), np.float32)
+    m[:, 4:12, 4:12] = 1.0
+    views = [0, 1, 2]
+    snr = {v: s for v, s in zip(views, (0.0, -1.0, 2.0), strict=True)}
+    scu = SemanticControlUnit(Demand.parse("hydrant"))
+    for fading, static in ((CopyFading(5.0, 0.0), False), (CopyFading(3.0, 0.9), True)):
+        plan = scu.plan(
+            candidates=views,
+            on_demand=views,
+            link_snr_db=snr,
+            measured_snr_db=snr,
+            outage=[],
+            masks=m,
+            cbr_range=(1 / 48, 1 / 6),
+            snr_range_db=(-5.0, 20.0),
+            height=16,
+            width=16,
+            copy_fading=fading,
+        )
+        assert plan.static_link is static
+        assert RunPlan.from_dict(plan.to_dict()) == plan

@@ -263,6 +263,19 @@ def test_fusion_receiver_changes_only_the_layers_estimate(codec):
             for_fusion(codec, bad)
 
 
+def test_transmitter_for_a_fusing_receiver_splits_towards_the_layer(codec):
+    """Fused over many receptions the layer's noise averages down, so its split sends the
+    layer where a single image would not, and fewer learned channels under it."""
+    x = smooth_image(5, 96, 128)
+    tx = for_fusion(codec, 100, "transmitter")
+    assert tx.split_fusion == 100 and tx.layer_fusion == 1 and codec.split_fusion == 1
+    alone, fused = codec.encode(x, -5.0, 1 / 12).meta, tx.encode(x, -5.0, 1 / 12).meta
+    assert alone.analog is None and fused.analog is not None
+    assert fused.num_channels < alone.num_channels
+    with pytest.raises(ValueError, match="end"):
+        for_fusion(codec, 4, "both")
+
+
 def test_jscc_learned_scheme_sends_the_learned_channels_only(codec):
     from semcodec import LINK_SCHEMES
     from semcodec.evaluation import EvalContext
