@@ -135,7 +135,7 @@ def _encode(ctx, p, x, kw: dict, on_demand: bool):
     from semcodec.contract import encode_with_focus
 
     codec = ctx.codec
-    if ctx.plan.static_link:  # the split's AWGN simulation holds: simulate it after fusion
+    if getattr(ctx.plan, "static_link", False):  # the AWGN simulation holds: split after fusion
         codec = for_fusion(codec, ctx.config.layer_fusion, "transmitter")
     with torch.no_grad():
         enc = encode_with_focus(
