@@ -64,7 +64,7 @@ class RunPlan:
     oversampling: int
     height: int
     width: int
-    static_link: bool = False
+    static_link: bool
 
     def on_demand(self) -> list[ViewPlan]:
         """Views sent on demand (not in outage)."""
@@ -104,5 +104,5 @@ class RunPlan:
             int(d["oversampling"]),
             d["height"],
             d["width"],
-            bool(d.get("static_link", False)),
+            bool(d["static_link"]),
         )
