@@ -135,7 +135,7 @@ def _encode(ctx, p, x, kw: dict, on_demand: bool):
     from semcodec.contract import encode_with_focus
 
     codec = ctx.codec
-    if getattr(ctx.plan, "static_link", False):  # the AWGN simulation holds: split after fusion
+    if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
         codec = for_fusion(codec, ctx.config.layer_fusion, "transmitter")
     with torch.no_grad():
         enc = encode_with_focus(

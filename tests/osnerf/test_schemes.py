@@ -16,6 +16,7 @@ import torch
 import osnerf.schemes as schemes_mod
 import phy
 from osnerf.cli import main
+from osnerf.run.plan import RunPlan
 from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
@@ -220,7 +221,7 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     ctx = RunContext(
         SimpleNamespace(seed=0, refine_steps=0),
         {0: phy.FlatLink(phy.CHANNELS["awgn"]())},
-        SimpleNamespace(oversampling=3),
+        RunPlan((), oversampling=3, height=h, width=w, static_link=False),
         codec,
         codec,
         np.ones(3, np.float32),
@@ -259,7 +260,8 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     out = {}
     for steps in (0, 30):
         cfg = SimpleNamespace(seed=0, channel="awgn", refine_steps=steps)
-        ctx = RunContext(cfg, dict.fromkeys(range(4), link), None, codec, codec, np.ones(3))
+        run_plan = RunPlan((), oversampling=1, height=48, width=48, static_link=False)
+        ctx = RunContext(cfg, dict.fromkeys(range(4), link), run_plan, codec, codec, np.ones(3))
         out[steps] = SCHEMES["full"]().transmit(ctx, plans, images, torch.Generator())
     assert np.array_equal(out[0].symbols, out[30].symbols)
     mse = {k: float(((t.images - images) ** 2).mean()) for k, t in out.items()}
