@@ -395,13 +395,17 @@ class Codec(ChannelTruncationCodec):
         """
         if not self.analog_layer:
             return None
-        m = self._best_split(_centre(region, PLAN_PROBE_PX), snr, budget / positions, m_full)
+        probe = _centre(region, PLAN_PROBE_PX)
+        m, bases = self._best_split(probe, snr, budget / positions, m_full)
         if m is None:
             return None
         h, w = region.shape[2:]
         with torch.no_grad():
-            sym, meta = self._base(region, snr, m)
-            residual = region - self.decode_differentiable(sym, meta, snr)
+            if probe.shape == region.shape:  # the probe was the whole region
+                sym, residual = bases[m]
+            else:
+                sym, meta = self._base(region, snr, m)
+                residual = region - self.decode_differentiable(sym, meta, snr)
             n = layer_symbols(h, w, budget - m * positions)
             if n < 1:
                 return None
@@ -420,9 +424,11 @@ class Codec(ChannelTruncationCodec):
 
     def _best_split(
         self, probe: Tensor, snr: Tensor, per_position: float, m_full: int
-    ) -> int | None:
+    ) -> tuple[int | None, dict]:
         """Learned channels under the layer with the least simulated error on ``probe`` at
-        ``per_position`` symbols per position, or None when ``m_full`` channels alone win."""
+        ``per_position`` symbols per position, or None when ``m_full`` channels alone win;
+        and each tried split's learned symbols and noiseless residual over the probe
+        (learned channels -> (symbols, residual))."""
         h, w = probe.shape[2:]
         positions = h * w // 16
         gen = torch.Generator().manual_seed(0)
@@ -438,8 +444,8 @@ class Codec(ChannelTruncationCodec):
             if m < m_full and n >= side_symbols(h, w, n):  # side information under half of it
                 candidates[m] = n
         if not candidates:
-            return None
-        best, choice = math.inf, None
+            return None, {}
+        best, choice, bases = math.inf, None, {}
         with torch.no_grad():
             sym, meta = self._base(probe, snr, m_full)
             learned = float(
@@ -447,13 +453,14 @@ class Codec(ChannelTruncationCodec):
             )
             for m, n in candidates.items():
                 sym, meta = self._base(probe, snr, m)
-                layer, side = encode_residual(probe - self.decode_differentiable(sym, meta, snr), n)
+                bases[m] = sym, probe - self.decode_differentiable(sym, meta, snr)
+                layer, side = encode_residual(bases[m][1], n)
                 y = self.decode_differentiable(received(sym), meta, snr)
                 y = (y + decode_residual(received(layer), nv, side)).clamp(0, 1)
                 err = float(((y - probe) ** 2).mean())
                 if err < best:
                     best, choice = err, m
-        return choice if best * 10 ** (LAYER_MARGIN_DB / 10) < learned else None
+        return (choice if best * 10 ** (LAYER_MARGIN_DB / 10) < learned else None), bases
 
     def decode(
         self,
