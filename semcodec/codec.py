@@ -27,6 +27,7 @@ from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
 from semcodec.analog import (
+    SIDE_BITS_PER_SYMBOL,
     AnalogSide,
     decode_residual,
     encode_residual,
@@ -110,7 +111,7 @@ class EncodedMeta:
         ``positions``, plus the analog layer's chunk energies."""
         layer = self.analog.side_info_bits() if self.analog is not None else 0
         if self.crop is not None:
-            return 4 * 16 + layer
+            return box_bits(self.height, self.width) + layer
         if self.positions is None:
             return layer
         return math.ceil(self.height / 4) * math.ceil(self.width / 4)
@@ -336,8 +337,9 @@ class Codec(ChannelTruncationCodec):
             objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
             top, left, rows, cols = attribution_box(heat, include=objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
-            m = min(c, budget // (rows * cols))
+            m = min(c, (budget - box_side_symbols(h, w)) // (rows * cols))
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
+                budget -= box_side_symbols(h, w)  # the box's side information rides in it
                 crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
                 xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
                 plan = self._layer_plan(xc, snr, budget, rows * cols, m)
@@ -588,6 +590,21 @@ class Codec(ChannelTruncationCodec):
         full = torch.zeros(b, 3, max(y.shape[2], top + rh), max(y.shape[3], left + rw))
         full[:, :, top : top + rh, left : left + rw] = res
         return (y + full[:, :, : meta.height, : meta.width]).clamp(0, 1)
+
+
+def box_bits(height: int, width: int) -> int:
+    """Bits of a focus box's side information in a ``height x width`` image: its top, left,
+    height and width in 4-pixel units (the feature grid's), each in as many bits as the
+    image's size in those units needs."""
+    rows, cols = -(-int(height) // 4), -(-int(width) // 4)
+    return 2 * (math.ceil(math.log2(rows + 1)) + math.ceil(math.log2(cols + 1)))
+
+
+def box_side_symbols(height: int, width: int) -> int:
+    """Channel symbols a focus box's side information (:func:`box_bits`) costs per image,
+    at ``semcodec.analog.SIDE_BITS_PER_SYMBOL`` like the analog layer's: in focus mode it
+    is charged to the view's budget."""
+    return math.ceil(box_bits(height, width) / SIDE_BITS_PER_SYMBOL)
 
 
 def learned_only(codec):

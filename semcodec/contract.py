@@ -36,7 +36,15 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from semcodec.codec import FOCUS_FILL, MIN_SIDE_PX, Encoded, EncodedMeta, check_images
+from semcodec.codec import (
+    FOCUS_FILL,
+    MIN_SIDE_PX,
+    Encoded,
+    EncodedMeta,
+    box_bits,
+    box_side_symbols,
+    check_images,
+)
 
 CODEC_MEMBERS = (
     "name",
@@ -163,8 +171,9 @@ class BoxMeta:
     positions: None = None
 
     def side_info_bits(self) -> int:
-        """Bits of side information per image: the box (4 x 16 bits) and the codec's own."""
-        return 4 * 16 + self.inner.side_info_bits()
+        """Bits of side information per image: the box (:func:`semcodec.codec.box_bits`)
+        and the codec's own."""
+        return box_bits(self.height, self.width) + self.inner.side_info_bits()
 
 
 def mask_box(mask: Tensor, height: int, width: int) -> tuple[int, int, int, int]:
@@ -197,7 +206,8 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
     """Focus for any codec: send the objects' bounding box at the view's symbol budget.
 
     The box (:func:`mask_box`) is encoded as an image of its own at CBR
-    ``budget_symbols / (3 * rows * cols)``, capped at the codec's largest CBR. A budget below
+    ``(budget_symbols - box) / (3 * rows * cols)``, where ``box`` is what the box's side
+    information costs (:func:`semcodec.codec.box_side_symbols`), capped at the codec's largest CBR. A budget below
     the codec's smallest CBR over the box sends the box downscaled (area) until it fits (at
     least 8 px a side; a smaller budget is a ValueError); the receiver upsamples it back. :func:`decode_box` pastes it on a mid-grey canvas.
 
@@ -222,7 +232,12 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
     top, left, rows, cols = mask_box(mask.float(), h, w)
     box = x[:, :, top : top + rows, left : left + cols]
     lo, hi = codec.cbr_range
-    budget = int(budget_symbols)
+    budget = int(budget_symbols) - box_side_symbols(h, w)  # the box's side information
+    if budget < 1:
+        raise ValueError(
+            f"budget_symbols {budget_symbols} does not carry the box's side information "
+            f"({box_side_symbols(h, w)} symbols)"
+        )
     scale = min(1.0, math.sqrt(budget / (lo * 3 * rows * cols)))
     while True:  # downscale the box until the codec's message fits the budget
         size = (max(int(rows * scale), MIN_SIDE_PX), max(int(cols * scale), MIN_SIDE_PX))

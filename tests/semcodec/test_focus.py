@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from semcodec import demand_weight_map, learned_only, select_positions
+from semcodec import box_side_symbols, demand_weight_map, learned_only, select_positions
 from semcodec.focus import attribution_box, demand_positions
 
 
@@ -69,7 +69,7 @@ def _object_scene():
 def test_focus_sends_the_object_box_within_budget(tiny_codec):
     x, mask = _object_scene()
     cbr = 1 / 16
-    budget = round(cbr * 3 * 64 * 64)
+    budget = round(cbr * 3 * 64 * 64) - box_side_symbols(64, 64)  # the box's side information
     # learned channels only: on noise, an untrained model's decode loses to the analog layer
     enc = learned_only(tiny_codec).encode(x, 5.0, cbr, mask=mask, demand_weights=[1.0])
     top, left, h, w = enc.meta.crop
@@ -106,8 +106,9 @@ def test_centre_first_orders_a_box_from_its_centre_out():
 
 def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
     """A reliability-aware decoder gets channel m + 1 at the box's central positions (the
-    rest of that channel looks erased to it), so the focus budget is spent to the symbol."""
-    from semcodec import Codec, make_model
+    rest of that channel looks erased to it), so the focus budget is spent to the symbol:
+    the box's side information and the symbols fill it."""
+    from semcodec import Codec, box_side_symbols, make_model
     from semcodec.codec import centre_first
     from semcodec.model import features_to_symbols, side_info, symbols_to_features
 
@@ -116,7 +117,8 @@ def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
     codec = Codec(model, {"sha256": "t" * 64, "name": "tiny-v2"})
     x, mask = _object_scene()
     cbr, snr = 1 / 40, 5.0
-    budget = round(cbr * 3 * 64 * 64)
+    budget = round(cbr * 3 * 64 * 64) - box_side_symbols(64, 64)
+    assert box_side_symbols(64, 64) == 40  # 4 x 5 bits (0..16 in 4 px units) at 0.5 bit/symbol
     enc = codec.encode(x, snr, cbr, mask=mask, demand_weights=[1.0])
     top, left, h, w = enc.meta.crop
     rows, cols, m = h // 4, w // 4, enc.meta.num_channels

@@ -78,6 +78,12 @@ def test_a_checkpoint_of_another_codec_is_refused_naming_both(tmp_path):
         make_codec(f"deepjscc:{semcodec.DEFAULT_CHECKPOINT}")
 
 
+def enc_bits(codec, x, mask) -> int:
+    """The box's share of a focus encoding's side information bits."""
+    enc = semcodec.focus_by_box(codec, x, mask, 400, 5.0)
+    return enc.meta.side_info_bits() - enc.meta.inner.side_info_bits()
+
+
 def test_focus_by_box_sends_the_box_at_the_budget():
     codec = make_codec("deepjscc")
     torch.manual_seed(0)
@@ -85,24 +91,29 @@ def test_focus_by_box_sends_the_box_at_the_budget():
     mask = torch.zeros(1, 1, 64, 96)
     mask[..., 20:30, 40:61] = 1.0
     assert semcodec.mask_box(mask, 64, 96) == (16, 40, 16, 24)
-    budget = 16 * 24 * 3 // 16  # CBR 1/16 over the box
+    # the box's side information: 4 coordinates of 5 bits in 4 px units, at 0.5 bit/symbol
+    box = semcodec.box_side_symbols(64, 96)
+    assert box == 40 and enc_bits(codec, x, mask) == 20
+    budget = 16 * 24 * 3 // 16 + box  # CBR 1/16 over the box, and the box's side information
     enc = semcodec.encode_with_focus(codec, x, 5.0, budget / (3 * 64 * 96), mask)
     assert isinstance(enc.meta, BoxMeta) and enc.meta.crop == (16, 40, 16, 24)
-    assert enc.meta.num_symbols == budget == enc.symbols.shape[1]
+    assert enc.meta.num_symbols + box == budget and enc.meta.num_symbols == enc.symbols.shape[1]
     y = semcodec.decode_received(codec, enc.symbols, enc.meta, 40.0, codec.sha256)
     assert y.shape == x.shape
     outside = torch.ones_like(y, dtype=torch.bool)
     outside[..., 16:32, 40:64] = False
     assert torch.all(y[outside] == 0.5)
     # a budget below the smallest rate over the box: the box goes downscaled, within budget
-    small = semcodec.focus_by_box(codec, x, mask, 10, 5.0)
+    small = semcodec.focus_by_box(codec, x, mask, box + 10, 5.0)
     assert 4 <= small.meta.num_symbols <= 10 and small.meta.crop == (16, 40, 16, 24)
     y = semcodec.decode_box(codec, small.symbols, small.meta, 5.0)
     assert y.shape == x.shape
     with pytest.raises(ValueError, match="budget_symbols must be >= 1"):
         semcodec.focus_by_box(codec, x, mask, 0, 5.0)
     with pytest.raises(ValueError, match="budget_symbols 3 is below the smallest message"):
-        semcodec.focus_by_box(codec, x, mask, 3, 5.0)
+        semcodec.focus_by_box(codec, x, mask, box + 3, 5.0)
+    with pytest.raises(ValueError, match="does not carry the box's side information"):
+        semcodec.focus_by_box(codec, x, mask, box, 5.0)
 
 
 def test_a_plugin_codec_runs_over_awgn_and_block_rayleigh(plugin):
