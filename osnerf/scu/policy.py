@@ -46,11 +46,12 @@ class RatePolicy:
     """On-demand views cost this fraction of what sending every view whole would cost at the
     same SNR (the full-scene budget): the symbols saved by not sending the background are
     spent on the objects through oversampling. In (0, 1]."""
-    min_fill: float = 0.5
+    min_fill: float = 1 / 3
     """The SCU takes the largest oversampling whose full rate (every channel on every position
     touching the objects) the on-demand budget covers at least this fraction of, and scales
     the rate to spend it, in (0, 1]: a larger oversampling at too few channels per position
-    loses to a smaller one at more."""
+    loses to a smaller one at more. The fraction is of the codec's largest CBR (1/3 for the
+    shipped codec), so it is measured again when that changes (README)."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:

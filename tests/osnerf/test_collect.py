@@ -133,9 +133,12 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     reps = np.array([2, 1, 1])
     full = {1: 128, 2: 512, 3: 1152}
     cbr_range = (1 / 48, 1 / 6)
-    scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, fill >= 1/2
-    # budget 512: s = 3 would get 0.44 of its full rate, s = 2 all of it
-    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=768) == (2, 1.0)
+    scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, fill >= 1/3
+    # budget 360: s = 3 would get 0.31 of its full rate, s = 2 0.70 of it
+    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=540) == (
+        2,
+        pytest.approx(360 / 512),
+    )
     assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
         str(k): full[k] for k in (2, 3)
     }
@@ -145,8 +148,8 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     cbr = scu.focus_cbr(m, cbr_range, [0, 1, 2], oversampling=s, scale=scale)
     assert cbr == pytest.approx([600 / 1152 / 24] * 3)
     assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(600)
-    # budget 200: below half the full rate at s = 2 and 3; s = 1 spends all of it
-    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=300) == (1, 200 / 128)
+    # budget 160: below a third of the full rate at s = 2 and 3; s = 1 spends all of it
+    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=240) == (1, 160 / 128)
     assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
         str(k): v for k, v in full.items()
     }
@@ -162,10 +165,10 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
 
 def test_on_demand_copies_only_where_they_fade_independently():
     """The same 8 x 8 object as above in 3 views, each sent twice as a whole view; one copy
-    of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 720 (2/3
-    of 1080): with independent fades the copies stay (s = 3 would fill 720 / 1728 < 1/2 of
-    its full rate, so s = 2 at 720 / 768); on a static channel one copy each buys s = 3 at
-    720 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
+    of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 540 (2/3
+    of 810): with independent fades the copies stay (s = 3 would fill 540 / 1728 < 1/3 of
+    its full rate, so s = 2 at 540 / 768); on a static channel one copy each buys s = 3 at
+    540 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
     budget one copy at s = 3 cannot take (beyond 864) keeps them all."""
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0
@@ -174,14 +177,14 @@ def test_on_demand_copies_only_where_they_fade_independently():
     cbr_range = (1 / 48, 1 / 6)
     scu = SemanticControlUnit(Demand.parse("hydrant"))
     fading, static = CopyFading(5.0, 0.0), CopyFading(3.0, 0.9)
-    kept = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1080, fading)
+    kept = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 810, fading)
     assert kept.tolist() == [2, 2, 2]
-    assert scu.choose_oversampling(m, cbr_range, kept, 1080) == (2, pytest.approx(720 / 768))
-    one = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1080, static)
+    assert scu.choose_oversampling(m, cbr_range, kept, 810) == (2, pytest.approx(540 / 768))
+    one = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 810, static)
     assert one.tolist() == [1, 1, 1] and "spent as rate" in scu.decisions[-1]["decision"]
-    assert scu.choose_oversampling(m, cbr_range, one, 1080) == (3, pytest.approx(720 / 864))
-    low = scu.choose_focus_repetitions(m, cbr_range, reps, np.array([0.0, -7.0, 2.0]), 1080, static)
-    assert low.tolist() == [1, 2, 1]  # 288 * 4 = 1152 at s = 3 takes the 720
+    assert scu.choose_oversampling(m, cbr_range, one, 810) == (3, pytest.approx(540 / 864))
+    low = scu.choose_focus_repetitions(m, cbr_range, reps, np.array([0.0, -7.0, 2.0]), 810, static)
+    assert low.tolist() == [1, 2, 1]  # 288 * 4 = 1152 at s = 3 takes the 540
     big = scu.choose_focus_repetitions(m, cbr_range, reps, snr, 1350, static)  # 900 > 864
     assert big.tolist() == [2, 2, 2] and "cannot take" in scu.decisions[-1]["decision"]
 
