@@ -7,10 +7,11 @@ digital, symbols jscc / full, processing time jscc / full), the total wall time 
 demo's budget is 10 minutes on 2 cores) and the machine load (timings on a shared machine
 are pessimistic).
 
-Then the over-the-air goal: `osnerf run --scene tiny --channel ota --snr-db 0` (emulated
-HackRFs at their defaults) for seeds 0-2 with jscc, digital and gt, each seed's jscc - gt in
-object PSNR against the goal of at most 3 dB under gt (the NeRF budget is wall-clock
-seconds, so a seed moves by about +-0.3 dB from run to run).
+Then the over-the-air goals: `osnerf run --scene tiny --channel ota --snr-db 0` (emulated
+HackRFs at their defaults) for seeds 0-2 with jscc, digital and gt: each seed's jscc - gt in
+object PSNR against the goal of at most 3 dB under gt, and jscc - digital against the goal
+of jscc at least digital's on every seed (every field takes the same NeRF steps, so a seed's
+numbers repeat; a change to the sent symbols moves them by about 0.1 dB).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ def _over_the_air(out_dir: Path) -> dict:
         report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
         sch = report.schemes
         gap = sch["jscc"].psnr_object - sch["gt"].psnr_object
+        over_digital = sch["jscc"].psnr_object - sch["digital"].psnr_object
         rows.append(
             {
                 "seed": seed,
@@ -46,21 +48,25 @@ def _over_the_air(out_dir: Path) -> dict:
                 "psnr_object": {n: r.psnr_object for n, r in sch.items()},
                 "psnr_received_object": {n: r.psnr_received_object for n, r in sch.items()},
                 "jscc_minus_gt_db": gap,
+                "jscc_minus_digital_db": over_digital,
                 "frames_lost": report.link.get("frames_lost"),
                 "object_oversampling": report.views["object_oversampling"],
                 "repetitions_on_demand": sorted(
                     set(report.views["repetitions_on_demand"].values())
                 ),
                 "met": gap >= -OTA_GOAL_DB,
+                "jscc_at_least_digital": over_digital >= 0,
             }
         )
     return {
         "command": "osnerf run --scene tiny --channel ota --snr-db 0 --schemes jscc,digital,gt "
         "--renderer-steps 0 --seed S",
         "goal": f"jscc within {OTA_GOAL_DB:g} dB of gt (object PSNR)",
+        "goal_over_digital": "jscc's object PSNR at least digital's on every seed",
         "rows": rows,
         "mean_jscc_minus_gt_db": sum(r["jscc_minus_gt_db"] for r in rows) / len(rows),
         "goal_met_every_seed": all(r["met"] for r in rows),
+        "jscc_at_least_digital_every_seed": all(r["jscc_at_least_digital"] for r in rows),
     }
 
 
