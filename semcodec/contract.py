@@ -207,9 +207,11 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
 
     The box (:func:`mask_box`) is encoded as an image of its own at CBR
     ``(budget_symbols - box) / (3 * rows * cols)``, where ``box`` is what the box's side
-    information costs (:func:`semcodec.codec.box_side_symbols`), capped at the codec's largest CBR. A budget below
-    the codec's smallest CBR over the box sends the box downscaled (area) until it fits (at
-    least 8 px a side; a smaller budget is a ValueError); the receiver upsamples it back. :func:`decode_box` pastes it on a mid-grey canvas.
+    information costs (:func:`semcodec.codec.box_side_symbols`; a box edge on the image's
+    border is coded as the border), capped at the codec's largest CBR. A budget below the
+    codec's smallest CBR over the box sends the box downscaled (area) until it fits (at least
+    8 px a side; a smaller budget is a ValueError); the receiver upsamples it back.
+    :func:`decode_box` pastes it on a mid-grey canvas.
 
     Args:
         codec: any :class:`SemanticCodec`.
