@@ -76,6 +76,12 @@ class RatePolicy:
             if not 0 < getattr(self, name) <= 1:
                 raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
 
+    def copies_independent(self, copy_fading) -> bool:
+        """Whether copies fade independently on links with these pilot measurements
+        (``phy.CopyFading.independent`` at :attr:`copy_spread_db` and
+        :attr:`max_copy_correlation`): where they do not, the link is static."""
+        return copy_fading.independent(self.copy_spread_db, self.max_copy_correlation)
+
     def cbr_for(self, snr_db: float) -> float:
         """The CBR of the band ``snr_db`` falls in."""
         k = int(np.searchsorted(np.asarray(self.thresholds_db), float(snr_db), side="right"))

@@ -204,7 +204,7 @@ class SemanticControlUnit:
         if not np.any(reps > 1):
             return reps
         details = {"spread_db": copy_fading.spread_db, "correlation": copy_fading.correlation}
-        if copy_fading.independent(pol.copy_spread_db, pol.max_copy_correlation):
+        if pol.copies_independent(copy_fading):
             self.log("rate", "on-demand copies fade independently: send copies", **details)
             return reps
         out = np.where(np.asarray(measured_snr_db) < pol.static_repeat_below_db, reps, 1)
@@ -333,8 +333,7 @@ class SemanticControlUnit:
             )
         if outage:
             self.log("link", "views in outage are not sent", views=sorted(outage))
-        pol = self.rate_policy
-        static = not copy_fading.independent(pol.copy_spread_db, pol.max_copy_correlation)
+        static = not self.rate_policy.copies_independent(copy_fading)
         return RunPlan(tuple(plans), int(s), int(height), int(width), static)
 
     def plan_run(
