@@ -337,9 +337,10 @@ class Codec(ChannelTruncationCodec):
             objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
             top, left, rows, cols = attribution_box(heat, include=objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
-            m = min(c, (budget - box_side_symbols(h, w)) // (rows * cols))
+            box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
+            m = min(c, (budget - box_side) // (rows * cols))
             if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
-                budget -= box_side_symbols(h, w)  # the box's side information rides in it
+                budget -= box_side
                 crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
                 xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
                 plan = self._layer_plan(xc, snr, budget, rows * cols, m)

@@ -234,11 +234,12 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
     top, left, rows, cols = mask_box(mask.float(), h, w)
     box = x[:, :, top : top + rows, left : left + cols]
     lo, hi = codec.cbr_range
-    budget = int(budget_symbols) - box_side_symbols(h, w)  # the box's side information
+    box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
+    budget = int(budget_symbols) - box_side
     if budget < 1:
         raise ValueError(
             f"budget_symbols {budget_symbols} does not carry the box's side information "
-            f"({box_side_symbols(h, w)} symbols)"
+            f"({box_side} symbols)"
         )
     scale = min(1.0, math.sqrt(budget / (lo * 3 * rows * cols)))
     while True:  # downscale the box until the codec's message fits the budget

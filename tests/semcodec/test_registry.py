@@ -78,12 +78,6 @@ def test_a_checkpoint_of_another_codec_is_refused_naming_both(tmp_path):
         make_codec(f"deepjscc:{semcodec.DEFAULT_CHECKPOINT}")
 
 
-def enc_bits(codec, x, mask) -> int:
-    """The box's share of a focus encoding's side information bits."""
-    enc = semcodec.focus_by_box(codec, x, mask, 400, 5.0)
-    return enc.meta.side_info_bits() - enc.meta.inner.side_info_bits()
-
-
 def test_focus_by_box_sends_the_box_at_the_budget():
     codec = make_codec("deepjscc")
     torch.manual_seed(0)
@@ -93,7 +87,8 @@ def test_focus_by_box_sends_the_box_at_the_budget():
     assert semcodec.mask_box(mask, 64, 96) == (16, 40, 16, 24)
     # the box's side information: 4 coordinates of 5 bits in 4 px units, at 0.5 bit/symbol
     box = semcodec.box_side_symbols(64, 96)
-    assert box == 40 and enc_bits(codec, x, mask) == 20
+    wide = semcodec.focus_by_box(codec, x, mask, 400, 5.0).meta
+    assert box == 40 and wide.side_info_bits() - wide.inner.side_info_bits() == 20
     budget = 16 * 24 * 3 // 16 + box  # CBR 1/16 over the box, and the box's side information
     enc = semcodec.encode_with_focus(codec, x, 5.0, budget / (3 * 64 * 96), mask)
     assert isinstance(enc.meta, BoxMeta) and enc.meta.crop == (16, 40, 16, 24)
