@@ -6,6 +6,7 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 
 import phy
 from osnerf.collect import Demand
@@ -174,12 +175,24 @@ class RunConfig:
         check_demand(self.scene, d.objects)
         return d
 
+    @cached_property
+    def _codec_sha256(self) -> tuple[str, str]:
+        """(transmitter, receiver) codec weights' sha256 (opening a codec reads its checkpoint)."""
+        import semcodec
+
+        tx = semcodec.open_codec(self.codec).sha256
+        rx = semcodec.open_codec(self.receiver_codec).sha256 if self.receiver_codec else tx
+        return tx, rx
+
     def key(self) -> str:
-        """Hash of everything that changes any scheme's results (the cache key). The list of
-        schemes is not part of it: each scheme's stages are cached under its own name."""
+        """Hash of everything that changes any scheme's results (the cache key): the settings
+        and the weights of both ends' codecs (their ``sha256``, so a checkpoint replaced under
+        the same path, the shipped default included, makes another key). The list of schemes
+        is not part of it: each scheme's stages are cached under its own name."""
         d = {k: v for k, v in asdict(self).items() if k != "schemes"}
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])
+        d["codec_sha256"] = self._codec_sha256
         blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]

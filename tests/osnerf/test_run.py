@@ -173,6 +173,24 @@ def test_cache_key_does_not_depend_on_how_a_number_is_written():
     assert RunConfig(schemes=("jscc",)).key() == RunConfig(schemes=("gt", "jscc")).key()
 
 
+def test_cache_key_follows_the_codec_weights_not_the_path(tmp_path):
+    """A checkpoint replaced under the same path (a new shipped default, a retrained file) is
+    another run: its jscc stages are not reused from the old weights' cache folder."""
+    import shutil
+
+    import semcodec
+    from osnerf.run import RunConfig
+
+    ckpts = semcodec.DEFAULT_CHECKPOINT.parent
+    path = tmp_path / "codec.safetensors"
+    shutil.copy(ckpts / "default.safetensors", path)
+    tx, rx = RunConfig(codec=f"jscc:{path}").key(), RunConfig(receiver_codec=f"jscc:{path}").key()
+    assert RunConfig(codec=f"jscc:{path}").key() == tx
+    shutil.copy(ckpts / "mix-v2.2.safetensors", path)
+    assert RunConfig(codec=f"jscc:{path}").key() != tx
+    assert RunConfig(receiver_codec=f"jscc:{path}").key() != rx
+
+
 def _scheme(psnr_object, symbols, processing, curve=(), encode=0.0, decode=0.0):
     from osnerf.report import SchemeReport
 
