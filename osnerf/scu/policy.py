@@ -46,12 +46,13 @@ class RatePolicy:
     """On-demand views cost this fraction of what sending every view whole would cost at the
     same SNR (the full-scene budget): the symbols saved by not sending the background are
     spent on the objects through oversampling. In (0, 1]."""
-    min_fill: float = 1 / 3
-    """The SCU takes the largest oversampling whose full rate (every channel on every position
-    touching the objects) the on-demand budget covers at least this fraction of, and scales
-    the rate to spend it, in (0, 1]: a larger oversampling at too few channels per position
-    loses to a smaller one at more. The fraction is of the codec's largest CBR (1/3 for the
-    shipped codec), so it is measured again when that changes (README)."""
+    min_position_cbr: float = 0.09
+    """The SCU takes the largest oversampling at which the on-demand budget gives every
+    feature position touching the objects at least this CBR (the codec's largest CBR is
+    every channel on them), and scales the rate to spend the budget, in (0, 1]: a larger
+    oversampling at too few channels per position loses to a smaller one at more. A CBR per
+    position, not a fraction of the codec's largest CBR, so it holds across codecs (README,
+    "Why the defaults")."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:
@@ -72,7 +73,7 @@ class RatePolicy:
             raise ValueError(
                 f"max_copy_correlation must be in [-1, 1], got {self.max_copy_correlation}"
             )
-        for name in ("object_budget_fraction", "min_fill"):
+        for name in ("object_budget_fraction", "min_position_cbr"):
             if not 0 < getattr(self, name) <= 1:
                 raise ValueError(f"{name} must be in (0, 1], got {getattr(self, name)}")
 

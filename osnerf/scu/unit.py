@@ -144,11 +144,11 @@ class SemanticControlUnit:
     ) -> tuple[int, float]:
         """The object oversampling s and the rate scale that spend the on-demand budget
         (``rate_policy.object_budget_fraction`` of the full-scene budget): the largest s <=
-        ``rate_policy.max_object_oversampling`` whose full rate (every channel on every
-        position touching the objects, times the repetitions) the budget covers at least
-        ``rate_policy.min_fill`` of (else s = 1), and scale = budget / that full rate
-        (logged). The codec sends at most all channels over its box, so a scale above 1
-        spends only what the box's rim can take.
+        ``rate_policy.max_object_oversampling`` at which the budget gives every position
+        touching the objects at least ``rate_policy.min_position_cbr`` (else s = 1), and
+        scale = budget / the full rate at s (every channel, i.e. the codec's largest CBR, on
+        every such position, times the repetitions; logged). The codec sends at most all
+        channels over its box, so a scale above 1 spends only what the box's rim can take.
 
         Args:
             masks: [num_views, height, width] union masks of the on-demand views.
@@ -163,7 +163,7 @@ class SemanticControlUnit:
         for s in range(pol.max_object_oversampling, 0, -1):
             n = full_rate_symbols(masks, cbr_range, repetitions, s, block_px)
             tried[s] = int(round(n))
-            if budget >= pol.min_fill * n or s == 1:
+            if budget >= pol.min_position_cbr / cbr_range[1] * n or s == 1:
                 break
         scale = float(budget / max(n, 1e-9))
         self.log(

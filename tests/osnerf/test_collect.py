@@ -133,7 +133,8 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     reps = np.array([2, 1, 1])
     full = {1: 128, 2: 512, 3: 1152}
     cbr_range = (1 / 48, 1 / 6)
-    scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, fill >= 1/3
+    scu = SemanticControlUnit(Demand.parse("hydrant"))  # 2/3 of the full scene, 0.09 CBR
+    # per position = 0.54 of the full rate at CBR 1/6
     # budget 360: s = 3 would get 0.31 of its full rate, s = 2 0.70 of it
     assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=540) == (
         2,
@@ -142,13 +143,19 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
         str(k): full[k] for k in (2, 3)
     }
-    # budget 600: s = 3 at 600 / 1152 of its full rate; the views' CBRs spend the budget
-    s, scale = scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=900)
-    assert (s, scale) == (3, pytest.approx(600 / 1152))
+    # budget 600: s = 3 would get 0.52 of its full rate (0.087 per position), s = 2 1.17
+    assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=900)[0] == 2
+    # budget 720: s = 3 at 720 / 1152 of its full rate; the views' CBRs spend the budget
+    s, scale = scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=1080)
+    assert (s, scale) == (3, pytest.approx(720 / 1152))
     cbr = scu.focus_cbr(m, cbr_range, [0, 1, 2], oversampling=s, scale=scale)
-    assert cbr == pytest.approx([600 / 1152 / 24] * 3)
-    assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(600)
-    # budget 160: below a third of the full rate at s = 2 and 3; s = 1 spends all of it
+    assert cbr == pytest.approx([720 / 1152 / 24] * 3)
+    assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(720)
+    # a codec with twice the largest CBR: the same budget is the same CBR per position
+    # (0.104), so the same s, at half the fraction of the doubled full rate
+    wide = scu.choose_oversampling(m, (1 / 48, 1 / 3), reps, full_scene_symbols=1080)
+    assert wide == (3, pytest.approx(720 / 2304))
+    # budget 160: below 0.09 per position at s = 2 and 3; s = 1 spends all of it
     assert scu.choose_oversampling(m, cbr_range, reps, full_scene_symbols=240) == (1, 160 / 128)
     assert scu.decisions[-1]["full_rate_symbols_by_oversampling"] == {
         str(k): v for k, v in full.items()
@@ -159,15 +166,15 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     assert one.choose_oversampling(m, cbr_range, reps, full_scene_symbols=10**6)[0] == 1
     with pytest.raises(ValueError, match="object_budget_fraction must be in"):
         RatePolicy(object_budget_fraction=1.5)
-    with pytest.raises(ValueError, match="min_fill must be in"):
-        RatePolicy(min_fill=0.0)
+    with pytest.raises(ValueError, match="min_position_cbr must be in"):
+        RatePolicy(min_position_cbr=0.0)
 
 
 def test_on_demand_copies_only_where_they_fade_independently():
     """The same 8 x 8 object as above in 3 views, each sent twice as a whole view; one copy
     of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 540 (2/3
-    of 810): with independent fades the copies stay (s = 3 would fill 540 / 1728 < 1/3 of
-    its full rate, so s = 2 at 540 / 768); on a static channel one copy each buys s = 3 at
+    of 810): with independent fades the copies stay (s = 3 would give 540 / 1728 of its full
+    rate, 0.05 CBR per position, so s = 2 at 540 / 768); on a static channel one copy each buys s = 3 at
     540 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
     budget one copy at s = 3 cannot take (beyond 864) keeps them all."""
     m = np.zeros((3, 16, 16), np.float32)
