@@ -52,6 +52,9 @@ class Transmission:
         seconds: ``encode``, ``decode`` (and ``encode_cpu``, ``decode_cpu``, ``channel``, or
             ``codec_and_ldpc`` for separate schemes), wall seconds over all views.
         info: JSON-able details for the report (``failed_codewords``, ``views_lost``, ...).
+        received: [num_views] bool, False for a view the receiver knows did not arrive (a
+            failed checksum, or nothing fitted its budget): ``images`` holds mid-grey there,
+            and the radiance field trains on the other views only. None: every view arrived.
     """
 
     images: torch.Tensor
@@ -59,6 +62,7 @@ class Transmission:
     rx_masks: np.ndarray | None = None
     seconds: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
+    received: np.ndarray | None = None
 
 
 @dataclass
@@ -238,7 +242,7 @@ class Digital(Scheme):
 
         cfg = ctx.config
         channel = phy.assumed_channel(cfg.channel)
-        out, per_view, failed = [], [], 0
+        out, per_view, failed, arrived = [], [], 0, []
         lost = {"budget": 0, "channel": 0}
         t = time.perf_counter()
         for k, p in enumerate(plans):
@@ -257,6 +261,7 @@ class Digital(Scheme):
             failed += int(st.get("failed_codewords", 0))
             for k in lost:
                 lost[k] += int(st["views_lost"][k])
+            arrived.append(not any(st["views_lost"].values()))
             per_view.append(
                 {k2: v for k2, v in st.items() if isinstance(v, (int, float, str, bool))}
             )
@@ -266,6 +271,7 @@ class Digital(Scheme):
             None,
             {"codec_and_ldpc": time.perf_counter() - t},
             {"failed_codewords": failed, "views_lost": lost, "per_view": per_view},
+            received=np.asarray(arrived, bool),
         )
 
 

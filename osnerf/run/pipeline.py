@@ -96,8 +96,9 @@ def transmit(
         gen = torch.Generator().manual_seed(seed)
         tx = scheme.transmit(ctx, plans, images, gen)
         arrays = {"images": tx.images.numpy(), "symbols": tx.symbols}
-        if tx.rx_masks is not None:
-            arrays["rx_masks"] = tx.rx_masks
+        for name in ("rx_masks", "received"):
+            if getattr(tx, name) is not None:
+                arrays[name] = getattr(tx, name)
         cache.save(f"{scheme.name}_tx", arrays, {"seconds": tx.seconds, "info": tx.info})
         return tx
     a, info = cached
@@ -107,18 +108,26 @@ def transmit(
         a.get("rx_masks"),
         info["seconds"],
         info["info"],
+        a.get("received"),
     )
 
 
 def reconstruct_and_score(
     scheme: Scheme, tx: Transmission, ctx: RunContext, prep: Prepared, views, col, cache, out_dir
 ) -> tuple[SchemeReport, Reconstruction]:
-    """A radiance field on the received views (in memory), scored on the held-out views."""
+    """A radiance field on the views that arrived (in memory), scored on the held-out views."""
     plans = ctx.plan.for_scheme(scheme.object_routed)
+    arrived = np.ones(len(plans), bool) if tx.received is None else np.asarray(tx.received, bool)
     ids = [p.view for p in plans]
-    aabb = prep.scu.route(scheme.name, scheme.object_routed, ids, views.meta)
+    kept = [v for v, a in zip(ids, arrived) if a]
+    aabb = prep.scu.route(scheme.name, scheme.object_routed, kept, views.meta)
     ds = received_dataset(
-        tx.images, views.poses[ids], views.intrinsics, views.background, aabb, tx.rx_masks
+        tx.images[torch.from_numpy(arrived)],
+        views.poses[kept],
+        views.intrinsics,
+        views.background,
+        aabb,
+        None if tx.rx_masks is None else tx.rx_masks[arrived],
     )
     cached = cache.load(f"{scheme.name}_nerf")
     if cached is None:

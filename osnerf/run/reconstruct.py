@@ -94,26 +94,32 @@ def reconstruct(
         eval_every_steps=max(config.nerf_steps // 12, 1) if config.nerf_steps else None,
         eval_views=len(test),
     )
-    torch.set_num_threads(min(2, torch.get_num_threads()))
-    t = time.perf_counter()
-    result = renderer.train(
-        ds, tc, generator=torch.Generator().manual_seed(seed), eval_dataset=held_out
-    )
-    wall = time.perf_counter() - t
-    with torch.no_grad():
-        out = renderer.render_views(
-            result.model,
-            held_out.poses,
-            ds.intrinsics,
-            views.intrinsics.height,
-            views.intrinsics.width,
-        )
-    renderers = None
-    if config.renderer_steps > 0:
-        renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
-    rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
-    op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
     n = len(test)
+    renderers, wall = None, 0.0
+    if ds.num_views == 0:  # nothing arrived: an empty field, the background everywhere
+        steps, curve, seconds = 0, [], 0.0
+        rgb = np.broadcast_to(np.asarray(views.background, np.float32), gt.shape).copy()
+        op = np.zeros(gt.shape[:3], np.float32)
+    else:
+        torch.set_num_threads(min(2, torch.get_num_threads()))
+        t = time.perf_counter()
+        result = renderer.train(
+            ds, tc, generator=torch.Generator().manual_seed(seed), eval_dataset=held_out
+        )
+        wall = time.perf_counter() - t
+        steps, curve, seconds = result.steps, result.curve, result.seconds
+        with torch.no_grad():
+            out = renderer.render_views(
+                result.model,
+                held_out.poses,
+                ds.intrinsics,
+                views.intrinsics.height,
+                views.intrinsics.width,
+            )
+        if config.renderer_steps > 0:
+            renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
+        rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
+        op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
     metrics = {
         "psnr": float(np.mean([renderer.psnr(rgb[k], ref[k]) for k in range(n)])),
         "ssim": float(np.mean([renderer.ssim(rgb[k], ref[k]) for k in range(n)])),
@@ -128,12 +134,12 @@ def reconstruct(
         else None,
         "num_test_views": int(n),
         "num_test_views_with_object": len(seen),
-        "nerf_steps": int(result.steps),
+        "nerf_steps": int(steps),
         "nerf_curve": [
             {"seconds": c["seconds"], "step": c["step"], "psnr_object": c.get("masked_psnr")}
-            for c in result.curve
+            for c in curve
         ],
-        "nerf_seconds": float(result.seconds),
+        "nerf_seconds": float(seconds),
         "nerf_wall_seconds": wall,
         "renderers": renderers,
     }

@@ -161,6 +161,31 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
         assert np.isclose(again["schemes"][name]["seconds"]["nerf"], sch[name]["seconds"]["nerf"])
 
 
+def test_a_field_trains_only_on_the_views_that_arrived(env, tmp_path):
+    """The digital receiver knows which views were lost (a codeword that failed its
+    checksum, or a budget that fitted nothing): its field trains on the views that arrived,
+    not on their mid-grey placeholders. With none arrived the field is empty: the background
+    on every held-out view, after no steps. (Block Rayleigh, seed 3: 2 of the 3 views lost
+    at 0 dB, all 3 at -10 dB.)"""
+    lost, sent = {}, {}
+    for snr in ("0", "-10"):
+        out = tmp_path / f"snr{snr}"
+        args = ["--channel", "rayleigh", "--snr-db", snr, "--schemes", "digital", "--seed", "3"]
+        assert _run(env, out, *args) == 0
+        report = json.loads((out / "report.json").read_text())
+        s = report["schemes"]["digital"]
+        lost[snr], sent[snr] = sum(s["views_lost"].values()), s["views_sent"]
+        frames = json.loads((out / "received" / "digital" / "transforms.json").read_text())
+        assert len(frames["frames"]) == sent[snr] - lost[snr]
+        trained = [d["decision"] for d in report["scu_decisions"] if d["stage"] == "renderer"]
+        assert trained == [f"digital: train on {sent[snr] - lost[snr]} decoded views"]
+        if lost[snr] == sent[snr]:
+            assert s["nerf_steps"] == 0 and s["nerf_curve"] == [] and s["mask_iou"] == 0.0
+        else:
+            assert s["nerf_steps"] == 60
+    assert 0 < lost["0"] < sent["0"] and lost["-10"] == sent["-10"] > 0
+
+
 def test_cache_key_does_not_depend_on_how_a_number_is_written():
     """The API takes 60 or 60.0 (the CLI always passes floats): one run, one cache folder,
     so a run started from the CLI resumes from Python and back; a real change still moves it."""
