@@ -70,7 +70,7 @@ from semcodec.contract import (
     mask_box,
 )
 from semcodec.evaluation import LINK_SCHEMES
-from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, select_positions
+from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
 from semcodec.focus_eval import focus_gain
 from semcodec.framed import (
     FramedReception,
@@ -85,7 +85,6 @@ from semcodec.grid import (
     focus_coverage,
     focus_pixel_masks,
     full_rate_symbols,
-    positions_to_mask,
 )
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
 from semcodec.model import (
@@ -149,7 +148,6 @@ __all__ = [
     "MODELS",
     "BLOCK_PX",
     "Codec",
-    "positions_to_mask",
     "focus_blocks",
     "focus_coverage",
     "focus_pixel_masks",
@@ -167,12 +165,12 @@ __all__ = [
     "focus_gain",
     "demand_heatmap",
     "demand_weight_map",
+    "densest_box",
     "features_to_symbols",
     "load_checkpoint",
     "load_codec",
     "make_model",
     "save_checkpoint",
-    "select_positions",
     "symbols_to_features",
     "weights_sha256",
 ]

@@ -6,9 +6,9 @@ is served by the nearest such m; ``Encoded.meta.cbr`` is the CBR actually used.
 
 On-demand focus (paper section 3.2): with an object ``mask`` (and weights ``lambda_j`` over
 K demanded objects), a Grad-CAM-style heat map ranks the encoder's feature positions by
-how much they serve the demand, and only the top positions are sent, with all channels;
-their indices go to the receiver as side information (``meta.positions``). See
-:mod:`semcodec.focus`.
+how much they serve the demand, and only the box of the positions that serve it most is
+sent, at the rate the budget allows; the box goes to the receiver as side information
+(``meta.crop``, charged to the budget). See :mod:`semcodec.focus`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import copy
 import dataclasses
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,8 +40,7 @@ from semcodec.checkpoint import (
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.focus import attribution_box, demand_heatmap, demand_positions, select_positions
-from semcodec.grid import positions_to_mask
+from semcodec.focus import attribution_box, demand_heatmap, demand_positions, densest_box
 from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.model import (
     MODELS,
@@ -81,9 +80,6 @@ class EncodedMeta:
         cbr: CBR actually used: num_symbols / (3 * height * width).
         num_symbols: complex symbols per image.
         codec_sha256: hash of the transmitter's codec (knowledge base identity).
-        positions: [batch, num_positions] int64 indices (row-major on the feature grid) of
-            the sent positions when the focus budget is below one channel over the object's
-            box, else None.
         crop: (top, left, height, width) in pixels of the box sent in focus mode (the
             positions holding the demand's attribution), else None (whole image).
         analog: the analog refinement layer's side information when the last
@@ -97,7 +93,6 @@ class EncodedMeta:
     cbr: float
     num_symbols: int
     codec_sha256: str
-    positions: Tensor | None = field(default=None, compare=False)
     crop: tuple[int, int, int, int] | None = None
     analog: AnalogSide | None = None
 
@@ -107,14 +102,11 @@ class EncodedMeta:
         return self.num_symbols - (self.analog.num_symbols if self.analog is not None else 0)
 
     def side_info_bits(self) -> int:
-        """Bits of side information per image: the focus box or a bitmap of the sent
-        ``positions``, plus the analog layer's chunk energies."""
+        """Bits of side information per image: the focus box, plus the analog layer's
+        chunk energies."""
         layer = self.analog.side_info_bits() if self.analog is not None else 0
-        if self.crop is not None:
-            return box_bits(self.height, self.width) + layer
-        if self.positions is None:
-            return layer
-        return math.ceil(self.height / 4) * math.ceil(self.width / 4)
+        box = box_bits(self.height, self.width) if self.crop is not None else 0
+        return box + layer
 
 
 @dataclass(frozen=True)
@@ -296,7 +288,8 @@ class Codec(ChannelTruncationCodec):
             images: [batch, 3, height, width] float32 in [0, 1] (any size >= 8 px).
             snr_db: float or [batch]: the SNR the transmitter expects (feeds the AF modules).
             cbr: channel symbols per real source value, in ``cbr_range`` (in focus mode any
-                budget up to the largest CBR: fewer positions are sent).
+                rate up to the largest CBR whose budget carries the box's side information
+                and one symbol: fewer channels, or a smaller box, are sent).
             mask: optional [batch, K, height, width] (or [batch, height, width]) masks of the K
                 demanded objects, values in [0, 1]: switches on focus mode.
             demand_weights: optional K weights lambda_j (or [batch, K]); default equal.
@@ -312,7 +305,7 @@ class Codec(ChannelTruncationCodec):
         analog = None
         if mask is None:
             m = self.channels_for_cbr(cbr)
-            positions = crop = None
+            crop = None
             plan = self._layer_plan(xp, snr, m * hf * wf, hf * wf, m)
             if plan is not None:
                 m, sym, analog = plan
@@ -321,7 +314,6 @@ class Codec(ChannelTruncationCodec):
                     feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
                 sym = power_normalize(features_to_symbols(feat, m))
         else:
-            positions = crop = None
             lo, hi = self.cbr_range
             try:
                 cbr = float(cbr)
@@ -335,32 +327,33 @@ class Codec(ChannelTruncationCodec):
             heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
             # feature-grid units; the demanded objects themselves are always in the box
             objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
-            top, left, rows, cols = attribution_box(heat, include=objects)
+            box = attribution_box(heat, include=objects)
             budget = max(int(round(float(cbr) * 3 * h * w)), 1)
             box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
-            m = min(c, (budget - box_side) // (rows * cols))
-            if m >= 1:  # send the box that holds the demand's attribution, at the rate that fits
-                budget -= box_side
-                crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
-                xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
-                plan = self._layer_plan(xc, snr, budget, rows * cols, m)
-                extra = self._extra_symbols(budget, m, rows, cols) if plan is None else 0
-                if plan is not None:
-                    m, sym, analog = plan
-                else:
-                    with torch.no_grad():
-                        fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
-                    sym = features_to_symbols(fc, m)
-                    if extra:
-                        part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
-                        sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
-                    sym = power_normalize(sym)
-            else:  # budget below one channel over the box: the top positions, one channel each
-                m, k = 1, min(budget, hf * wf)
-                positions = select_positions(heat, k)  # [batch, k]
-                flat = feat[:, :2].reshape(b, 2, hf * wf)
-                sent = torch.gather(flat, 2, positions[:, None, :].expand(b, 2, k))  # [b, 2, k]
-                sym = power_normalize(features_to_symbols(sent[:, :, :, None], 1))
+            if budget <= box_side:
+                raise ValueError(
+                    f"cbr {cbr:.4g} gives {budget} symbols, which do not carry the focus box's "
+                    f"side information ({box_side} symbols) and one more"
+                )
+            budget -= box_side
+            # the box that holds the demand's attribution, at the rate that fits; below one
+            # channel over it, the part of it that holds the most attribution
+            top, left, rows, cols = densest_box(heat, box, budget)
+            m = min(c, budget // (rows * cols))
+            crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
+            xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
+            plan = self._layer_plan(xc, snr, budget, rows * cols, m)
+            extra = self._extra_symbols(budget, m, rows, cols) if plan is None else 0
+            if plan is not None:
+                m, sym, analog = plan
+            else:
+                with torch.no_grad():
+                    fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
+                sym = features_to_symbols(fc, m)
+                if extra:
+                    part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
+                    sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
+                sym = power_normalize(sym)
         meta = EncodedMeta(
             height=h,
             width=w,
@@ -368,7 +361,6 @@ class Codec(ChannelTruncationCodec):
             cbr=sym.shape[1] / (3 * h * w),
             num_symbols=int(sym.shape[1]),
             codec_sha256=self.sha256,
-            positions=positions,
             crop=crop,
             analog=analog,
         )
@@ -557,19 +549,8 @@ class Codec(ChannelTruncationCodec):
             y = torch.full((b, 3, 4 * hf, 4 * wf), FOCUS_FILL)
             y[:, :, t : t + ch, left : left + cw] = yc
             return y[:, :, : meta.height, : meta.width].clamp(0, 1)
-        if meta.positions is None:
-            z = symbols_to_features(x_hat, m, c, hf, wf)
-            r = reliability_to_features(rel, m, c, hf, wf)
-        else:
-            pos = meta.positions
-            k = pos.shape[1]
-            sent = symbols_to_features(x_hat, m, m, k, 1)[:, :, :, 0]  # [b, 2m, k]
-            z = torch.zeros(b, 2 * m, hf * wf)
-            z.scatter_(2, pos[:, None, :].expand(b, 2 * m, k), sent)
-            z = F.pad(z.reshape(b, 2 * m, hf, wf), (0, 0, 0, 0, 0, 2 * (c - m)))
-            r = torch.zeros(b, m, hf * wf)
-            r.scatter_(2, pos[:, None, :].expand(b, m, k), rel.reshape(b, m, k))
-            r = F.pad(r.reshape(b, m, hf, wf), (0, 0, 0, 0, 0, c - m))
+        z = symbols_to_features(x_hat, m, c, hf, wf)
+        r = reliability_to_features(rel, m, c, hf, wf)
         y = self.model.decoder(z, side, r)
         return y[:, :, : meta.height, : meta.width].clamp(0, 1)
 
@@ -663,12 +644,10 @@ def centre_first(rows: int, cols: int) -> Tensor:
 
 def receiver_mask(meta: EncodedMeta, height: int, width: int) -> np.ndarray | None:
     """[height, width] float32: the pixels the focus-mode side information says were sent
-    (``meta.crop`` box, or ``meta.positions`` of the first image); None = whole image."""
-    if meta.crop is not None:
-        top, left, rows, cols = (int(v) for v in meta.crop)
-        m = np.zeros((height, width), np.float32)
-        m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
-        return m
-    if meta.positions is not None:
-        return positions_to_mask(meta.positions[0].cpu().numpy(), height, width)
-    return None
+    (the ``meta.crop`` box); None = whole image."""
+    if meta.crop is None:
+        return None
+    top, left, rows, cols = (int(v) for v in meta.crop)
+    m = np.zeros((height, width), np.float32)
+    m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
+    return m

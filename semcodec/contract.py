@@ -168,7 +168,6 @@ class BoxMeta:
     num_symbols: int
     cbr: float
     codec_sha256: str
-    positions: None = None
 
     def side_info_bits(self) -> int:
         """Bits of side information per image: the box (:func:`semcodec.codec.box_bits`)

@@ -13,7 +13,8 @@ attribution (the core of the object and the rim its reconstruction depends on mo
 attribution's long tail spreads over much of the view) and of every position
 showing a demanded object (a peaky attribution must not cut the object off: version-2
 models concentrate theirs on a part of it), at the rate the budget allows, or, when the
-budget is below one channel over that box, the top positions one channel each.
+budget is below one channel over that box, the part of the box of the box's shape that holds
+the most attribution and takes one channel on every position (:func:`densest_box`).
 """
 
 from __future__ import annotations
@@ -134,15 +135,6 @@ def demand_heatmap(
     )
 
 
-def select_positions(heat: Tensor, k: int) -> Tensor:
-    """Top-k positions of each heat map, sorted ascending: [batch, k] int64 (row-major indices)."""
-    b = heat.shape[0]
-    flat = heat.reshape(b, -1)
-    if not 1 <= k <= flat.shape[1]:
-        raise ValueError(f"k (positions to send) must be in [1, {flat.shape[1]}], got {k}")
-    return flat.topk(k, dim=1).indices.sort(dim=1).values
-
-
 FOCUS_REL_THRESHOLD = 0.5
 """Positions with at least this fraction of the peak attribution form the focus box."""
 
@@ -174,3 +166,33 @@ def attribution_box(
     cols = torch.nonzero(keep.any(dim=0)).flatten()
     top, left = int(rows[0]), int(cols[0])
     return top, left, int(rows[-1]) - top + 1, int(cols[-1]) - left + 1
+
+
+def densest_box(
+    heat: Tensor, box: tuple[int, int, int, int], max_positions: int
+) -> tuple[int, int, int, int]:
+    """The part of ``box`` with at most ``max_positions`` feature positions, about the box's
+    aspect ratio, that holds the most attribution (summed over the batch; the first such
+    window, row-major): where a budget below one channel over the whole box goes. ``box``
+    itself when it is small enough.
+
+    Args:
+        heat: [batch, hf, wf] float32 >= 0.
+        box: (top, left, rows, cols) in feature-grid units, inside ``heat``.
+        max_positions: >= 1.
+    Returns:
+        (top, left, rows, cols) in feature-grid units.
+    """
+    top, left, rows, cols = (int(v) for v in box)
+    if max_positions < 1:
+        raise ValueError(f"max_positions must be >= 1, got {max_positions}")
+    if rows * cols <= max_positions:
+        return top, left, rows, cols
+    shrink = (max_positions / (rows * cols)) ** 0.5
+    r = min(rows, max(1, int(rows * shrink)))
+    c = min(cols, max(1, max_positions // r))
+    inner = heat.sum(dim=0)[top : top + rows, left : left + cols].double()
+    s = F.pad(inner.cumsum(0).cumsum(1), (1, 0, 1, 0))  # s[i, j] = sum of inner[:i, :j]
+    win = s[r:, c:] - s[:-r, c:] - s[r:, :-c] + s[:-r, :-c]  # every r x c window's sum
+    dt, dl = divmod(int(win.flatten().argmax()), win.shape[1])
+    return top + dt, left + dl, r, c

@@ -14,19 +14,6 @@ BLOCK_PX = 4
 """Side of the image square one feature position covers (the encoder's downsampling)."""
 
 
-def positions_to_mask(positions, height: int, width: int) -> np.ndarray:
-    """[height, width] float32: 1 on the pixels of the sent feature positions.
-
-    Args:
-        positions: [num_positions] indices, row-major on the ceil(h/4) x ceil(w/4) grid.
-    """
-    hf, wf = -(-height // BLOCK_PX), -(-width // BLOCK_PX)
-    grid = np.zeros(hf * wf, np.float32)
-    grid[np.asarray(positions, np.int64)] = 1.0
-    full = np.kron(grid.reshape(hf, wf), np.ones((BLOCK_PX, BLOCK_PX), np.float32))
-    return full[:height, :width]
-
-
 def full_rate_symbols(
     masks: np.ndarray,
     cbr_range: tuple[float, float],

@@ -19,6 +19,7 @@ from osnerf.run.plan import RunPlan, ViewPlan
 from osnerf.schemes import scheme_seed
 from osnerf.scu.policy import RatePolicy, combined_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
+from semcodec.codec import box_side_symbols
 from semcodec.grid import BLOCK_PX, focus_coverage, full_rate_symbols
 
 
@@ -109,8 +110,9 @@ class SemanticControlUnit:
     ) -> np.ndarray:
         """CBR per on-demand view: every feature position (``block_px`` square) touching the
         objects' mask with all of the codec's channels, times ``scale``, i.e. ``scale *
-        coverage * max_cbr``, at most the codec's largest CBR and at least one symbol (focus
-        mode takes any rate below the largest; logged per view).
+        coverage * max_cbr``, at most the codec's largest CBR and at least what carries the focus
+        box's side information and one symbol (focus mode takes any rate below the largest;
+        logged per view).
 
         Args:
             masks: [num_views, height, width] union masks of the demanded objects.
@@ -119,10 +121,11 @@ class SemanticControlUnit:
             scale: the rate relative to all channels (:meth:`choose_oversampling`).
         """
         h, w = np.asarray(masks).shape[1:]
-        one_symbol = 1.0 / (3 * oversampling * h * oversampling * w)
+        sh, sw = oversampling * h, oversampling * w
+        least = (box_side_symbols(sh, sw) + 1) / (3 * sh * sw)
         out = []
         for v, cov in zip(views, focus_coverage(masks, block_px, oversampling)):
-            c = float(np.clip(scale * cov * cbr_range[1], one_symbol, cbr_range[1]))
+            c = float(np.clip(scale * cov * cbr_range[1], least, cbr_range[1]))
             out.append(c)
             self.log(
                 "rate",

@@ -9,6 +9,7 @@ from osnerf.collect import CollectorConfig, Demand, collect, masked_images
 from osnerf.scenes import SceneViews, intrinsics_from_fov
 from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit
 from phy import CopyFading
+from semcodec import box_side_symbols
 from semcodec.grid import focus_coverage, focus_pixel_masks
 
 
@@ -151,6 +152,10 @@ def test_oversampling_spends_the_saved_symbols_within_the_budget():
     cbr = scu.focus_cbr(m, cbr_range, [0, 1, 2], oversampling=s, scale=scale)
     assert cbr == pytest.approx([720 / 1152 / 24] * 3)
     assert sum(c * 48 * 48 * 3 * r for c, r in zip(cbr, reps)) == pytest.approx(720)
+    # however small the scale, a view's rate carries its focus box's side information and
+    # one symbol (the codec refuses less)
+    tiny = scu.focus_cbr(m, cbr_range, [0, 1, 2], oversampling=s, scale=1e-9)
+    assert tiny == pytest.approx([(box_side_symbols(48, 48) + 1) / (3 * 48 * 48)] * 3)
     # a codec with twice the largest CBR: the same budget is the same CBR per position
     # (0.104), so the same s, at half the fraction of the doubled full rate
     wide = scu.choose_oversampling(m, (1 / 48, 1 / 3), reps, full_scene_symbols=1080)

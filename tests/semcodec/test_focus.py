@@ -1,9 +1,9 @@
-"""On-demand focus: the demand map, position selection, and that the heat map follows the object."""
+"""On-demand focus: the demand map, the box and its densest part, and that the heat map follows the object."""
 
 import pytest
 import torch
 
-from semcodec import box_side_symbols, demand_weight_map, learned_only, select_positions
+from semcodec import box_side_symbols, demand_weight_map, densest_box, learned_only
 from semcodec.focus import attribution_box, demand_positions
 
 
@@ -24,11 +24,19 @@ def test_demand_weight_map_is_lambda_weighted_mean():
         demand_weight_map(torch.zeros(1, 1, 5, 4), None, 1, 4, 4)
 
 
-def test_select_positions_top_k_sorted():
-    heat = torch.tensor([[[0.1, 5.0], [3.0, 0.2]]])
-    assert select_positions(heat, 2).tolist() == [[1, 2]]
-    with pytest.raises(ValueError, match="k"):
-        select_positions(heat, 5)
+def test_densest_box_keeps_the_shape_and_the_most_attribution():
+    heat = torch.zeros(2, 6, 8)
+    heat[0, 3, 5] = 1.0  # the two images' heat adds up
+    heat[1, 4, 6] = 2.0
+    box = (0, 0, 6, 8)
+    assert densest_box(heat, box, 48) == box  # it fits already
+    # 12 of 48 positions: half the rows and cols, 3 x 4; the first 3 x 4 window over both
+    # hot positions (rows 3..4, cols 5..6) starts at row 2, col 3
+    assert densest_box(heat, box, 12) == (2, 3, 3, 4)
+    assert densest_box(heat, (3, 4, 2, 4), 2) == (4, 5, 1, 2)  # the first 1 x 2 holding 2.0
+    assert densest_box(heat, box, 1) == (4, 6, 1, 1)
+    with pytest.raises(ValueError, match="max_positions"):
+        densest_box(heat, box, 0)
 
 
 def test_attribution_box_cuts_the_thin_tail():
@@ -85,15 +93,23 @@ def test_focus_sends_the_object_box_within_budget(tiny_codec):
     assert torch.all(y[..., :, left + w :] == 0.5)  # nothing was sent there
 
 
-def test_focus_below_one_channel_sends_top_positions(tiny_codec):
+def test_focus_below_one_channel_sends_the_densest_part_of_the_box(tiny_codec):
+    """A budget below one channel over the object's box sends the part of the box that holds
+    the most attribution, one channel on each position; its side information is still only
+    the box, charged to the budget. A budget that cannot carry the box is refused."""
     x, mask = _object_scene()
-    enc = tiny_codec.encode(x, 5.0, 1 / 600, mask=mask)
-    budget = round(3 * 64 * 64 / 600)
-    assert enc.meta.crop is None and enc.meta.num_channels == 1
-    assert enc.symbols.shape[1] == enc.meta.positions.shape[1] == budget
-    cols = enc.meta.positions[0] % 16
-    assert float((cols <= 8).float().mean()) >= 0.75  # chance: 9/16
+    full = learned_only(tiny_codec).encode(x, 5.0, 1 / 16, mask=mask)
+    budget = round(3 * 64 * 64 / 150) - box_side_symbols(64, 64)
+    enc = learned_only(tiny_codec).encode(x, 5.0, 1 / 150, mask=mask)
+    top, left, h, w = enc.meta.crop
+    t0, l0, h0, w0 = full.meta.crop
+    assert enc.meta.num_channels == 1 and h * w // 16 <= budget < h0 * w0 // 16
+    assert t0 <= top and l0 <= left and top + h <= t0 + h0 and left + w <= l0 + w0
+    assert enc.symbols.shape[1] <= budget
+    assert enc.meta.side_info_bits() == full.meta.side_info_bits()  # the box, nothing more
     assert tiny_codec.decode(enc.symbols, enc.meta, 5.0).shape == x.shape
+    with pytest.raises(ValueError, match="side information"):
+        tiny_codec.encode(x, 5.0, box_side_symbols(64, 64) / (3 * 64 * 64), mask=mask)
 
 
 def test_centre_first_orders_a_box_from_its_centre_out():
