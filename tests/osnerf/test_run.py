@@ -183,6 +183,13 @@ def test_a_field_trains_only_on_the_views_that_arrived(env, tmp_path):
             assert s["nerf_steps"] == 0 and s["nerf_curve"] == [] and s["mask_iou"] == 0.0
         else:
             assert s["nerf_steps"] == 60
+            # which views arrived is cached with the transmission: a field trained again
+            # from the cached stage leaves the same views out
+            for f in (out / "cache").glob("*/digital_nerf.*"):
+                f.unlink()
+            assert _run(env, out, *args) == 0
+            again = json.loads((out / "report.json").read_text())["schemes"]["digital"]
+            assert again["psnr_object"] == pytest.approx(s["psnr_object"], abs=1e-6)
     assert 0 < lost["0"] < sent["0"] and lost["-10"] == sent["-10"] > 0
 
 
