@@ -192,7 +192,6 @@ def densest_box(
     r = min(rows, max(1, int(rows * shrink)))
     c = min(cols, max(1, max_positions // r))
     inner = heat.sum(dim=0)[top : top + rows, left : left + cols].double()
-    s = F.pad(inner.cumsum(0).cumsum(1), (1, 0, 1, 0))  # s[i, j] = sum of inner[:i, :j]
-    win = s[r:, c:] - s[:-r, c:] - s[r:, :-c] + s[:-r, :-c]  # every r x c window's sum
+    win = F.avg_pool2d(inner[None, None], (r, c), stride=1)[0, 0]  # every r x c window
     dt, dl = divmod(int(win.flatten().argmax()), win.shape[1])
     return top + dt, left + dl, r, c
