@@ -19,7 +19,9 @@ _CANDIDATES = (
     "/usr/lib/llvm-19/lib/libLLVM.so.19.1",
 )
 MIN_LLVM_MAJOR = 16
-INSTALL_HINT = "install LLVM 19 ('sudo apt-get install libllvm19' on Debian 12) or set DRJIT_LIBLLVM_PATH"
+INSTALL_HINT = (
+    "install LLVM 19 ('sudo apt-get install libllvm19' on Debian 12) or set DRJIT_LIBLLVM_PATH"
+)
 
 
 def _major_version(path: str) -> int | None:
@@ -53,7 +55,9 @@ def require_llvm() -> str:
     """Return the LLVM path for Dr.Jit, or raise RuntimeError saying what to install."""
     path = configure_llvm()
     if not path or not os.path.exists(path):
-        raise RuntimeError(f"ray tracing and Mitsuba renders need LLVM >= {MIN_LLVM_MAJOR}: {INSTALL_HINT}")
+        raise RuntimeError(
+            f"ray tracing and Mitsuba renders need LLVM >= {MIN_LLVM_MAJOR}: {INSTALL_HINT}"
+        )
     major = _major_version(path)
     if major is not None and major < MIN_LLVM_MAJOR:
         raise RuntimeError(

@@ -17,14 +17,18 @@ from torch import Tensor
 SNR_DB_RANGE = (-30.0, 60.0)
 
 
-def validate_snr_db(snr_db, name: str = "snr_db", low: float = SNR_DB_RANGE[0], high: float = SNR_DB_RANGE[1]):
+def validate_snr_db(
+    snr_db, name: str = "snr_db", low: float = SNR_DB_RANGE[0], high: float = SNR_DB_RANGE[1]
+):
     """Raise ValueError naming ``name`` unless every value is finite and in [low, high]."""
     values = snr_db.detach().flatten().tolist() if isinstance(snr_db, Tensor) else [snr_db]
     for v in values:
         try:
             f = float(v)
         except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a number in [{low:g}, {high:g}] dB, got {v!r}") from None
+            raise ValueError(
+                f"{name} must be a number in [{low:g}, {high:g}] dB, got {v!r}"
+            ) from None
         if not math.isfinite(f) or not low <= f <= high:
             raise ValueError(f"{name} must be in [{low:g}, {high:g}] dB, got {v!r}")
     return snr_db
@@ -69,7 +73,11 @@ def power_normalize(x: Tensor, power: float = 1.0, eps: float = 1e-12) -> Tensor
     if x.dim() < 2:
         raise ValueError(f"x must be [batch, num_symbols], got shape {tuple(x.shape)}")
     dims = tuple(range(1, x.dim()))
-    p = (x.real**2 + x.imag**2).mean(dim=dims, keepdim=True) if x.is_complex() else (x**2).mean(dim=dims, keepdim=True)
+    p = (
+        (x.real**2 + x.imag**2).mean(dim=dims, keepdim=True)
+        if x.is_complex()
+        else (x**2).mean(dim=dims, keepdim=True)
+    )
     return x * torch.sqrt(power / (p + eps))
 
 
@@ -92,7 +100,9 @@ def parse_cbr(value) -> float:
         else:
             out = float(value)
     except (ValueError, ZeroDivisionError):
-        raise ValueError(f"cbr must be a fraction like 1/16 or a number in (0, 1], got {value!r}") from None
+        raise ValueError(
+            f"cbr must be a fraction like 1/16 or a number in (0, 1], got {value!r}"
+        ) from None
     if not math.isfinite(out) or not 0.0 < out <= 1.0:
         raise ValueError(f"cbr must be in (0, 1], got {value!r}")
     return out

@@ -16,10 +16,12 @@ from phy.digital.layout import (
     MAX_CODED_BITS,
     CodewordLayout,
     codeword_layout,
+    max_codeword_bits,
     min_num_symbols,
+    mother_bits,
     payload_capacity_bits,
 )
-from phy.digital.mcs import MCS, MCS_TABLE, get_mcs
+from phy.digital.mcs import MCS, MCS_TABLE, MOTHER_RATE, get_mcs
 
 __all__ = [
     "CRC_BITS",
@@ -27,14 +29,17 @@ __all__ = [
     "MAX_CODED_BITS",
     "MCS",
     "MCS_TABLE",
+    "MOTHER_RATE",
     "CodewordLayout",
     "DigitalResult",
     "codeword_errors",
     "codeword_layout",
+    "max_codeword_bits",
     "decode_symbols",
     "encode_bytes",
     "get_mcs",
     "min_num_symbols",
+    "mother_bits",
     "payload_capacity_bits",
     "transmit_bytes",
 ]

@@ -13,7 +13,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from phy.digital.chain import DEFAULT_NUM_ITER, _code, _decode_group, _modem
+from phy.digital.chain import (
+    DEFAULT_NUM_ITER,
+    _decode_group,
+    _modem,
+    codeword_code,
+    rate_match,
+)
 from phy.digital.layout import CRC_BITS
 from phy.digital.mcs import MCS, get_mcs
 
@@ -50,11 +56,12 @@ def codeword_errors(
         raise ValueError(f"coded_bits={coded_bits} at {m.name} leaves no room for the CRC")
     if not isinstance(num_codewords, int) or num_codewords < 1:
         raise ValueError(f"num_codewords must be an integer >= 1, got {num_codewords!r}")
-    crc_enc, _, enc, _ = _code(k, coded_bits, bps, "cpu")
+    crc_enc, _, enc, _ = codeword_code(k, coded_bits, bps, "cpu")
     mapper, demapper, _, _ = _modem(bps, "cpu")
     u = torch.randint(0, 2, (num_codewords, k - CRC_BITS), generator=generator).float()
     with torch.no_grad():
-        x = mapper(enc(crc_enc(u))).to(torch.complex64)  # [num_codewords, E / bps]
+        c = rate_match(enc(crc_enc(u)), coded_bits)  # [num_codewords, E]
+        x = mapper(c).to(torch.complex64)  # [num_codewords, E / bps]
         out = link(x, snr_db, generator=generator)
         llr = demapper(out.x_hat, out.noise_var)  # [num_codewords, E]
         _, ok, _ = _decode_group(llr, k, coded_bits, bps, num_iter)

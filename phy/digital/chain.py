@@ -6,6 +6,12 @@ modulation order), ``TB5GScrambler`` over the whole block (so zero padding still
 random-looking symbols of mean power ~1), ``Mapper/Demapper("app", "qam")`` with the
 link's per-symbol ``noise_var``. See :mod:`phy.digital.layout` for the codeword sizes.
 
+Below the LDPC code's mother rate 1/5 (which sionna's encoder does not go under) a
+codeword is the rate-1/5 mother codeword repeated cyclically to its length
+(:func:`rate_match`), and the receiver adds the LLRs of every copy of a bit before decoding
+(:func:`combine_repeats`, chase combining): ``r`` copies of a bit at Es/N0 ``s`` give the
+LLR of one copy at ``r * s``.
+
 Decoding: belief propagation ("boxplus-phi", flooding) for at most ``num_iter`` iterations
 (default 20, sionna's default). Codewords stop early once their CRC checks, tested after
 2, 4, 6, 8, 12, 16, 20, ... iterations, so at a comfortable SNR most codewords cost 2-4
@@ -21,7 +27,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from phy.digital.layout import CRC_POLY, CodewordLayout, codeword_layout, min_num_symbols
+from phy.digital.layout import (
+    CRC_POLY,
+    CodewordLayout,
+    codeword_layout,
+    min_num_symbols,
+    mother_bits,
+)
 from phy.digital.mcs import MCS, get_mcs
 
 DEFAULT_NUM_ITER = 20
@@ -55,7 +67,10 @@ class DigitalResult:
 
 # ----------------------------------------------------------------------------- sionna blocks
 @functools.lru_cache(maxsize=64)
-def _code(k: int, n: int, bits_per_symbol: int, device: str):
+def _code(k: int, n: int, bits_per_symbol: int | None, device: str):
+    """CRC and LDPC blocks of a codeword of ``k`` information bits and ``n`` distinct coded
+    bits (the mother codeword below rate 1/5, which has no output interleaver: its repeats
+    are what the rate matcher sends)."""
     from sionna.phy.fec.crc import CRCDecoder, CRCEncoder
     from sionna.phy.fec.ldpc import LDPC5GDecoder, LDPC5GEncoder
 
@@ -76,6 +91,33 @@ def _modem(bits_per_symbol: int, device: str):
     scrambler = TB5GScrambler(binary=True, device=device)
     descrambler = Descrambler(scrambler, binary=False, device=device)
     return mapper, demapper, scrambler, descrambler
+
+
+def codeword_code(k: int, coded_bits: int, bits_per_symbol: int, device: str = "cpu"):
+    """(CRC encoder, CRC decoder, LDPC encoder, LDPC decoder) of a codeword of ``k``
+    information bits (CRC included) sent in ``coded_bits`` bits; the LDPC blocks work on the
+    :func:`phy.digital.layout.mother_bits` distinct bits."""
+    n = mother_bits(k, coded_bits)
+    return _code(k, n, bits_per_symbol if n == coded_bits else None, device)
+
+
+def rate_match(coded: Tensor, coded_bits: int) -> Tensor:
+    """[count, n] distinct coded bits -> [count, coded_bits]: the bits repeated cyclically
+    (unchanged when ``coded_bits == n``)."""
+    n = coded.shape[-1]
+    if n == coded_bits:
+        return coded
+    return coded[..., torch.arange(coded_bits) % n]
+
+
+def combine_repeats(llr: Tensor, n: int) -> Tensor:
+    """[count, coded_bits] LLRs -> [count, n]: each distinct bit's copies added up (the
+    inverse of :func:`rate_match`; exact for independent noise on the copies)."""
+    e = llr.shape[-1]
+    if n == e:
+        return llr
+    out = torch.zeros(*llr.shape[:-1], n, dtype=llr.dtype, device=llr.device)
+    return out.index_add_(-1, torch.arange(e, device=llr.device) % n, llr)
 
 
 # ----------------------------------------------------------------------------- checks
@@ -151,11 +193,11 @@ def encode_bytes(payload: bytes, mcs: str | MCS, num_symbols: int | None = None)
     bits[:bits_needed] = np.unpackbits(np.frombuffer(payload, dtype=np.uint8))
     bits_t = torch.from_numpy(bits)
     coded, offset = [], 0
-    for _, count, k, n in layout.groups():
-        crc_enc, _, enc, _ = _code(k, n, m.bits_per_symbol, device)
+    for _, count, k, e in layout.groups():
+        crc_enc, _, enc, _ = codeword_code(k, e, m.bits_per_symbol, device)
         u = bits_t[offset : offset + count * (k - 24)].reshape(count, k - 24)
         offset += count * (k - 24)
-        coded.append(enc(crc_enc(u)).reshape(-1))  # [count * n]
+        coded.append(rate_match(enc(crc_enc(u)), e).reshape(-1))  # [count * e]
     c = torch.cat(coded)[None]  # [1, num_symbols * bits_per_symbol]
     mapper, _, scrambler, _ = _modem(m.bits_per_symbol, device)
     return mapper(scrambler(c))[0].to(torch.complex64)
@@ -171,12 +213,14 @@ def _checkpoints(num_iter: int) -> list[int]:
     return points
 
 
-def _decode_group(llr: Tensor, k: int, n: int, bits_per_symbol: int, num_iter: int):
-    """BP-decode ``llr`` [count, n] with CRC early stopping.
+def _decode_group(llr: Tensor, k: int, e: int, bits_per_symbol: int, num_iter: int):
+    """BP-decode ``llr`` [count, e] (codewords of ``e`` coded bits, repeats combined first)
+    with CRC early stopping.
 
     Returns: (info bits [count, k - 24] float32, crc_ok [count] bool, iterations [count]).
     """
-    crc_enc, crc_dec, _, dec = _code(k, n, bits_per_symbol, str(llr.device))
+    _, crc_dec, enc, dec = codeword_code(k, e, bits_per_symbol, str(llr.device))
+    llr = combine_repeats(llr, enc.n)
     count = llr.shape[0]
     info = torch.zeros(count, k - 24)
     ok = torch.zeros(count, dtype=torch.bool)

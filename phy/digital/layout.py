@@ -3,13 +3,17 @@
 Layout of ``num_symbols`` channel symbols at one MCS (TS 38.212 5.2.2 / 5.4.2 in spirit):
 
 * ``G = num_symbols * bits_per_symbol`` coded bits are split into
-  ``C = ceil(G / MAX_CODED_BITS)`` codewords whose lengths differ by at most one symbol
+  ``C = ceil(G / max_codeword_bits(mcs))`` codewords whose lengths differ by at most one symbol
   (the first ``C - num_symbols % C`` codewords get ``floor(num_symbols / C)`` symbols, the
   rest one more), so a codeword never straddles a symbol.
 * A codeword of ``E`` coded bits carries ``k = floor(E * code_rate)`` LDPC information
   bits, of which the last ``CRC_BITS`` (24, CRC24B as for 5G code blocks) are its own CRC:
   ``k - 24`` payload bits. Every codeword is checked on its own, so a receiver knows which
   codewords failed.
+* Below the mother rate 1/5 a codeword is the rate-1/5 mother codeword of ``5 k`` bits
+  (:func:`mother_bits`) repeated cyclically to ``E`` bits. No codeword sends more than
+  ``MAX_CODED_BITS`` distinct bits, so the longest codeword at a rate ``R < 1/5`` is
+  ``MAX_CODED_BITS / (5 R)`` bits (:func:`max_codeword_bits`).
 * Payload bits fill the codewords in order; unused capacity is zero padding.
 """
 
@@ -18,13 +22,31 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from phy.digital.mcs import MCS, get_mcs
+from phy.digital.mcs import MCS, MOTHER_RATE, get_mcs
 
 CRC_POLY = "CRC24B"
 CRC_BITS = 24
 MAX_CODED_BITS = 3840
-"""Longest codeword in coded bits (a multiple of 2, 4 and 6). Longer payloads use more
-codewords; decoding cost per bit does not depend on this length."""
+"""Most distinct coded bits of one codeword (a multiple of 2, 4 and 6): the codeword's
+length at rates >= 1/5, its mother codeword's below. Longer payloads use more codewords;
+decoding cost per bit does not depend on this length."""
+
+
+def max_codeword_bits(mcs: str | MCS) -> int:
+    """Longest codeword ``E`` at ``mcs``: :data:`MAX_CODED_BITS` at rates >= 1/5, else the
+    length whose mother codeword has at most that many bits (a multiple of bits per symbol)."""
+    m = get_mcs(mcs)
+    if m.code_rate >= MOTHER_RATE:
+        return MAX_CODED_BITS
+    e = math.floor(MAX_CODED_BITS * MOTHER_RATE / m.code_rate)
+    return e - e % m.bits_per_symbol
+
+
+def mother_bits(ldpc_k: int, coded_bits: int) -> int:
+    """Distinct coded bits of a codeword of ``ldpc_k`` information bits sent in ``coded_bits``
+    bits: all of them at rates >= 1/5, else the rate-1/5 mother codeword's ``5 k`` (sionna's
+    ``LDPC5GEncoder`` stops there), which the rate matcher repeats up to ``coded_bits``."""
+    return min(coded_bits, int(ldpc_k / MOTHER_RATE))
 
 
 @dataclass(frozen=True)
@@ -91,7 +113,7 @@ def codeword_layout(num_symbols: int, mcs: str | MCS) -> CodewordLayout:
     num_symbols = _check_num_symbols(num_symbols)
     m = get_mcs(mcs)
     coded = num_symbols * m.bits_per_symbol
-    c = -(-coded // MAX_CODED_BITS)
+    c = -(-coded // max_codeword_bits(m))
     short_symbols, num_long = divmod(num_symbols, c)
     return CodewordLayout(num_symbols, m, c - num_long, num_long, short_symbols)
 
@@ -116,12 +138,12 @@ def min_num_symbols(num_bytes: int, mcs: str | MCS) -> int:
         raise ValueError(f"num_bytes must be an integer >= 1, got {num_bytes!r}")
     m = get_mcs(mcs)
     bits = 8 * num_bytes
-    # Every codeword has at most MAX_CODED_BITS coded bits, so at least c_min codewords
+    # Every codeword has at most max_codeword_bits(m) coded bits, so at least c_min codewords
     # (each with its CRC) are needed, and capacity(s) <= s * bits_per_symbol * code_rate
     # - 24 * c_min: start at that lower bound and step up (capacity is not monotone across
     # a change in the number of codewords, so no bisection).
     per_symbol = m.bits_per_symbol * m.code_rate
-    c_min = -(-bits // (math.floor(MAX_CODED_BITS * m.code_rate) - CRC_BITS))
+    c_min = -(-bits // (math.floor(max_codeword_bits(m) * m.code_rate) - CRC_BITS))
     s = max(1, math.ceil((bits + CRC_BITS * c_min) / per_symbol))
     while codeword_layout(s, m).capacity_bits < bits:
         s += 1

@@ -1,9 +1,16 @@
 """Modulation and coding schemes (MCS) of the digital baseline: QAM order x LDPC code rate.
 
-A 5G-like table (TS 38.214 Table 5.1.3.1-1 spans the same ground): QPSK at rates 1/3..3/4,
-16-QAM at 1/2..3/4, 64-QAM at 2/3..5/6. Names read ``<modulation>-<rate>``, e.g.
-``"16qam-3/4"``. Spectral efficiency ``bits_per_symbol * code_rate`` counts the CRC as
-payload overhead (see :func:`phy.digital.payload_capacity_bits` for the exact count).
+A 5G-like table: QPSK at the low-spectral-efficiency rates of TS 38.214 Table 5.1.3.1-3
+(R x 1024 = 30, 40, 50, 64, 78, 99, 120, 157, 193, 251, 308), then QPSK at 1/3..3/4, 16-QAM
+at 1/2..3/4, 64-QAM at 2/3..5/6 (Table 5.1.3.1-1 spans the same ground). Names read
+``<modulation>-<rate>``, e.g. ``"16qam-3/4"`` or ``"qpsk-30/1024"``. Spectral efficiency
+``bits_per_symbol * code_rate`` counts the CRC as payload overhead (see
+:func:`phy.digital.payload_capacity_bits` for the exact count).
+
+Rates below :data:`MOTHER_RATE` (1/5, LDPC base graph 2's mother rate) send the mother
+codeword and then repeat its bits cyclically up to the codeword's length, as the 38.212 rate
+matcher wraps around its circular buffer; the receiver adds the repeats' LLRs before decoding
+(:mod:`phy.digital.chain`).
 """
 
 from __future__ import annotations
@@ -12,6 +19,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 MODULATION_BITS = {"qpsk": 2, "16qam": 4, "64qam": 6}
+MOTHER_RATE = Fraction(1, 5)
+"""Lowest rate of the 5G LDPC code itself (base graph 2); lower rates repeat its bits."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +56,11 @@ class MCS:
         """Coded-rate bits per channel use, ``bits_per_symbol * code_rate`` (CRC included)."""
         return float(self.bits_per_symbol * self.code_rate)
 
+    @property
+    def repetition(self) -> float:
+        """How many times each mother-code bit is sent on average (1 at rates >= 1/5)."""
+        return float(max(MOTHER_RATE / self.code_rate, 1))
+
 
 def _mcs(modulation: str, rate: str) -> MCS:
     return MCS(f"{modulation}-{rate}", modulation, Fraction(rate))
@@ -55,6 +69,7 @@ def _mcs(modulation: str, rate: str) -> MCS:
 MCS_TABLE: dict[str, MCS] = {
     m.name: m
     for m in (
+        *(_mcs("qpsk", f"{r}/1024") for r in (30, 40, 50, 64, 78, 99, 120, 157, 193, 251, 308)),
         _mcs("qpsk", "1/3"),
         _mcs("qpsk", "1/2"),
         _mcs("qpsk", "2/3"),

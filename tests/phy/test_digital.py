@@ -2,6 +2,7 @@
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -44,7 +45,15 @@ def test_mcs_table_is_5g_like():
     assert rates["16qam-3/4"] == ("16qam", 4, "3/4")
     assert rates["64qam-5/6"] == ("64qam", 6, "5/6")
     eff = [m.spectral_efficiency for m in MCS_TABLE.values()]
-    assert eff == sorted(eff) and eff[0] == pytest.approx(2 / 3) and eff[-1] == pytest.approx(5)
+    assert eff == sorted(eff) and eff[-1] == pytest.approx(5)
+    # TS 38.214 Table 5.1.3.1-3 (low spectral efficiency), its QPSK entries below 1/3:
+    # MCS 0..10, R x 1024 and the table's spectral efficiency 2 R to four decimals
+    low = [(30, 0.0586), (40, 0.0781), (50, 0.0977), (64, 0.1250), (78, 0.1523), (99, 0.1934)]
+    low += [(120, 0.2344), (157, 0.3066), (193, 0.3770), (251, 0.4902), (308, 0.6016)]
+    for (r, se), m in zip(low, MCS_TABLE.values()):
+        assert (m.name, m.modulation) == (f"qpsk-{r}/1024", "qpsk")
+        assert round(m.spectral_efficiency, 4) == se
+    assert [m.repetition > 1 for m in MCS_TABLE.values()][:10] == [True] * 9 + [False]
 
 
 def test_unknown_mcs_lists_known_names():
@@ -67,10 +76,91 @@ def test_layout_by_hand():
     assert payload_capacity_bits(3, "qpsk-1/3") == 0  # 6 coded bits cannot hold a CRC
 
 
-@pytest.mark.parametrize("mcs", ["qpsk-1/3", "16qam-2/3", "64qam-5/6"])
+def test_low_rate_layout_by_hand():
+    """Below rate 1/5 a codeword is the 1/5 mother codeword (5 k bits, at most 3840) repeated.
+    qpsk-30/1024: the longest codeword is floor(3840 / (5 * 30/1024)) = 26214 bits; 20000
+    symbols = 40000 bits -> 2 codewords of 20000 bits, k = floor(20000 * 30/1024) = 585,
+    mother 2925 bits, each sent 6.84 times on average."""
+    from phy.digital import max_codeword_bits, mother_bits
+
+    assert max_codeword_bits("qpsk-30/1024") == 26214
+    assert max_codeword_bits("qpsk-1/3") == 3840  # rates >= 1/5 as before
+    lay = codeword_layout(20000, "qpsk-30/1024")
+    assert (lay.num_codewords, lay.coded_bits(0), lay.ldpc_k(0)) == (2, 20000, 585)
+    assert mother_bits(585, 20000) == 2925 and mother_bits(1000, 2000) == 2000
+    assert lay.capacity_bits == 2 * (585 - CRC_BITS)
+    # the longest codeword's mother codeword stays within 3840 bits
+    big = codeword_layout(26214 // 2, "qpsk-30/1024")
+    assert big.num_codewords == 1 and mother_bits(big.ldpc_k(0), 26214) <= 3840
+
+
+def test_rate_matching_repeats_cyclically_and_combining_adds_the_copies():
+    from phy.digital.chain import combine_repeats, rate_match
+
+    c = torch.arange(10.0).reshape(2, 5)
+    r = rate_match(c, 12)
+    assert r[0].tolist() == [0, 1, 2, 3, 4, 0, 1, 2, 3, 4, 0, 1]
+    combined = combine_repeats(r, 5)
+    assert combined[1].tolist() == [15.0, 18.0, 14.0, 16.0, 18.0]  # 3, 3, 2, 2, 2 copies
+    assert rate_match(c, 5) is c and combine_repeats(c, 5) is c
+
+
+def _threshold_db(mcs, coded_bits, seed) -> float:
+    """50 % codeword-error Es/N0 of ``mcs`` at ``coded_bits`` on AWGN: probit fit to 5 points
+    of 200 codewords each around a bisected start."""
+    from phy.digital import codeword_errors
+    from semcodec.digital_calibration import fit_probit
+
+    link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
+    g = torch.Generator().manual_seed(seed)
+    lo, hi = -15.0, 5.0
+    for _ in range(6):
+        mid = 0.5 * (lo + hi)
+        err = codeword_errors(mcs, coded_bits, link, mid, 40, generator=g).float().mean()
+        lo, hi = (mid, hi) if err > 0.5 else (lo, mid)
+    pts = [0.5 * (lo + hi) + d for d in (-0.5, -0.25, 0.0, 0.25, 0.5)]
+    errs = [int(codeword_errors(mcs, coded_bits, link, p, 200, generator=g).sum()) for p in pts]
+    return fit_probit(pts, errs, [200] * len(pts))[0]
+
+
+def test_each_doubling_of_repetition_gains_3_db():
+    """The same 200 information bits (CRC included) in 1000, 2000 and 4000 coded bits: the
+    rate-1/5 code itself, then its bits sent twice and four times. Chase combining adds the
+    copies' LLRs, so r copies at Es/N0 s decode as one at r s: 10 log10 2 = 3.01 dB per
+    doubling at equal codeword error rate."""
+    from phy.digital import MCS
+
+    t = [
+        _threshold_db(MCS(f"qpsk-1/{5 * r}", "qpsk", Fraction(1, 5 * r)), 1000 * r, seed=r)
+        for r in (1, 2, 4)
+    ]
+    assert t[0] - t[1] == pytest.approx(3.01, abs=0.3)
+    assert t[1] - t[2] == pytest.approx(3.01, abs=0.3)
+
+
+def test_lowest_mcs_round_trips_at_minus_10_db():
+    """qpsk-30/1024 (about 6.8 copies of a rate-1/5 code) carries 300 bytes at -10 dB Es/N0,
+    where uncoded QPSK's bit error rate is 0.33."""
+    payload = _payload(300, seed=9)
+    res = transmit_bytes(
+        payload,
+        "qpsk-30/1024",
+        phy.FlatLink(phy.AWGN()),
+        -10.0,
+        generator=torch.Generator().manual_seed(1),
+    )
+    assert res.ok and res.payload == payload
+    assert res.num_symbols == min_num_symbols(300, "qpsk-30/1024")
+
+
+@pytest.mark.parametrize("mcs", ["qpsk-30/1024", "qpsk-1/3", "16qam-2/3", "64qam-5/6"])
 @pytest.mark.parametrize("num_symbols", [60, 997, 5000])
 def test_capacity_matches_what_encode_accepts(mcs, num_symbols):
     cap_bytes = payload_capacity_bits(num_symbols, mcs) // 8
+    if cap_bytes == 0:  # 60 symbols at 30/1024: 3 information bits, no room for a CRC
+        with pytest.raises(ValueError, match="at most 0 bytes"):
+            encode_bytes(b"x", mcs, num_symbols=num_symbols)
+        return
     x = encode_bytes(_payload(cap_bytes), mcs, num_symbols=num_symbols)
     assert x.shape == (num_symbols,) and x.dtype == torch.complex64
     with pytest.raises(ValueError, match="does not fit num_symbols"):
