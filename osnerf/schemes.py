@@ -264,6 +264,7 @@ class Digital(Scheme):
             arrived.append(not any(st["views_lost"].values()))
             per_view.append(
                 {k2: v for k2, v in st.items() if isinstance(v, (int, float, str, bool))}
+                | {k2: st[k2][0] for k2 in ("mcs", "quality", "scale")}
             )
         return Transmission(
             torch.stack(out),

@@ -9,9 +9,13 @@ Every ``transmit_*`` takes images [batch, 3, height, width] float32 in [0, 1] an
   MCS from a shipped calibration table, no CSI at the transmitter), ``"genie"`` (a bound:
   the best MCS for this very draw) or a fixed MCS name (the cliff); see
   :func:`transmit_digital`. A lost image (any payload codeword failing its CRC, or a
-  budget too small for the codec's lowest quality) is received as mid-grey (0.5
-  everywhere): the receiver has nothing better to show.
+  budget too small for the codec's lowest quality at every scale) is received as mid-grey
+  (0.5 everywhere): the receiver has nothing better to show.
 * ideal: the codec at capacity, ``num_symbols * log2(1 + snr)`` bits, error free.
+
+Both send the best file of the image that fits the budget over quality and scale
+(:func:`semcodec.image_codecs.encode_scaled_to_budget`: below some budget a downscaled image,
+upscaled at the receiver); each image's scale is in the stats.
 * analog: uncoded pixels; each image's values standardised (mean and std sent as side
   information), paired into complex symbols, LMMSE-scaled at the receiver.
 """
@@ -32,10 +36,10 @@ from semcodec.codec import Codec, Encoded, check_images
 from semcodec.contract import decode_received, encode_with_focus
 from semcodec.image_codecs import (
     IMAGE_CODECS,
-    decode_wire,
-    encode_image,
-    encode_to_budget,
-    get_image_codec,
+    RESAMPLE_FILTER,
+    decode_scaled,
+    encode_scaled_to_budget,
+    smallest_files,
 )
 
 LOST_IMAGE_VALUE = 0.5
@@ -182,13 +186,15 @@ def _grey(shape) -> Tensor:
     return torch.full(shape, LOST_IMAGE_VALUE)
 
 
-def decode_or_grey(data: bytes | None, shape, image_codec: str) -> tuple[Tensor, bool]:
-    """Wire bytes -> ([3, H, W] float32 image, True), or (mid-grey, False) when they are
-    None (nothing arrived) or undecodable."""
+def decode_or_grey(
+    data: bytes | None, shape, image_codec: str, scale: int = 1
+) -> tuple[Tensor, bool]:
+    """Wire bytes of an image sent at ``scale`` -> ([3, H, W] float32 image, True), or
+    (mid-grey, False) when they are None (nothing arrived) or undecodable."""
     if data is None:
         return _grey(shape), False
     try:
-        a = decode_wire(data, image_codec, shape[1], shape[2])
+        a = decode_scaled(data, image_codec, shape[1], shape[2], scale)
     except ValueError:
         return _grey(shape), False
     return torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1), True
@@ -209,17 +215,19 @@ def _check_num_symbols(num_symbols) -> int:
 def transmit_ideal(
     images: Tensor, snr_db: float, num_symbols: int, image_codec: str = "avif"
 ) -> TransmitResult:
-    """The codec at the capacity rate ``num_symbols * log2(1 + snr)`` bits, no errors."""
+    """The codec at the capacity rate ``num_symbols * log2(1 + snr)`` bits, no errors (the
+    best file over quality and scale)."""
     x = check_images(images)
     n = _check_num_symbols(num_symbols)
     _check_codec(image_codec)
     bits = int(math.floor(n * math.log2(1.0 + 10.0 ** (float(snr_db) / 10.0))))
-    out, qualities, sizes = [], [], []
+    out, qualities, sizes, scales = [], [], [], []
     for img in x:
-        data, q = encode_to_budget(img, bits // 8, image_codec)
-        rec, _ = decode_or_grey(data, img.shape, image_codec)
+        data, q, scale = encode_scaled_to_budget(img, bits // 8, image_codec)
+        rec, _ = decode_or_grey(data, img.shape, image_codec, scale or 1)
         out.append(rec)
         qualities.append(q)
+        scales.append(scale)
         sizes.append(0 if data is None else len(data))
     return TransmitResult(
         torch.stack(out),
@@ -228,6 +236,8 @@ def transmit_ideal(
             "bits": 8 * sum(sizes),
             "num_symbols": n * len(x),
             "quality": qualities,
+            "scale": scales,
+            "resample_filter": RESAMPLE_FILTER,
             "lost_images": sum(q is None for q in qualities),
             "failed_codewords": 0,
         },
@@ -241,7 +251,14 @@ MCS_MODES = (AUTO, GENIE)
 
 
 def _lost(img: Tensor, mcs, why: str, failed: int = 0) -> tuple[Tensor, bool, dict]:
-    info = {"mcs": mcs, "quality": None, "bits": 0, "failed_codewords": failed, "lost": why}
+    info = {
+        "mcs": mcs,
+        "quality": None,
+        "scale": None,
+        "bits": 0,
+        "failed_codewords": failed,
+        "lost": why,
+    }
     return _grey(img.shape), False, info
 
 
@@ -251,13 +268,13 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
     from phy.digital import payload_capacity_bits, transmit_bytes
 
     budget = payload_capacity_bits(n, mcs) // 8
-    data, q = encode_to_budget(img, budget, image_codec)
+    data, q, scale = encode_scaled_to_budget(img, budget, image_codec)
     if data is None:
         return _lost(img, mcs, "budget")
     r = transmit_bytes(
         data, mcs, link, snr_db, generator=torch.Generator().manual_seed(seed), num_symbols=n
     )
-    rec, ok = decode_or_grey(r.payload if r.ok else None, img.shape, image_codec)
+    rec, ok = decode_or_grey(r.payload if r.ok else None, img.shape, image_codec, scale)
     failed = (
         len([c for c in r.failed_codewords if c < r.num_payload_codewords])
         if r.num_payload_codewords
@@ -269,6 +286,7 @@ def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str,
         {
             "mcs": mcs,
             "quality": q,
+            "scale": scale,
             "bits": 8 * len(data),
             "failed_codewords": failed,
             "num_codewords": r.num_codewords,
@@ -324,17 +342,19 @@ def transmit_digital(
 
     * ``"auto"`` (the honest link, ``digital``): no CSI at the transmitter. The MCS comes
       from the shipped calibration table (:mod:`semcodec.digital_calibration`) given the
-      channel kind, the average ``snr_db``, ``num_symbols``, the image size and the size of
-      the image's lowest-quality file: the MCS of highest expected PSNR over the channel's
-      fading distribution. One shot: a failed codeword loses the image (an outage).
+      channel kind, the average ``snr_db``, ``num_symbols``, the image size and the sizes of
+      the image's lowest-quality file at each scale: the MCS of highest expected PSNR over
+      the channel's fading distribution. One shot: a failed codeword loses the image (an
+      outage).
     * ``"genie"`` (``digital_genie``, a bound; ``"envelope"`` is its old name): knows this
       draw's fade and noise; the best image over every MCS that decodes on the same draw,
       searched from the honest choice, so it is never below ``"auto"`` on the same draws.
     * a name in ``phy.digital.MCS_TABLE``: that MCS always (shows the cliff).
 
-    The codec's wire bytes are sent (container stripped, :mod:`semcodec.image_codecs`).
-    A lost image is mid-grey: ``"budget"`` when no file fits, ``"channel"`` when a payload
-    codeword failed.
+    The codec's wire bytes are sent (container stripped, :mod:`semcodec.image_codecs`): the
+    file of highest PSNR over quality and scale that fits the MCS's payload (a downscaled
+    image where that is better, upscaled at the receiver). A lost image is mid-grey:
+    ``"budget"`` when no file fits, ``"channel"`` when a payload codeword failed.
 
     Args:
         images: [batch, 3, height, width] float32 in [0, 1].
@@ -350,7 +370,8 @@ def transmit_digital(
             genie without it searches from the lowest MCS.
     Returns:
         TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images,
-        views_lost {"budget", "channel"}, mcs / quality / expected_psnr per image,
+        views_lost {"budget", "channel"}, mcs / quality / scale / expected_psnr per image,
+        resample_filter,
         mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
         calibrated).
     """
@@ -396,8 +417,7 @@ def _send_image(img, mode, kind, table, link, snr_db, n: int, image_codec: str, 
     choice, expected = names[0], None
     if kind is not None:
         h, w = img.shape[1:]
-        lo = get_image_codec(image_codec).quality_range[0]
-        min_bytes = len(encode_image(img, image_codec, lo))
+        min_bytes = smallest_files(img, image_codec)
         choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
         expected = round(expected, 3)
     if mode == AUTO:
@@ -454,6 +474,8 @@ def _digital_stats(infos: list[dict], num_symbols: int, mode: str) -> dict:
         "views_lost": lost,
         "mcs": [i["mcs"] for i in infos],
         "quality": [i["quality"] for i in infos],
+        "scale": [i["scale"] for i in infos],
+        "resample_filter": RESAMPLE_FILTER,
         "mcs_choice": {AUTO: "auto", GENIE: "genie (bound)"}.get(mode, "fixed"),
     }
 

@@ -8,8 +8,10 @@ the MCS of :data:`phy.digital.MCS_TABLE` that maximises the expected PSNR
 
 where BLER is the probability that some payload codeword of the image fails over the
 channel's fading distribution, PSNR(rate) the image codec's rate-distortion curve (Kodak,
-:data:`semcodec.IMAGE_CODECS`, container stripped) at the MCS's payload bits per pixel, and
-PSNR(lost) that of the mid-grey a lost image is shown as. Deep fades cost outages.
+:data:`semcodec.IMAGE_CODECS`, container stripped) at the MCS's payload bits per pixel, the
+best over the scales the image may be sent at (downscaled and upscaled at the receiver,
+:func:`semcodec.image_codecs.encode_scaled_to_budget`), and PSNR(lost) that of the mid-grey
+a lost image is shown as. Deep fades cost outages.
 
 What the table (``semcodec/data/digital_calibration.json``) holds and how it was computed
 (``python -m semcodec.digital_calibration --kodak KODAK --out PATH`` recomputes it, about
@@ -20,7 +22,9 @@ What the table (``semcodec/data/digital_calibration.json``) holds and how it was
   likelihood to Monte-Carlo counts (kept beside it) of :func:`phy.digital.codeword_errors`:
   AWGN (E = 960, 1920, 3840), and fast Rayleigh fading with perfect-CSI ZF (each codeword
   sees many fades; E = 3840, used for shorter codewords too).
-* ``rate_distortion[codec]``: mean bpp and mean PSNR over the 24 Kodak images per quality.
+* ``rate_distortion[codec][scale]``: mean bpp (bits per pixel of the full image) and mean
+  PSNR (the upscaled image against the full one) over the 24 Kodak images per quality, the
+  image sent downscaled by ``scale``.
 * ``lost_psnr_db``: mean PSNR of mid-grey (0.5) against the Kodak images.
 
 Image BLER with ``C`` codewords (they are independent given the fade):
@@ -42,6 +46,7 @@ import math
 import sys
 import time
 import zlib
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +55,8 @@ from common import psnr, read_image, write_text
 
 CALIBRATION_PATH = Path(__file__).resolve().parent / "data" / "digital_calibration.json"
 CODEWORD_BITS = (960, 1920, 3840)
-"""Codeword lengths E (coded bits) with a measured curve; others interpolate in log E."""
+"""Codeword lengths E (coded bits) with a measured curve; others interpolate in log E.
+Below rate 1/5 these are the mother codeword's distinct bits (:func:`measured_lengths`)."""
 MEASURED = {"awgn": CODEWORD_BITS, "rayleigh_fast": (3840,)}
 BLOCK_FADING = {"rayleigh": ("awgn", "rayleigh"), "rician": ("awgn", "rician")}
 """Block-fading channel -> (curve it averages, fade distribution)."""
@@ -72,8 +78,9 @@ HOW = (
     "Monte-Carlo points [snr_db, errors, trials] of phy.digital.codeword_errors (CRC24B, 5G "
     "LDPC, QAM, BP <= 20 iterations); awgn at E = 960, 1920, 3840; rayleigh_fast (perfect-CSI "
     "ZF, a fade per symbol) at E = 3840. Block fading = the awgn curve averaged over the fade. "
-    "rate_distortion[codec]: mean bpp (wire bytes, container stripped) and mean PSNR over the "
-    "Kodak images per quality. lost_psnr_db: mean PSNR of mid-grey against Kodak. Recompute: "
+    "rate_distortion[codec][scale]: mean bpp (wire bytes, container stripped, per pixel of the "
+    "full image) and mean PSNR (upscaled with Lanczos against the full image) over the Kodak "
+    "images per quality, the image sent downscaled by scale. lost_psnr_db: mean PSNR of mid-grey against Kodak. Recompute: "
     "python -m semcodec.digital_calibration --kodak KODAK --out FILE (about 30 CPU minutes)."
 )
 
@@ -82,6 +89,21 @@ def _q(x):
     from scipy.special import erfc
 
     return 0.5 * erfc(np.asarray(x, dtype=np.float64) / math.sqrt(2.0))
+
+
+def measured_lengths(channel: str, mcs: str) -> list[int]:
+    """Codeword lengths E measured for ``mcs`` on ``channel``: :data:`MEASURED`'s, or below
+    rate 1/5 the lengths whose mother codewords have that many bits (the same information
+    bits per codeword as at rate 1/5)."""
+    from phy.digital import MOTHER_RATE, get_mcs
+
+    m = get_mcs(mcs)
+    scale = max(MOTHER_RATE / m.code_rate, 1)
+    out = []
+    for e in MEASURED[channel]:
+        x = math.floor(e * scale)
+        out.append(x - x % m.bits_per_symbol)
+    return out
 
 
 # ----------------------------------------------------------------------------- fades
@@ -165,21 +187,25 @@ class DigitalCalibration:
         p = float(self.codeword_bler(curve, mcs, float(snr_db), e))
         return float(-math.expm1(c * math.log1p(-min(p, 1 - 1e-15))))
 
-    def psnr_at_bpp(self, image_codec: str, bpp: float) -> float:
-        """The codec's mean Kodak PSNR at ``bpp`` (linear in log2 bpp; PSNR(lost) below its
+    def psnr_at_bpp(self, image_codec: str, bpp: float, scales=None) -> float:
+        """The codec's mean Kodak PSNR at ``bpp``: the best over ``scales`` (default every
+        measured one) of each scale's curve, linear in log2 bpp (PSNR(lost) below a curve's
         lowest rate, its highest PSNR above its highest)."""
         if image_codec not in self.rd:
             raise KeyError(
                 f"no rate-distortion curve for {image_codec!r}; known: {sorted(self.rd)}"
             )
-        pts = self.rd[image_codec]
-        b = np.array([p["bpp"] for p in pts])
-        q = np.array([p["psnr_db"] for p in pts])
-        order = np.argsort(b)
-        b, q = b[order], q[order]
-        if bpp < b[0]:
-            return self.lost_psnr_db
-        return float(np.interp(math.log2(bpp), np.log2(b), q))
+        best = self.lost_psnr_db
+        for scale, pts in self.rd[image_codec].items():
+            if scales is not None and int(scale) not in scales:
+                continue
+            b = np.array([p["bpp"] for p in pts])
+            q = np.array([p["psnr_db"] for p in pts])
+            order = np.argsort(b)
+            b, q = b[order], q[order]
+            if bpp >= b[0]:
+                best = max(best, float(np.interp(math.log2(bpp), np.log2(b), q)))
+        return best
 
     def expected_psnr(
         self,
@@ -189,20 +215,30 @@ class DigitalCalibration:
         num_symbols: int,
         num_pixels: int,
         image_codec: str = "avif",
-        min_bytes: int = 0,
+        min_bytes=None,
     ) -> float:
         """E[PSNR] of sending at ``mcs``: (1 - BLER) PSNR(rate) + BLER PSNR(lost).
 
-        ``min_bytes``: the smallest file the codec makes of this image (the transmitter
-        knows it); a payload capacity below it means the image is lost with certainty.
+        ``min_bytes``: ``{scale: bytes}``, the smallest file the codec makes of this image at
+        each scale it may be sent at (the transmitter knows them), or one number for the
+        full image alone; the scales whose smallest file exceeds the payload capacity are
+        out, and with none left the image is lost with certainty. None: every scale of the
+        table, at least one byte each.
         """
         from phy.digital import payload_capacity_bits
 
+        if min_bytes is None:
+            smallest = {int(s): 1 for s in self.rd.get(image_codec, {1: None})}
+        elif isinstance(min_bytes, Mapping):
+            smallest = dict(min_bytes)
+        else:
+            smallest = {1: int(min_bytes)}
         cap = payload_capacity_bits(int(num_symbols), mcs)
-        if cap < 8 * max(int(min_bytes), 1):
+        fits = [s for s, b in smallest.items() if cap >= 8 * max(int(b), 1)]
+        if not fits:
             return self.lost_psnr_db
         bler = self.image_bler(channel, mcs, snr_db, num_symbols)
-        good = self.psnr_at_bpp(image_codec, cap / float(num_pixels))
+        good = self.psnr_at_bpp(image_codec, cap / float(num_pixels), fits)
         return (1.0 - bler) * good + bler * self.lost_psnr_db
 
     def choose_mcs(
@@ -212,14 +248,15 @@ class DigitalCalibration:
         num_symbols: int,
         num_pixels: int,
         image_codec: str = "avif",
-        min_bytes: int = 0,
+        min_bytes=None,
     ) -> tuple[str, float]:
         """(MCS name, its expected PSNR): the argmax of :meth:`expected_psnr` over
         :data:`phy.digital.MCS_TABLE` (ties: the lower rate). No channel draw is consulted.
         Answers are memoised per argument set."""
         from phy.digital import MCS_TABLE
 
-        key = (channel, float(snr_db), int(num_symbols), int(num_pixels), image_codec, min_bytes)
+        smallest = tuple(sorted(min_bytes.items())) if isinstance(min_bytes, Mapping) else min_bytes
+        key = (channel, float(snr_db), int(num_symbols), int(num_pixels), image_codec, smallest)
         if key in self._choices:
             return self._choices[key]
         best = None
@@ -305,18 +342,19 @@ def measure_curve(
     return {"t_db": round(t_fit, 3), "s_db": round(s_fit, 4), "points": pts}
 
 
-def measure_rate_distortion(images, image_codec: str, qualities) -> list[dict]:
-    """Mean bpp (wire bytes: container stripped) and mean PSNR per quality over ``images``
-    ([3, H, W] float tensors)."""
-    from semcodec.image_codecs import decode_wire, encode_image
+def measure_rate_distortion(images, image_codec: str, qualities, scale: int = 1) -> list[dict]:
+    """Mean bpp (wire bytes: container stripped, per pixel of the full image) and mean PSNR
+    (upscaled against the full image) per quality over ``images`` ([3, H, W] float tensors)
+    sent downscaled by ``scale``."""
+    from semcodec.image_codecs import decode_scaled, downscale, encode_image
 
     out = []
     for q in qualities:
         bpps, psnrs = [], []
         for img in images:
-            data = encode_image(img, image_codec, q)
+            data = encode_image(downscale(img, scale), image_codec, q)
             h, w = img.shape[1:]
-            rec = decode_wire(data, image_codec, h, w).astype(np.float64) / 255.0
+            rec = decode_scaled(data, image_codec, h, w, scale).astype(np.float64) / 255.0
             ref = np.round(img.permute(1, 2, 0).numpy() * 255) / 255.0
             bpps.append(8 * len(data) / (h * w))
             psnrs.append(psnr(rec, ref))
@@ -356,16 +394,23 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--part", choices=("all", "curves", "rd"), default="all")
     p.add_argument("--quick", action="store_true", help="fewer trials (tests, smoke runs)")
     p.add_argument("--max-images", type=int, default=None)
+    p.add_argument(
+        "--channels", default=",".join(MEASURED), help=f"curves to measure, of {list(MEASURED)}"
+    )
     args = p.parse_args(argv)
+    channels = args.channels.split(",")
+    for ch in channels:
+        if ch not in MEASURED:
+            p.error(f"--channels: {ch!r} is not one of {list(MEASURED)}")
     torch.set_num_threads(1)
     out = Path(args.out)
     doc = json.loads(out.read_text()) if out.exists() else {}
     doc.setdefault("codeword_curves", {})
     doc["how"] = HOW
     if args.part in ("all", "curves"):
-        for ch, lengths in MEASURED.items():
+        for ch in channels:
             for mcs in MCS_TABLE:
-                for e in lengths:
+                for e in measured_lengths(ch, mcs):
                     if str(e) in doc["codeword_curves"].get(ch, {}).get(mcs, {}):
                         continue
                     t0 = time.perf_counter()
@@ -380,11 +425,13 @@ def main(argv: list[str] | None = None) -> int:
                     )
                     write_text(out, json.dumps(doc, indent=1))
     if args.part in ("all", "rd"):
-        from semcodec.image_codecs import IMAGE_CODECS
+        from semcodec.image_codecs import IMAGE_CODECS, usable_scales
 
         imgs = _kodak(Path(args.kodak), args.max_images)
+        scales = usable_scales(*imgs[0].shape[1:])
         doc["rate_distortion"] = {
-            c: measure_rate_distortion(imgs, c, QUALITIES[c]) for c in IMAGE_CODECS
+            c: {str(s): measure_rate_distortion(imgs, c, QUALITIES[c], s) for s in scales}
+            for c in IMAGE_CODECS
         }
         grey = [psnr(im, torch.full_like(im, 0.5)) for im in imgs]
         doc["lost_psnr_db"] = round(float(np.mean(grey)), 3)

@@ -8,7 +8,8 @@ carries them, and ``receive(received, state, images, settings)`` turns each
 :class:`ReceivedBlock` into a :class:`FramedReception` (the image, its PSNR, the scheme's
 numbers and one CRC verdict per frame). ``LinkScheme.framed`` holds the scheme's pair.
 
-* digital: the image codec at ``quality`` (wire bytes), cut into frame-sized chunks; each
+* digital: the image codec at ``quality`` (wire bytes; the image downscaled by ``scale``
+  and upscaled at the receiver), cut into frame-sized chunks; each
   chunk is its own CRC + 5G LDPC + QAM block of one frame at ``mcs``
   (``phy.digital.encode_bytes``), so every frame has its own CRC. An image shows only when
   every frame arrived and passed its CRC; otherwise mid-grey (:data:`LOST_IMAGE_VALUE`).
@@ -28,7 +29,7 @@ import torch
 from common import psnr
 from semcodec.baselines import decode_or_grey
 from semcodec.contract import decode_received
-from semcodec.image_codecs import encode_image
+from semcodec.image_codecs import SCALES, downscale, encode_image
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,8 @@ class FramedSettings:
         mcs: digital: a name of ``phy.digital.MCS_TABLE``.
         image_codec: digital: a name of ``semcodec.IMAGE_CODECS``.
         quality: digital: the image codec's quality setting.
+        scale: digital: the image is sent downscaled by this factor of
+            ``semcodec.image_codecs.SCALES`` and upscaled at the receiver (1: whole).
         cbr: jscc: channel symbols per source value.
         codec: jscc: the semantic codec (``semcodec.open_codec``); None for digital.
     """
@@ -50,6 +53,7 @@ class FramedSettings:
     mcs: str = "qpsk-1/2"
     image_codec: str = "avif"
     quality: int = 50
+    scale: int = 1
     cbr: float = 1 / 16
     codec: object | None = None
 
@@ -58,6 +62,8 @@ class FramedSettings:
             raise ValueError(
                 f"symbols_per_frame must be an integer >= 1, got {self.symbols_per_frame!r}"
             )
+        if self.scale not in SCALES:
+            raise ValueError(f"scale must be one of {SCALES}, got {self.scale!r}")
 
 
 @dataclass
@@ -132,7 +138,8 @@ def _digital_transmit(images, settings: FramedSettings):
         raise ValueError(f"symbols_per_frame={spf} holds no payload at mcs {settings.mcs!r}")
     blocks, sizes = [], []
     for img in np.asarray(images, np.float32):
-        data = encode_image(img, settings.image_codec, int(settings.quality))
+        small = downscale(img, settings.scale)
+        data = encode_image(small, settings.image_codec, int(settings.quality))
         parts = [data[i : i + per_frame] for i in range(0, len(data), per_frame)]
         syms = [encode_bytes(c, mcs, num_symbols=spf).numpy() for c in parts]
         blocks.append(np.concatenate(syms).astype(np.complex64))
@@ -163,7 +170,7 @@ def _digital_receive(received, sizes, images, settings: FramedSettings):
     for block, frame_sizes, img in zip(received, sizes, np.asarray(images, np.float32)):
         payloads, crc_ok = _digital_frames(block, frame_sizes, settings)
         data = b"".join(payloads) if all(crc_ok) else None
-        shown, decoded = decode_or_grey(data, img.shape, settings.image_codec)
+        shown, decoded = decode_or_grey(data, img.shape, settings.image_codec, settings.scale)
         shown = shown.numpy()
         stats = {
             "decoded": decoded,

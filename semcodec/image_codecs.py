@@ -20,6 +20,13 @@ are patched back. WebP: the 20-byte RIFF/WEBP/'VP8 ' headers (pure lengths). JPE
 whole (with ``optimize=True`` its Huffman tables are the image's own). :func:`encode_image`
 returns wire bytes and :func:`decode_wire` decodes them; the round trip is bit-exact
 (``rebuild(strip(file)) == file`` is checked on every encode).
+
+Very low budgets. Where no file of the whole image fits (or a smaller image at a higher
+quality looks better), the transmitter sends the image downscaled by a factor of
+:data:`SCALES` (Pillow's Lanczos filter, :data:`RESAMPLE_FILTER`) and the receiver upscales
+the decoded image with the same filter (:func:`encode_scaled_to_budget`,
+:func:`decode_scaled`). The scale is control information, as the quality and the length
+are: both ends know it before the bytes are decoded.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import math
 import os
 import struct
 from collections.abc import Callable
@@ -36,9 +44,16 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from common import write_bytes
+from common import psnr, write_bytes
 
 AVIF_SPEED = 6
+SCALES = (1, 2, 4, 8, 16)
+"""Downscaling factors the transmitter may send an image at (each side divided, rounded up)."""
+RESAMPLE_FILTER = "lanczos"
+"""Pillow's filter for the transmitter's downscale and the receiver's upscale."""
+_PIL_FILTER = Image.Resampling.LANCZOS
+MIN_SCALED_SIDE = 8
+"""Smallest side in pixels of a downscaled image; coarser scales are not tried."""
 
 
 def _avif(img: Image.Image, q: int) -> bytes:
@@ -340,3 +355,77 @@ def encode_to_budget(
         else:
             b = mid
     return encode_image(image, codec, a, cache_dir), a
+
+
+# ----------------------------------------------------------------------------- scales
+def scaled_size(height: int, width: int, scale: int) -> tuple[int, int]:
+    """(height, width) of an image downscaled by ``scale`` (each side divided, rounded up)."""
+    if scale not in SCALES:
+        raise ValueError(f"scale must be one of {SCALES}, got {scale!r}")
+    return -(-int(height) // scale), -(-int(width) // scale)
+
+
+def downscale(image, scale: int) -> np.ndarray:
+    """[H, W, 3] uint8 of ``image`` (as :func:`to_uint8` takes it) downscaled by ``scale``."""
+    a = to_uint8(image)
+    h, w = scaled_size(*a.shape[:2], scale)
+    if (h, w) == a.shape[:2]:
+        return a
+    return np.asarray(Image.fromarray(a).resize((w, h), _PIL_FILTER))
+
+
+def decode_scaled(data: bytes, codec: str, height: int, width: int, scale: int = 1) -> np.ndarray:
+    """Wire bytes of an image sent at ``scale`` -> [height, width, 3] uint8: decoded at the
+    scaled size, then upscaled with :data:`RESAMPLE_FILTER`. ValueError as :func:`decode_wire`."""
+    h, w = scaled_size(height, width, scale)
+    a = decode_wire(data, codec, h, w)
+    if (h, w) == (height, width):
+        return a
+    return np.asarray(Image.fromarray(a).resize((int(width), int(height)), _PIL_FILTER))
+
+
+def usable_scales(height: int, width: int) -> tuple[int, ...]:
+    """The :data:`SCALES` whose downscaled image keeps both sides >= :data:`MIN_SCALED_SIDE`
+    (always 1)."""
+    return tuple(
+        s for s in SCALES if s == 1 or min(scaled_size(height, width, s)) >= MIN_SCALED_SIDE
+    )
+
+
+def smallest_files(image, codec: str, cache_dir=None) -> dict[int, int]:
+    """scale -> wire bytes of the image at the codec's lowest quality, per usable scale."""
+    a = to_uint8(image)
+    lo = get_image_codec(codec).quality_range[0]
+    return {
+        s: len(encode_image(downscale(a, s), codec, lo, cache_dir))
+        for s in usable_scales(*a.shape[:2])
+    }
+
+
+def encode_scaled_to_budget(
+    image, max_bytes: int, codec: str = "avif", cache_dir=None
+) -> tuple[bytes | None, int | None, int | None]:
+    """The best file of the image that fits ``max_bytes``, over scale and quality.
+
+    Per scale of :func:`usable_scales`, from 1 up, the highest quality that fits
+    (:func:`encode_to_budget`); the transmitter decodes and upscales each candidate and keeps
+    the one of highest PSNR against its image, stopping at the first scale that does worse
+    than the best so far (a coarser one would lose more detail still).
+
+    Returns:
+        (wire bytes, quality, scale), or (None, None, None) when nothing fits.
+    """
+    a = to_uint8(image)
+    h, w = a.shape[:2]
+    ref = a.astype(np.float64) / 255.0
+    best = (None, None, None)
+    best_psnr = -math.inf
+    for s in usable_scales(h, w):
+        data, q = encode_to_budget(downscale(a, s), max_bytes, codec, cache_dir)
+        if data is None:
+            continue
+        p = psnr(decode_scaled(data, codec, h, w, s).astype(np.float64) / 255.0, ref)
+        if p <= best_psnr:
+            break
+        best, best_psnr = (data, q, s), p
+    return best

@@ -332,6 +332,7 @@ def _point(
     extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
     lost = {"budget": 0, "channel": 0}
     mcs_used: dict[str, int] = {}
+    scales_used: dict[str, int] = {}  # images sent downscaled by each factor (1: whole)
     stats_keys = {}
     separate = False  # the scheme reported views lost (a separate source-channel code)
     for ii, img in enumerate(images):
@@ -350,7 +351,9 @@ def _point(
                 lost[k] += int(v)
             for m in res.stats.get("mcs") or []:
                 mcs_used[str(m)] = mcs_used.get(str(m), 0) + 1
-            for k in ("mcs_choice", "calibration"):
+            for sc in res.stats.get("scale") or []:
+                scales_used[str(sc)] = scales_used.get(str(sc), 0) + 1
+            for k in ("mcs_choice", "calibration", "resample_filter"):
                 if k in res.stats:
                     stats_keys[k] = res.stats[k]
             bar.update(1)
@@ -375,7 +378,9 @@ def _point(
     if separate:
         r["views_lost"] = lost
         r["mcs_used"] = mcs_used
-        r.update(stats_keys)
+    if scales_used:
+        r["scales_used"] = scales_used
+    r.update(stats_keys)
     if LINK_SCHEMES[scheme].bound:
         r["bound"] = LINK_SCHEMES[scheme].bound
     lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""

@@ -167,7 +167,7 @@ def _add_air_arguments(p: argparse.ArgumentParser) -> None:
 def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     """The options of the digital scheme (MCS, image codec, quality) and of jscc (CBR, codec)."""
     from phy.digital import MCS_TABLE
-    from semcodec.image_codecs import IMAGE_CODECS
+    from semcodec.image_codecs import IMAGE_CODECS, SCALES
 
     p.add_argument(
         "--mcs",
@@ -184,6 +184,14 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
         type=int,
         default=50,
         help="digital: codec quality, 1-100 (JPEG 1-95; default 50)",
+    )
+    p.add_argument(
+        "--scale",
+        type=int,
+        default=1,
+        choices=SCALES,
+        help="digital: send the image downscaled by this factor, upscaled (Lanczos) at the "
+        "receiver; for low rates at low SNR (default 1: whole)",
     )
     p.add_argument(
         "--cbr", default="1/16", help="jscc: channel symbols per source value (default 1/16)"
@@ -321,6 +329,7 @@ def framed_settings(args, symbols_per_frame: int):
         mcs=args.mcs,
         image_codec=args.image_codec,
         quality=args.quality,
+        scale=args.scale,
         cbr=cbr,
         codec=codec,
     )

@@ -18,7 +18,7 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
-CACHE_VERSION = 13
+CACHE_VERSION = 14
 
 
 @dataclass(frozen=True)

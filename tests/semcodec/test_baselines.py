@@ -64,10 +64,17 @@ def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
     )
     assert good.stats["lost_images"] == 0 and good.stats["failed_codewords"] == 0
     from phy.digital import payload_capacity_bits
+    from semcodec.baselines import decode_or_grey
+    from semcodec.image_codecs import encode_scaled_to_budget
 
-    data, _ = encode_to_budget(x[0], payload_capacity_bits(n, "16qam-1/2") // 8, "avif")
+    budget = payload_capacity_bits(n, "16qam-1/2") // 8
+    data, _, scale = encode_scaled_to_budget(x[0], budget, "avif")
     assert good.stats["bits"] == 8 * len(data) <= payload_capacity_bits(n, "16qam-1/2")
+    assert good.stats["scale"] == [scale]
     assert psnr(good.images, x) > 25
+    # the file sent is at least as good as the best full-size one that fits
+    full, _ = encode_to_budget(x[0], budget, "avif")
+    assert psnr(good.images, x) >= psnr(decode_or_grey(full, x[0].shape, "avif")[0], x[0])
 
 
 def test_scheme_registry_runs_every_name_and_bounds_bound(tiny_codec):

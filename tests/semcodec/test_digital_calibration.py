@@ -18,6 +18,7 @@ from semcodec.digital_calibration import (
     fade_grid,
     fit_probit,
     load_calibration,
+    measured_lengths,
 )
 
 
@@ -27,14 +28,42 @@ def cal():
 
 
 def test_table_covers_every_mcs_measured_channel_and_codec(cal):
-    for ch, lengths in MEASURED.items():
+    for ch in MEASURED:
         assert set(cal.curves[ch]) == set(MCS_TABLE)
         for mcs in MCS_TABLE:
-            assert {int(e) for e in cal.curves[ch][mcs]} == set(lengths)
+            assert {int(e) for e in cal.curves[ch][mcs]} == set(measured_lengths(ch, mcs))
     assert set(cal.rd) == set(IMAGE_CODECS)
     # thresholds rise with spectral efficiency (AWGN, longest codewords)
-    t = [cal.curves["awgn"][m]["3840"]["t_db"] for m in MCS_TABLE]
+    t = [_longest(cal, "awgn", m)["t_db"] for m in MCS_TABLE]
     assert t == sorted(t)
+
+
+def _longest(cal, channel, mcs):
+    return cal.curves[channel][mcs][str(max(measured_lengths(channel, mcs)))]
+
+
+def _shannon_db(mcs) -> float:
+    """Es/N0 at which a complex Gaussian channel's capacity is the MCS's spectral efficiency."""
+    return 10 * math.log10(2.0 ** MCS_TABLE[mcs].spectral_efficiency - 1.0)
+
+
+@pytest.mark.parametrize("mcs", list(MCS_TABLE)[:12])
+def test_low_rate_codes_decode_within_2_db_of_the_shannon_limit(cal, mcs):
+    """QPSK at R = 30/1024 .. 1/3 (repeated rate-1/5 LDPC below 1/5): the AWGN threshold
+    (50 % codeword errors, longest codewords) lies 0.7 to 2 dB above the Es/N0 where capacity
+    equals the MCS's spectral efficiency. QPSK's own capacity costs under 0.1 dB there, the
+    short code and the repetition the rest; closer than 0.7 dB would mean a broken model."""
+    gap = _longest(cal, "awgn", mcs)["t_db"] - _shannon_db(mcs)
+    assert 0.7 < gap < 2.0, gap
+
+
+def test_the_lowest_mcs_reaches_below_minus_12_db(cal):
+    """TS 38.214's lowest QPSK entry, 30/1024, decodes half its codewords near -12.3 dB; at
+    -10 dB an image of thousands of codewords at that MCS is almost never lost."""
+    lowest = next(iter(MCS_TABLE))
+    assert lowest == "qpsk-30/1024"
+    assert -13.0 < _longest(cal, "awgn", lowest)["t_db"] < -11.5
+    assert cal.image_bler("awgn", lowest, -10.0, 73728) < 1e-3
 
 
 @pytest.mark.parametrize("name", [*sorted(phy.CHANNELS), "ota"])
@@ -66,7 +95,7 @@ def test_block_rayleigh_bler_is_the_awgn_curve_averaged_over_exp1_fades(
         p = float(cal.codeword_bler("awgn", mcs, snr_db + 10 * math.log10(g), e))
         return (1.0 - (1.0 - p) ** c) * math.exp(-g)
 
-    t = cal.curves["awgn"][mcs]["3840"]["t_db"]
+    t = _longest(cal, "awgn", mcs)["t_db"]
     knee = 10 ** ((t - snr_db) / 10)  # where the fade crosses the threshold
     pts = [knee * f for f in (0.25, 0.5, 1.0, 2.0, 4.0)]
     ref = quad(lost, 1e-12, 60.0, points=pts, limit=400, epsabs=1e-10)[0]
@@ -85,8 +114,8 @@ def test_fade_grids_are_distributions_with_unit_mean_power():
 
 def test_awgn_bler_has_no_fading_and_fades_cost_outages(cal):
     n = 4000
-    for mcs in ("qpsk-1/2", "16qam-3/4"):
-        t = cal.curves["awgn"][mcs]["3840"]["t_db"]
+    for mcs in ("qpsk-30/1024", "qpsk-1/2", "16qam-3/4"):
+        t = _longest(cal, "awgn", mcs)["t_db"]
         assert cal.image_bler("awgn", mcs, t + 3, n) < 1e-3
         assert cal.image_bler("rayleigh", mcs, t + 3, n) > 0.2  # deep fades
         assert cal.image_bler("awgn", mcs, t - 3, n) > 0.999
@@ -168,3 +197,44 @@ def test_honest_digital_needs_the_channel_kind_the_genie_does_not():
     )
     res = transmit_digital(x, link, 10.0, 768, mcs="genie")
     assert res.stats["mcs_choice"] == "genie (bound)" and "calibration" not in res.stats
+
+
+def test_rate_distortion_is_measured_at_every_scale_and_downscaling_reaches_lower_rates(cal):
+    """Per scale, the lowest rate falls (fewer pixels to code) and the highest PSNR falls
+    (the upscale cannot bring detail back); the hull over scales is the best of them."""
+    for codec in IMAGE_CODECS:
+        curves = {int(s): pts for s, pts in cal.rd[codec].items()}
+        assert sorted(curves) == [1, 2, 4, 8, 16]
+        low = [min(p["bpp"] for p in curves[s]) for s in sorted(curves)]
+        top = [max(p["psnr_db"] for p in curves[s]) for s in sorted(curves)]
+        assert low == sorted(low, reverse=True) and top == sorted(top, reverse=True)
+    b = 0.01  # below the full-size curve's lowest rate: only downscaled images
+    assert cal.psnr_at_bpp("avif", b, scales=[1]) == cal.lost_psnr_db
+    assert cal.psnr_at_bpp("avif", b) == max(
+        cal.psnr_at_bpp("avif", b, scales=[s]) for s in (2, 4, 8, 16)
+    )
+    assert cal.psnr_at_bpp("avif", b) > cal.lost_psnr_db + 5
+
+
+def test_at_minus_10_db_the_honest_link_plans_a_downscaled_image_at_a_repeated_code(cal):
+    """A Kodak image at CBR 1/16 and -10 dB AWGN: no full-size file fits any MCS that
+    decodes, so with the full size alone the choice is a certain loss; with the scales the
+    choice is a rate below 1/5 and a downscaled image."""
+    n, px = 73728, 768 * 512
+    smallest = {1: 1900, 2: 560, 4: 160, 8: 60, 16: 22}  # kodim01's, in bytes
+    mcs, expected = cal.choose_mcs("awgn", -10.0, n, px, "avif", smallest)
+    assert MCS_TABLE[mcs].code_rate < 0.2 and expected > cal.lost_psnr_db + 5
+    assert cal.choose_mcs("awgn", -10.0, n, px, "avif", 1900)[1] == cal.lost_psnr_db
+
+
+def test_the_link_records_the_scale_it_sent_and_the_image_round_trips_at_it():
+    """256 px at CBR 1/16 over AWGN at -10 dB: the transmitter sends a downscaled image at a
+    repeated code, the receiver upscales it, and the result says which scale and filter. The
+    picture varies on a 64 px scale, so a downscaled copy keeps most of it."""
+    base = torch.rand(1, 3, 4, 4, generator=torch.Generator().manual_seed(9))
+    x = torch.nn.functional.interpolate(base, size=(256, 256), mode="bilinear").clamp(0, 1)
+    res = transmit_digital(x, _link("awgn"), -10.0, 256 * 256 * 3 // 16, mcs="auto")
+    st = res.stats
+    assert st["lost_images"] == 0 and st["scale"][0] > 1 and st["resample_filter"] == "lanczos"
+    assert MCS_TABLE[st["mcs"][0]].code_rate < 0.2
+    assert psnr(res.images, x) > 25
