@@ -4,7 +4,7 @@
   (96 px crops, batch 12), with the shipped checkpoint; timings on a shared 2-core machine
   are noisy.
 * The codec table: Kodak x channels (awgn; rayleigh = block fading, 4 draws per image;
-  rayleigh_fast) x SNR 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
+  rayleigh_fast) x SNR -10, -5, -2, 0, 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
   checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital
   (honest: MCS from the calibration table), digital_genie and ideal (bounds), mean and 95 %
   interval, with the published anchors beside each row and checks (jscc above digital,
@@ -86,7 +86,9 @@ REFINED_CHANNELS = ("rayleigh",)
 """Channels where the table also has ``jscc_refined`` (the transmitter refines each image's
 symbols, :func:`semcodec.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
 fading, where jscc meets the honest digital link."""
-TABLE_SNRS = (1.0, 4.0, 10.0)
+TABLE_SNRS = (-10.0, -5.0, -2.0, 0.0, 1.0, 4.0, 10.0)
+"""The HIWE range from -10 dB, where only the low-rate MCSs and downscaled images carry the
+digital link, to 10 dB."""
 SEPARATE = tuple(
     name
     for name, s in LINK_SCHEMES.items()
