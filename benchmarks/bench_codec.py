@@ -87,8 +87,7 @@ REFINED_CHANNELS = ("rayleigh",)
 symbols, :func:`semcodec.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
 fading, where jscc meets the honest digital link."""
 TABLE_SNRS = (-10.0, -5.0, -2.0, 0.0, 1.0, 4.0, 10.0)
-"""The HIWE range from -10 dB, where only the low-rate MCSs and downscaled images carry the
-digital link, to 10 dB."""
+"""The table's SNRs: the HIWE range from -10 to 10 dB."""
 SEPARATE = tuple(
     name
     for name, s in LINK_SCHEMES.items()

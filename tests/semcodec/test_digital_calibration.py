@@ -51,8 +51,7 @@ def _shannon_db(mcs) -> float:
 def test_low_rate_codes_decode_within_2_db_of_the_shannon_limit(cal, mcs):
     """QPSK at R = 30/1024 .. 1/3 (repeated rate-1/5 LDPC below 1/5): the AWGN threshold
     (50 % codeword errors, longest codewords) lies 0.7 to 2 dB above the Es/N0 where capacity
-    equals the MCS's spectral efficiency. QPSK's own capacity costs under 0.1 dB there, the
-    short code and the repetition the rest; closer than 0.7 dB would mean a broken model."""
+    equals the MCS's spectral efficiency; closer than 0.7 dB would mean a broken model."""
     gap = _longest(cal, "awgn", mcs)["t_db"] - _shannon_db(mcs)
     assert 0.7 < gap < 2.0, gap
 
