@@ -60,7 +60,10 @@ def available_commands() -> dict[str, tuple[str, str]]:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    from osnerf import __version__
+
     parser = _Parser(prog="osnerf", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"osnerf {__version__}")
     parser._negative_number_matcher = _NEGATIVE_LIST
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True

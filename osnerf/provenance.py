@@ -40,8 +40,10 @@ def versions() -> dict[str, str]:
     """Versions of the libraries results depend on."""
     from importlib import metadata
 
-    out = {"python": platform.python_version()}
-    for name in ("osnerf", "torch", "sionna", "numpy"):
+    from osnerf import __version__
+
+    out = {"python": platform.python_version(), "osnerf": __version__}
+    for name in ("torch", "sionna", "numpy"):
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
