@@ -7,11 +7,13 @@ digital, symbols jscc / full, processing time jscc / full), the total wall time 
 demo's budget is 10 minutes on 2 cores) and the machine load (timings on a shared machine
 are pessimistic).
 
-Then the over-the-air goals: `osnerf run --scene tiny --channel ota --snr-db 0` (emulated
-HackRFs at their defaults) for seeds 0-2 with jscc, digital and gt: each seed's jscc - gt in
-object PSNR against the goal of at most 3 dB under gt, and jscc - digital against the goal
-of jscc at least digital's on every seed (every field takes the same NeRF steps, so a seed's
-numbers repeat; a change to the sent symbols moves them by about 0.1 dB).
+Then over the air: `osnerf run --scene tiny --channel ota --snr-db S` (emulated HackRFs at
+their defaults) at S = 0, -5 and -10 dB for seeds 0-2 with jscc, digital and gt: each seed's
+jscc - gt in object PSNR against the goal of at most 3 dB under gt (at 0 dB), and jscc -
+digital against the goal of jscc at least digital's on every seed (every field takes the
+same NeRF steps, so a seed's numbers repeat). Each run's folder is
+``pipeline_tiny_ota_<S>dB_seed<N>``; a report already there from the same clean commit and
+config is reused, anything else is run again (``--overwrite``).
 """
 
 from __future__ import annotations
@@ -22,29 +24,59 @@ import time
 from pathlib import Path
 
 OTA_SEEDS = (0, 1, 2)
+OTA_SNRS_DB = (0, -5, -10)
 OTA_GOAL_DB = 3.0
+OTA_GOAL_SNR_DB = 0
+
+
+def _reusable(run_dir: Path, argv: list[str]) -> bool:
+    """A report in ``run_dir`` that this clean commit made with these arguments."""
+    from osnerf.provenance import git_commit
+
+    path = run_dir / "report.json"
+    if not path.is_file():
+        return False
+    doc = json.loads(path.read_text())
+    commit = git_commit()
+    clean = commit != "unknown" and not commit.endswith("-dirty")
+    return clean and doc.get("git_commit") == commit and doc.get("argv") == argv
+
+
+def _run(run_dir: Path, argv: list[str]) -> float:
+    """``osnerf run`` into ``run_dir`` (reused when :func:`_reusable`); wall seconds."""
+    from common import write_text
+    from osnerf.cli import main
+
+    if _reusable(run_dir, argv):
+        return 0.0
+    t = time.perf_counter()
+    if main([*argv, "--out", str(run_dir), "--overwrite"]) != 0:
+        raise RuntimeError(f"osnerf {' '.join(argv)} failed")
+    path = run_dir / "report.json"
+    doc = json.loads(path.read_text())
+    doc["argv"] = argv
+    write_text(path, json.dumps(doc, indent=1))
+    return time.perf_counter() - t
 
 
 def _over_the_air(out_dir: Path) -> dict:
-    from osnerf.cli import main
     from osnerf.report import Report
 
     rows = []
-    for seed in OTA_SEEDS:
-        run_dir = Path(out_dir) / f"pipeline_tiny_ota_{seed}"
-        args = ["run", "--scene", "tiny", "--channel", "ota", "--snr-db", "0"]
-        args += ["--schemes", "jscc,digital,gt", "--renderer-steps", "0"]
-        t = time.perf_counter()
-        if main([*args, "--seed", str(seed), "--out", str(run_dir)]) != 0:
-            raise RuntimeError(f"osnerf run (tiny, ota, seed {seed}) failed")
+    for snr, seed in ((s, n) for s in OTA_SNRS_DB for n in OTA_SEEDS):
+        run_dir = Path(out_dir) / f"pipeline_tiny_ota_{snr}dB_seed{seed}"
+        args = ["run", "--scene", "tiny", "--channel", "ota", "--snr-db", str(snr)]
+        args += ["--schemes", "jscc,digital,gt", "--renderer-steps", "0", "--seed", str(seed)]
+        wall = _run(run_dir, args)
         report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
         sch = report.schemes
         gap = sch["jscc"].psnr_object - sch["gt"].psnr_object
         over_digital = sch["jscc"].psnr_object - sch["digital"].psnr_object
         rows.append(
             {
+                "snr_db": snr,
                 "seed": seed,
-                "wall_seconds": time.perf_counter() - t,
+                "wall_seconds": wall,
                 "psnr_object": {n: r.psnr_object for n, r in sch.items()},
                 "psnr_received_object": {n: r.psnr_received_object for n, r in sch.items()},
                 "jscc_minus_gt_db": gap,
@@ -54,34 +86,25 @@ def _over_the_air(out_dir: Path) -> dict:
                 "repetitions_on_demand": sorted(
                     set(report.views["repetitions_on_demand"].values())
                 ),
-                "met": gap >= -OTA_GOAL_DB,
+                "met": gap >= -OTA_GOAL_DB if snr == OTA_GOAL_SNR_DB else None,
                 "jscc_at_least_digital": over_digital >= 0,
             }
         )
     return {
-        "command": "osnerf run --scene tiny --channel ota --snr-db 0 --schemes jscc,digital,gt "
-        "--renderer-steps 0 --seed S",
-        "goal": f"jscc within {OTA_GOAL_DB:g} dB of gt (object PSNR)",
+        "command": "osnerf run --scene tiny --channel ota --snr-db S --schemes jscc,digital,gt "
+        "--renderer-steps 0 --seed N",
+        "goal": f"jscc within {OTA_GOAL_DB:g} dB of gt (object PSNR) at {OTA_GOAL_SNR_DB} dB",
         "goal_over_digital": "jscc's object PSNR at least digital's on every seed",
         "rows": rows,
-        "mean_jscc_minus_gt_db": sum(r["jscc_minus_gt_db"] for r in rows) / len(rows),
-        "goal_met_every_seed": all(r["met"] for r in rows),
+        "goal_met_every_seed": all(r["met"] for r in rows if r["met"] is not None),
         "jscc_at_least_digital_every_seed": all(r["jscc_at_least_digital"] for r in rows),
     }
 
 
 def run(out_dir: Path) -> dict:
-    from osnerf.cli import main
-
     run_dir = Path(out_dir) / "pipeline_demo"
     load_before = os.getloadavg()
-    t = time.perf_counter()
-    rc = main(
-        ["run", "--channel", "rayleigh", "--snr-db", "0", "--seed", "0", "--out", str(run_dir)]
-    )
-    wall = time.perf_counter() - t
-    if rc != 0:
-        raise RuntimeError(f"osnerf run exited with {rc}")
+    wall = _run(run_dir, ["run", "--channel", "rayleigh", "--snr-db", "0", "--seed", "0"])
     from dataclasses import asdict
 
     from osnerf.report import Report
@@ -89,9 +112,9 @@ def run(out_dir: Path) -> dict:
     report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
     return {
         "command": "osnerf run --channel rayleigh --snr-db 0 --seed 0 (default scene and demand)",
-        "wall_seconds": wall,
+        "wall_seconds": wall or None,
         "demo_budget_seconds": 600,
-        "within_budget": wall < 600,
+        "within_budget": wall < 600 if wall else None,
         "loadavg_before": load_before,
         "loadavg_after": os.getloadavg(),
         "cpu_count": os.cpu_count(),
@@ -119,5 +142,5 @@ def run(out_dir: Path) -> dict:
         "comparisons": report.comparisons,
         "report": str(run_dir / "report.json"),
         "over_the_air_tiny": _over_the_air(out_dir),
-        "note": "reused cached stages if run_dir already held them; delete it for a cold run",
+        "note": "wall_seconds is null where this commit's report was reused",
     }

@@ -1,0 +1,378 @@
+"""Generate ``docs/results.md`` and the README's results table from ``bench-results/``.
+
+    python -m benchmarks.results            # rewrite both
+    python -m benchmarks.results --check    # exit 1 if either is out of date
+
+It reads only what the benchmarks write there: ``osnerf eval-codec`` result files
+(``codec_<channel>_separate.json``, ``codec_<channel>_jscc_<sha12>.json``, from
+``python -m benchmarks codec``) and ``osnerf run`` reports (``pipeline_demo/report.json``,
+``pipeline_tiny_ota_<snr>dB_seed<seed>/report.json``, from ``python -m benchmarks
+pipeline``), plus the shipped checkpoints' model cards. Every number it prints carries the
+commit that made it. A missing file leaves its rows out, never a stale number in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections.abc import Iterable
+from fractions import Fraction
+from pathlib import Path
+from statistics import mean
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "bench-results"
+README = ROOT / "README.md"
+DOC = ROOT / "docs" / "results.md"
+CARDS = ROOT / "semcodec" / "checkpoints"
+BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+
+CHANNEL_LABELS = {"awgn": "AWGN", "rayleigh": "block Rayleigh", "rayleigh_fast": "fast Rayleigh"}
+CODEC_SCHEMES = ("jscc", "digital", "digital_genie", "ideal")
+BOUNDS = ("digital_genie", "ideal", "gt")
+HEADLINE_SNRS = (-10.0, 1.0, 10.0)
+OTA_DIR = re.compile(r"pipeline_tiny_ota_(?P<snr>-?\d+)dB_seed(?P<seed>\d+)$")
+
+
+def _commit(doc: dict) -> str:
+    sha = doc.get("git_commit", "unknown")
+    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
+
+
+def _label(scheme: str) -> str:
+    return f"{scheme} (bound)" if scheme in BOUNDS else scheme
+
+
+def _lost(entry: dict | None) -> int:
+    """Views or images lost to the budget or the channel (0 when the scheme cannot lose any)."""
+    lost = (entry or {}).get("views_lost") or {}
+    return int(sum(lost.values())) if isinstance(lost, dict) else int(lost)
+
+
+def _table(header: Iterable[str], rows: Iterable[Iterable[object]]) -> list[str]:
+    header = list(header)
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return out
+
+
+# --- loading -------------------------------------------------------------------------------
+
+
+def codec_results(folder: Path = RESULTS) -> dict:
+    """channel -> {"rows": {(scheme, snr_db): result row}, "docs": [eval-codec files]}."""
+    out: dict = {}
+    for path in sorted(folder.glob("codec_*.json")):
+        m = re.fullmatch(r"codec_(?P<ch>.+?)_(separate|jscc_[0-9a-f]{12})", path.stem)
+        if not m or m["ch"] not in CHANNEL_LABELS:  # Kodak's table only
+            continue
+        doc = json.loads(path.read_text())
+        entry = out.setdefault(m["ch"], {"rows": {}, "docs": []})
+        entry["docs"].append((path.name, doc))
+        for r in doc["results"]:
+            entry["rows"][(r["scheme"], float(r["snr_db"]))] = r
+    return out
+
+
+def run_report(path: Path) -> dict | None:
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def ota_reports(folder: Path = RESULTS) -> dict[float, list[dict]]:
+    """SNR -> the tiny scene's over-the-air reports, by seed."""
+    out: dict[float, list[dict]] = {}
+    for d in sorted(folder.glob("pipeline_tiny_ota_*")):
+        m = OTA_DIR.match(d.name)
+        doc = run_report(d / "report.json")
+        if m and doc:
+            out.setdefault(float(m["snr"]), []).append(doc)
+    return {k: sorted(v, key=lambda d: d["seed"]) for k, v in sorted(out.items(), reverse=True)}
+
+
+def cards(folder: Path = CARDS) -> list[tuple[str, dict]]:
+    return [
+        (p.name.removesuffix(".card.json"), json.loads(p.read_text()))
+        for p in sorted(folder.glob("*.card.json"))
+    ]
+
+
+# --- tables --------------------------------------------------------------------------------
+
+
+def _psnr(x: float | None) -> str:
+    return "–" if x is None else f"{x:.2f}"
+
+
+def _cbr(cbr: float) -> str:
+    return str(Fraction(cbr).limit_denominator(64))
+
+
+def _lost_of(r: dict) -> str:
+    lost = _lost(r)
+    return f" ({lost} of {r['num_images'] * r['draws']} lost)" if lost else ""
+
+
+def _mean_object(docs: list[dict], scheme: str) -> float | None:
+    vals = [d["schemes"][scheme]["psnr_object"] for d in docs if scheme in d["schemes"]]
+    return mean(vals) if vals else None
+
+
+def _views(docs: list[dict]) -> int:
+    return docs[0]["schemes"]["digital"]["views_sent"]
+
+
+def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> list[str]:
+    """The README's one table: the demo, over the air, and the codec against digital."""
+    rows = []
+    if demo:
+        s = demo["schemes"]
+        rows.append(
+            [
+                "demo: firefighter scene, hydrant, object PSNR of the field",
+                f"block Rayleigh {demo['snr_db']:g} dB",
+                _psnr(s.get("jscc", {}).get("psnr_object")),
+                _psnr(s.get("digital", {}).get("psnr_object"))
+                + (
+                    f" ({_lost(s.get('digital'))} of {s['digital']['views_sent']} lost)"
+                    if "digital" in s
+                    else ""
+                ),
+                "gt " + _psnr(s.get("gt", {}).get("psnr_object")),
+                _commit(demo),
+            ]
+        )
+    for snr, docs in ota.items():
+        lost = [_lost(d["schemes"].get("digital")) for d in docs if "digital" in d["schemes"]]
+        rows.append(
+            [
+                f"over the air: tiny scene, emulated HackRFs, mean of {len(docs)} seeds",
+                f"{snr:g} dB",
+                _psnr(_mean_object(docs, "jscc")),
+                _psnr(_mean_object(docs, "digital"))
+                + (f" ({sum(lost)} of {len(lost) * _views(docs)} lost)" if any(lost) else ""),
+                "gt " + _psnr(_mean_object(docs, "gt")),
+                ", ".join(sorted({_commit(d) for d in docs})),
+            ]
+        )
+    for channel in (c for c in CHANNEL_LABELS if c in codec):
+        entry = codec[channel]
+        for snr in HEADLINE_SNRS:
+            r = {k: entry["rows"].get((k, snr)) for k in CODEC_SCHEMES}
+            if not r["jscc"] or not r["digital"]:
+                continue
+            commits = sorted({_commit(doc) for _, doc in entry["docs"]})
+            rows.append(
+                [
+                    f"Kodak-{r['jscc']['num_images']}, CBR {_cbr(r['jscc']['cbr'])}, image PSNR",
+                    f"{CHANNEL_LABELS.get(channel, channel)} {snr:g} dB",
+                    _psnr(r["jscc"]["psnr"]),
+                    _psnr(r["digital"]["psnr"]) + _lost_of(r["digital"]),
+                    "ideal " + _psnr((r["ideal"] or {}).get("psnr")),
+                    ", ".join(commits),
+                ]
+            )
+    header = ["experiment", "link", "jscc (dB)", "digital (dB)", "bound (dB)", "commit"]
+    return _table(header, rows)
+
+
+def _eval_command(doc: dict) -> str:
+    """The eval-codec command line that made ``doc`` (rebuilt from its config if not stored)."""
+    argv = doc.get("argv")
+    if not argv:
+        c = doc["config"]
+        argv = [
+            *("--images", c["images"], "--max-images", str(len(c["image_names"]))),
+            *("--channel", c["channel"], "--draws", str(c["draws"])),
+            "--snr-db=" + ",".join(f"{x:g}" for x in c["snr_db"]),
+            *("--cbr", _cbr(c["cbr"]), "--schemes", ",".join(c["schemes"])),
+            *("--seed", str(doc["seed"])),
+            *([] if c.get("lpips", True) else ["--no-lpips"]),
+        ]
+    text = "osnerf eval-codec " + " ".join(argv)
+    return re.sub(r"\S*/shared/data/", "../shared/data/", text)
+
+
+def codec_section(codec: dict) -> list[str]:
+    lines = ["## The codec against the digital link", ""]
+    if not codec:
+        return lines + ["No `codec_*.json` in bench-results/ (`python -m benchmarks codec`).", ""]
+    for channel in (c for c in CHANNEL_LABELS if c in codec):
+        entry = codec[channel]
+        lines.append(f"### {CHANNEL_LABELS.get(channel, channel)}")
+        lines.append("")
+        for name, doc in entry["docs"]:
+            lines.append(f"- `{name}`: `{_eval_command(doc)}`, commit {_commit(doc)}")
+        lines.append("")
+        snrs = sorted({s for _, s in entry["rows"]})
+        schemes = [
+            s
+            for s in (*CODEC_SCHEMES, "jscc_refined")
+            if any((s, x) in entry["rows"] for x in snrs)
+        ]
+        rows = []
+        for scheme in schemes:
+            cells = []
+            for snr in snrs:
+                r = entry["rows"].get((scheme, snr))
+                if r is None:
+                    cells.append("–")
+                    continue
+                total = r["num_images"] * r["draws"]
+                lost = _lost(r)
+                cells.append(_psnr(r["psnr"]) + (f" ({lost}/{total} lost)" if lost else ""))
+            rows.append([_label(scheme), *cells])
+        lines += _table(["scheme", *(f"{s:g} dB" for s in snrs)], rows)
+        lines.append("")
+    lines.append(
+        "Mean of per-image PSNR over images x draws (peak 1.0); `lost` counts images that "
+        "did not arrive (the digital link shows them mid-grey). `digital_genie` knows each "
+        "draw's fade and `ideal` sends at the AWGN capacity: both are bounds, not systems."
+    )
+    return lines + [""]
+
+
+def demo_section(demo: dict | None) -> list[str]:
+    lines = ["## End to end: the demo", ""]
+    if not demo:
+        return lines + ["No `pipeline_demo/report.json` (`python -m benchmarks pipeline`).", ""]
+    cfg = demo["config"]
+    lines.append(
+        f"`osnerf demo` = `osnerf run --channel {cfg['channel']} --snr-db {cfg['snr_db']:g} "
+        f"--seed {demo['seed']}` (scene `{cfg['scene']}`, {cfg['nerf_steps']} NeRF steps per "
+        f"scheme), commit {_commit(demo)}. Object PSNR of each scheme's field on the held-out "
+        "views (the demanded object's pixels), whole-view PSNR, views that did not arrive:"
+    )
+    lines.append("")
+    rows = []
+    for name, s in demo["schemes"].items():
+        rows.append(
+            [
+                _label(name) if s.get("bound") else name,
+                _psnr(s["psnr_object"]),
+                _psnr(s["psnr"]),
+                f"{s['ssim']:.3f}",
+                f"{_lost(s)} of {s['views_sent']}",
+                f"{s['symbols_sent']:,}",
+                s["nerf_steps"],
+            ]
+        )
+    lines += _table(
+        ["scheme", "object PSNR", "PSNR", "SSIM", "lost", "symbols", "NeRF steps"], rows
+    )
+    return lines + [""]
+
+
+def ota_section(ota: dict[float, list[dict]]) -> list[str]:
+    lines = ["## Over the air", ""]
+    if not ota:
+        return lines + ["No `pipeline_tiny_ota_*` reports (`python -m benchmarks pipeline`).", ""]
+    lines.append(
+        "`osnerf run --scene tiny --channel ota --snr-db S --schemes jscc,digital,gt "
+        "--renderer-steps 0 --seed N` between two emulated HackRFs (crystal offsets, "
+        "multipath); object PSNR of each field:"
+    )
+    lines.append("")
+    rows = []
+    for snr, docs in ota.items():
+        for d in docs:
+            s = d["schemes"]
+            dig = s.get("digital")
+            rows.append(
+                [
+                    f"{snr:g} dB",
+                    d["seed"],
+                    _psnr(s.get("jscc", {}).get("psnr_object")),
+                    _psnr((dig or {}).get("psnr_object"))
+                    + (f" ({_lost(dig)} of {dig['views_sent']} lost)" if dig else ""),
+                    _psnr(s.get("gt", {}).get("psnr_object")),
+                    f"{d['link'].get('frames_lost', 0)} of {d['link'].get('frames_sent', 0)}",
+                    _commit(d),
+                ]
+            )
+    lines += _table(["SNR", "seed", "jscc", "digital", "gt (bound)", "frames lost", "commit"], rows)
+    return lines + [""]
+
+
+def checkpoint_section() -> list[str]:
+    lines = ["## Shipped checkpoints", ""]
+    rows = []
+    for stem, card in cards():
+        rows.append(
+            [
+                f"`semcodec/checkpoints/{stem}.safetensors`",
+                f"`{card['name']}`",
+                card.get("version", "–"),
+                f"`{card['sha256'][:12]}`",
+            ]
+        )
+    lines += _table(["file", "name", "version", "sha256"], rows)
+    lines.append("")
+    lines.append(
+        "`default.safetensors` is what every command uses without `--codec`; the others load "
+        "with `--codec PATH`. Each card (`*.card.json`) records its training and its metric."
+    )
+    return lines + [""]
+
+
+def render() -> tuple[str, list[str]]:
+    """(docs/results.md, the README's table lines)."""
+    codec = codec_results()
+    demo = run_report(RESULTS / "pipeline_demo" / "report.json")
+    ota = ota_reports()
+    head = headline(codec, demo, ota)
+    doc = [
+        "# Results",
+        "",
+        "<!-- generated by `python -m benchmarks.results` from bench-results/; do not edit -->",
+        "",
+        "Every number here is read from a file the benchmarks wrote under `bench-results/` "
+        "(`make bench`, or `python -m benchmarks NAME`); `python -m benchmarks.results` "
+        "regenerates this page and the README's table, and a test fails when they drift. "
+        "PSNR in dB, peak 1.0; SNR is Es/N0 per complex symbol.",
+        "",
+        "## Summary",
+        "",
+        *head,
+        "",
+        *demo_section(demo),
+        *ota_section(ota),
+        *codec_section(codec),
+        *checkpoint_section(),
+    ]
+    return "\n".join(doc).rstrip() + "\n", head
+
+
+def readme_with(table: list[str], text: str) -> str:
+    if BEGIN not in text or END not in text:
+        raise ValueError(f"README.md has no {BEGIN} ... {END} block")
+    before, rest = text.split(BEGIN, 1)
+    _, after = rest.split(END, 1)
+    return before + BEGIN + "\n" + "\n".join(table) + "\n" + END + after
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.results", description=__doc__)
+    parser.add_argument("--check", action="store_true", help="exit 1 if a file is out of date")
+    args = parser.parse_args(argv)
+    doc, table = render()
+    readme = readme_with(table, README.read_text())
+    stale = [
+        p for p, text in ((DOC, doc), (README, readme)) if not p.is_file() or p.read_text() != text
+    ]
+    if args.check:
+        for p in stale:
+            print(
+                f"{p.relative_to(ROOT)} is out of date: run python -m benchmarks.results",
+                file=sys.stderr,
+            )
+        return 1 if stale else 0
+    DOC.parent.mkdir(exist_ok=True)
+    for p, text in ((DOC, doc), (README, readme)):
+        p.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
