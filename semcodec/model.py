@@ -278,7 +278,7 @@ MODELS: dict[str, Callable[[], JSCCConfig]] = {
         num_complex_channels=16,
         **_RELIABILITY,
     ),
-    # capacity candidates for the shipped default (semcodec/README.md, "Training on a lent
+    # capacity candidates for the shipped default (docs/training.md, "On a lent
     # GPU"); no checkpoint ships for them
     "adjscc_s4_w192_rel_c16": partial(
         JSCCConfig,
