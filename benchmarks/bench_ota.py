@@ -49,7 +49,7 @@ def run(out_dir: Path) -> dict:
             ref = _simulated(codec, images, snr)
             for seed in seeds:
                 path = Path(tmp) / f"ota_{snr:g}_{seed}.json"
-                args = ["ota", "--scheme", "jscc", "--snr-db", f"{snr:g}", "--images", str(kodak)]
+                args = ["ota", "--schemes", "jscc", "--snr-db", f"{snr:g}", "--images", str(kodak)]
                 args += ["--out", str(path), "--size", str(SIZE), "--cbr", CBR]
                 args += ["--max-images", str(NUM_IMAGES), "--seed", str(seed)]
                 rc = osnerf_main(args)

@@ -23,8 +23,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train-codec": ("osnerf.commands.train_codec", "train the semantic codec (JSCC)"),
     "train-nerf": ("osnerf.commands.train_nerf", "train a radiance field on a nerfstudio folder"),
     "render": ("osnerf.commands.render", "render a camera path from a trained field"),
-    "hil": ("osnerf.commands.hil", "SDR front-ends: `osnerf hil info [--emulate]`"),
-    "ota": ("osnerf.commands.ota", "send images over the air (real or emulated HackRFs)"),
+    "hil": ("osnerf.commands.hil", "SDR front ends: `hil info`, `hil emulate pluto`"),
+    "ota": (
+        "osnerf.commands.ota",
+        "send images over the air (HackRF One or ADALM-Pluto, real or emulated)",
+    ),
     "scenes": ("osnerf.commands.scenes", "list built-in scenes and their objects"),
     "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
     "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),

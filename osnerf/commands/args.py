@@ -17,7 +17,7 @@ import argparse
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from osnerf.cli import UsageError
@@ -36,6 +36,24 @@ def count(lo: int, hi: int) -> Callable:
         return int_in(text, lo, hi)
 
     parse.__name__ = "count"
+    return parse
+
+
+def names_from(known: Sequence[str], flag: str) -> Callable:
+    """argparse type: comma-separated names, each one of ``known``, none twice -> tuple."""
+
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        unknown = [n for n in names if n not in known]
+        if not names or unknown or len(set(names)) != len(names):
+            what = f"unknown {', '.join(map(repr, unknown))}; " if unknown else ""
+            raise argparse.ArgumentTypeError(
+                f"{what}give one or more of {', '.join(known)}, comma-separated, each once "
+                f"(got {text!r})"
+            )
+        return names
+
+    parse.__name__ = flag.lstrip("-")
     return parse
 
 

@@ -7,8 +7,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-ACTIONS = ("info", "emulate")
-
 
 def _integer(lo: int, hi: int):
     def parse(text: str) -> int:
@@ -25,45 +23,58 @@ def _integer(lo: int, hi: int):
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", parser_class=type(p))
+    sub.required = True
+    info = sub.add_parser(
+        "info",
+        help="board id, firmware, serial and USB API of each HackRF, then each Pluto libiio finds",
+        description="list HackRF boards as hackrf_info does (pure pyusb), then the Plutos "
+        "libiio finds (USB, ip:$IIOD_REMOTE)",
+    )
+    info.add_argument(
+        "--emulate", action="store_true", help="use two emulated HackRFs instead of USB hardware"
+    )
+    info.add_argument("--serial", default=None, help="only the HackRF whose serial ends with this")
+    _add_emulate_arguments(
+        sub.add_parser(
+            "emulate",
+            help="serve an emulated board over iiod's network protocol until SIGINT or SIGTERM",
+            description="serve an emulated board (its TX looped to its RX through the air "
+            "model) over iiod's network protocol, in the foreground, until SIGINT or SIGTERM",
+        )
+    )
+
+
+def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     from hil import DEVICES, IIOD_PORT
     from hil.air import SNR_DB_RANGE
     from hil.pluto_emulator import NETWORK_FAULTS
     from osnerf.commands import args as checks
 
-    p.add_argument(
-        "action",
-        choices=ACTIONS,
-        help="info: board id, firmware, serial, USB API of each HackRF, and each Pluto; "
-        "emulate DEVICE: serve an emulated board in the foreground",
-    )
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
-    p.add_argument("device", nargs="?", choices=served, help="emulate: which board")
-    p.add_argument("--address", default="127.0.0.1", help="emulate: loopback IPv4 to listen on")
-    p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="emulate: TCP port")
+    p.add_argument("device", choices=served, help=f"which board: {', '.join(served)}")
+    p.add_argument("--address", default="127.0.0.1", help="loopback IPv4 to listen on")
+    p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="TCP port")
     p.add_argument(
         "--snr-db",
         type=checks.number(*SNR_DB_RANGE, "dB"),
         default=15.0,
-        help="emulate: SNR of the board's TX-to-RX loop for over-the-air frames, dB",
+        help="SNR of the board's TX-to-RX loop for over-the-air frames, dB (default 15)",
     )
-    p.add_argument("--seed", type=checks.seed, default=0, help="emulate: noise seed")
+    p.add_argument("--seed", type=checks.seed, default=0, help="noise seed (default 0)")
     p.add_argument(
         "--fault",
         default=None,
         choices=NETWORK_FAULTS,
-        help="emulate: after --fault-after-samples received samples, drop (the board dies) or "
-        "slow (each receive reply 6 s late, past libiio's 5 s timeout)",
+        help="after --fault-after-samples received samples, drop (the board dies) or slow "
+        "(each receive reply 6 s late, past libiio's 5 s timeout)",
     )
     p.add_argument(
         "--fault-after-samples",
         type=_integer(0, 2**40),
         default=50_000,
-        help="emulate --fault: received samples before the fault (default 50000)",
+        help="with --fault: received samples before the fault (default 50000)",
     )
-    p.add_argument(
-        "--emulate", action="store_true", help="use two emulated boards instead of USB hardware"
-    )
-    p.add_argument("--serial", default=None, help="only the board whose serial ends with this")
 
 
 def _info_lines(index: int, dev) -> list[str]:
@@ -88,8 +99,6 @@ def _emulate(args: argparse.Namespace) -> int:
     from osnerf.cli import UsageError as usage_error
     from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
 
-    if args.device is None:
-        raise usage_error("emulate needs a device: osnerf hil emulate pluto")
     board = DEVICES[args.device].emulator(
         args.snr_db,
         seed=args.seed,

@@ -1,6 +1,6 @@
-"""`osnerf ota`: send images over the air between two HackRFs (real, emulated or loopback).
+"""`osnerf ota`: send images over the air (HackRF One or ADALM-Pluto; real, emulated or loopback).
 
-    osnerf ota --tx emulated --rx emulated --scheme digital --snr-db 15 --images DIR --out ota.json
+    osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 --images DIR --out ota.json
 
 Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
 receiver (``LinkScheme.framed``, :mod:`semcodec.framed`): ``digital`` (image codec bytes ->
@@ -10,6 +10,8 @@ frames (preamble, pilots), ``hil``'s PAPR control and int8 scaling, out of the T
 and into the RX HackRF. Emulated boards sit ``--ppm`` apart with
 ``--multipath`` and ``--delay-us`` at ``--snr-db``. The result file reports per image the
 PSNR, the SNR measured from the pilots, frames sent and lost, and lists the SigMF files.
+Each scheme of ``--schemes`` goes in its own burst, one after another, with its own capture
+(``ota`` for one scheme, ``ota_<scheme>`` for several).
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
 
 ``--tx pluto --rx pluto [--uri URI]`` uses one ADALM-Pluto (full duplex) as both ends, real or
@@ -82,11 +84,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
+    framed = [k for k, v in LINK_SCHEMES.items() if v.over_the_air]
     p.add_argument(
-        "--scheme",
+        "--schemes",
         required=True,
-        choices=[k for k, v in LINK_SCHEMES.items() if v.over_the_air],
-        help="digital (codec + LDPC + QAM at --mcs) or jscc",
+        type=checks.names_from(framed, "--schemes"),
+        help=f"comma-separated, each sent in its own burst: {', '.join(framed)} (digital: "
+        "image codec + LDPC + QAM at --mcs; jscc: the semantic codec at --cbr)",
     )
     p.add_argument(
         "--snr-db",
@@ -312,14 +316,14 @@ def framed_settings(args, symbols_per_frame: int):
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
     cbr, codec = FramedSettings.cbr, None
-    if LINK_SCHEMES[args.scheme].needs_codec:
+    if any(LINK_SCHEMES[name].needs_codec for name in args.schemes):
         try:
             cbr = parse_cbr(args.cbr)
         except ValueError as e:
             raise usage_error(f"--{e}") from None
         codec = open_codec(args.codec)
         check_codec_snr(codec, args.snr_db)
-    elif frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
+    if "digital" in args.schemes and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
         )
@@ -352,27 +356,31 @@ def run(args: argparse.Namespace) -> int:
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
     t0 = time.perf_counter()
-    scheme = LINK_SCHEMES[args.scheme].framed
-    blocks, state = scheme.transmit(images, settings)
-    print(
-        f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {args.scheme}",
-        file=sys.stderr,
-    )
-    result, hw = send_over_the_air(args, cfg, blocks, sigmf_dir)
-    per_image = scheme.receive(received_blocks(result), state, images, settings)
-    for b, rec in enumerate(per_image):  # the receiver's CRC verdicts go with the frames
-        for frame, crc_ok in zip(result.block_frames(b), rec.frames_crc_ok):
-            frame.crc_ok = crc_ok
-    sigmf_paths = save_sigmf(result, sigmf_dir / "ota", cfg, hw=hw)
-    record = _record(args, cfg, names, per_image, result, sigmf_paths, t0)
-    write_json_atomic(out, record)
-    print(
-        f"ota: wrote {out} ({result.frames_lost}/{result.frames_sent} frames lost)", file=sys.stderr
-    )
+    bursts = []
+    for name in args.schemes:
+        scheme = LINK_SCHEMES[name].framed
+        blocks, state = scheme.transmit(images, settings)
+        print(
+            f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {name}",
+            file=sys.stderr,
+        )
+        base = "ota" if len(args.schemes) == 1 else f"ota_{name}"
+        result, hw = send_over_the_air(args, cfg, blocks, sigmf_dir, base)
+        per_image = scheme.receive(received_blocks(result), state, images, settings)
+        for b, rec in enumerate(per_image):  # the receiver's CRC verdicts go with the frames
+            for frame, crc_ok in zip(result.block_frames(b), rec.frames_crc_ok):
+                frame.crc_ok = crc_ok
+        paths = save_sigmf(result, sigmf_dir / base, cfg, hw=hw)
+        bursts.append((name, per_image, result, paths))
+        print(
+            f"ota: {name}: {result.frames_lost}/{result.frames_sent} frames lost", file=sys.stderr
+        )
+    write_json_atomic(out, _record(args, cfg, settings, names, bursts, t0))
+    print(f"ota: wrote {out}", file=sys.stderr)
     return 0
 
 
-def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path):
+def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota"):
     """One burst of ``blocks`` over an :class:`osnerf.ota_link.OtaLink` between the --tx/--rx
     radios: (``hil.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
     in one line, with what the receiver got so far saved as SigMF; warnings are printed one
@@ -389,7 +397,7 @@ def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path):
             warnings.simplefilter("always")
             result = link.send_blocks(blocks)
     except HilError as e:  # keep what arrived, then report the fault in one line (exit 1)
-        saved = save_partial_capture(e, sigmf_dir / "ota", cfg, hw=hw)
+        saved = save_partial_capture(e, sigmf_dir / base, cfg, hw=hw)
         kept = f"; capture so far saved to {saved}" if saved else "; nothing was received"
         raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
     finally:
@@ -399,23 +407,36 @@ def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path):
     return result, hw
 
 
-def _record(args, cfg, names, per_image, result, sigmf_paths, t0: float) -> dict:
-    """The result file's record: per image, the summary, every frame, the SigMF paths."""
+def _record(args, cfg, settings, names, bursts, t0: float) -> dict:
+    """The result file's record: per scheme and image, the summary, every frame, the SigMF
+    paths. ``bursts``: (scheme, per-image receptions, ``hil.BurstResult``, SigMF paths)."""
     from osnerf.provenance import result_header
 
-    results = []
-    for b, (name, rec) in enumerate(zip(names, per_image)):
-        frames = result.block_frames(b)
-        results.append(
-            {
-                "image": name,
-                "psnr": rec.psnr,
-                "snr_db_measured": result.snr_db_measured(b),
-                "frames_sent": len(frames),
-                "frames_lost": sum(not f.detected for f in frames),
-                **rec.stats,
-            }
-        )
+    results, frames, sigmf, by_scheme = [], [], [], {}
+    for scheme, per_image, result, paths in bursts:
+        rows = []
+        for b, (name, rec) in enumerate(zip(names, per_image)):
+            burst_frames = result.block_frames(b)
+            rows.append(
+                {
+                    "scheme": scheme,
+                    "image": name,
+                    "psnr": rec.psnr,
+                    "snr_db_measured": result.snr_db_measured(b),
+                    "frames_sent": len(burst_frames),
+                    "frames_lost": sum(not f.detected for f in burst_frames),
+                    **rec.stats,
+                }
+            )
+        results += rows
+        frames += [{"scheme": scheme, **vars(f)} for f in result.frames]
+        sigmf += [str(p) for p in paths]
+        by_scheme[scheme] = {
+            "mean_psnr": float(np.mean([r["psnr"] for r in rows])),
+            "frames_sent": result.frames_sent,
+            "frames_lost": result.frames_lost,
+            "snr_db_measured": result.snr_db_measured(),
+        }
     config = {k: v for k, v in vars(args).items() if k not in ("command",)}
     config.update(
         {
@@ -425,19 +446,23 @@ def _record(args, cfg, names, per_image, result, sigmf_paths, t0: float) -> dict
         }
     )
     record = result_header(config, args.seed)
+    if settings.codec is not None:
+        record["codec"] = {"name": settings.codec.name, "sha256": settings.codec.sha256}
     record.update(
         {
             "results": results,
-            "sigmf": [str(p) for p in sigmf_paths],
+            "sigmf": sigmf,
             "summary": {
-                "frames_sent": result.frames_sent,
-                "frames_lost": result.frames_lost,
-                "mean_psnr": float(np.mean([r["psnr"] for r in results])),
+                "frames_sent": sum(s["frames_sent"] for s in by_scheme.values()),
+                "frames_lost": sum(s["frames_lost"] for s in by_scheme.values()),
+                "snr_db_measured": float(
+                    np.mean([s["snr_db_measured"] for s in by_scheme.values()])
+                ),
+                "schemes": by_scheme,
                 "psnr_note": "mean of per-image PSNR (peak 1.0)",
-                "snr_db_measured": result.snr_db_measured(),
                 "seconds": time.perf_counter() - t0,
             },
-            "frames": [vars(f) for f in result.frames],
+            "frames": frames,
         }
     )
     return record

@@ -39,7 +39,7 @@ def ota(tmp_path, images, scheme, snr_db, *extra):
             "emulated",
             "--rx",
             "emulated",
-            "--scheme",
+            "--schemes",
             scheme,
             "--snr-db",
             str(snr_db),
@@ -110,10 +110,26 @@ def test_jscc_at_15_db_matches_the_simulated_link(tmp_path, images):
     assert r["psnr"] == pytest.approx(ref, abs=1.5)
 
 
+def test_two_schemes_go_in_two_bursts_with_their_own_captures(tmp_path, images):
+    d = ota(tmp_path, images, "digital,jscc", 15)
+    assert [r["scheme"] for r in d["results"]] == ["digital", "jscc"]
+    by = d["summary"]["schemes"]
+    assert set(by) == {"digital", "jscc"}
+    assert d["summary"]["frames_sent"] == by["digital"]["frames_sent"] + by["jscc"]["frames_sent"]
+    assert {f["scheme"] for f in d["frames"]} == {"digital", "jscc"}
+    stems = {p.rsplit("/", 1)[-1].split(".sigmf")[0].rsplit("_", 1)[0] for p in d["sigmf"]}
+    assert stems == {"ota_digital", "ota_jscc"}  # each burst's own capture
+    from semcodec import load_codec
+
+    assert d["codec"]["sha256"] == load_codec().sha256  # the knowledge base the run used
+    for s in ("digital", "jscc"):
+        assert by[s]["frames_lost"] == 0 and by[s]["mean_psnr"] > 20
+
+
 def test_bad_arguments_exit_2(tmp_path, images):
     base = [
         "ota",
-        "--scheme",
+        "--schemes",
         "digital",
         "--images",
         str(images),
@@ -123,8 +139,10 @@ def test_bad_arguments_exit_2(tmp_path, images):
     assert main(base + ["--tx", "pluto"]) == 2
     assert main(base + ["--tx", "hackrf", "--rx", "emulated"]) == 2
     assert main(base + ["--multipath", "2-0.4"]) == 2
+    assert main([*base[:2], "digital,digital", *base[3:]]) == 2
+    assert main([*base[:2], "analog", *base[3:]]) == 2
     assert (
-        main(["ota", "--scheme", "digital", "--images", str(tmp_path / "none"), "--out", "x.json"])
+        main(["ota", "--schemes", "digital", "--images", str(tmp_path / "none"), "--out", "x.json"])
         == 2
     )
     assert not (tmp_path / "o.json").exists()
@@ -154,7 +172,7 @@ def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
 
     monkeypatch.setattr(ota_cmd, "load_images", no_work)
     out = tmp_path / "o.json"
-    argv = ["ota", "--scheme", "digital", "--images", str(images), "--out", str(out)]
+    argv = ["ota", "--schemes", "digital", "--images", str(images), "--out", str(out)]
     assert main(argv + [flag, value]) == 2
     err = capsys.readouterr().err.strip()
     assert match in err and len(err.splitlines()) == 1
@@ -168,7 +186,7 @@ def test_corrupt_image_is_bad_input(tmp_path, capsys):
     (folder / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
     argv = [
         "ota",
-        "--scheme",
+        "--schemes",
         "digital",
         "--images",
         str(folder),
@@ -192,7 +210,7 @@ def test_fault_exits_1_in_one_line_and_keeps_the_capture(tmp_path, images, capsy
     import sigmf
 
     out = tmp_path / "ota.json"
-    argv = ["ota", "--scheme", "digital", "--snr-db", "15", "--images", str(images)]
+    argv = ["ota", "--schemes", "digital", "--snr-db", "15", "--images", str(images)]
     argv += ["--out", str(out), "--size", "32", "--symbols-per-frame", "1024", "--fault", fault]
     assert main(argv) == 1
     err = capsys.readouterr().err.strip().splitlines()

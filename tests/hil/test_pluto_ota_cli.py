@@ -69,7 +69,7 @@ def serve(snr_db: float, **kwargs) -> IiodServer:
 
 def ota(tmp_path, images, uri, scheme, snr_db, *extra):
     out = tmp_path / "ota.json"
-    argv = ["ota", "--tx", "pluto", "--rx", "pluto", "--uri", uri, "--scheme", scheme]
+    argv = ["ota", "--tx", "pluto", "--rx", "pluto", "--uri", uri, "--schemes", scheme]
     argv += ["--snr-db", str(snr_db), "--images", str(images), "--out", str(out)]
     argv += ["--size", "48", "--max-images", "1", "--symbols-per-frame", "1024", *extra]
     return main(argv), out

@@ -53,7 +53,7 @@ def model(tmp_path):
         (["eval-codec", "--images", "{images}", "--schemes", "jscc,jscc"], "--schemes"),
         (["eval-codec", "--images", "{images}", "--schemes", "jscc,"], "--schemes"),
         (
-            ["ota", "--scheme", "jscc", "--images", "{images}", "--max-papr-db", "nan"],
+            ["ota", "--schemes", "jscc", "--images", "{images}", "--max-papr-db", "nan"],
             "--max-papr-db",
         ),
         (["sweep", "spec.yaml", "--workers", "100000"], "--workers"),
@@ -101,7 +101,7 @@ def test_ota_refuses_an_snr_outside_the_checkpoint_card(one_line, tmp_path, caps
 
     lo, hi = load_codec(None).snr_range_db
     out = tmp_path / "o.json"
-    argv = ["ota", "--scheme", "jscc", "--snr-db", f"{hi + 5:g}", "--images", str(images)]
+    argv = ["ota", "--schemes", "jscc", "--snr-db", f"{hi + 5:g}", "--images", str(images)]
     assert main([*argv, "--out", str(out)]) == 2
     err = one_line()
     assert "--snr-db" in err and "not covered by checkpoint" in err

@@ -38,7 +38,7 @@ def test_plugin_in_eval_codec_on_awgn_and_block_rayleigh(plugin, kodak1, tmp_pat
 
 def test_plugin_over_the_air_between_emulated_hackrfs(plugin, kodak1, tmp_path):
     out = tmp_path / "ota.json"
-    argv = ["ota", "--tx", "emulated", "--rx", "emulated", "--scheme", "jscc", "--codec", "demo"]
+    argv = ["ota", "--tx", "emulated", "--rx", "emulated", "--schemes", "jscc", "--codec", "demo"]
     argv += ["--snr-db", "15", "--images", str(kodak1), "--size", "48", "--max-images", "1"]
     argv += ["--symbols-per-frame", "1024", "--out", str(out)]
     assert main(argv) == 0

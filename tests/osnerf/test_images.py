@@ -53,7 +53,7 @@ def test_eval_codec_accepts_one_image_file_and_16_bit(gray16, tmp_path, capsys):
 def test_ota_refuses_to_upscale_a_1x1_image(one_line, tmp_path, capsys):
     Image.fromarray(np.zeros((1, 1, 3), np.uint8)).save(tmp_path / "dot.png")
     out = tmp_path / "o.json"
-    argv = ["ota", "--scheme", "digital", "--snr-db", "10", "--images", str(tmp_path / "dot.png")]
+    argv = ["ota", "--schemes", "digital", "--snr-db", "10", "--images", str(tmp_path / "dot.png")]
     assert main([*argv, "--out", str(out)]) == 2
     err = one_line()
     assert "dot.png is 1x1 px, smaller than --size 64" in err and not out.exists()

@@ -87,7 +87,7 @@ def test_ota_refuses_an_existing_json_and_sigmf_folder(one_line, tmp_path, capsy
     images = _image_dir(tmp_path, 64)
     out = tmp_path / "ota.json"
     out.write_text("old")
-    argv = ["ota", "--scheme", "digital", "--snr-db", "10", "--images", str(images)]
+    argv = ["ota", "--schemes", "digital", "--snr-db", "10", "--images", str(images)]
     assert main([*argv, "--out", str(out)]) == 2
     assert "--out" in one_line() and out.read_text() == "old"
     sig = tmp_path / "n_sigmf"
