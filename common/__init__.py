@@ -8,6 +8,7 @@
   orientation) and the one list of image file suffixes.
 * ``common.quality``: the one PSNR (peak 1.0).
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
+* ``common.registry``: ``Registry``, the one way a table of named things is declared.
 
 Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
 may all import it.
@@ -29,10 +30,12 @@ from common.files import (
 from common.images import IMAGE_SUFFIXES, list_images, read_image
 from common.memory import trim_heap, tune_malloc
 from common.quality import PSNR_MAX_DB, psnr
+from common.registry import Registry
 
 __all__ = [
     "IMAGE_SUFFIXES",
     "PSNR_MAX_DB",
+    "Registry",
     "atomic_path",
     "check_replaceable",
     "list_images",

@@ -13,27 +13,36 @@ import importlib
 import re
 import sys
 
-from common import tune_malloc
+from common import Registry, tune_malloc
 from osnerf.provenance import git_commit
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
-COMMANDS: dict[str, tuple[str, str]] = {
-    "ber": ("osnerf.commands.ber", "uncoded BER vs SNR over AWGN or Rayleigh, against theory"),
-    "eval-codec": ("osnerf.commands.eval_codec", "image transmission: JSCC vs digital vs ideal"),
-    "train-codec": ("osnerf.commands.train_codec", "train the semantic codec (JSCC)"),
-    "train-nerf": ("osnerf.commands.train_nerf", "train a radiance field on a nerfstudio folder"),
-    "render": ("osnerf.commands.render", "render a camera path from a trained field"),
-    "hil": ("osnerf.commands.hil", "SDR front ends: `hil info`, `hil emulate pluto`"),
-    "ota": (
-        "osnerf.commands.ota",
-        "send images over the air (HackRF One or ADALM-Pluto, real or emulated)",
-    ),
-    "scenes": ("osnerf.commands.scenes", "list built-in scenes and their objects"),
-    "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
-    "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),
-    "plot": ("osnerf.commands.plot", "plots from a sweep results file"),
-    "demo": ("osnerf.commands.demo", "the main job on its embedded default"),
-}
+COMMANDS = Registry[tuple[str, str]](
+    "command",
+    {
+        "ber": ("osnerf.commands.ber", "uncoded BER vs SNR over AWGN or Rayleigh, against theory"),
+        "eval-codec": (
+            "osnerf.commands.eval_codec",
+            "image transmission: JSCC vs digital vs ideal",
+        ),
+        "train-codec": ("osnerf.commands.train_codec", "train the semantic codec (JSCC)"),
+        "train-nerf": (
+            "osnerf.commands.train_nerf",
+            "train a radiance field on a nerfstudio folder",
+        ),
+        "render": ("osnerf.commands.render", "render a camera path from a trained field"),
+        "hil": ("osnerf.commands.hil", "SDR front ends: `hil info`, `hil emulate pluto`"),
+        "ota": (
+            "osnerf.commands.ota",
+            "send images over the air (HackRF One or ADALM-Pluto, real or emulated)",
+        ),
+        "scenes": ("osnerf.commands.scenes", "list built-in scenes and their objects"),
+        "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
+        "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),
+        "plot": ("osnerf.commands.plot", "plots from a sweep results file"),
+        "demo": ("osnerf.commands.demo", "the main job on its embedded default"),
+    },
+)
 
 
 # argparse takes "-10,-5" for an option unless it looks like a negative number: let

@@ -14,15 +14,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
-MODULATIONS: dict[str, int] = {"bpsk": 1, "qpsk": 2, "16qam": 4, "64qam": 6}
+from common import Registry
+
+MODULATIONS = Registry[int]("modulation", {"bpsk": 1, "qpsk": 2, "16qam": 4, "64qam": 6})
+"""name -> bits per symbol (Gray-mapped QAM; BPSK)."""
 
 
 def bits_per_symbol(modulation: str) -> int:
     """Bits per symbol of a registered modulation; unknown names raise KeyError listing them."""
-    try:
-        return MODULATIONS[modulation]
-    except (KeyError, TypeError):
-        raise KeyError(f"unknown modulation {modulation!r}; known: {list(MODULATIONS)}") from None
+    return MODULATIONS[modulation]
 
 
 def _pam_gray(bits: np.ndarray) -> np.ndarray:

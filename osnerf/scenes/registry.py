@@ -2,27 +2,22 @@
 
 from __future__ import annotations
 
+from common import Registry
 from osnerf.scenes.city import build_munich
 from osnerf.scenes.compact import build_firefighter, build_tiny
 from osnerf.scenes.spec import SceneInfo
 
-SCENES: dict[str, SceneInfo] = {}
+SCENES = Registry[SceneInfo]("scene")
 
 
 def register(info: SceneInfo) -> SceneInfo:
-    """Add a scene to :data:`SCENES` (names are unique)."""
-    if info.name in SCENES:
-        raise ValueError(f"scene {info.name!r} is already registered")
-    SCENES[info.name] = info
-    return info
+    """Add a scene to :data:`SCENES` under its name (names are unique)."""
+    return SCENES.register(info.name, info)
 
 
 def get_scene(name: str) -> SceneInfo:
     """The registry entry of ``name``; KeyError listing the known scenes otherwise."""
-    try:
-        return SCENES[name]
-    except KeyError:
-        raise KeyError(f"unknown scene {name!r}; known scenes: {', '.join(SCENES)}") from None
+    return SCENES[name]
 
 
 DEFAULT_SCENE = "firefighter"

@@ -19,6 +19,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from common import Registry
+
 Task = dict[str, Any]  # plain data, picklable: what a worker needs to run one point
 Outcome = dict[str, Any]  # {"ok", "result", "error", "seconds"}
 
@@ -64,7 +66,8 @@ def execute_point(task: Task) -> Outcome:
         import torch
 
         torch.set_num_threads(int(task["threads"]))
-    osnerf.cli.COMMANDS.setdefault(task["command"], (task["module"], task["command"]))
+    if task["command"] not in osnerf.cli.COMMANDS:  # a command the driver registered itself
+        osnerf.cli.COMMANDS.register(task["command"], (task["module"], task["command"]))
     err = io.StringIO()
     with tempfile.TemporaryDirectory(prefix="osnerf-sweep-") as tmp:
         out = Path(tmp) / ("result.json" if task["out_kind"] == "file" else "run")
@@ -236,14 +239,10 @@ def _ray(
             ray.shutdown()
 
 
-EXECUTORS: dict[str, Callable[..., Iterator[tuple[str, Outcome]]]] = {
-    "local": _local,
-    "ray": _ray,
-    "serial": _serial,
-}
+EXECUTORS = Registry[Callable[..., Iterator[tuple[str, Outcome]]]](
+    "executor", {"local": _local, "ray": _ray, "serial": _serial}
+)
 
 
 def get_executor(name: str) -> Callable[..., Iterator[tuple[str, Outcome]]]:
-    if name not in EXECUTORS:
-        raise KeyError(f"unknown executor {name!r}; known: {sorted(EXECUTORS)}")
     return EXECUTORS[name]

@@ -21,6 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from common import Registry
+
 HEADER_KEYS = ("config", "seed", "git_commit", "versions")
 
 
@@ -80,12 +82,15 @@ def _run(result: dict[str, Any]) -> dict[str, Any]:
 
 DEFAULT_RULE = MetricRule("file", _without_header)
 
-METRIC_RULES: dict[str, MetricRule] = {
-    "ber": MetricRule("file", _ber),
-    "eval-codec": MetricRule("file", _eval_codec),
-    "train-nerf": MetricRule("dir", _train_nerf, "metrics.json"),
-    "run": MetricRule("dir", _run, "report.json"),
-}
+METRIC_RULES = Registry[MetricRule](
+    "metric rule",
+    {
+        "ber": MetricRule("file", _ber),
+        "eval-codec": MetricRule("file", _eval_codec),
+        "train-nerf": MetricRule("dir", _train_nerf, "metrics.json"),
+        "run": MetricRule("dir", _run, "report.json"),
+    },
+)
 
 
 def metric_rule(command: str) -> MetricRule:

@@ -9,6 +9,7 @@ import functools
 import importlib.util
 from collections.abc import Callable
 
+from common import Registry
 from phy.channels.awgn import AWGN
 from phy.channels.base import Channel, ChannelOutput
 from phy.channels.rayleigh import RayleighFading
@@ -27,18 +28,21 @@ def _lazy(module: str, name: str, **defaults) -> Callable[..., Channel]:
     return factory
 
 
-CHANNELS: dict[str, Callable[..., Channel]] = {
-    "awgn": AWGN,
-    "rayleigh": functools.partial(RayleighFading, mode="block"),
-    "rayleigh_fast": functools.partial(RayleighFading, mode="fast"),
-    "rician": functools.partial(RicianFading, mode="block"),
-    "rician_fast": functools.partial(RicianFading, mode="fast"),
-}
+CHANNELS = Registry[Callable[..., Channel]](
+    "channel",
+    {
+        "awgn": AWGN,
+        "rayleigh": functools.partial(RayleighFading, mode="block"),
+        "rayleigh_fast": functools.partial(RayleighFading, mode="fast"),
+        "rician": functools.partial(RicianFading, mode="block"),
+        "rician_fast": functools.partial(RicianFading, mode="fast"),
+    },
+)
 if importlib.util.find_spec("phy.channels.tr38901") is not None:
-    CHANNELS["tdl"] = _lazy("phy.channels.tr38901", "TDLChannel")
-    CHANNELS["cdl"] = _lazy("phy.channels.tr38901", "CDLChannel")
+    CHANNELS.register("tdl", _lazy("phy.channels.tr38901", "TDLChannel"))
+    CHANNELS.register("cdl", _lazy("phy.channels.tr38901", "CDLChannel"))
 if importlib.util.find_spec("phy.raytrace") is not None:
-    CHANNELS["raytraced"] = _lazy("phy.raytrace", "RayTracedChannel")
+    CHANNELS.register("raytraced", _lazy("phy.raytrace", "RayTracedChannel"))
 
 
 def make_channel(name: str, **kwargs) -> Channel:
@@ -46,11 +50,7 @@ def make_channel(name: str, **kwargs) -> Channel:
 
     Example: ``make_channel("rician", k_factor_db=3.0)``.
     """
-    try:
-        factory = CHANNELS[name]
-    except (KeyError, TypeError):
-        raise KeyError(f"unknown channel {name!r}; known: {sorted(CHANNELS)}") from None
-    return factory(**kwargs)
+    return CHANNELS[name](**kwargs)
 
 
 __all__ = [

@@ -18,7 +18,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fractions import Fraction
 
-MODULATION_BITS = {"qpsk": 2, "16qam": 4, "64qam": 6}
+from common import Registry
+from phy.modulation import MODULATIONS
+
+QAM_MODULATIONS = ("qpsk", "16qam", "64qam")
+"""The modulations of :data:`phy.MODULATIONS` that the LDPC chain maps (sionna's QAM)."""
 MOTHER_RATE = Fraction(1, 5)
 """Lowest rate of the 5G LDPC code itself (base graph 2); lower rates repeat its bits."""
 
@@ -39,9 +43,9 @@ class MCS:
     code_rate: Fraction
 
     def __post_init__(self):
-        if self.modulation not in MODULATION_BITS:
+        if self.modulation not in QAM_MODULATIONS:
             raise ValueError(
-                f"modulation must be one of {sorted(MODULATION_BITS)}, got {self.modulation!r}"
+                f"modulation must be one of {', '.join(QAM_MODULATIONS)}, got {self.modulation!r}"
             )
         if not isinstance(self.code_rate, Fraction) or not 0 < self.code_rate < 1:
             raise ValueError(f"code_rate must be a Fraction in (0, 1), got {self.code_rate!r}")
@@ -49,7 +53,7 @@ class MCS:
     @property
     def bits_per_symbol(self) -> int:
         """Coded bits per complex channel symbol (2, 4 or 6)."""
-        return MODULATION_BITS[self.modulation]
+        return MODULATIONS[self.modulation]
 
     @property
     def spectral_efficiency(self) -> float:
@@ -66,22 +70,25 @@ def _mcs(modulation: str, rate: str) -> MCS:
     return MCS(f"{modulation}-{rate}", modulation, Fraction(rate))
 
 
-MCS_TABLE: dict[str, MCS] = {
-    m.name: m
-    for m in (
-        *(_mcs("qpsk", f"{r}/1024") for r in (30, 40, 50, 64, 78, 99, 120, 157, 193, 251, 308)),
-        _mcs("qpsk", "1/3"),
-        _mcs("qpsk", "1/2"),
-        _mcs("qpsk", "2/3"),
-        _mcs("qpsk", "3/4"),
-        _mcs("16qam", "1/2"),
-        _mcs("16qam", "2/3"),
-        _mcs("16qam", "3/4"),
-        _mcs("64qam", "2/3"),
-        _mcs("64qam", "3/4"),
-        _mcs("64qam", "5/6"),
-    )
-}
+MCS_TABLE = Registry[MCS](
+    "MCS",
+    {
+        m.name: m
+        for m in (
+            *(_mcs("qpsk", f"{r}/1024") for r in (30, 40, 50, 64, 78, 99, 120, 157, 193, 251, 308)),
+            _mcs("qpsk", "1/3"),
+            _mcs("qpsk", "1/2"),
+            _mcs("qpsk", "2/3"),
+            _mcs("qpsk", "3/4"),
+            _mcs("16qam", "1/2"),
+            _mcs("16qam", "2/3"),
+            _mcs("16qam", "3/4"),
+            _mcs("64qam", "2/3"),
+            _mcs("64qam", "3/4"),
+            _mcs("64qam", "5/6"),
+        )
+    },
+)
 """name -> :class:`MCS`, ordered by increasing spectral efficiency."""
 
 
@@ -91,8 +98,4 @@ def get_mcs(mcs: str | MCS) -> MCS:
     Raises:
         KeyError: unknown name; the message lists the known names.
     """
-    if isinstance(mcs, MCS):
-        return mcs
-    if isinstance(mcs, str) and mcs in MCS_TABLE:
-        return MCS_TABLE[mcs]
-    raise KeyError(f"mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
+    return mcs if isinstance(mcs, MCS) else MCS_TABLE[mcs]

@@ -36,7 +36,7 @@ def _run(env, out, *extra):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--scene", "atlantis"], "known scenes: firefighter"),
+        (["--scene", "atlantis"], "unknown scene 'atlantis'; known: firefighter"),
         (["--demand", "crate,piano"], "known objects: crate, post, cable"),
         (["--channel", "carrier-pigeon"], "invalid choice: 'carrier-pigeon'"),
         (["--schemes", "jscc,telepathy"], "argument --schemes: must be a comma-separated subset"),

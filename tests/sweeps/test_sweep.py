@@ -19,6 +19,7 @@ import pytest
 import sweep_fake_command as fake
 
 import osnerf.cli
+import osnerf.sweeps.metrics
 from osnerf.sweeps import (
     METRIC_RULES,
     MetricRule,
@@ -36,9 +37,17 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 
 
+def _with_command(monkeypatch, name, entry):
+    """osnerf.cli.COMMANDS with ``name`` added, for this test only."""
+    from common import Registry
+
+    table = Registry("command", {**osnerf.cli.COMMANDS, name: entry})
+    monkeypatch.setattr(osnerf.cli, "COMMANDS", table)
+
+
 @pytest.fixture(autouse=True)
 def fake_command(monkeypatch):
-    monkeypatch.setitem(osnerf.cli.COMMANDS, fake.NAME, fake.ENTRY)
+    _with_command(monkeypatch, fake.NAME, fake.ENTRY)
 
 
 def _spec(tmp_path, **over):
@@ -371,7 +380,7 @@ def _sweep_process(yml: Path, out: Path, *extra: str, stderr=subprocess.DEVNULL)
     """`osnerf sweep YML --out OUT --no-progress EXTRA...` with the fake command, in a new process."""
     argv = ["sweep", str(yml), "--out", str(out), "--no-progress", *extra]
     driver = (
-        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS[f.NAME] = f.ENTRY; "
+        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS.register(f.NAME, f.ENTRY); "
         f"sys.exit(osnerf.cli.main({argv!r}))"
     )
     env = dict(
@@ -502,10 +511,12 @@ def test_kept_outputs_files_and_run_folders(tmp_path, monkeypatch):
             and Path(r["output"]).parent == tmp_path / "keep"
         )
     # a command whose --out is a folder: the rule reads metrics.json inside, the folder is kept
-    monkeypatch.setitem(osnerf.cli.COMMANDS, "fake-dir", fake.ENTRY)
-    monkeypatch.setitem(
-        METRIC_RULES, "fake-dir", MetricRule("dir", lambda d: d["results"][0], "metrics.json")
-    )
+    _with_command(monkeypatch, "fake-dir", fake.ENTRY)
+    from common import Registry
+
+    rule = MetricRule("dir", lambda d: d["results"][0], "metrics.json")
+    rules = Registry("metric rule", {**METRIC_RULES, "fake-dir": rule})
+    monkeypatch.setattr(osnerf.sweeps.metrics, "METRIC_RULES", rules)
     spec = spec_from_dict({**spec.to_dict(), "command": "fake-dir"})
     run_sweep(spec, tmp_path / "d.jsonl", executor="serial", progress=False, keep=tmp_path / "keep")
     records = read_results(tmp_path / "d.jsonl")
