@@ -3,12 +3,15 @@
 Each command lives in ``osnerf/commands/<name>.py`` with ``add_arguments(parser)`` and
 ``run(args) -> int``. Results go to files (or stdout), progress and logs to stderr.
 Exit codes: 0 success, 2 bad arguments or input, 1 runtime failure; always with a
-one-line message naming what was wrong.
+one-line message naming what was wrong. A command calls :func:`inputs_checked` once it has
+read and checked its inputs: a ``ValueError``, ``KeyError`` or ``FileNotFoundError`` before
+that is bad input (2), after it a runtime failure (1); a ``UsageError`` is always bad input.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextvars
 import importlib
 import re
 import sys
@@ -57,6 +60,15 @@ class UsageError(ValueError):
     """Bad arguments or input: exit code 2."""
 
 
+_inputs_checked = contextvars.ContextVar("osnerf_inputs_checked", default=False)
+
+
+def inputs_checked() -> None:
+    """Mark that the running command has read and checked its inputs: from here on a
+    ``ValueError``, ``KeyError`` or ``FileNotFoundError`` is a runtime failure (exit 1)."""
+    _inputs_checked.set(True)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (``osnerf ber: error: argument --channel: ...``)."""
 
@@ -103,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:  # argparse already printed its message
         return int(e.code or 0)
     module = importlib.import_module(COMMANDS[args.command][0])
+    token = _inputs_checked.set(False)
     try:
         if sys.stdout is None and args.command in STDOUT_COMMANDS:
             raise UsageError("standard output is closed; its listing would be lost")
@@ -114,8 +127,14 @@ def main(argv: list[str] | None = None) -> int:
         return rc
     except (UsageError, ValueError, KeyError, FileNotFoundError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-        print(f"osnerf {args.command}: error: {_first_line(msg)}", file=sys.stderr)
-        return 2
+        if isinstance(e, UsageError) or not _inputs_checked.get():
+            print(f"osnerf {args.command}: error: {_first_line(msg)}", file=sys.stderr)
+            return 2
+        print(
+            f"osnerf {args.command}: failed: {type(e).__name__}: {_first_line(msg)}",
+            file=sys.stderr,
+        )
+        return 1
     except KeyboardInterrupt:
         print(f"osnerf {args.command}: interrupted", file=sys.stderr)
         return 130
@@ -124,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
             f"osnerf {args.command}: failed: {type(e).__name__}: {_first_line(e)}", file=sys.stderr
         )
         return 1
+    finally:
+        _inputs_checked.reset(token)
 
 
 def _first_line(e: BaseException) -> str:

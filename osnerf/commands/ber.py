@@ -184,9 +184,11 @@ def plot(config: dict, results: list[dict], path: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
 
     config = parse_args(args)
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     results = simulate(config, args.seed)
     record = result_header(config, args.seed)
     record["results"] = results

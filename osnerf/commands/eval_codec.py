@@ -154,6 +154,7 @@ def mean_ci95(values) -> tuple[float, float, float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
     from semcodec.evaluation import LINK_SCHEMES, EvalContext
 
@@ -193,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:
         print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": []}
     total = len(schemes) * len(snrs) * len(images) * args.draws
     # the bar is closed on the way out, by an error too: it never redraws after the message

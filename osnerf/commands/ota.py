@@ -341,6 +341,7 @@ def framed_settings(args, symbols_per_frame: int):
 
 def run(args: argparse.Namespace) -> int:
     from hil import OtaConfig, save_sigmf
+    from osnerf.cli import inputs_checked
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
@@ -355,6 +356,7 @@ def run(args: argparse.Namespace) -> int:
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     t0 = time.perf_counter()
     bursts = []
     for name in args.schemes:

@@ -30,6 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.cli import inputs_checked
     from osnerf.commands import args as checks
     from osnerf.plots import make_plots
     from osnerf.sweeps import read_results
@@ -39,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     records = read_results(args.results)
     if not records:
         raise ValueError(f"RESULTS {args.results!r} holds no finished points")
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     written = make_plots(records, args.out, anchors=not args.no_anchors, formats=formats)
     for path in written:
         print(f"wrote {path}", file=sys.stderr)

@@ -126,6 +126,7 @@ def _path_poses(path: Path):
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
     from renderer import RENDERERS, load_model, make_renderer, to_uint8
 
@@ -148,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
     intr, poses = _camera_path(args, model)
 
     config = _renderer_config(args, intr.width)
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     t0, c0 = time.perf_counter(), time.process_time()
     rend, setup_stats = make_renderer(
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)

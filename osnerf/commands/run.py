@@ -134,6 +134,7 @@ def run_config(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.cli import inputs_checked
     from osnerf.report import write_report
     from osnerf.run import run_pipeline
     from osnerf.run.cache import check_stage_files
@@ -152,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if cache:
         checks.output_dir(cache, cache_flag, resumable=lambda _: True)
     check_stage_files(out / "cache" / cfg.key())
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
     )

@@ -108,7 +108,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from osnerf.cli import inputs_checked
+
     cfg, data, val, init, out = parse(args)
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     summary = train_codec(cfg, data, val, init, out, resume=not args.no_resume)
     report(cfg, summary, out)
     return 0

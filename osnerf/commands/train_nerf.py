@@ -80,6 +80,7 @@ def _background(text: str | None):
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from osnerf.cli import inputs_checked
     from osnerf.provenance import write_json_atomic
     from renderer import (
         TrainConfig,
@@ -119,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
         f"{train_set.width}x{train_set.height}, field {args.field}, {args.max_seconds:g} s",
         file=sys.stderr,
     )
+    inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     result = train(
         train_set, config, torch.Generator().manual_seed(args.seed), eval_dataset=test_set
     )
