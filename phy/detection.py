@@ -36,8 +36,8 @@ from scipy import stats
 
 from phy.sync import correct_cfo
 
-SEARCH_THRESHOLD = 11.0  # S above this is a candidate: 5e-5 per sample in noise (measured);
-# a frame at -10 dB (4 MS/s, 20 ppm, 3-path multipath) has S above it in 200 of 200 trials
+SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
+# sample passes it, high enough that few noise samples reach the coherent check
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
 _SPAN = 4  # lags either side of the search peak where Q is evaluated
 _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)

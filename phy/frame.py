@@ -53,9 +53,8 @@ class FrameConfig:
             above 1.0 are clipped.
         sync_length: samples of the detection preamble (N = K * L), a multiple of
             ``sync_segment_length`` with K in [8, 512]. Coherent processing gain
-            10 log10(N): 33 dB for the default 2048 (1024 leaves the CFO-proof search
-            statistic, which grows with K, missing 1 frame in 10 at -10 dB through the
-            emulated boards).
+            10 log10(N): 33 dB for the default 2048; the CFO-proof search statistic grows
+            with K, so a shorter preamble finds fewer frames at low SNR.
         sync_segment_length: L, samples per coherently summed segment, dividing
             ``fft_size``, in [2, fft_size]. The CFO range is +-fft_size / (2 L) subcarriers
             (+-2 for 64 / 16: 125 kHz at 4 MS/s, 625 kHz at 20 MS/s); a CFO f loses
@@ -64,13 +63,9 @@ class FrameConfig:
             ``Q = |<r, q_f>|^2 / (|q_f|^2 |r|^2)`` over the N-sample window that declares a
             frame, in (0, 1). In noise alone Q ~ Beta(1, N - 1) per lag and CFO hypothesis:
             ``Pfa = (1 - t)^(N - 1)``; the default 0.015 with N = 2048 gives 4e-14 per
-            hypothesis; the search hands over about 5e-5 of the samples of noise, each
-            checked on 2 x 17 lags x 4K hypotheses: below 1e-15 per sample (no false alarm
-            in 10^7 noise samples, tests/phy). A clean preamble at per-sample SNR rho gives
-            Q ~ rho / (1 + rho) less the CFO and multipath losses; Pd from the noncentral F
-            (:func:`phy.detection.pd_coherent`): above 0.9999 at an effective -13 dB, i.e.
-            -10 dB with the default 3-path multipath, 20 ppm at 4 MS/s and the emulated int8
-            ADC saturating (38 % of samples clipped, about -2.3 dB).
+            hypothesis, each candidate sample being checked on 2 x 17 lags x 4K hypotheses.
+            A clean preamble at per-sample SNR rho gives Q ~ rho / (1 + rho) less the CFO
+            and multipath losses; Pd from the noncentral F (:func:`phy.detection.pd_coherent`).
         max_cfo_subcarriers: largest |CFO| accepted, subcarriers, in (0, fft_size / (2 L)].
         timing_backoff: samples the FFT window starts inside the prefix, in [0, cp_length);
             ``None`` = ``cp_length // 4``. The receiver tolerates a delay spread up to
@@ -79,7 +74,7 @@ class FrameConfig:
         carrier_freq_hz: None, or the carrier frequency when both radios derive their
             local oscillator and sample clock from one crystal (HackRF): the receiver then
             takes the sampling-clock offset from the CFO (``-cfo_hz / carrier_freq_hz``)
-            instead of estimating it from the pilots, which stays exact at -10 dB.
+            instead of estimating it from the pilots, which stays exact at any SNR.
     """
 
     fft_size: int = 64
