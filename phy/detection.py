@@ -174,23 +174,6 @@ def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
     return out.reshape(-1)[:nout]
 
 
-def search_metric(r: np.ndarray, cfg) -> np.ndarray:
-    """The normalised differential statistic S[d] for every preamble start d.
-
-    The noise level is the mean of ``|w|^2`` (the neighbouring-segment products) over the
-    window, taken over blocks of ``_POWER_BLOCK`` lags (a CFAR normaliser: coloured
-    signals such as OFDM data normalise like white noise; the decision uses the exact
-    window energy).
-
-    Args:
-        r: [num_samples] complex64.
-    Returns:
-        [num_samples - N + 1] float32 (empty when the capture is shorter than N).
-    """
-    _, power, var = _search(r, cfg)
-    return power / np.repeat(var, _POWER_BLOCK)[: power.size]
-
-
 def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(c [num_samples - L + 1], |D|^2 [num_samples - N + 1], noise-only variance of D per
     block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)])."""

@@ -59,14 +59,6 @@ def channel_smoother(counts: np.ndarray, basis: np.ndarray) -> tuple[np.ndarray,
     return p, np.maximum(np.diag(p).real, 0.0)
 
 
-def smooth_channel(
-    obs_sum: np.ndarray, counts: np.ndarray, basis: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`channel_smoother` applied: (h [num_carriers] complex128, mse_factor)."""
-    p, factor = channel_smoother(counts, basis)
-    return p @ obs_sum, factor
-
-
 def _moving_sum(a: np.ndarray, width: int) -> np.ndarray:
     """Centred moving sum over ``width`` (odd) entries, truncated at the ends."""
     half = width // 2

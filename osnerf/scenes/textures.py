@@ -64,14 +64,6 @@ def pavement(seed: int = 2, size: int = 128) -> np.ndarray:
     return np.clip(rgb, 0, 1).astype(np.float32)
 
 
-def grass(seed: int = 3, size: int = 128) -> np.ndarray:
-    """Green lawn with clumps."""
-    rng = np.random.default_rng(seed)
-    n = 0.6 * _noise(rng, size, 8) + 0.4 * _noise(rng, size, 32)
-    rgb = np.stack([0.15 + 0.15 * n, 0.35 + 0.25 * n, 0.1 + 0.08 * n], -1)
-    return np.clip(rgb, 0, 1).astype(np.float32)
-
-
 def roof_tiles(seed: int = 4, size: int = 128) -> np.ndarray:
     """Dark slate tiles in rows."""
     rng = np.random.default_rng(seed)
