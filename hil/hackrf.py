@@ -246,9 +246,9 @@ class HackRF:
         self.part_id, serial_from_board = self._read_partid_serial()
         if not self.serial_number:
             self.serial_number = serial_from_board
-        self._sample_rate_hz = None
-        self._baseband_filter_hz = None
-        self._center_freq_hz = None
+        self._sample_rate_hz: float | None = None
+        self._baseband_filter_hz: int | None = None
+        self._center_freq_hz: int | None = None
         self._lna_gain_db = 0
         self._vga_gain_db = 0
         self._txvga_gain_db = 0
@@ -390,6 +390,12 @@ class HackRF:
             self._control(p.read_partid_serial(), "read part id and serial")
         )
 
+    def _rate_hz(self, what: str) -> float:
+        """The sample rate set, for a stream that needs it."""
+        if self._sample_rate_hz is None:
+            raise HilError(f"{what}: no sample rate set (configure() or set sample_rate_hz)")
+        return self._sample_rate_hz
+
     def m0_state(self) -> p.M0State | None:
         """The M0 streaming state (request 41); None on USB API < 1.06."""
         if self.usb_api_version < p.M0_STATE_MIN_API:
@@ -398,8 +404,9 @@ class HackRF:
 
     # ------------------------------------------------------------------ properties
     @property
-    def sample_rate_hz(self) -> float:
-        """Sample rate, 2-20 MS/s; setting it also sets the automatic baseband filter (0.75 Fs)."""
+    def sample_rate_hz(self) -> float | None:
+        """Sample rate, 2-20 MS/s (None until set); setting it also sets the automatic
+        baseband filter (0.75 Fs)."""
         return self._sample_rate_hz
 
     @sample_rate_hz.setter
@@ -407,14 +414,15 @@ class HackRF:
         req = p.set_sample_rate(value)
         self._control(req, "set sample rate")
         freq_hz, divider = p.sample_rate_params(value)
-        self._sample_rate_hz = freq_hz / divider
-        bw = p.auto_baseband_filter_hz(self._sample_rate_hz)
+        rate = freq_hz / divider
+        self._sample_rate_hz = rate
+        bw = p.auto_baseband_filter_hz(rate)
         self._control(p.set_baseband_filter(bw), "set baseband filter")
         self._baseband_filter_hz = bw
 
     @property
-    def baseband_filter_hz(self) -> int:
-        """Baseband filter, rounded down to one of 1.75 ... 28 MHz."""
+    def baseband_filter_hz(self) -> int | None:
+        """Baseband filter, rounded down to one of 1.75 ... 28 MHz (None until set)."""
         return self._baseband_filter_hz
 
     @baseband_filter_hz.setter
@@ -427,8 +435,8 @@ class HackRF:
         self._baseband_filter_hz = bw
 
     @property
-    def center_freq_hz(self) -> int:
-        """Centre frequency, 1 MHz - 6 GHz, in 1 Hz steps."""
+    def center_freq_hz(self) -> int | None:
+        """Centre frequency, 1 MHz - 6 GHz, in 1 Hz steps (None until set)."""
         return self._center_freq_hz
 
     @center_freq_hz.setter
@@ -543,12 +551,15 @@ class HackRF:
         """Exactly ``num_bytes`` int8 from the running stream (raises HilError on faults)."""
         import usb.core
 
+        rx = self._rx
+        if rx is None:
+            raise HilError("receive: not receiving")
         parts = [self._pending]
         have = len(self._pending)
         while have < num_bytes:
-            data = self._rx.get()
+            data = rx.get()
             if data is None:
-                e = self._rx.error
+                e = rx.error
                 got = np.concatenate(parts)
                 self._pending = np.zeros(0, np.int8)
                 if isinstance(e, usb.core.USBError):
@@ -637,7 +648,7 @@ class HackRF:
         return write_sigmf(
             path,
             raw,
-            sample_rate_hz=self._sample_rate_hz,
+            sample_rate_hz=self._rate_hz("save a capture"),
             center_freq_hz=self._center_freq_hz,
             datatype="ci8",
             hw=f"{self.product} {self.serial_number}",
@@ -672,7 +683,7 @@ class HackRF:
                     chunk += bytes(p.PACKET_BYTES - len(chunk) % p.PACKET_BYTES)
                 self._t.write(chunk, self.bulk_timeout_ms)
             self._t.write(bytes(p.FLUSH_BYTES), self.bulk_timeout_ms)
-            time.sleep(p.FLUSH_BYTES / (p.BYTES_PER_SAMPLE * self._sample_rate_hz))
+            time.sleep(p.FLUSH_BYTES / (p.BYTES_PER_SAMPLE * self._rate_hz("transmit")))
         except usb.core.USBError as e:
             try:
                 self._control(p.set_transceiver_mode(p.MODE_OFF), "set mode off")

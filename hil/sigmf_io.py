@@ -129,7 +129,9 @@ def write_sigmf(
         info[sigmf.HW_KEY] = hw
     if description:
         info[sigmf.DESCRIPTION_KEY] = description
-    capture = {sigmf.DATETIME_KEY: _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")}
+    capture: dict[str, str | float] = {
+        sigmf.DATETIME_KEY: _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    }
     if center_freq_hz is not None:
         capture[sigmf.FREQUENCY_KEY] = float(center_freq_hz)
     try:
