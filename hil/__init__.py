@@ -38,8 +38,9 @@ from hil.errors import (
     TimedOutError,
     UsbTimeoutError,
 )
-from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
+from hil.hackrf import HackRF
 from hil.iiod import IIOD_PORT, IiodServer
+from hil.iq import to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
 from hil.ota import (
@@ -56,6 +57,8 @@ from hil.pluto import Pluto, find_plutos
 from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
+from hil.stream import StreamStats
+from hil.usb_transport import find_hackrfs
 
 __all__ = [
     "DEVICES",

@@ -63,7 +63,7 @@ class DeviceKind:
 
 
 def _find_hackrfs() -> list:
-    from hil.hackrf import find_hackrfs
+    from hil.usb_transport import find_hackrfs
 
     return [d.serial_number for d in find_hackrfs()]
 

@@ -26,7 +26,8 @@ from hil.errors import (
     StreamError,
     TimedOutError,
 )
-from hil.hackrf import StreamStats, full_scale_samples
+from hil.iq import full_scale_samples
+from hil.stream import StreamStats
 
 RX_FULL_SCALE = 2048.0  # 12-bit ADC samples in 16-bit containers
 TX_FULL_SCALE = 32767.0  # 12-bit DAC samples in the containers' most significant bits
