@@ -19,14 +19,8 @@ May import ``phy`` only. Public names::
 from hil import protocol
 from hil.air import AirChannel, fractional_resample, iq_imbalance, quantize_ci8
 from hil.devices import DEVICES, DeviceKind, device_kind
-from hil.emulator import (
-    EmulatedHackRF,
-    Emulator,
-    EmulatorBackend,
-    Faults,
-    RadioSpec,
-    default_serial,
-)
+from hil.emulated_hackrf import EmulatedHackRF, Faults, RadioSpec
+from hil.emulator import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
     DeviceNotFoundError,
     DisconnectedError,
