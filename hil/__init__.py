@@ -37,16 +37,10 @@ from hil.iiod import IIOD_PORT, IiodServer
 from hil.iq import to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
-from hil.ota import (
-    BurstResult,
-    FrameReport,
-    OtaConfig,
-    PhyFrames,
-    decode_capture,
-    save_partial_capture,
-    save_sigmf,
-    send_blocks,
-)
+from hil.ota import decode_capture, send_blocks
+from hil.ota_burst import BurstResult, FrameReport, PhyFrames
+from hil.ota_config import OtaConfig
+from hil.ota_sigmf import save_partial_capture, save_sigmf
 from hil.pluto import Pluto, find_plutos
 from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from hil import AirChannel, Emulator, HackRF, OtaConfig, read_sigmf, save_sigmf, send_blocks
-from hil.ota import ERASED_NOISE_VAR, assign_frames, decode_header, header_symbols
+from hil.ota_header import decode_header, header_symbols
+from hil.ota_receiver import ERASED_NOISE_VAR, assign_frames
 
 PRE = np.exp(2j * np.pi * np.random.default_rng(99).integers(0, 4, 64) / 4).astype(np.complex64)
 
