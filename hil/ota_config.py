@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from hil.ota_header import HEADER_BITS
-from hil.pluto_emulator import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
+from hil.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 
 
 @dataclass(frozen=True)
