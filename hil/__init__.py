@@ -33,6 +33,7 @@ from hil.errors import (
     UsbTimeoutError,
 )
 from hil.hackrf import HackRF
+from hil.iio_access import find_plutos
 from hil.iiod import IIOD_PORT, IiodServer
 from hil.iq import to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
@@ -41,7 +42,7 @@ from hil.ota import decode_capture, send_blocks
 from hil.ota_burst import BurstResult, FrameReport, PhyFrames
 from hil.ota_config import OtaConfig
 from hil.ota_sigmf import save_partial_capture, save_sigmf
-from hil.pluto import Pluto, find_plutos
+from hil.pluto import Pluto
 from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
