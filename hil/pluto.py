@@ -17,6 +17,7 @@ import warnings
 
 import numpy as np
 
+from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.errors import (
     DeviceNotFoundError,
     HilError,
@@ -27,8 +28,6 @@ from hil.iio_access import find_plutos, iio_error_to_hil, import_iio, release_fr
 from hil.iq import full_scale_samples
 from hil.stream import StreamStats
 
-RX_FULL_SCALE = 2048.0  # 12-bit ADC samples in 16-bit containers
-TX_FULL_SCALE = 32767.0  # 12-bit DAC samples in the containers' most significant bits
 GAIN_CONTROL_MODES = ("manual", "fast_attack", "slow_attack", "hybrid")
 
 

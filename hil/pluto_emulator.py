@@ -3,10 +3,10 @@
 The board holds what libiio sees of a Pluto (``ad9361-phy``, ``cf-ad9361-lpc``,
 ``cf-ad9361-dds-core-lpc``): the context XML, attribute reads and writes with the driver's
 ranges, quantisation and errno-style refusals (:class:`hil.pluto_attrs.PlutoAttributes`),
-and the sample buffers. Its TX DAC (12 bits in 16-bit
-containers, full scale 32768) loops to its RX ADC (12 bits, full scale 2048) through a
-:class:`hil.Medium`: multipath, delay and noise at the channel's SNR. TX and RX LOs come
-from one crystal, so TX and RX at the same LO have no carrier offset; a TX LO ``df`` above
+and the sample buffers. Its TX DAC (12 bits in 16-bit containers, full scale
+``ad9361.TX_FULL_SCALE``) loops to its RX ADC (12 bits, full scale ``ad9361.RX_FULL_SCALE``)
+through a :class:`hil.Medium`: multipath, delay and noise at the channel's SNR. TX and RX
+LOs come from one crystal, so TX and RX at the same LO have no carrier offset; a TX LO ``df`` above
 the RX LO shifts what is received by ``df``.
 
 The receive clock cannot run ahead of the wall clock (samples are delivered at most at the
@@ -25,14 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil import ad9361
+from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.air import RESAMPLER_TAPS, AirChannel
 from hil.medium import Medium
 from hil.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB, PlutoAttributes, iio_errno
 from hil.pluto_context import context_xml
-
-RX_FULL_SCALE = 2048  # 12-bit ADC samples, sign-extended in 16-bit containers
-TX_FULL_SCALE = 32768  # 12-bit DAC samples in the 16 bits' most significant bits
-
 
 NETWORK_FAULTS = ("drop", "slow")
 """Faults of a served board (``osnerf hil emulate pluto --fault``), both ``after_samples``
