@@ -73,7 +73,11 @@ class PhyFrames:
 
 @dataclass
 class FrameReport:
-    """What the receiver made of one transmitted frame."""
+    """What the receiver made of one transmitted frame.
+
+    ``header_error`` says why a detection where this frame starts was dropped: its header
+    contradicts the frame's number (:func:`hil.ota_header.header_mismatch`); None otherwise.
+    """
 
     number: int
     block: int
@@ -83,6 +87,7 @@ class FrameReport:
     snr_db: float | None = None
     cfo_hz: float | None = None
     crc_ok: bool | None = None
+    header_error: str | None = None
 
 
 @dataclass

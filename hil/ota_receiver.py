@@ -8,7 +8,7 @@ import numpy as np
 
 from hil.ota_burst import as_numpy
 from hil.ota_config import OtaConfig
-from hil.ota_header import HEADER_BITS, header_symbols
+from hil.ota_header import HEADER_BITS, header_mismatch, header_symbols
 
 ERASED_NOISE_VAR = 1e3  # noise variance reported for symbols of lost frames (an erasure)
 
@@ -63,7 +63,9 @@ def receive_burst(
     """Find, synchronise and equalise every frame of ``capture``; reassemble the blocks.
 
     Frame numbers come from the headers and the burst's layout together
-    (:func:`assign_frames`). Fills ``reports`` (detected, start, SNR, CFO) in place.
+    (:func:`assign_frames`); a detection whose header then contradicts its number
+    (:func:`hil.ota_header.header_mismatch`) is dropped, its frame lost, and the reason kept
+    in the frame's ``header_error``. Fills ``reports`` (detected, start, SNR, CFO) in place.
     Returns:
         list of ``(x_hat [n] complex64, noise_var [n] float32)``, one per block.
     """
@@ -95,6 +97,9 @@ def receive_burst(
         if number is None or reports[number].detected:
             continue  # not where a frame of this burst starts, or a duplicate detection
         rep = reports[number]
+        rep.header_error = header_mismatch(sym, cfg.header_repeat, number, nv)
+        if rep.header_error is not None:
+            continue  # the header says this is not frame `number`: lost, not misplaced
         rep.detected = True
         rep.start_index = start
         snr = getattr(res, "snr_db_estimate", None)
