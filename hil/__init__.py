@@ -10,6 +10,7 @@ May import ``phy`` only. Public names::
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
+    Radio                         what the over-the-air path uses of a front end (a Protocol)
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
     decode_capture                a recorded capture decoded again, offline
@@ -45,6 +46,7 @@ from hil.ota_sigmf import save_partial_capture, save_sigmf
 from hil.pluto import Pluto
 from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State
+from hil.radio import Radio
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 from hil.stream import StreamStats
 from hil.usb_transport import find_hackrfs
@@ -57,6 +59,7 @@ __all__ = [
     "IIOD_PORT",
     "IiodServer",
     "Pluto",
+    "Radio",
     "find_plutos",
     "TimedOutError",
     "AirChannel",

@@ -24,29 +24,34 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import cast
 
 import numpy as np
 
 from hil.errors import HilError
+from hil.hackrf_settings import HackRFSettings
 from hil.ota_burst import BurstResult, PhyFrames, build_burst
 from hil.ota_config import OtaConfig
 from hil.ota_receiver import receive_burst
+from hil.radio import Radio
 
 
-def _configure(dev, cfg: OtaConfig) -> None:
+def _configure(dev: Radio, cfg: OtaConfig) -> None:
+    """Set ``cfg``'s tuning and gains on ``dev`` with the front end's own knobs."""
     if hasattr(dev, "apply_ota_config"):  # a front end with its own knobs (Pluto)
         dev.apply_ota_config(cfg)
         return
-    dev.sample_rate_hz = cfg.sample_rate_hz
-    dev.center_freq_hz = cfg.center_freq_hz
-    dev.lna_gain_db = cfg.lna_gain_db
-    dev.vga_gain_db = cfg.vga_gain_db
-    dev.txvga_gain_db = cfg.txvga_gain_db
+    hackrf = cast(HackRFSettings, dev)  # otherwise a HackRF: one property per knob
+    hackrf.sample_rate_hz = cfg.sample_rate_hz
+    hackrf.center_freq_hz = cfg.center_freq_hz
+    hackrf.lna_gain_db = cfg.lna_gain_db
+    hackrf.vga_gain_db = cfg.vga_gain_db
+    hackrf.txvga_gain_db = cfg.txvga_gain_db
 
 
 def transmit_and_capture(
-    tx,
-    rx,
+    tx: Radio,
+    rx: Radio,
     burst: np.ndarray,
     num_rx_samples: int,
     lead_s: float = 0.0,
@@ -122,11 +127,14 @@ def decode_capture(capture, block_sizes: list, cfg: OtaConfig | None = None, fra
     return BurstResult(received, reports, burst, capture)
 
 
-def send_blocks(tx, rx, blocks: list, cfg: OtaConfig | None = None, frames=None) -> BurstResult:
+def send_blocks(
+    tx: Radio, rx: Radio, blocks: list, cfg: OtaConfig | None = None, frames=None
+) -> BurstResult:
     """Send symbol blocks from ``tx`` to ``rx`` (HackRFs, real, emulated or loopback).
 
     Args:
-        tx, rx: open :class:`hil.HackRF` devices (configured here from ``cfg``).
+        tx, rx: open front ends (:class:`hil.Radio`: HackRFs, real, emulated or loopback, or
+            one full-duplex Pluto as both), configured here from ``cfg``.
         blocks: list of [num_symbols] complex64, unit mean power each (one per image).
         cfg: :class:`OtaConfig`.
         frames: the frame layer (default :class:`PhyFrames`).
