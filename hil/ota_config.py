@@ -26,9 +26,8 @@ class OtaConfig:
         detection_threshold: the receiver's normalised coherent preamble metric that counts
             as a frame, in (0, 1) (``phy.FrameConfig.detection_threshold``: in noise alone it
             is Beta(1, N - 1) distributed, so 0.015 with the 2048-sample preamble
-            has a false-alarm probability of 4e-14 per lag and CFO hypothesis, while a
-            preamble at -10 dB per sample reaches about 0.045 through the emulated boards);
-            a detection where no frame of the burst starts is dropped.
+            has a false-alarm probability of 4e-14 per lag and CFO hypothesis); a
+            detection where no frame of the burst starts is dropped.
         lna_gain_db, vga_gain_db, txvga_gain_db: HackRF gains (quantised by the driver).
         ad9361_rx_gain_db, ad9361_tx_gain_db: Pluto (AD9361) gains: manual RX gain, and TX
             gain (minus the attenuation, <= 0), dB.
