@@ -64,6 +64,7 @@ def _decode(path: Path) -> tuple[np.ndarray, int]:
         ) from None
     if fallback is not None:
         return np.asarray(fallback), orientation
+    assert a is not None  # cv2 decoded it, or fallback is set above
     if a.ndim == 2:
         a = a[..., None]
     elif a.shape[2] == 3:

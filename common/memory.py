@@ -16,10 +16,11 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+from typing import Literal
 
 _M_TRIM_THRESHOLD = -1  # glibc mallopt parameters (malloc.h)
 _M_MMAP_THRESHOLD = -3
-_LIBC = None
+_LIBC: ctypes.CDLL | Literal[False] | None = None
 
 
 def _libc():

@@ -10,6 +10,7 @@ May import ``phy`` only. Public names::
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
+    Radio                         what the over-the-air path uses of a front end (a Protocol)
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
     decode_capture                a recorded capture decoded again, offline
@@ -19,14 +20,8 @@ May import ``phy`` only. Public names::
 from hil import protocol
 from hil.air import AirChannel, fractional_resample, iq_imbalance, quantize_ci8
 from hil.devices import DEVICES, DeviceKind, device_kind
-from hil.emulator import (
-    EmulatedHackRF,
-    Emulator,
-    EmulatorBackend,
-    Faults,
-    RadioSpec,
-    default_serial,
-)
+from hil.emulated_hackrf import EmulatedHackRF, Faults, RadioSpec
+from hil.emulator import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
     DeviceNotFoundError,
     DisconnectedError,
@@ -38,24 +33,23 @@ from hil.errors import (
     TimedOutError,
     UsbTimeoutError,
 )
-from hil.hackrf import HackRF, StreamStats, find_hackrfs, to_int8_iq
+from hil.hackrf import HackRF
+from hil.iio_access import find_plutos
 from hil.iiod import IIOD_PORT, IiodServer
+from hil.iq import to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
-from hil.ota import (
-    BurstResult,
-    FrameReport,
-    OtaConfig,
-    PhyFrames,
-    decode_capture,
-    save_partial_capture,
-    save_sigmf,
-    send_blocks,
-)
-from hil.pluto import Pluto, find_plutos
+from hil.ota import decode_capture, send_blocks
+from hil.ota_burst import BurstResult, FrameReport, PhyFrames
+from hil.ota_config import OtaConfig
+from hil.ota_sigmf import save_partial_capture, save_sigmf
+from hil.pluto import Pluto
 from hil.pluto_emulator import EmulatedPluto
 from hil.protocol import ControlRequest, M0State
+from hil.radio import Radio
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
+from hil.stream import StreamStats
+from hil.usb_transport import find_hackrfs
 
 __all__ = [
     "DEVICES",
@@ -65,6 +59,7 @@ __all__ = [
     "IIOD_PORT",
     "IiodServer",
     "Pluto",
+    "Radio",
     "find_plutos",
     "TimedOutError",
     "AirChannel",

@@ -14,12 +14,20 @@ reference, so an emulated board reads values back as the part would:
 
 Ranges are a stock Pluto's AD9363: LO 325 MHz-3.8 GHz, RF bandwidth 200 kHz-20 MHz, sample
 rate 2.083-61.44 MS/s (520.833 kS/s with the FIR decimating by 4).
+
+Sample containers (the host's int16 I and Q): the ADC's 12-bit samples arrive sign-extended
+(full scale 2048); the DAC takes its 12 bits from the container's most significant bits.
+pyadi-iio's ``tx()`` casts the host's numbers to int16 with ``astype`` (no clipping), so a
+full-scale 1.0 must map to 32767, the largest int16: 32768 would wrap to -32768. The DAC
+keeps ``32767 >> 4 = 2047``, its largest code, so nothing of the range is lost.
 """
 
 from __future__ import annotations
 
 import math
 
+RX_FULL_SCALE = 2048  # 12-bit ADC samples, sign-extended in int16 containers
+TX_FULL_SCALE = 32767  # int16 container of the 12-bit DAC (its 12 MSBs): int16's maximum
 REFERENCE_HZ = 40_000_000
 RFPLL_MODULUS = 8388593
 BBPLL_MODULUS = 2088960

@@ -63,7 +63,7 @@ class DeviceKind:
 
 
 def _find_hackrfs() -> list:
-    from hil.hackrf import find_hackrfs
+    from hil.usb_transport import find_hackrfs
 
     return [d.serial_number for d in find_hackrfs()]
 
@@ -81,7 +81,7 @@ def _emulated_pluto(snr_db: float, **kwargs):
 
 
 def _find_plutos() -> list:
-    from hil.pluto import find_plutos
+    from hil.iio_access import find_plutos
 
     return [uri for uri, _ in find_plutos()]
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import errno as _errno
 
+import numpy as np
+
 
 class HilError(RuntimeError):
     """Base class of every hardware-in-the-loop failure.
@@ -16,7 +18,11 @@ class HilError(RuntimeError):
         capture: the samples received before the failure, ``[1, num_samples] complex64``
             (or ``None`` when nothing was being received).
         sigmf_path: where that partial capture was saved as SigMF, or ``None``.
+        partial_raw: the raw int8 interleaved I/Q a HackRF stream read before it failed
+            (set only by the HackRF driver's reader, absent otherwise).
     """
+
+    partial_raw: np.ndarray
 
     def __init__(self, message: str, *, capture=None, sigmf_path=None):
         super().__init__(message)

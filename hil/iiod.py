@@ -233,7 +233,7 @@ class IiodServer(socketserver.ThreadingTCPServer):
 
     @property
     def address(self) -> str:
-        return self.server_address[0]
+        return str(self.server_address[0])
 
     @property
     def port(self) -> int:

@@ -10,7 +10,8 @@ import numpy as np
 
 from hil import protocol as p
 from hil.air import AirChannel
-from hil.emulator import EmulatedHackRF, Emulator
+from hil.emulated_hackrf import EmulatedHackRF
+from hil.emulator import Emulator
 from hil.hackrf import HackRF
 
 

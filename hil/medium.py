@@ -189,7 +189,9 @@ class Medium:
         noise = rng.standard_normal(2 * n, dtype=np.float32).view(np.complex64) * np.float32(
             math.sqrt(ch.noise_var / 2)
         )
-        y = (sig + noise) * np.float32(10 ** ((radio.rx_gain_db - ch.reference_rx_gain_db) / 20))
+        y: np.ndarray = (sig + noise) * np.float32(
+            10 ** ((radio.rx_gain_db - ch.reference_rx_gain_db) / 20)
+        )
         y = iq_imbalance(y, ch.iq_gain_imbalance_db, ch.iq_phase_imbalance_deg)
         if ch.dc_offset:
             y = y + np.complex64(ch.dc_offset)

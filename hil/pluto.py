@@ -10,7 +10,6 @@ board transmits and receives at once (``tx`` from one thread while ``rx`` runs o
 
 from __future__ import annotations
 
-import errno
 import math
 import os
 import time
@@ -18,65 +17,18 @@ import warnings
 
 import numpy as np
 
+from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.errors import (
     DeviceNotFoundError,
-    DisconnectedError,
     HilError,
-    RequestFailedError,
     StreamError,
     TimedOutError,
 )
-from hil.hackrf import StreamStats, full_scale_samples
+from hil.iio_access import find_plutos, iio_error_to_hil, import_iio, release_frames
+from hil.iq import full_scale_samples
+from hil.stream import StreamStats
 
-RX_FULL_SCALE = 2048.0  # 12-bit ADC samples in 16-bit containers
-TX_FULL_SCALE = 32767.0  # 12-bit DAC samples in the containers' most significant bits
 GAIN_CONTROL_MODES = ("manual", "fast_attack", "slow_attack", "hybrid")
-_GONE = {errno.EPIPE, errno.ECONNRESET, errno.ENOTCONN, errno.ECONNABORTED, errno.ENODEV, errno.EBADF, errno.ESHUTDOWN}  # fmt: skip
-
-
-def iio_error_to_hil(exc: BaseException, what: str) -> HilError:
-    """Map a libiio ``OSError`` (or pyadi-iio's plain ``Exception``) to a ``HilError``."""
-    err = getattr(exc, "errno", None)
-    text = os.strerror(err) if err else str(exc)
-    if err == errno.ETIMEDOUT:
-        return TimedOutError(f"{what}: the board did not answer in time ({text})")
-    if err in _GONE or err == errno.ECONNREFUSED:
-        return DisconnectedError(f"{what}: the board is gone (connection dropped: {text})")
-    if err == errno.EINVAL:
-        return RequestFailedError(f"{what}: the driver refused the value ({text})")
-    return HilError(f"{what}: libiio error: {text}")
-
-
-def find_plutos() -> list[tuple[str, str]]:
-    """``(uri, description)`` of every Pluto libiio finds: its USB (and DNS-SD) scan, and
-    ``ip:$IIOD_REMOTE`` when that variable (libiio's default network host) is set.
-
-    Raises:
-        DeviceNotFoundError: libiio or its Python binding cannot be loaded.
-    """
-    iio = _import_iio()
-    found = []
-    remote = os.environ.get("IIOD_REMOTE")
-    if remote:
-        found.append((f"ip:{remote}", "IIOD_REMOTE"))
-    try:
-        scanned = iio.scan_contexts()
-    except OSError:
-        scanned = {}
-    for uri, desc in scanned.items():
-        if "pluto" in desc.lower() or "ad9361" in desc.lower() or "ad9363" in desc.lower():
-            found.append((uri, desc))
-    return found
-
-
-def _import_iio():
-    try:
-        import iio
-    except (ImportError, OSError) as e:
-        raise DeviceNotFoundError(
-            "libiio is not available: install libiio0 (Debian) and pip install pylibiio==0.25"
-        ) from e
-    return iio
 
 
 class Pluto:
@@ -149,7 +101,7 @@ class Pluto:
             DeviceNotFoundError: nothing answers at ``uri`` (the message names it) or no
                 Pluto was found.
         """
-        iio = _import_iio()
+        iio = import_iio()
         if uri is None and os.environ.get("IIOD_REMOTE"):
             uri = f"ip:{os.environ['IIOD_REMOTE']}"  # no scan: libiio's default network host
         if uri is None:
@@ -379,7 +331,7 @@ class Pluto:
                 have += len(x)
                 self._receiving = True  # the stream is live once a buffer arrived
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
-            _release_frames(e)
+            release_frames(e)
             waited_s = time.monotonic() - asked if parts or self._receiving else 0.0
             if isinstance(e, HilError):
                 err = e
@@ -456,7 +408,7 @@ class Pluto:
                 time.sleep(queued / float(self.sample_rate_hz))  # the queue plays out
                 sdr.tx_destroy_buffer()
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
-            _release_frames(e)
+            release_frames(e)
             raise iio_error_to_hil(e, "transmit") from e
         self.last_stats = StreamStats("tx", len(x))
         if save_to is not None:
@@ -475,15 +427,6 @@ class Pluto:
         except Exception as e:  # noqa: BLE001
             warnings.warn(f"Pluto {self.uri}: stop transmit: {e}", stacklevel=2)
         self._cyclic = False
-
-
-def _release_frames(exc: BaseException) -> None:
-    """Drop the locals of the frames in ``exc``'s traceback: pyadi-iio's frames hold its
-    ``iio.Buffer``, which must be destroyed before its context (libiio frees the buffer
-    through the context; garbage collection in the wrong order crashes the process)."""
-    import traceback
-
-    traceback.clear_frames(exc.__traceback__)
 
 
 def _hz(value: float, name: str) -> int:

@@ -108,6 +108,7 @@ def context_xml(context_attrs: dict[str, str], description: str) -> str:
                 f'<channel id="{ch.id}"{label} type="{"output" if ch.output else "input"}" >'
             )
             if ch.scan_index is not None:
+                assert ch.scan_format is not None  # every scan element has a format
                 fmt = ch.scan_format.replace(">", "&gt;")
                 out.append(
                     f'<scan-element index="{ch.scan_index}" format="{fmt}" scale="1.000000" />'

@@ -74,6 +74,26 @@ def sigmf_paths(path) -> tuple[Path, Path]:
     return stem.with_name(name + ".sigmf-meta"), stem.with_name(name + ".sigmf-data")
 
 
+def _payload(samples, datatype: str) -> bytes:
+    """The data file's bytes of ``samples`` in ``datatype`` (see :func:`write_sigmf`)."""
+    if datatype not in DATATYPES:
+        raise ValueError(f"datatype must be one of {DATATYPES}, got {datatype!r}")
+    x = np.asarray(samples)
+    if datatype == "ci8":
+        if x.dtype == np.int8:
+            raw = x.reshape(-1)
+        else:
+            from hil.air import quantize_ci8
+
+            raw = quantize_ci8(x.reshape(-1))
+        payload = raw.astype(np.int8).tobytes()
+    else:
+        payload = x.reshape(-1).astype(np.complex64).tobytes()
+    if not payload:
+        raise ValueError("a SigMF recording needs at least one sample, got none")
+    return payload
+
+
 def write_sigmf(
     path,
     samples,
@@ -102,21 +122,7 @@ def write_sigmf(
     import sigmf
     from sigmf import SigMFFile
 
-    if datatype not in DATATYPES:
-        raise ValueError(f"datatype must be one of {DATATYPES}, got {datatype!r}")
-    x = np.asarray(samples)
-    if datatype == "ci8":
-        if x.dtype == np.int8:
-            raw = x.reshape(-1)
-        else:
-            from hil.air import quantize_ci8
-
-            raw = quantize_ci8(x.reshape(-1))
-        payload = raw.astype(np.int8).tobytes()
-    else:
-        payload = x.reshape(-1).astype(np.complex64).tobytes()
-    if not payload:
-        raise ValueError("a SigMF recording needs at least one sample, got none")
+    payload = _payload(samples, datatype)
     meta_path, data_path = sigmf_paths(path)
     meta_path.parent.mkdir(parents=True, exist_ok=True)
     info = {
@@ -129,7 +135,9 @@ def write_sigmf(
         info[sigmf.HW_KEY] = hw
     if description:
         info[sigmf.DESCRIPTION_KEY] = description
-    capture = {sigmf.DATETIME_KEY: _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")}
+    capture: dict[str, str | float] = {
+        sigmf.DATETIME_KEY: _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    }
     if center_freq_hz is not None:
         capture[sigmf.FREQUENCY_KEY] = float(center_freq_hz)
     try:

@@ -5,7 +5,7 @@ phy.LinkOutput``), so every scheme of ``osnerf run`` can cross the air: each cal
 the batch's blocks as one burst of ``phy`` OFDM frames through ``hil.send_blocks`` and
 returns zero-forced (unbiased) symbols with the receiver's own per-symbol effective noise
 variance, the codec's convention (lost frames come back erased: zero symbols with noise
-variance ``hil.ota.ERASED_NOISE_VAR``). A decoder should get that variance
+variance ``hil.ota_receiver.ERASED_NOISE_VAR``). A decoder should get that variance
 (``codec.decode(x_hat, meta, snr_db, noise_var=out.noise_var)``) and, as its SNR, the
 receiver's measured one (``snr_db_measured``) rather than ``1 / mean(noise_var)``, which
 one erased frame dominates.
@@ -19,11 +19,15 @@ into ``semcodec.ReceivedBlock`` s for a framed scheme's receiver.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from hil.devices import DEVICES as _HARDWARE
+
+if TYPE_CHECKING:
+    from hil import Emulator, Radio
 
 DEVICES = ("emulated", *_HARDWARE)  # emulated HackRFs, then hil's table of real front ends
 DEFAULT_PPM = (0.0, 20.0)
@@ -42,7 +46,7 @@ def open_radios(
     loopback: bool = False,
     tx_serial: str | None = None,
     rx_serial: str | None = None,
-):
+) -> tuple[Radio, Radio, Emulator | None]:
     """(tx, rx, emulator or None): two emulated boards ``ppm`` apart with the air at
     ``snr_db`` (``loopback``: the same without USB), or real boards of a kind of
     ``hil.DEVICES`` (a full-duplex Pluto is both ends; its id is a libiio URI).
@@ -83,15 +87,15 @@ class OtaLink:
     """``link(x [batch, num_symbols] complex64, snr_db) -> phy.LinkOutput`` over the air.
 
     Attributes:
-        tx, rx: open ``hil.HackRF`` devices (see :func:`open_radios`).
+        tx, rx: open front ends, ``hil.Radio`` s (see :func:`open_radios`).
         snr_db: the air's SNR (emulated boards: fixed when they were opened).
         ota_cfg: ``hil.OtaConfig``.
         frames_sent, frames_lost: counted over every call.
         snr_db_measured: the receiver's pilot SNR of each call (None when all were lost).
     """
 
-    tx: object
-    rx: object
+    tx: Radio
+    rx: Radio
     snr_db: float
     ota_cfg: object
     emulator: object | None = None

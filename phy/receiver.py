@@ -299,6 +299,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
 
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
+    assert h is not None  # set on the loop's first pass
     h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
     # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
     h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)

@@ -62,6 +62,7 @@ def ber_theory(modulation: str, snr_db, channel: str = "awgn"):
     """Uncoded bit error rate at Es/N0 ``snr_db`` (float or array) -> float or ndarray."""
     s = _check(modulation, channel, snr_db)
     g = 10.0 ** (s / 10.0)
+    out: np.ndarray | float
     if modulation == "bpsk":
         out = 0.5 * _erfc_avg(1.0, g, channel)
     else:

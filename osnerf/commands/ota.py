@@ -71,7 +71,7 @@ def check_codec_snr(codec, snr_db: float) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from hil import OtaConfig
     from hil.air import SNR_DB_RANGE
-    from hil.emulator import FAULT_NAMES
+    from hil.emulated_hackrf import FAULT_NAMES
     from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
     from semcodec.evaluation import LINK_SCHEMES
 

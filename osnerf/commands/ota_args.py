@@ -47,7 +47,7 @@ def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
 
 
 def parse_ppm(value: str) -> tuple[float, float]:
-    from hil.emulator import PPM_RANGE
+    from hil.emulated_hackrf import PPM_RANGE
 
     lo, hi = PPM_RANGE
     try:

@@ -53,9 +53,12 @@ class Channel(torch.nn.Module):
         generator: torch.Generator for noise and fading draws.
     """
 
-    kind: str = ""
-    """Its ``phy.CHANNELS`` name: the fading distribution a transmitter may know (never the
-    draw). Set by each subclass (a property where it depends on the mode)."""
+    @property
+    def kind(self) -> str:
+        """Its ``phy.CHANNELS`` name: the fading distribution a transmitter may know (never the
+        draw). Set by each subclass (a class attribute, or a property where it depends on the
+        mode); ``""`` here."""
+        return ""
 
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:  # noqa: D102
         raise NotImplementedError

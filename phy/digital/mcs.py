@@ -63,7 +63,7 @@ class MCS:
     @property
     def repetition(self) -> float:
         """How many times each mother-code bit is sent on average (1 at rates >= 1/5)."""
-        return float(max(MOTHER_RATE / self.code_rate, 1))
+        return float(max(MOTHER_RATE / self.code_rate, Fraction(1)))
 
 
 def _mcs(modulation: str, rate: str) -> MCS:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from numpy.typing import ArrayLike
 from torch import Tensor
 
 from phy.ofdm.resource_grid import ResourceGrid
@@ -12,7 +13,7 @@ INTERPOLATIONS = ("linear", "nearest")
 
 
 def interpolation_matrix(
-    positions: np.ndarray, targets: np.ndarray, kind: str = "linear"
+    positions: ArrayLike, targets: ArrayLike, kind: str = "linear"
 ) -> np.ndarray:
     """[len(targets), len(positions)] weights that interpolate values known at ``positions``.
 
@@ -21,8 +22,9 @@ def interpolation_matrix(
     if kind not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {list(INTERPOLATIONS)}, got {kind!r}")
     p = np.asarray(positions, dtype=np.float64)
-    w = np.zeros((len(targets), len(p)))
-    for i, t in enumerate(np.asarray(targets, dtype=np.float64)):
+    tt = np.asarray(targets, dtype=np.float64)
+    w = np.zeros((len(tt), len(p)))
+    for i, t in enumerate(tt):
         if len(p) == 1 or t <= p[0]:
             w[i, 0] = 1.0
         elif t >= p[-1]:

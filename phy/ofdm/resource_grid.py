@@ -126,7 +126,7 @@ class ResourceGrid:
         """[num_ofdm_symbols, fft_size] bool."""
         m = torch.zeros(self.num_ofdm_symbols, self.fft_size, dtype=torch.bool)
         if self.pilot_ofdm_symbols:
-            m[np.ix_(self.pilot_ofdm_symbols, self.pilot_subcarriers)] = True
+            m[np.ix_(np.asarray(self.pilot_ofdm_symbols), self.pilot_subcarriers)] = True
         return m
 
     @functools.cached_property

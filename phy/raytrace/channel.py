@@ -52,6 +52,8 @@ class RayTracedChannel(Channel):
     """
 
     kind = "raytraced"
+    h: Tensor  # registered buffers (see __init__)
+    outage: Tensor
 
     def __init__(
         self,
@@ -104,6 +106,7 @@ class RayTracedChannel(Channel):
             p = h.abs().pow(2).mean(dim=1, keepdim=True)
             h = torch.where(p > 0, h / p.clamp_min(1e-300).sqrt(), torch.zeros_like(h))
         else:
+            assert reference_path_gain_db is not None  # checked above for "absolute"
             h = h * 10.0 ** (-float(reference_path_gain_db) / 20.0)
         self.tx_positions_m = positions
         self.subcarrier_frequencies_hz = freqs
@@ -183,6 +186,7 @@ class PerPositionChannel(Channel):
     """
 
     kind = "raytraced"
+    h: Tensor  # registered buffer
 
     def __init__(self, h):
         super().__init__()

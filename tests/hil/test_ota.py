@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from hil import AirChannel, Emulator, HackRF, OtaConfig, read_sigmf, save_sigmf, send_blocks
-from hil.ota import ERASED_NOISE_VAR, assign_frames, decode_header, header_symbols
+from hil.ota_burst import build_burst
+from hil.ota_header import decode_header, header_mismatch, header_symbols
+from hil.ota_receiver import ERASED_NOISE_VAR, assign_frames, receive_burst
 
 PRE = np.exp(2j * np.pi * np.random.default_rng(99).integers(0, 4, 64) / 4).astype(np.complex64)
 
@@ -175,6 +177,65 @@ def test_lost_frame_is_an_erasure_not_a_crash():
     x_hat, nv = res.blocks[0]
     assert np.all(x_hat[256:512] == 0) and np.all(nv[256:512] == ERASED_NOISE_VAR)
     assert np.mean(np.abs(x_hat[:256] - blocks[0][:256]) ** 2) < 0.05
+
+
+class TamperedHeader(ToyFrames):
+    """ToyFrames that send frame ``victim`` with ``header`` instead of its own."""
+
+    def __init__(self, victim, header):
+        super().__init__()
+        self.victim, self.header = victim, np.asarray(header, np.complex64)
+
+    def build(self, symbols):
+        s = np.array(symbols, np.complex64)
+        n = len(self.header)
+        if np.all(s[:n].imag == 0) and decode_header(s, n // 16) == self.victim:  # not the probe
+            s[:n] = self.header
+        return super().build(s)
+
+
+@pytest.mark.parametrize("tamper", ["another frame's", "one bit flipped"])
+def test_a_frame_whose_header_does_not_match_is_lost_with_the_reason(tamper):
+    cfg = OtaConfig(
+        sample_rate_hz=2e6, symbols_per_frame=256, gap_samples=300, rx_margin_samples=2000
+    )
+    r = cfg.header_repeat
+    if tamper == "another frame's":
+        header = header_symbols(5, r)
+    else:
+        header = header_symbols(1, r) * np.tile(np.where(np.arange(16) == 3, -1, 1), r)
+    blocks = [qpsk(768, 3)]
+    burst, reports, layout = build_burst(blocks, cfg, TamperedHeader(1, header))
+    rng = np.random.default_rng(4)
+    capture = np.concatenate([np.zeros(500, np.complex64), burst, np.zeros(500, np.complex64)])
+    capture = capture + 0.003 * (rng.standard_normal(capture.size) + 1j * rng.standard_normal(capture.size))  # fmt: skip
+    ((x_hat, nv),) = receive_burst(
+        capture.astype(np.complex64), reports, layout, [768], cfg, ToyFrames()
+    )
+    assert [f.detected for f in reports] == [True, False, True]
+    assert [f.header_error is None for f in reports] == [True, False, True]
+    why = reports[1].header_error
+    assert "does not match frame 1" in why
+    assert ("decodes as frame 5" if tamper == "another frame's" else "check nibble fails") in why
+    assert np.all(x_hat[256:512] == 0) and np.all(nv[256:512] == ERASED_NOISE_VAR)
+    assert np.mean(np.abs(x_hat[:256] - blocks[0][:256]) ** 2) < 0.05
+
+
+def test_header_check_does_not_drop_frames_for_low_snr_alone():
+    """At -10 dB per symbol most headers fail to decode on their own, yet hardly any bit
+    lies 3 noise deviations against the frame's number; at 20 dB a swapped header does."""
+    rng = np.random.default_rng(5)
+    nv = np.full(128, 10.0)
+    dropped = 0
+    for i in range(2000):
+        x = header_symbols(i, 8) + np.sqrt(5.0) * (
+            rng.standard_normal(128) + 1j * rng.standard_normal(128)
+        )
+        dropped += header_mismatch(x, 8, i, nv) is not None
+    assert dropped <= 3
+    quiet = np.full(128, 0.01)
+    assert header_mismatch(header_symbols(7, 8), 8, 7, quiet) is None
+    assert "decodes as frame 6" in header_mismatch(header_symbols(6, 8), 8, 7, quiet)
 
 
 def test_ota_config_validation():

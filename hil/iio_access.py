@@ -1,0 +1,72 @@
+"""libiio access for the Pluto: loading the binding, finding boards, and mapping its
+errors onto :class:`hil.HilError`."""
+
+from __future__ import annotations
+
+import errno
+import os
+
+from hil.errors import (
+    DeviceNotFoundError,
+    DisconnectedError,
+    HilError,
+    RequestFailedError,
+    TimedOutError,
+)
+
+_GONE = {errno.EPIPE, errno.ECONNRESET, errno.ENOTCONN, errno.ECONNABORTED, errno.ENODEV, errno.EBADF, errno.ESHUTDOWN}  # fmt: skip
+
+
+def iio_error_to_hil(exc: BaseException, what: str) -> HilError:
+    """Map a libiio ``OSError`` (or pyadi-iio's plain ``Exception``) to a ``HilError``."""
+    err = getattr(exc, "errno", None)
+    text = os.strerror(err) if err else str(exc)
+    if err == errno.ETIMEDOUT:
+        return TimedOutError(f"{what}: the board did not answer in time ({text})")
+    if err in _GONE or err == errno.ECONNREFUSED:
+        return DisconnectedError(f"{what}: the board is gone (connection dropped: {text})")
+    if err == errno.EINVAL:
+        return RequestFailedError(f"{what}: the driver refused the value ({text})")
+    return HilError(f"{what}: libiio error: {text}")
+
+
+def find_plutos() -> list[tuple[str, str]]:
+    """``(uri, description)`` of every Pluto libiio finds: its USB (and DNS-SD) scan, and
+    ``ip:$IIOD_REMOTE`` when that variable (libiio's default network host) is set.
+
+    Raises:
+        DeviceNotFoundError: libiio or its Python binding cannot be loaded.
+    """
+    iio = import_iio()
+    found = []
+    remote = os.environ.get("IIOD_REMOTE")
+    if remote:
+        found.append((f"ip:{remote}", "IIOD_REMOTE"))
+    try:
+        scanned = iio.scan_contexts()
+    except OSError:
+        scanned = {}
+    for uri, desc in scanned.items():
+        if "pluto" in desc.lower() or "ad9361" in desc.lower() or "ad9363" in desc.lower():
+            found.append((uri, desc))
+    return found
+
+
+def import_iio():
+    """The ``iio`` module (pylibiio); DeviceNotFoundError when it cannot be loaded."""
+    try:
+        import iio
+    except (ImportError, OSError) as e:
+        raise DeviceNotFoundError(
+            "libiio is not available: install libiio0 (Debian) and pip install pylibiio==0.25"
+        ) from e
+    return iio
+
+
+def release_frames(exc: BaseException) -> None:
+    """Drop the locals of the frames in ``exc``'s traceback: pyadi-iio's frames hold its
+    ``iio.Buffer``, which must be destroyed before its context (libiio frees the buffer
+    through the context; garbage collection in the wrong order crashes the process)."""
+    import traceback
+
+    traceback.clear_frames(exc.__traceback__)
