@@ -74,7 +74,7 @@ from phy.theory import ber_theory, ser_theory  # noqa: E402
 
 
 def __getattr__(name: str):
-    """TDLChannel / CDLChannel on first use (they import sionna, about 2 s)."""
+    """TDLChannel / CDLChannel on first use (they import sionna, which is slow to import)."""
     if name in ("TDLChannel", "CDLChannel"):
         from phy.channels import tr38901
 
