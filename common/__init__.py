@@ -17,6 +17,7 @@ may all import it.
 from common.files import (
     atomic_path,
     check_replaceable,
+    json_default,
     path_kind,
     to_json,
     write_bytes,
@@ -29,10 +30,13 @@ from common.files import (
 )
 from common.images import IMAGE_SUFFIXES, list_images, read_image
 from common.memory import trim_heap, tune_malloc
+from common.plugins import load_plugins
 from common.quality import PSNR_MAX_DB, psnr
 from common.registry import Registry
 
 __all__ = [
+    "json_default",
+    "load_plugins",
     "IMAGE_SUFFIXES",
     "PSNR_MAX_DB",
     "Registry",

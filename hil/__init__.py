@@ -18,9 +18,17 @@ May import ``phy`` only. Public names::
 """
 
 from hil import protocol
-from hil.air import AirChannel, fractional_resample, iq_imbalance, quantize_ci8
+from hil.air import (
+    AIR_SNR_DB_RANGE,
+    MAX_DELAY_S,
+    MAX_MULTIPATH_DELAY,
+    AirChannel,
+    fractional_resample,
+    iq_imbalance,
+    quantize_ci8,
+)
 from hil.devices import DEVICES, DeviceKind, device_kind
-from hil.emulated_hackrf import EmulatedHackRF, Faults, RadioSpec
+from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
 from hil.emulator import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
     DeviceNotFoundError,
@@ -44,14 +52,31 @@ from hil.ota_burst import BurstResult, FrameReport, PhyFrames
 from hil.ota_config import OtaConfig
 from hil.ota_sigmf import save_partial_capture, save_sigmf
 from hil.pluto import Pluto
-from hil.pluto_emulator import EmulatedPluto
-from hil.protocol import ControlRequest, M0State
+from hil.pluto_emulator import NETWORK_FAULTS, EmulatedPluto
+from hil.protocol import (
+    BOARD_IDS,
+    FREQ_RANGE_HZ,
+    SAMPLE_RATE_RANGE_HZ,
+    ControlRequest,
+    M0State,
+    usb_api_version_string,
+)
 from hil.radio import Radio
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 from hil.stream import StreamStats
 from hil.usb_transport import find_hackrfs
 
 __all__ = [
+    "AIR_SNR_DB_RANGE",
+    "BOARD_IDS",
+    "FAULT_NAMES",
+    "FREQ_RANGE_HZ",
+    "MAX_DELAY_S",
+    "MAX_MULTIPATH_DELAY",
+    "NETWORK_FAULTS",
+    "PPM_RANGE",
+    "SAMPLE_RATE_RANGE_HZ",
+    "usb_api_version_string",
     "DEVICES",
     "DeviceKind",
     "device_kind",

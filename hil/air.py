@@ -17,7 +17,7 @@ RESAMPLER_TAPS = 48  # Kaiser(7)-windowed sinc: interpolation error < -60 dB up 
 _KAISER_BETA = 7.0
 
 
-SNR_DB_RANGE = (-30.0, 100.0)  # AirChannel.snr_db, dB
+AIR_SNR_DB_RANGE = (-30.0, 100.0)  # AirChannel.snr_db, dB
 MAX_DELAY_S = 1.0  # AirChannel.delay_s in [0, MAX_DELAY_S]
 MAX_MULTIPATH_DELAY = 4096  # AirChannel.multipath delays in [1, MAX_MULTIPATH_DELAY] samples
 
@@ -59,7 +59,7 @@ class AirChannel:
     iq_phase_imbalance_deg: float = 0.0
 
     def __post_init__(self):
-        lo, hi = SNR_DB_RANGE
+        lo, hi = AIR_SNR_DB_RANGE
         if not math.isfinite(self.snr_db) or not lo <= self.snr_db <= hi:
             raise ValueError(f"snr_db must be in [{lo:g}, {hi:g}] dB, got {self.snr_db!r}")
         if not -60 <= self.reference_power_dbfs <= 0:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from hil.devices import DEVICES as _HARDWARE
+from hil import DEVICES as _HARDWARE
 
 if TYPE_CHECKING:
     from hil import Emulator, Radio

@@ -143,7 +143,7 @@ def _ber_theory_curve(modulation, channel, lo, hi, group) -> tuple[list[float], 
         try:
             from phy import ber_theory
         except ImportError:  # before phy re-exports it
-            from phy.theory import ber_theory
+            from phy import ber_theory
 
         grid = np.linspace(lo, hi, 61)
         ys = np.asarray(

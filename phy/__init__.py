@@ -17,6 +17,7 @@ from phy._llvm import configure_llvm, require_llvm
 
 configure_llvm()  # before anything imports sionna.rt or mitsuba
 
+from phy.ber import simulate_uncoded  # noqa: E402
 from phy.channels import (  # noqa: E402
     AWGN,
     CHANNELS,
@@ -27,6 +28,7 @@ from phy.channels import (  # noqa: E402
     make_channel,
 )
 from phy.conventions import (  # noqa: E402
+    SNR_DB_RANGE,
     cbr,
     clip_papr,
     ebno_db_to_snr_db,
@@ -70,7 +72,7 @@ from phy.ofdm import (  # noqa: E402
     post_equalization_snr,
 )
 from phy.receiver import FrameResult, find_frames, receive_frame  # noqa: E402
-from phy.theory import ber_theory, ser_theory  # noqa: E402
+from phy.theory import THEORY_CHANNELS, ber_theory, ser_theory  # noqa: E402
 
 
 def __getattr__(name: str):
@@ -83,6 +85,9 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "SNR_DB_RANGE",
+    "THEORY_CHANNELS",
+    "simulate_uncoded",
     "OFDM_CHANNELS",
     "CopyFading",
     "assumed_channel",

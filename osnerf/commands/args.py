@@ -113,7 +113,7 @@ def number(lo: float, hi: float, unit: str = "", *, low_open: bool = False) -> C
 
 
 def _snr_range() -> tuple[float, float]:
-    from phy.conventions import SNR_DB_RANGE
+    from phy import SNR_DB_RANGE
 
     return SNR_DB_RANGE
 

@@ -19,8 +19,8 @@ MAX_NUM_BITS = 10**9
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from phy.modulation import MODULATIONS
-    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
+    from phy import MODULATIONS
+    from phy import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
 
     p.add_argument(
         "--channel",
@@ -58,8 +58,8 @@ def parse_snr_list(text) -> list[float]:
 
 
 def parse_args(args: argparse.Namespace) -> dict:
-    from phy.modulation import MODULATIONS
-    from phy.theory import THEORY_CHANNELS as CHANNEL_CHOICES
+    from phy import MODULATIONS
+    from phy import THEORY_CHANNELS as CHANNEL_CHOICES
 
     if args.channel not in CHANNEL_CHOICES:
         raise UsageError(
@@ -103,10 +103,7 @@ def simulate(config: dict, seed: int) -> list[dict]:
     from tqdm import tqdm
 
     import phy
-    from phy.ber import simulate_uncoded
-    from phy.conventions import snr_db_to_ebno_db
-    from phy.modulation import bits_per_symbol
-    from phy.theory import ber_theory, ser_theory
+    from phy import ber_theory, bits_per_symbol, ser_theory, simulate_uncoded, snr_db_to_ebno_db
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
     channel = phy.AWGN() if config["channel"] == "awgn" else phy.RayleighFading(mode="fast")
@@ -159,7 +156,7 @@ def plot(config: dict, results: list[dict], path: str) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from phy.theory import ber_theory
+    from phy import ber_theory
 
     snrs = [r["snr_db"] for r in results]
     lo, hi = min(snrs), max(snrs)
@@ -177,7 +174,7 @@ def plot(config: dict, results: list[dict], path: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    from common.files import write_figure
+    from common import write_figure
 
     write_figure(path, fig, dpi=120)
     plt.close(fig)

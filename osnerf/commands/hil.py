@@ -46,9 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import DEVICES, IIOD_PORT
-    from hil.air import SNR_DB_RANGE
-    from hil.pluto_emulator import NETWORK_FAULTS
+    from hil import AIR_SNR_DB_RANGE, DEVICES, IIOD_PORT, NETWORK_FAULTS
     from osnerf.commands import args as checks
 
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
@@ -57,7 +55,7 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="TCP port")
     p.add_argument(
         "--snr-db",
-        type=checks.number(*SNR_DB_RANGE, "dB"),
+        type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
         default=15.0,
         help="SNR of the board's TX-to-RX loop for over-the-air frames, dB (default 15)",
     )
@@ -78,15 +76,15 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _info_lines(index: int, dev) -> list[str]:
-    from hil import protocol
+    from hil import BOARD_IDS, usb_api_version_string
 
-    board = protocol.BOARD_IDS.get(dev.board_id, "unknown")
+    board = BOARD_IDS.get(dev.board_id, "unknown")
     return [
         "Found HackRF",
         f"Index: {index}",
         f"Serial number: {dev.serial_number}",
         f"Board ID Number: {dev.board_id} ({board})",
-        f"Firmware Version: {dev.firmware_version} (API:{protocol.usb_api_version_string(dev.usb_api_version)})",
+        f"Firmware Version: {dev.firmware_version} (API:{usb_api_version_string(dev.usb_api_version)})",
         f"Part ID Number: 0x{dev.part_id[0]:08x} 0x{dev.part_id[1]:08x}",
     ]
 

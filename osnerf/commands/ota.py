@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hil.devices import DEVICES as HARDWARE
+from hil import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
 from osnerf.commands.ota_args import (
@@ -69,10 +69,7 @@ def check_codec_snr(codec, snr_db: float) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import OtaConfig
-    from hil.air import SNR_DB_RANGE
-    from hil.emulated_hackrf import FAULT_NAMES
-    from hil.protocol import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
+    from hil import AIR_SNR_DB_RANGE, FAULT_NAMES, FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ, OtaConfig
     from semcodec.evaluation import LINK_SCHEMES
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
@@ -94,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--snr-db",
-        type=checks.number(*SNR_DB_RANGE, "dB"),
+        type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
         default=15.0,
         help="air SNR of emulated boards, dB (default 15)",
     )
@@ -147,7 +144,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
     """The emulated air between the boards: seed, crystal errors, echoes, delay."""
-    from hil.air import MAX_DELAY_S
+    from hil import MAX_DELAY_S
 
     p.add_argument(
         "--seed", type=checks.seed, default=0, help="seed of the emulated air (default 0)"

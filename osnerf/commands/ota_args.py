@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hil.devices import DEVICES as HARDWARE
+from hil import DEVICES as HARDWARE
 
 DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 
@@ -29,7 +29,7 @@ def parse_device(value: str, name: str) -> tuple[str, str | None]:
 def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
     if value.strip().lower() in ("", "none"):
         return ()
-    from hil.air import MAX_MULTIPATH_DELAY
+    from hil import MAX_MULTIPATH_DELAY
 
     out = []
     try:
@@ -47,7 +47,7 @@ def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
 
 
 def parse_ppm(value: str) -> tuple[float, float]:
-    from hil.emulated_hackrf import PPM_RANGE
+    from hil import PPM_RANGE
 
     lo, hi = PPM_RANGE
     try:

@@ -16,7 +16,7 @@ from typing import Any
 
 
 def _dumps(record: dict[str, Any]) -> str:
-    from common.files import json_default
+    from common import json_default
 
     return json.dumps(record, default=json_default, allow_nan=True, separators=(",", ":"))
 
