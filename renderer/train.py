@@ -172,9 +172,9 @@ GRIDS_BY_SIZE: dict[int, dict] = {
     300: {"grid_resolutions": (48, 128, 256), "batch_rays": 8192},
 }
 """Smallest image width (px) -> :class:`TrainConfig` settings that differ from the defaults
-(:meth:`TrainConfig.for_resolution`); up to 299 px the defaults (at 200 px a 192-vertex grid
-did not beat them within 300 CPU-s). More rays per step amortise the finer grid's dense
-per-step work (README, "Why the defaults are what they are")."""
+(:meth:`TrainConfig.for_resolution`); up to 299 px the defaults (a finer grid costs more per
+step, which a short budget at small sizes does not repay). More rays per step amortise the
+finer grid's dense per-step work (README, "Why the defaults are what they are")."""
 
 
 @dataclass

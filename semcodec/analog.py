@@ -1,7 +1,7 @@
 """Analog refinement layer: the JSCC base's residual sent as SoftCast-style linear symbols.
 
-A learned JSCC's quality saturates with rate (its decoder has a ceiling: the shipped
-model gains about half a dB from CBR 1/6 to 1/3 at 10 dB). Hybrid digital-analog
+A learned JSCC's quality saturates with rate (its decoder has a ceiling: past a base rate
+more symbols add little to its reconstruction). Hybrid digital-analog
 transmission spends the symbols above a base rate on the residual instead: the transmitter,
 which holds the decoder (the shared knowledge base), decodes its own noiseless base symbols
 at the nominal SNR, and sends ``residual = image - that decode`` uncoded, as SoftCast does

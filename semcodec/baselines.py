@@ -66,8 +66,8 @@ def _run_link(link, x: Tensor, snr_db, generator):
 
 
 REFINE_STEPS = 50
-"""Adam steps of :func:`refine_symbols` by default (Kodak, block Rayleigh 10 dB: about one
-CPU second each per 768 x 512 image)."""
+"""Adam steps of :func:`refine_symbols` by default (each step runs the decoder forward and
+backward once per image)."""
 REFINE_LR = 0.03
 """Adam step of :func:`refine_symbols`, relative to the symbols' RMS per real dimension."""
 
