@@ -38,6 +38,14 @@ from semcodec.baselines import (
     transmit_ideal,
     transmit_jscc,
 )
+from semcodec.box_focus import (
+    BoxMeta,
+    decode_box,
+    decode_received,
+    encode_with_focus,
+    focus_by_box,
+    mask_box,
+)
 from semcodec.channel_layers import TRAIN_CHANNELS
 from semcodec.checkpoint import (
     KnowledgeBaseMismatch,
@@ -48,26 +56,21 @@ from semcodec.checkpoint import (
 from semcodec.codec import (
     DEFAULT_CHECKPOINT,
     Codec,
-    Encoded,
     EncodedMeta,
-    box_bits,
-    box_side_symbols,
-    check_images,
     for_fusion,
     learned_only,
     load_codec,
     receiver_mask,
 )
 from semcodec.contract import (
-    BoxMeta,
+    CodecMeta,
+    Encoded,
     SemanticCodec,
     TrainableCodec,
-    decode_box,
-    decode_received,
-    encode_with_focus,
-    focus_by_box,
+    box_bits,
+    box_side_symbols,
+    check_images,
     is_trainable,
-    mask_box,
 )
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
@@ -109,6 +112,7 @@ from semcodec.registry import (
 __all__ = [
     "BoxMeta",
     "CODECS",
+    "CodecMeta",
     "CodecPluginError",
     "SemanticCodec",
     "TrainableCodec",

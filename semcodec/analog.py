@@ -40,11 +40,12 @@ from functools import cached_property, lru_cache
 import torch
 from torch import Tensor
 
+from semcodec.contract import SIDE_BITS_PER_SYMBOL
+
 VAR_BITS = 6  # bits per chunk energy: 64 half-octave steps below the strongest chunk
 REFERENCE_BITS = 16  # the strongest chunk's code
 POWER_SCALE_BITS = 16  # one float16 power scale per image
 FORMAT_BITS = 2  # which of the three formats the chunk energies are sent in
-SIDE_BITS_PER_SYMBOL = 0.5  # side information at QPSK with a rate-1/4 code
 _LOG2_STEP = 0.5  # quantisation step of log2(chunk energy)
 _LOG2_MIN = -60.0  # energies below 2**-60 (all-zero chunks) are coded as 2**-60
 

@@ -32,8 +32,8 @@ from torch.nn import functional as F
 
 from common import psnr
 from phy import Channel, FlatLink, power_normalize
+from semcodec.box_focus import decode_received, encode_with_focus
 from semcodec.codec import Codec, Encoded, check_images
-from semcodec.contract import decode_received, encode_with_focus
 from semcodec.image_codecs import (
     IMAGE_CODECS,
     RESAMPLE_FILTER,

@@ -27,7 +27,6 @@ from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
 from semcodec.analog import (
-    SIDE_BITS_PER_SYMBOL,
     AnalogSide,
     decode_residual,
     encode_residual,
@@ -39,6 +38,13 @@ from semcodec.checkpoint import (
     load_checkpoint,
     save_checkpoint,
     weights_sha256,
+)
+from semcodec.contract import (
+    FOCUS_FILL,
+    Encoded,
+    box_bits,
+    box_side_symbols,
+    check_images,
 )
 from semcodec.focus import attribution_box, demand_heatmap, demand_positions, densest_box
 from semcodec.jscc_train import forward_train, load_compatible
@@ -53,8 +59,6 @@ from semcodec.model import (
 )
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
-MIN_SIDE_PX = 8
-FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
 LAYER_FRACTIONS = (1 / 8, 1 / 4, 3 / 8, 1 / 2, 5 / 8, 3 / 4)
 """Learned channels, as fractions of the budget's, that :meth:`Codec._layer_plan` tries
 under the analog refinement layer."""
@@ -106,35 +110,6 @@ class EncodedMeta:
         layer = self.analog.side_info_bits() if self.analog is not None else 0
         box = box_bits(self.height, self.width) if self.crop is not None else 0
         return box + layer
-
-
-@dataclass(frozen=True)
-class Encoded:
-    """Transmitter output: ``symbols`` [batch, num_symbols] complex64 (mean |x|^2 = 1 per image)."""
-
-    symbols: Tensor
-    meta: EncodedMeta
-
-
-def check_images(images, name: str = "images") -> Tensor:
-    """Raise ValueError unless ``images`` is [batch, 3, height, width] float in [0, 1]."""
-    if not isinstance(images, Tensor):
-        raise ValueError(
-            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got {type(images).__name__}"
-        )
-    if images.dim() != 4 or images.shape[1] != 3:
-        raise ValueError(
-            f"{name} must be [batch, 3, height, width] (RGB), got shape {tuple(images.shape)}"
-        )
-    if images.shape[2] < MIN_SIDE_PX or images.shape[3] < MIN_SIDE_PX:
-        raise ValueError(
-            f"{name} must be at least {MIN_SIDE_PX}x{MIN_SIDE_PX} px, got {tuple(images.shape[2:])}"
-        )
-    if not images.is_floating_point():
-        raise ValueError(f"{name} must be float32 in [0, 1], got dtype {images.dtype}")
-    if not torch.isfinite(images).all() or images.min() < 0 or images.max() > 1:
-        raise ValueError(f"{name} values must be finite and in [0, 1]")
-    return images.float()
 
 
 def _pad4(x: Tensor) -> Tensor:
@@ -571,21 +546,6 @@ class Codec(ChannelTruncationCodec):
         full = torch.zeros(b, 3, max(y.shape[2], top + rh), max(y.shape[3], left + rw))
         full[:, :, top : top + rh, left : left + rw] = res
         return (y + full[:, :, : meta.height, : meta.width]).clamp(0, 1)
-
-
-def box_bits(height: int, width: int) -> int:
-    """Bits of a focus box's side information in a ``height x width`` image: its top, left,
-    height and width in 4-pixel units (the feature grid's), each in as many bits as the
-    image's size in those units needs."""
-    rows, cols = -(-int(height) // 4), -(-int(width) // 4)
-    return 2 * (math.ceil(math.log2(rows + 1)) + math.ceil(math.log2(cols + 1)))
-
-
-def box_side_symbols(height: int, width: int) -> int:
-    """Channel symbols a focus box's side information (:func:`box_bits`) costs per image,
-    at ``semcodec.analog.SIDE_BITS_PER_SYMBOL`` like the analog layer's: in focus mode it
-    is charged to the view's budget."""
-    return math.ceil(box_bits(height, width) / SIDE_BITS_PER_SYMBOL)
 
 
 def learned_only(codec):

@@ -26,7 +26,8 @@ from semcodec.baselines import (
     transmit_ideal,
     transmit_jscc,
 )
-from semcodec.codec import MIN_SIDE_PX, Codec, learned_only
+from semcodec.codec import Codec, learned_only
+from semcodec.contract import MIN_SIDE_PX
 from semcodec.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
 
 DEFAULT_FIXED_MCS = "16qam-1/2"

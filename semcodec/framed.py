@@ -28,7 +28,7 @@ import torch
 
 from common import psnr
 from semcodec.baselines import decode_or_grey
-from semcodec.contract import decode_received
+from semcodec.box_focus import decode_received
 from semcodec.image_codecs import SCALES, downscale, encode_image
 
 
