@@ -53,15 +53,7 @@ from semcodec.checkpoint import (
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.codec import (
-    DEFAULT_CHECKPOINT,
-    Codec,
-    EncodedMeta,
-    for_fusion,
-    learned_only,
-    load_codec,
-    receiver_mask,
-)
+from semcodec.codec import DEFAULT_CHECKPOINT, Codec, for_fusion, learned_only, load_codec
 from semcodec.contract import (
     CodecMeta,
     Encoded,
@@ -72,6 +64,7 @@ from semcodec.contract import (
     check_images,
     is_trainable,
 )
+from semcodec.encoded_meta import EncodedMeta, receiver_mask
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
 from semcodec.focus_eval import focus_gain
