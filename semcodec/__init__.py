@@ -29,15 +29,6 @@ without ``supports_focus`` sends the objects' box at the same symbol budget,
 Imports only ``phy`` of osnerf.
 """
 
-from semcodec.baselines import (
-    LOST_IMAGE_VALUE,
-    TransmitResult,
-    refine_symbols,
-    transmit_analog,
-    transmit_digital,
-    transmit_ideal,
-    transmit_jscc,
-)
 from semcodec.box_focus import (
     BoxMeta,
     decode_box,
@@ -64,6 +55,7 @@ from semcodec.contract import (
     check_images,
     is_trainable,
 )
+from semcodec.digital_link import transmit_digital, transmit_ideal
 from semcodec.encoded_meta import EncodedMeta, receiver_mask
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
@@ -83,6 +75,7 @@ from semcodec.grid import (
     full_rate_symbols,
 )
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
+from semcodec.jscc_link import refine_symbols, transmit_jscc
 from semcodec.model import (
     MODELS,
     JSCCConfig,
@@ -101,6 +94,8 @@ from semcodec.registry import (
     parse_codec_spec,
     register_codec,
 )
+from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
+from semcodec.uncoded import transmit_analog
 
 __all__ = [
     "BoxMeta",

@@ -25,7 +25,7 @@ for whole frames (Jakubczak and Katabi, MobiCom 2011):
   equaliser convention), then the inverse transforms.
 
 Everything is linear in the symbols and written in torch, so transmitter-side refinement
-(``semcodec.baselines.refine_symbols``) differentiates through the layer as through the
+(``semcodec.jscc_link.refine_symbols``) differentiates through the layer as through the
 decoder. The side information is charged to the layer's own budget at ``SIDE_BITS_PER_SYMBOL``
 bits per channel symbol (a robust QPSK rate-1/4 code), so the layer's CBR is what crosses
 the channel.

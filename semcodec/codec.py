@@ -270,7 +270,7 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
 
     def decode_differentiable(self, x_hat: Tensor, meta: EncodedMeta, snr: Tensor, noise_var=None):
         """:meth:`decode` without its checks and with autograd on: the receiver as the
-        transmitter simulates it (:func:`semcodec.baselines.refine_symbols`). ``snr`` [batch]."""
+        transmitter simulates it (:func:`semcodec.jscc_link.refine_symbols`). ``snr`` [batch]."""
         b = x_hat.shape[0]
         if meta.analog is not None:
             return self._decode_layered(x_hat, meta, snr, noise_var)
