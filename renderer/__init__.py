@@ -75,7 +75,8 @@ from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_ren
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.teacher_cameras import stored_cameras
 from renderer.teachers import TeacherPool
-from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
+from renderer.train import TrainResult, evaluate, train
+from renderer.train_config import FIELDS, TrainConfig
 from renderer.volume import (
     alpha_from_density,
     composite,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from renderer.train import settings_for_size
+from renderer.train_config import settings_for_size
 
 
 @dataclass(frozen=True)
