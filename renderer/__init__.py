@@ -63,13 +63,9 @@ from renderer.cameras import (
     rotate_pose_about,
 )
 from renderer.dataset import Dataset, default_aabb, load_dataset, write_transforms
-from renderer.features import (
-    FeatureConfig,
-    FeatureRenderer,
-    TeacherPool,
-    stored_cameras,
-    train_features,
-)
+from renderer.feature_config import FeatureConfig
+from renderer.feature_renderer import FeatureRenderer
+from renderer.features import train_features
 from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lpips_weights import lpips_weights_path
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
@@ -77,7 +73,10 @@ from renderer.model import RadianceField, load_model, render_views, save_model
 from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
 from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
-from renderer.train import FIELDS, TrainConfig, TrainResult, evaluate, train
+from renderer.teacher_cameras import stored_cameras
+from renderer.teachers import TeacherPool
+from renderer.train import TrainResult, evaluate, train
+from renderer.train_config import FIELDS, TrainConfig
 from renderer.volume import (
     alpha_from_density,
     composite,

@@ -39,8 +39,8 @@ def trilinear_corners(aabb: Tensor, shape, points: Tensor) -> tuple[Tensor, Tens
         weights [num_points, 8] float32 summing to 1 per point).
     """
     nz, ny, nx = (int(n) for n in shape)
-    # axis by axis on contiguous rows of [3, n]: about three times faster than the same
-    # arithmetic on [n, 3] with broadcast outer products (lego, 24k points: 2.4 -> 0.8 ms)
+    # axis by axis on contiguous rows of [3, n] rather than the same arithmetic on [n, 3]
+    # with broadcast outer products: contiguous rows keep each axis's work vectorised
     pt = points.t()
     lows, fracs, bases = aabb[0].tolist(), [], []
     for a, n in enumerate((nx, ny, nz)):
@@ -73,9 +73,8 @@ def read_rows(rows: Tensor, index: Tensor, weights: Tensor) -> Tensor:
     """Trilinear reads of a vertex-major table ``rows`` [num_vertices, channels] at the
     corners of :func:`trilinear_corners`: [num_points, channels].
 
-    One ``F.embedding_bag`` (weighted sum of eight rows per point): for inference. On one
-    CPU thread it reads lego's 12 colour channels at 100k points in about 10 ms against
-    25-70 ms for :func:`read_corners`; its backward is slower, so training keeps
+    One ``F.embedding_bag`` (weighted sum of eight rows per point): for inference, where
+    one fused gather beats :func:`read_corners`; its backward is slower, so training keeps
     :func:`read_corners`."""
     return F.embedding_bag(index.view(-1, 8), rows, per_sample_weights=weights, mode="sum")
 
@@ -110,9 +109,8 @@ def trilinear(grid: Tensor, aabb: Tensor, points: Tensor) -> Tensor:
     points, as gathers: [num_points, channels] from ``grid`` [1, channels, z, y, x] over
     ``aabb`` [2, 3] (at least 2 vertices per axis).
 
-    On one CPU thread this is about twice as fast as ``grid_sample`` forward and backward
-    together (lego's field, 54k samples, 13 channels: 37 against 82 ms), whose 3-D backward
-    was the largest single cost of a training step.
+    Gathers replace ``grid_sample`` because its 3-D backward is slow on CPU, and a training
+    step spends much of its time here.
     """
     return read_corners(grid, *trilinear_corners(aabb, grid.shape[2:], points))
 

@@ -18,7 +18,8 @@ from torch import Tensor
 
 from renderer.cameras import Intrinsics
 from renderer.dataset import Dataset
-from renderer.features import FeatureConfig, train_features
+from renderer.feature_config import FeatureConfig
+from renderer.features import train_features
 from renderer.metrics import image_metrics
 from renderer.model import RadianceField, render_views
 

@@ -305,7 +305,7 @@ def sample_along_rays(
             torch.zeros(0, dtype=torch.long),
         )
     # Every candidate is generated in cell units and only the survivors get world points:
-    # candidates outnumber occupied samples about 4 to 1 (lego), so per-candidate work is
+    # candidates usually outnumber occupied samples several times, so per-candidate work is
     # what this function costs. t is formed in float64 from a per-ray offset (exact for
     # millions of samples) and counts make every t fall before t_far, so no test against
     # it is needed. (index_select rather than [] indexing: the same gathers, faster.)

@@ -29,14 +29,13 @@ without ``supports_focus`` sends the objects' box at the same symbol budget,
 Imports only ``phy`` of osnerf.
 """
 
-from semcodec.baselines import (
-    LOST_IMAGE_VALUE,
-    TransmitResult,
-    refine_symbols,
-    transmit_analog,
-    transmit_digital,
-    transmit_ideal,
-    transmit_jscc,
+from semcodec.box_focus import (
+    BoxMeta,
+    decode_box,
+    decode_received,
+    encode_with_focus,
+    focus_by_box,
+    mask_box,
 )
 from semcodec.channel_layers import TRAIN_CHANNELS
 from semcodec.checkpoint import (
@@ -45,30 +44,19 @@ from semcodec.checkpoint import (
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.codec import (
-    DEFAULT_CHECKPOINT,
-    Codec,
+from semcodec.codec import DEFAULT_CHECKPOINT, Codec, for_fusion, learned_only, load_codec
+from semcodec.contract import (
+    CodecMeta,
     Encoded,
-    EncodedMeta,
+    SemanticCodec,
+    TrainableCodec,
     box_bits,
     box_side_symbols,
     check_images,
-    for_fusion,
-    learned_only,
-    load_codec,
-    receiver_mask,
-)
-from semcodec.contract import (
-    BoxMeta,
-    SemanticCodec,
-    TrainableCodec,
-    decode_box,
-    decode_received,
-    encode_with_focus,
-    focus_by_box,
     is_trainable,
-    mask_box,
 )
+from semcodec.digital_link import transmit_digital, transmit_ideal
+from semcodec.encoded_meta import EncodedMeta, receiver_mask
 from semcodec.evaluation import LINK_SCHEMES
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
 from semcodec.focus_eval import focus_gain
@@ -87,6 +75,7 @@ from semcodec.grid import (
     full_rate_symbols,
 )
 from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
+from semcodec.jscc_link import refine_symbols, transmit_jscc
 from semcodec.model import (
     MODELS,
     JSCCConfig,
@@ -105,10 +94,13 @@ from semcodec.registry import (
     parse_codec_spec,
     register_codec,
 )
+from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
+from semcodec.uncoded import transmit_analog
 
 __all__ = [
     "BoxMeta",
     "CODECS",
+    "CodecMeta",
     "CodecPluginError",
     "SemanticCodec",
     "TrainableCodec",

@@ -1,7 +1,7 @@
 """Analog refinement layer: the JSCC base's residual sent as SoftCast-style linear symbols.
 
-A learned JSCC's quality saturates with rate (its decoder has a ceiling: the shipped
-model gains about half a dB from CBR 1/6 to 1/3 at 10 dB). Hybrid digital-analog
+A learned JSCC's quality saturates with rate (its decoder has a ceiling: past a base rate
+more symbols add little to its reconstruction). Hybrid digital-analog
 transmission spends the symbols above a base rate on the residual instead: the transmitter,
 which holds the decoder (the shared knowledge base), decodes its own noiseless base symbols
 at the nominal SNR, and sends ``residual = image - that decode`` uncoded, as SoftCast does
@@ -25,7 +25,7 @@ for whole frames (Jakubczak and Katabi, MobiCom 2011):
   equaliser convention), then the inverse transforms.
 
 Everything is linear in the symbols and written in torch, so transmitter-side refinement
-(``semcodec.baselines.refine_symbols``) differentiates through the layer as through the
+(``semcodec.jscc_link.refine_symbols``) differentiates through the layer as through the
 decoder. The side information is charged to the layer's own budget at ``SIDE_BITS_PER_SYMBOL``
 bits per channel symbol (a robust QPSK rate-1/4 code), so the layer's CBR is what crosses
 the channel.
@@ -40,11 +40,12 @@ from functools import cached_property, lru_cache
 import torch
 from torch import Tensor
 
+from semcodec.contract import SIDE_BITS_PER_SYMBOL
+
 VAR_BITS = 6  # bits per chunk energy: 64 half-octave steps below the strongest chunk
 REFERENCE_BITS = 16  # the strongest chunk's code
 POWER_SCALE_BITS = 16  # one float16 power scale per image
 FORMAT_BITS = 2  # which of the three formats the chunk energies are sent in
-SIDE_BITS_PER_SYMBOL = 0.5  # side information at QPSK with a rate-1/4 code
 _LOG2_STEP = 0.5  # quantisation step of log2(chunk energy)
 _LOG2_MIN = -60.0  # energies below 2**-60 (all-zero chunks) are coded as 2**-60
 

@@ -16,7 +16,7 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save
 
-from common import write_bytes, write_text
+from common import write_bytes
 from semcodec.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
@@ -78,16 +78,6 @@ def save_checkpoint(
     }
     write_bytes(path, save(state, metadata={CARD_KEY: json.dumps(full, sort_keys=True)}))
     return sha
-
-
-def write_card_json(checkpoint_path: str | os.PathLike) -> Path:
-    """Write the checkpoint's model card beside it as ``<name>.card.json`` (for people and diffs)."""
-    checkpoint_path = Path(checkpoint_path)
-    with safe_open(str(checkpoint_path), framework="pt") as f:
-        card = json.loads((f.metadata() or {})[CARD_KEY])
-    out = checkpoint_path.with_name(checkpoint_path.name.replace(".safetensors", "") + ".card.json")
-    write_text(out, json.dumps(card, indent=2, sort_keys=True) + "\n")
-    return out
 
 
 def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[dict, dict, object]:

@@ -1,8 +1,8 @@
 """The codec as transmitter and receiver use it: ``load_codec``, ``Codec.encode/decode``.
 
-Rate: keeping the first ``m`` of the model's importance-ordered complex channels gives
-CBR ``m/48`` (the encoder downsamples by 4: 48 real values per position). A requested CBR
-is served by the nearest such m; ``Encoded.meta.cbr`` is the CBR actually used.
+Rate: channel truncation (:mod:`semcodec.truncation`), with part of the budget on the
+analog refinement layer where the transmitter's simulation favours it
+(:mod:`semcodec.layer_plan`).
 
 On-demand focus (paper section 3.2): with an object ``mask`` (and weights ``lambda_j`` over
 K demanded objects), a Grad-CAM-style heat map ranks the encoder's feature positions by
@@ -17,31 +17,19 @@ import copy
 import dataclasses
 import math
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import Tensor
-from torch.nn import functional as F
 
 from phy import power_normalize, validate_snr_db
-from semcodec.analog import (
-    SIDE_BITS_PER_SYMBOL,
-    AnalogSide,
-    decode_residual,
-    encode_residual,
-    layer_symbols,
-    side_symbols,
-)
-from semcodec.checkpoint import (
-    KnowledgeBaseMismatch,
-    load_checkpoint,
-    save_checkpoint,
-    weights_sha256,
-)
+from semcodec.analog import decode_residual
+from semcodec.checkpoint import load_checkpoint, save_checkpoint, weights_sha256
+from semcodec.contract import FOCUS_FILL, Encoded, box_side_symbols, check_images
+from semcodec.encoded_meta import EncodedMeta, centre_first
 from semcodec.focus import attribution_box, demand_heatmap, demand_positions, densest_box
 from semcodec.jscc_train import forward_train, load_compatible
+from semcodec.layer_plan import LayerPlanner
 from semcodec.model import (
     MODELS,
     features_to_symbols,
@@ -51,170 +39,12 @@ from semcodec.model import (
     side_info,
     symbols_to_features,
 )
+from semcodec.truncation import ChannelTruncationCodec, pad4
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.safetensors"
-MIN_SIDE_PX = 8
-FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
-LAYER_FRACTIONS = (1 / 8, 1 / 4, 3 / 8, 1 / 2, 5 / 8, 3 / 4)
-"""Learned channels, as fractions of the budget's, that :meth:`Codec._layer_plan` tries
-under the analog refinement layer."""
-PLAN_PROBE_PX = 192  # side of the central square the transmitter simulates the split on
-LAYER_MARGIN_DB = 0.2
-"""How much less simulated error (dB) the best split with the analog layer needs than the
-learned channels alone: the simulation is one AWGN draw at the nominal SNR, and on fading
-channels the layer gains less (block Rayleigh, two copies combined, 80 px views at CBR 1/8
-and 0 dB: without a margin the layer was chosen in 13 of 24 views and lost 0.08 dB per view;
-at 0.1 / 0.3 dB it was chosen in 6 / 4 and lost 0.02 / gained 0.01)."""
 
 
-@dataclass(frozen=True)
-class EncodedMeta:
-    """What the receiver needs besides the symbols (side information).
-
-    Attributes:
-        height, width: original image size in pixels.
-        num_channels: complex channels kept per sent position (m). In focus mode a model
-            whose decoder reads each symbol's reliability also sends channel m + 1 at the
-            box's first ``num_symbols - m * positions`` positions of :func:`centre_first`
-            (the budget's remainder; no side information needed).
-        cbr: CBR actually used: num_symbols / (3 * height * width).
-        num_symbols: complex symbols per image.
-        codec_sha256: hash of the transmitter's codec (knowledge base identity).
-        crop: (top, left, height, width) in pixels of the box sent in focus mode (the
-            positions holding the demand's attribution), else None (whole image).
-        analog: the analog refinement layer's side information when the last
-            ``analog.num_symbols`` symbols carry the base's residual
-            (:mod:`semcodec.analog`), else None.
-    """
-
-    height: int
-    width: int
-    num_channels: int
-    cbr: float
-    num_symbols: int
-    codec_sha256: str
-    crop: tuple[int, int, int, int] | None = None
-    analog: AnalogSide | None = None
-
-    @property
-    def base_symbols(self) -> int:
-        """Symbols of the learned channels (the first ones; the analog layer's follow)."""
-        return self.num_symbols - (self.analog.num_symbols if self.analog is not None else 0)
-
-    def side_info_bits(self) -> int:
-        """Bits of side information per image: the focus box, plus the analog layer's
-        chunk energies."""
-        layer = self.analog.side_info_bits() if self.analog is not None else 0
-        box = box_bits(self.height, self.width) if self.crop is not None else 0
-        return box + layer
-
-
-@dataclass(frozen=True)
-class Encoded:
-    """Transmitter output: ``symbols`` [batch, num_symbols] complex64 (mean |x|^2 = 1 per image)."""
-
-    symbols: Tensor
-    meta: EncodedMeta
-
-
-def check_images(images, name: str = "images") -> Tensor:
-    """Raise ValueError unless ``images`` is [batch, 3, height, width] float in [0, 1]."""
-    if not isinstance(images, Tensor):
-        raise ValueError(
-            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got {type(images).__name__}"
-        )
-    if images.dim() != 4 or images.shape[1] != 3:
-        raise ValueError(
-            f"{name} must be [batch, 3, height, width] (RGB), got shape {tuple(images.shape)}"
-        )
-    if images.shape[2] < MIN_SIDE_PX or images.shape[3] < MIN_SIDE_PX:
-        raise ValueError(
-            f"{name} must be at least {MIN_SIDE_PX}x{MIN_SIDE_PX} px, got {tuple(images.shape[2:])}"
-        )
-    if not images.is_floating_point():
-        raise ValueError(f"{name} must be float32 in [0, 1], got dtype {images.dtype}")
-    if not torch.isfinite(images).all() or images.min() < 0 or images.max() > 1:
-        raise ValueError(f"{name} values must be finite and in [0, 1]")
-    return images.float()
-
-
-def _pad4(x: Tensor) -> Tensor:
-    """Replicate-pad height and width up to multiples of 4. [b, c, H, W] -> [b, c, H4, W4]."""
-    h, w = x.shape[-2:]
-    ph, pw = (-h) % 4, (-w) % 4
-    return F.pad(x, (0, pw, 0, ph), mode="replicate") if ph or pw else x
-
-
-class ChannelTruncationCodec:
-    """What semcodec's codecs share: a network whose encoder output holds
-    ``num_complex_channels`` importance-ordered complex channels per 4x4 block (CBR m/48 for
-    the first m), loaded with its model card and hash."""
-
-    def __init__(self, model, card: dict, path: Path | None = None):
-        self.model = model.eval()
-        self.card = card
-        self.path = path
-        self.sha256: str = card["sha256"]
-
-    @property
-    def name(self) -> str:
-        return self.card.get("name", self.model.cfg.name)
-
-    @property
-    def module(self):
-        """The network (every trained parameter)."""
-        return self.model
-
-    @property
-    def cbr_range(self) -> tuple[float, float]:
-        """(smallest, largest) CBR: (1/48, num_complex_channels/48)."""
-        return self.model.cfg.cbr_range
-
-    @property
-    def snr_range_db(self) -> tuple[float, float]:
-        """SNR range (Es/N0, dB) the model was trained for."""
-        return (self.model.cfg.snr_min_db, self.model.cfg.snr_max_db)
-
-    @property
-    def rate_levels(self) -> tuple[float, ...]:
-        """CBRs m/48 for m = 1 .. num_complex_channels."""
-        c = self.model.cfg.num_complex_channels
-        return tuple(k * self.model.cfg.cbr_per_channel for k in range(1, c + 1))
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}(name={self.name!r}, sha256={self.sha256[:12]}, cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
-
-    def check_knowledge_base(self, expected_sha256: str | None, meta_sha256: str | None) -> None:
-        """Raise :class:`KnowledgeBaseMismatch` unless both hashes (where given) are ours."""
-        for label, sha in (
-            ("expected_sha256", expected_sha256),
-            ("meta.codec_sha256", meta_sha256),
-        ):
-            if sha is not None and sha != self.sha256:
-                raise KnowledgeBaseMismatch(
-                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
-                )
-
-    def channels_for_cbr(self, cbr: float) -> int:
-        """Kept complex channels m for a CBR (nearest multiple of 1/48); ValueError outside the range."""
-        lo, hi = self.cbr_range
-        try:
-            c = float(cbr)
-        except (TypeError, ValueError):
-            raise ValueError(f"cbr must be a number in [{lo:.4g}, {hi:.4g}], got {cbr!r}") from None
-        if not math.isfinite(c) or not lo * 0.999 <= c <= hi * 1.001:
-            raise ValueError(
-                f"cbr must be in the codec's range [1/48, {round(hi * 48)}/48] = [{lo:.4g}, {hi:.4g}], got {cbr!r}"
-            )
-        return int(
-            min(
-                max(round(c / self.model.cfg.cbr_per_channel), 1),
-                self.model.cfg.num_complex_channels,
-            )
-        )
-
-
-class Codec(ChannelTruncationCodec):
+class Codec(LayerPlanner, ChannelTruncationCodec):
     """A loaded JSCC (encoder + decoder) with its model card and hash: semcodec's own
     :class:`semcodec.SemanticCodec` and :class:`semcodec.TrainableCodec` (registry name
     ``jscc``; architectures :data:`semcodec.MODELS`)."""
@@ -299,61 +129,11 @@ class Codec(ChannelTruncationCodec):
         x = check_images(images)
         b, _, h, w = x.shape
         snr = self._snr(snr_db, b)
-        cfg = self.model.cfg
-        xp = _pad4(x)
-        hf, wf = xp.shape[2] // 4, xp.shape[3] // 4
-        analog = None
+        xp = pad4(x)
         if mask is None:
-            m = self.channels_for_cbr(cbr)
-            crop = None
-            plan = self._layer_plan(xp, snr, m * hf * wf, hf * wf, m)
-            if plan is not None:
-                m, sym, analog = plan
-            else:
-                with torch.no_grad():
-                    feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
-                sym = power_normalize(features_to_symbols(feat, m))
+            m, sym, crop, analog = self._encode_whole(xp, snr, cbr)
         else:
-            lo, hi = self.cbr_range
-            try:
-                cbr = float(cbr)
-            except (TypeError, ValueError):
-                raise ValueError(f"cbr must be a number in (0, {hi:.4g}], got {cbr!r}") from None
-            if not 0 < cbr <= hi * 1.001:
-                raise ValueError(f"cbr in focus mode must be in (0, {hi:.4g}], got {cbr!r}")
-            c = cfg.num_complex_channels
-            with torch.no_grad():
-                feat = self.model.encoder(xp, side_info(snr, c, c, b))
-            heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, (h, w))
-            # feature-grid units; the demanded objects themselves are always in the box
-            objects = demand_positions(mask, demand_weights, (h, w), tuple(xp.shape[2:]))
-            box = attribution_box(heat, include=objects)
-            budget = max(int(round(float(cbr) * 3 * h * w)), 1)
-            box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
-            if budget <= box_side:
-                raise ValueError(
-                    f"cbr {cbr:.4g} gives {budget} symbols, which do not carry the focus box's "
-                    f"side information ({box_side} symbols) and one more"
-                )
-            budget -= box_side
-            # the box that holds the demand's attribution, at the rate that fits; below one
-            # channel over it, the part of it that holds the most attribution
-            top, left, rows, cols = densest_box(heat, box, budget)
-            m = min(c, budget // (rows * cols))
-            crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
-            xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
-            plan = self._layer_plan(xc, snr, budget, rows * cols, m)
-            extra = self._extra_symbols(budget, m, rows, cols) if plan is None else 0
-            if plan is not None:
-                m, sym, analog = plan
-            else:
-                with torch.no_grad():
-                    fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
-                sym = features_to_symbols(fc, m)
-                if extra:
-                    part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
-                    sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
-                sym = power_normalize(sym)
+            m, sym, crop, analog = self._encode_focus(xp, snr, cbr, mask, demand_weights, (h, w))
         meta = EncodedMeta(
             height=h,
             width=w,
@@ -366,96 +146,84 @@ class Codec(ChannelTruncationCodec):
         )
         return Encoded(sym.to(torch.complex64), meta)
 
-    def _layer_plan(
-        self, region: Tensor, snr: Tensor, budget: int, positions: int, m_full: int
-    ) -> tuple[int, Tensor, AnalogSide] | None:
-        """Split ``budget`` symbols over ``region`` between learned channels and the analog
-        refinement layer (:mod:`semcodec.analog`), or None to send learned channels only.
+    def _encode_whole(self, xp: Tensor, snr: Tensor, cbr) -> tuple:
+        """Every position of the padded images ``xp`` at the channels nearest ``cbr``:
+        (learned channels, unit-power symbols, crop None, analog side information or None)."""
+        b = xp.shape[0]
+        cfg = self.model.cfg
+        hf, wf = xp.shape[2] // 4, xp.shape[3] // 4
+        analog = None
+        m = self.channels_for_cbr(cbr)
+        crop = None
+        plan = self._layer_plan(xp, snr, m * hf * wf, hf * wf, m)
+        if plan is not None:
+            m, sym, analog = plan
+        else:
+            with torch.no_grad():
+                feat = self.model.encoder(xp, side_info(snr, m, cfg.num_complex_channels, b))
+            sym = power_normalize(features_to_symbols(feat, m))
+        return m, sym, crop, analog
 
-        The transmitter simulates each option once on an AWGN channel at the nominal SNR,
-        with its own fixed-seed noise (it knows the decoder, not the draw), on the central
-        ``PLAN_PROBE_PX`` square of the region at the same symbols per position: ``m_full``
-        channels alone, and ``round(f * m_full)`` channels for each f in
-        :data:`LAYER_FRACTIONS` with the rest of the budget, less the side information's
-        symbols (at most one symbol per two coefficients), as the layer over the residual of
-        its own noiseless decode. The layer option with the smallest squared error over the
-        batch wins if it beats the learned channels alone by :data:`LAYER_MARGIN_DB`.
+    def _focus_cbr(self, cbr) -> float:
+        """``cbr`` as a float in (0, largest CBR]; ValueError otherwise."""
+        lo, hi = self.cbr_range
+        try:
+            cbr = float(cbr)
+        except (TypeError, ValueError):
+            raise ValueError(f"cbr must be a number in (0, {hi:.4g}], got {cbr!r}") from None
+        if not 0 < cbr <= hi * 1.001:
+            raise ValueError(f"cbr in focus mode must be in (0, {hi:.4g}], got {cbr!r}")
+        return cbr
 
-        Args:
-            region: [batch, 3, 4*rows, 4*cols] the pixels the learned channels cover.
-            snr: [batch] nominal SNR in dB.
-            budget: complex symbols per image; positions: rows * cols.
-        Returns:
-            (learned channels, unit-power symbols [batch, budget - side], side information).
-        """
-        if not self.analog_layer:
-            return None
-        probe = _centre(region, PLAN_PROBE_PX)
-        m, bases = self._best_split(probe, snr, budget / positions, m_full)
-        if m is None:
-            return None
-        h, w = region.shape[2:]
-        with torch.no_grad():
-            if probe.shape == region.shape:  # the probe was the whole region
-                sym, residual = bases[m]
-            else:
-                sym, meta = self._base(region, snr, m)
-                residual = region - self.decode_differentiable(sym, meta, snr)
-            n = layer_symbols(h, w, budget - m * positions)
-            if n < 1:
-                return None
-            layer, side = encode_residual(residual, n)
-        return m, torch.cat([sym, layer], 1), side
-
-    def _base(self, region: Tensor, snr: Tensor, m: int) -> tuple[Tensor, EncodedMeta]:
-        """Unit-power symbols of ``m`` learned channels over a whole region, and their meta."""
-        b, _, h, w = region.shape
+    def _attribution(self, xp: Tensor, snr: Tensor, mask, demand_weights, size) -> tuple:
+        """The demand's heat map over the feature grid of ``xp`` and the box (feature-grid
+        units) of the positions that hold its attribution, the objects themselves included."""
+        b = xp.shape[0]
         c = self.model.cfg.num_complex_channels
-        sym = power_normalize(
-            features_to_symbols(self.model.encoder(region, side_info(snr, m, c, b)), m)
-        )
-        n = sym.shape[1]
-        return sym, EncodedMeta(h, w, m, n / (3 * h * w), n, self.sha256)
-
-    def _best_split(
-        self, probe: Tensor, snr: Tensor, per_position: float, m_full: int
-    ) -> tuple[int | None, dict]:
-        """Learned channels under the layer with the least simulated error on ``probe`` at
-        ``per_position`` symbols per position, or None when ``m_full`` channels alone win;
-        and each tried split's learned symbols and noiseless residual over the probe
-        (learned channels -> (symbols, residual))."""
-        h, w = probe.shape[2:]
-        positions = h * w // 16
-        gen = torch.Generator().manual_seed(0)
-        nv = (10.0 ** (-snr / 10.0))[:, None] / self.split_fusion  # after the receiver's fusion
-
-        def received(sym: Tensor) -> Tensor:
-            noise = torch.randn(sym.shape, generator=gen, dtype=torch.complex64)
-            return sym + noise * nv.sqrt()
-
-        candidates = {}  # learned channels -> the layer's symbols
-        for m in sorted({max(1, round(f * m_full)) for f in LAYER_FRACTIONS}):
-            n = layer_symbols(h, w, int(per_position * positions) - m * positions)
-            if m < m_full and n >= side_symbols(h, w, n):  # side information under half of it
-                candidates[m] = n
-        if not candidates:
-            return None, {}
-        best, choice, bases = math.inf, None, {}
         with torch.no_grad():
-            sym, meta = self._base(probe, snr, m_full)
-            learned = float(
-                ((self.decode_differentiable(received(sym), meta, snr) - probe) ** 2).mean()
+            feat = self.model.encoder(xp, side_info(snr, c, c, b))
+        heat = demand_heatmap(self.model, xp, feat, snr, mask, demand_weights, size)
+        # feature-grid units; the demanded objects themselves are always in the box
+        objects = demand_positions(mask, demand_weights, size, tuple(xp.shape[2:]))
+        return heat, attribution_box(heat, include=objects)
+
+    def _encode_focus(self, xp: Tensor, snr: Tensor, cbr, mask, demand_weights, size) -> tuple:
+        """Focus mode: the box holding the demand's attribution at the rate ``cbr``'s budget
+        allows over it, less the box's side information: (learned channels, unit-power
+        symbols, crop in pixels, analog side information or None)."""
+        h, w = size
+        b = xp.shape[0]
+        analog = None
+        cbr = self._focus_cbr(cbr)
+        c = self.model.cfg.num_complex_channels
+        heat, box = self._attribution(xp, snr, mask, demand_weights, (h, w))
+        budget = max(int(round(float(cbr) * 3 * h * w)), 1)
+        box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
+        if budget <= box_side:
+            raise ValueError(
+                f"cbr {cbr:.4g} gives {budget} symbols, which do not carry the focus box's "
+                f"side information ({box_side} symbols) and one more"
             )
-            for m, n in candidates.items():
-                sym, meta = self._base(probe, snr, m)
-                bases[m] = sym, probe - self.decode_differentiable(sym, meta, snr)
-                layer, side = encode_residual(bases[m][1], n)
-                y = self.decode_differentiable(received(sym), meta, snr)
-                y = (y + decode_residual(received(layer), nv, side)).clamp(0, 1)
-                err = float(((y - probe) ** 2).mean())
-                if err < best:
-                    best, choice = err, m
-        return (choice if best * 10 ** (LAYER_MARGIN_DB / 10) < learned else None), bases
+        budget -= box_side
+        # the box that holds the demand's attribution, at the rate that fits; below one
+        # channel over it, the part of it that holds the most attribution
+        top, left, rows, cols = densest_box(heat, box, budget)
+        m = min(c, budget // (rows * cols))
+        crop = (4 * top, 4 * left, 4 * rows, 4 * cols)
+        xc = xp[:, :, crop[0] : crop[0] + crop[2], crop[1] : crop[1] + crop[3]]
+        plan = self._layer_plan(xc, snr, budget, rows * cols, m)
+        extra = self._extra_symbols(budget, m, rows, cols) if plan is None else 0
+        if plan is not None:
+            m, sym, analog = plan
+        else:
+            with torch.no_grad():
+                fc = self.model.encoder(xc, side_info(snr, m + (extra > 0), c, b))
+            sym = features_to_symbols(fc, m)
+            if extra:
+                part = features_to_symbols(fc[:, 2 * m : 2 * m + 2], 1)
+                sym = torch.cat([sym, part[:, centre_first(rows, cols)[:extra]]], 1)
+            sym = power_normalize(sym)
+        return m, sym, crop, analog
 
     def decode(
         self,
@@ -502,7 +270,7 @@ class Codec(ChannelTruncationCodec):
 
     def decode_differentiable(self, x_hat: Tensor, meta: EncodedMeta, snr: Tensor, noise_var=None):
         """:meth:`decode` without its checks and with autograd on: the receiver as the
-        transmitter simulates it (:func:`semcodec.baselines.refine_symbols`). ``snr`` [batch]."""
+        transmitter simulates it (:func:`semcodec.jscc_link.refine_symbols`). ``snr`` [batch]."""
         b = x_hat.shape[0]
         if meta.analog is not None:
             return self._decode_layered(x_hat, meta, snr, noise_var)
@@ -574,21 +342,6 @@ class Codec(ChannelTruncationCodec):
         return (y + full[:, :, : meta.height, : meta.width]).clamp(0, 1)
 
 
-def box_bits(height: int, width: int) -> int:
-    """Bits of a focus box's side information in a ``height x width`` image: its top, left,
-    height and width in 4-pixel units (the feature grid's), each in as many bits as the
-    image's size in those units needs."""
-    rows, cols = -(-int(height) // 4), -(-int(width) // 4)
-    return 2 * (math.ceil(math.log2(rows + 1)) + math.ceil(math.log2(cols + 1)))
-
-
-def box_side_symbols(height: int, width: int) -> int:
-    """Channel symbols a focus box's side information (:func:`box_bits`) costs per image,
-    at ``semcodec.analog.SIDE_BITS_PER_SYMBOL`` like the analog layer's: in focus mode it
-    is charged to the view's budget."""
-    return math.ceil(box_bits(height, width) / SIDE_BITS_PER_SYMBOL)
-
-
 def learned_only(codec):
     """``codec`` without the analog refinement layer (a copy; codecs without one as they are)."""
     if not getattr(codec, "analog_layer", False):
@@ -616,14 +369,6 @@ def for_fusion(codec, views: float, end: str = "receiver"):
     return out
 
 
-def _centre(x: Tensor, side_px: int) -> Tensor:
-    """The central ``side_px`` square of [b, c, H, W] (multiples of 4 kept), or all of it."""
-    h, w = x.shape[2:]
-    ch, cw = min(h, side_px), min(w, side_px)
-    top, left = (h - ch) // 8 * 4, (w - cw) // 8 * 4
-    return x[:, :, top : top + ch, left : left + cw]
-
-
 def load_codec(path: str | os.PathLike | None = None) -> Codec:
     """Load a codec checkpoint (None = the shipped default, offline).
 
@@ -632,22 +377,3 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
     p = DEFAULT_CHECKPOINT if path is None else Path(path)
     model, card = load_checkpoint(p)
     return Codec(model, card, p)
-
-
-def centre_first(rows: int, cols: int) -> Tensor:
-    """The positions of a rows x cols box (row-major indices), nearest its centre first
-    (ties in row-major order): where a partial channel goes, known to both ends."""
-    r, c = torch.meshgrid(torch.arange(rows), torch.arange(cols), indexing="ij")
-    d = (2 * r - (rows - 1)) ** 2 + (2 * c - (cols - 1)) ** 2
-    return torch.sort(d.flatten(), stable=True).indices
-
-
-def receiver_mask(meta: EncodedMeta, height: int, width: int) -> np.ndarray | None:
-    """[height, width] float32: the pixels the focus-mode side information says were sent
-    (the ``meta.crop`` box); None = whole image."""
-    if meta.crop is None:
-        return None
-    top, left, rows, cols = (int(v) for v in meta.crop)
-    m = np.zeros((height, width), np.float32)
-    m[max(top, 0) : min(top + rows, height), max(left, 0) : min(left + cols, width)] = 1.0
-    return m

@@ -8,10 +8,10 @@ back, with the SNR and the rate as inputs:
   (Es/N0 per complex symbol, dB); ``cbr`` channel symbols per real source value in
   ``cbr_range``; ``mask`` optional ``[batch, K, height, width]`` object masks in [0, 1]
   (only codecs with ``supports_focus``; see :func:`encode_with_focus` for the others).
-  Returns :class:`semcodec.Encoded`: ``symbols`` ``[batch, num_symbols]`` complex64 with
-  mean ``|x|^2 = 1`` per image, ``meta`` the side information: any object with ``height``,
-  ``width``, ``num_symbols``, ``cbr`` (num_symbols / (3 * height * width)), ``codec_sha256``
-  and ``side_info_bits()`` (bits per image), e.g. :class:`semcodec.EncodedMeta`.
+  Returns :class:`Encoded`: ``symbols`` ``[batch, num_symbols]`` complex64 with
+  mean ``|x|^2 = 1`` per image, ``meta`` the side information: any :class:`CodecMeta`
+  (``height``, ``width``, ``num_symbols``, ``cbr`` (num_symbols / (3 * height * width)),
+  ``codec_sha256`` and ``side_info_bits()``, bits per image), e.g. :class:`semcodec.EncodedMeta`.
 * ``decode(x_hat, meta, snr_db, expected_sha256=None, noise_var=None) -> images``:
   ``x_hat`` ``[batch, num_symbols]`` complex64 *unbiased* equalised symbols (``x + e``),
   ``noise_var`` the effective variance of ``e`` (None: ``10**(-snr_db/10)``; a float,
@@ -23,6 +23,12 @@ back, with the SNR and the rate as inputs:
   ``supports_focus`` (bool: ``encode`` accepts ``mask``).
 
 A codec that the trainer can train is also a :class:`TrainableCodec`.
+
+The contract owns the types and checks both ends of every codec share (:class:`Encoded`,
+:class:`CodecMeta`, :func:`check_images`, the focus box's side-information cost
+:func:`box_bits` / :func:`box_side_symbols`); it imports nothing of semcodec's own codec,
+which implements it. Focus for codecs without ``supports_focus`` is
+:mod:`semcodec.box_focus`.
 """
 
 from __future__ import annotations
@@ -34,17 +40,10 @@ from typing import Protocol, runtime_checkable
 
 import torch
 from torch import Tensor, nn
-from torch.nn import functional as F
 
-from semcodec.codec import (
-    FOCUS_FILL,
-    MIN_SIDE_PX,
-    Encoded,
-    EncodedMeta,
-    box_bits,
-    box_side_symbols,
-    check_images,
-)
+MIN_SIDE_PX = 8  # the smallest image side a codec must accept
+FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
+SIDE_BITS_PER_SYMBOL = 0.5  # side information at QPSK with a rate-1/4 code
 
 CODEC_MEMBERS = (
     "name",
@@ -64,7 +63,6 @@ TRAINABLE_MEMBERS = (
     "save",
     "load_compatible",
 )
-BOX_ALIGN_PX = 8  # the focus box's corners and sides are multiples of this (codecs downsample)
 
 
 @runtime_checkable
@@ -84,7 +82,7 @@ class SemanticCodec(Protocol):
     def decode(
         self,
         x_hat: Tensor,
-        meta: EncodedMeta,
+        meta: CodecMeta,
         snr_db,
         expected_sha256: str | None = None,
         noise_var=None,
@@ -150,161 +148,80 @@ def is_trainable(codec) -> bool:
     return not missing_members(codec, CODEC_MEMBERS + TRAINABLE_MEMBERS)
 
 
-@dataclass(frozen=True)
-class BoxMeta:
-    """Side information of :func:`focus_by_box`: the codec's own meta for the box image.
+@runtime_checkable
+class CodecMeta(Protocol):
+    """The side information a codec's ``encode`` returns and its ``decode`` reads: whatever
+    the codec needs, with at least these members."""
 
-    Attributes:
-        inner: the codec's :class:`EncodedMeta` of the box image it encoded.
-        height, width: the full image's size in pixels.
-        crop: (top, left, height, width) in pixels of the box in the full image.
-        num_symbols, cbr, codec_sha256: as :class:`EncodedMeta` (``cbr`` over the full image).
-    """
+    @property
+    def height(self) -> int:
+        """Original image height in pixels."""
+        ...
 
-    inner: EncodedMeta
-    height: int
-    width: int
-    crop: tuple[int, int, int, int]
-    num_symbols: int
-    cbr: float
-    codec_sha256: str
+    @property
+    def width(self) -> int:
+        """Original image width in pixels."""
+        ...
+
+    @property
+    def num_symbols(self) -> int:
+        """Complex channel symbols per image."""
+        ...
+
+    @property
+    def cbr(self) -> float:
+        """num_symbols / (3 * height * width)."""
+        ...
+
+    @property
+    def codec_sha256(self) -> str:
+        """The transmitting codec's ``sha256`` (knowledge-base identity)."""
+        ...
 
     def side_info_bits(self) -> int:
-        """Bits of side information per image: the box (:func:`semcodec.codec.box_bits`)
-        and the codec's own."""
-        return box_bits(self.height, self.width) + self.inner.side_info_bits()
+        """Bits of side information per image."""
+        ...
 
 
-def mask_box(mask: Tensor, height: int, width: int) -> tuple[int, int, int, int]:
-    """(top, left, rows, cols) in pixels: the bounding box of every mask value > 0.5 over the
-    batch and the K objects, grown to multiples of :data:`BOX_ALIGN_PX` (at least 16 px),
-    inside the image. An empty mask gives the whole image.
+@dataclass(frozen=True)
+class Encoded:
+    """Transmitter output: ``symbols`` [batch, num_symbols] complex64 (mean |x|^2 = 1 per image)."""
 
-    Args:
-        mask: [batch, K, height, width] or [batch, height, width], values in [0, 1].
-    """
-    m = mask.reshape(-1, height, width) > 0.5
-    if not bool(m.any()):
-        return (0, 0, height, width)
-    rows = torch.nonzero(m.any(dim=0).any(dim=1)).flatten()
-    cols = torch.nonzero(m.any(dim=0).any(dim=0)).flatten()
-
-    def span(lo: int, hi: int, size: int) -> tuple[int, int]:
-        a = BOX_ALIGN_PX
-        start, end = lo // a * a, min(-(-(hi + 1) // a) * a, size)
-        while end - start < min(2 * a, size):  # at least 16 px where the image allows
-            start, end = max(start - a, 0), min(end + a, size)
-        return start, end - start
-
-    top, rows_px = span(int(rows[0]), int(rows[-1]), height)
-    left, cols_px = span(int(cols[0]), int(cols[-1]), width)
-    return (top, left, rows_px, cols_px)
+    symbols: Tensor
+    meta: CodecMeta
 
 
-def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_db) -> Encoded:
-    """Focus for any codec: send the objects' bounding box at the view's symbol budget.
-
-    The box (:func:`mask_box`) is encoded as an image of its own at CBR
-    ``(budget_symbols - box) / (3 * rows * cols)``, where ``box`` is what the box's side
-    information costs (:func:`semcodec.codec.box_side_symbols`; a box edge on the image's
-    border is coded as the border), capped at the codec's largest CBR. A budget below the
-    codec's smallest CBR over the box sends the box downscaled (area) until it fits (at least
-    8 px a side; a smaller budget is a ValueError); the receiver upsamples it back.
-    :func:`decode_box` pastes it on a mid-grey canvas.
-
-    Args:
-        codec: any :class:`SemanticCodec`.
-        images: [batch, 3, height, width] float32 in [0, 1].
-        mask: [batch, K, height, width] or [batch, height, width] object masks in [0, 1].
-        budget_symbols: complex symbols per image the view may use, >= 1.
-        snr_db: float or [batch].
-    Returns:
-        :class:`Encoded` whose ``meta`` is a :class:`BoxMeta`.
-    """
-    x = check_images(images)
-    _, _, h, w = x.shape
-    if not isinstance(mask, Tensor) or mask.shape[-2:] != (h, w) or mask.shape[0] != x.shape[0]:
+def check_images(images, name: str = "images") -> Tensor:
+    """Raise ValueError unless ``images`` is [batch, 3, height, width] float in [0, 1]."""
+    if not isinstance(images, Tensor):
         raise ValueError(
-            f"mask must be [batch, K, {h}, {w}] or [batch, {h}, {w}] (batch {x.shape[0]}), "
-            f"got {tuple(getattr(mask, 'shape', ()))}"
+            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got {type(images).__name__}"
         )
-    if int(budget_symbols) < 1:
-        raise ValueError(f"budget_symbols must be >= 1, got {budget_symbols!r}")
-    top, left, rows, cols = mask_box(mask.float(), h, w)
-    box = x[:, :, top : top + rows, left : left + cols]
-    lo, hi = codec.cbr_range
-    box_side = box_side_symbols(h, w)  # the box's side information rides in the budget
-    budget = int(budget_symbols) - box_side
-    if budget < 1:
+    if images.dim() != 4 or images.shape[1] != 3:
         raise ValueError(
-            f"budget_symbols {budget_symbols} does not carry the box's side information "
-            f"({box_side} symbols)"
+            f"{name} must be [batch, 3, height, width] (RGB), got shape {tuple(images.shape)}"
         )
-    scale = min(1.0, math.sqrt(budget / (lo * 3 * rows * cols)))
-    while True:  # downscale the box until the codec's message fits the budget
-        size = (max(int(rows * scale), MIN_SIDE_PX), max(int(cols * scale), MIN_SIDE_PX))
-        sent = box if size == (rows, cols) else F.interpolate(box, size=size, mode="area")
-        cbr = min(max(budget / (3 * size[0] * size[1]), lo), hi)
-        enc = codec.encode(sent.clamp(0, 1), snr_db, cbr)
-        if enc.meta.num_symbols > budget and cbr > lo:  # the codec rounded its rate up
-            enc = codec.encode(sent.clamp(0, 1), snr_db, lo)
-        if enc.meta.num_symbols <= budget:
-            break
-        if size == (MIN_SIDE_PX, MIN_SIDE_PX):
-            raise ValueError(
-                f"budget_symbols {budget} is below the smallest message of codec "
-                f"{codec.name} ({enc.meta.num_symbols} symbols for a {MIN_SIDE_PX} px box)"
-            )
-        scale *= 0.9
-    meta = BoxMeta(
-        inner=enc.meta,
-        height=h,
-        width=w,
-        crop=(top, left, rows, cols),
-        num_symbols=enc.meta.num_symbols,
-        cbr=enc.meta.num_symbols / (3 * h * w),
-        codec_sha256=enc.meta.codec_sha256,
-    )
-    return Encoded(enc.symbols, meta)
+    if images.shape[2] < MIN_SIDE_PX or images.shape[3] < MIN_SIDE_PX:
+        raise ValueError(
+            f"{name} must be at least {MIN_SIDE_PX}x{MIN_SIDE_PX} px, got {tuple(images.shape[2:])}"
+        )
+    if not images.is_floating_point():
+        raise ValueError(f"{name} must be float32 in [0, 1], got dtype {images.dtype}")
+    if not torch.isfinite(images).all() or images.min() < 0 or images.max() > 1:
+        raise ValueError(f"{name} values must be finite and in [0, 1]")
+    return images.float()
 
 
-def decode_box(
-    codec, x_hat: Tensor, meta: BoxMeta, snr_db, expected_sha256=None, noise_var=None
-) -> Tensor:
-    """Receiver of :func:`focus_by_box`: [batch, 3, height, width] float32, the decoded box
-    (upsampled bilinearly when it was sent downscaled) on a mid-grey (0.5) canvas."""
-    y = codec.decode(
-        x_hat, meta.inner, snr_db, expected_sha256=expected_sha256, noise_var=noise_var
-    )
-    top, left, rows, cols = meta.crop
-    if tuple(y.shape[-2:]) != (rows, cols):
-        y = F.interpolate(y, size=(rows, cols), mode="bilinear", align_corners=False)
-    out = torch.full((y.shape[0], 3, meta.height, meta.width), FOCUS_FILL)
-    out[:, :, top : top + rows, left : left + cols] = y.clamp(0, 1)
-    return out
+def box_bits(height: int, width: int) -> int:
+    """Bits of a focus box's side information in a ``height x width`` image: its top, left,
+    height and width in 4-pixel units (the feature grid's), each in as many bits as the
+    image's size in those units needs."""
+    rows, cols = -(-int(height) // 4), -(-int(width) // 4)
+    return 2 * (math.ceil(math.log2(rows + 1)) + math.ceil(math.log2(cols + 1)))
 
 
-def encode_with_focus(
-    codec, images: Tensor, snr_db, cbr: float, mask: Tensor | None = None, demand_weights=None
-) -> Encoded:
-    """``codec.encode`` for every codec: with a ``mask`` and a codec without
-    ``supports_focus``, the objects' box at the same symbol budget (``cbr`` over the whole
-    image, :func:`focus_by_box`)."""
-    if mask is None or getattr(codec, "supports_focus", False):
-        return codec.encode(images, snr_db, cbr, mask=mask, demand_weights=demand_weights)
-    x = check_images(images)
-    try:
-        budget = max(int(round(float(cbr) * 3 * x.shape[2] * x.shape[3])), 1)
-    except (TypeError, ValueError):
-        raise ValueError(f"cbr must be a number, got {cbr!r}") from None
-    return focus_by_box(codec, x, mask, budget, snr_db)
-
-
-def decode_received(
-    codec, x_hat: Tensor, meta, snr_db, expected_sha256=None, noise_var=None
-) -> Tensor:
-    """``codec.decode`` for whatever :func:`encode_with_focus` sent (a :class:`BoxMeta` goes
-    through :func:`decode_box`)."""
-    if isinstance(meta, BoxMeta):
-        return decode_box(codec, x_hat, meta, snr_db, expected_sha256, noise_var)
-    return codec.decode(x_hat, meta, snr_db, expected_sha256=expected_sha256, noise_var=noise_var)
+def box_side_symbols(height: int, width: int) -> int:
+    """Channel symbols a focus box's side information (:func:`box_bits`) costs per image,
+    at :data:`SIDE_BITS_PER_SYMBOL` like the analog layer's: in focus mode it
+    is charged to the view's budget."""
+    return math.ceil(box_bits(height, width) / SIDE_BITS_PER_SYMBOL)

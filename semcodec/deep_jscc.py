@@ -32,8 +32,10 @@ from semcodec.checkpoint import (
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.codec import ChannelTruncationCodec, Encoded, EncodedMeta, _pad4, check_images
+from semcodec.contract import Encoded, check_images
+from semcodec.encoded_meta import EncodedMeta
 from semcodec.model import features_to_symbols, lmmse_input, symbols_to_features
+from semcodec.truncation import ChannelTruncationCodec, pad4
 
 CODEC_NAME = "deepjscc"
 
@@ -133,7 +135,7 @@ class DeepJSCC(ChannelTruncationCodec):
         b, _, h, w = x.shape
         m = self.channels_for_cbr(cbr)
         with torch.no_grad():
-            feat = self.model.encoder(_pad4(x))
+            feat = self.model.encoder(pad4(x))
         sym = power_normalize(features_to_symbols(feat, m)).to(torch.complex64)
         meta = EncodedMeta(h, w, m, sym.shape[1] / (3 * h * w), int(sym.shape[1]), self.sha256)
         return Encoded(sym, meta)

@@ -15,19 +15,13 @@ import torch
 
 from common import list_images, read_image
 from phy import num_symbols_for_cbr
-from semcodec.baselines import (
-    AUTO,
-    GENIE,
-    REFINE_STEPS,
-    TransmitResult,
-    refine_symbols,
-    transmit_analog,
-    transmit_digital,
-    transmit_ideal,
-    transmit_jscc,
-)
-from semcodec.codec import MIN_SIDE_PX, Codec, learned_only
+from semcodec.codec import Codec, learned_only
+from semcodec.contract import MIN_SIDE_PX
+from semcodec.digital_link import AUTO, GENIE, transmit_digital, transmit_ideal
 from semcodec.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
+from semcodec.jscc_link import REFINE_STEPS, refine_symbols, transmit_jscc
+from semcodec.transmit import TransmitResult
+from semcodec.uncoded import transmit_analog
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
 
@@ -54,7 +48,7 @@ class EvalContext:
     links: dict = field(default_factory=dict)
     encodings: dict = field(default_factory=dict)  # (id, snr, cbr) -> (image, Encoded), latest
     refine_steps: int = REFINE_STEPS
-    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.baselines.refine_symbols`)."""
+    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc_link.refine_symbols`)."""
     refine_seed: int = 0
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import torch
 
 from common import psnr
-from semcodec.baselines import transmit_jscc
 from semcodec.codec import Codec
+from semcodec.jscc_link import transmit_jscc
 
 
 def focus_gain(

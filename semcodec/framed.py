@@ -27,8 +27,8 @@ import numpy as np
 import torch
 
 from common import psnr
-from semcodec.baselines import decode_or_grey
-from semcodec.contract import decode_received
+from semcodec.box_focus import decode_received
+from semcodec.digital_link import decode_or_grey
 from semcodec.image_codecs import SCALES, downscale, encode_image
 
 

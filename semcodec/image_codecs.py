@@ -3,9 +3,9 @@
 One table, :data:`IMAGE_CODECS` (name -> :class:`ImageCodec`), read by every
 ``--image-codec`` flag and by the baselines.
 
-AVIF: ``quality=q, speed=6, subsampling="4:4:4", advanced=[("tune", "psnr")]``: within
-about 1 % of BPG's rate on Kodak at speed 4 (reference/codecs.md); we use speed 6, about 7x
-faster to encode and about 2 % larger at equal quality setting. ``encode_to_budget`` bisects
+AVIF: ``quality=q, speed=6, subsampling="4:4:4", advanced=[("tune", "psnr")]``: a BPG-class
+codec (reference/codecs.md); speed 6 rather than a slower preset trades a slightly larger
+file at equal quality setting for a much faster encode. ``encode_to_budget`` bisects
 the integer quality to the largest file that fits a byte budget. Encodes are cached in
 memory and, when ``OSNERF_CODEC_CACHE`` (or ``cache_dir``) names a folder, on disk, keyed by
 (image hash, codec, quality, speed).

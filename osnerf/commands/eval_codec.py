@@ -86,7 +86,7 @@ def _add_link_arguments(p: argparse.ArgumentParser) -> None:
         help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    from semcodec.baselines import REFINE_STEPS
+    from semcodec.jscc_link import REFINE_STEPS
 
     p.add_argument(
         "--refine-steps",

@@ -131,8 +131,7 @@ def _view_input(ctx, x, k: int, s_up: int, on_demand: bool) -> tuple[torch.Tenso
 def _encode(ctx, p, x, kw: dict, on_demand: bool):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
-    from semcodec import for_fusion, refine_symbols
-    from semcodec.contract import encode_with_focus
+    from semcodec import encode_with_focus, for_fusion, refine_symbols
 
     codec = ctx.codec
     if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
@@ -170,8 +169,7 @@ def _decode(ctx, p, enc, x_hat, nv, size, s_up: int, on_demand: bool):
     """Decode one view at the average SNR after combining (per-symbol noise in ``nv``); on
     demand, the background outside the sent box, then back to the captured size. Returns
     (image [3, h, w], the sent pixels at the decoded resolution or None)."""
-    from semcodec import receiver_mask
-    from semcodec.contract import decode_received
+    from semcodec import decode_received, receiver_mask
 
     h, w = size
     bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]

@@ -16,8 +16,9 @@ from renderer import (
     render_views,
     train_features,
 )
-from renderer.features import jittered_poses, low_res_intrinsics
+from renderer.feature_renderer import low_res_intrinsics
 from renderer.fields import trilinear
+from renderer.teacher_cameras import jittered_poses
 
 
 def test_composite_uses_the_fields_weights(sphere_model):

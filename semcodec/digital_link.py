@@ -1,39 +1,32 @@
-"""The schemes a JSCC is judged against, and the JSCC itself, on one interface.
+"""The digital baselines: an image codec's file through CRC + 5G LDPC + QAM, and the same
+codec at capacity.
 
-Every ``transmit_*`` takes images [batch, 3, height, width] float32 in [0, 1] and returns a
-:class:`TransmitResult` (received images of the same shape + stats).
-
-* digital: image codec (AVIF by default, wire bytes: container stripped) at the byte
-  budget the MCS allows in ``num_symbols`` (``phy.digital.payload_capacity_bits``), then
-  phy.digital's CRC + 5G LDPC + QAM through the same link. ``mcs="auto"`` (honest: the
-  MCS from a shipped calibration table, no CSI at the transmitter), ``"genie"`` (a bound:
-  the best MCS for this very draw) or a fixed MCS name (the cliff); see
-  :func:`transmit_digital`. A lost image (any payload codeword failing its CRC, or a
-  budget too small for the codec's lowest quality at every scale) is received as mid-grey
-  (0.5 everywhere): the receiver has nothing better to show.
-* ideal: the codec at capacity, ``num_symbols * log2(1 + snr)`` bits, error free.
+* digital (:func:`transmit_digital`): image codec (AVIF by default, wire bytes: container
+  stripped) at the byte budget the MCS allows in ``num_symbols``
+  (``phy.digital.payload_capacity_bits``), then phy.digital's CRC + 5G LDPC + QAM through
+  the same link. ``mcs="auto"`` (honest: the MCS from a shipped calibration table, no CSI at
+  the transmitter), ``"genie"`` (a bound: the best MCS for this very draw) or a fixed MCS
+  name (the cliff). A lost image (any payload codeword failing its CRC, or a budget too
+  small for the codec's lowest quality at every scale) is received as mid-grey
+  (:data:`semcodec.transmit.LOST_IMAGE_VALUE`).
+* ideal (:func:`transmit_ideal`): the codec at capacity, ``num_symbols * log2(1 + snr)``
+  bits, error free.
 
 Both send the best file of the image that fits the budget over quality and scale
 (:func:`semcodec.image_codecs.encode_scaled_to_budget`: below some budget a downscaled image,
 upscaled at the receiver); each image's scale is in the stats.
-* analog: uncoded pixels; each image's values standardised (mean and std sent as side
-  information), paired into complex symbols, LMMSE-scaled at the receiver.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 from torch import Tensor
-from torch.nn import functional as F
 
 from common import psnr
-from phy import Channel, FlatLink, power_normalize
-from semcodec.codec import Codec, Encoded, check_images
-from semcodec.contract import decode_received, encode_with_focus
+from semcodec.contract import check_images
 from semcodec.image_codecs import (
     IMAGE_CODECS,
     RESAMPLE_FILTER,
@@ -41,149 +34,7 @@ from semcodec.image_codecs import (
     encode_scaled_to_budget,
     smallest_files,
 )
-
-LOST_IMAGE_VALUE = 0.5
-
-
-@dataclass
-class TransmitResult:
-    """Received images [batch, 3, height, width] float32 and stats (sums over the batch, and lists per image)."""
-
-    images: Tensor
-    stats: dict = field(default_factory=dict)
-
-    def __iter__(self):  # (images, stats) = result
-        return iter((self.images, self.stats))
-
-
-def _run_link(link, x: Tensor, snr_db, generator):
-    """(unbiased x_hat, noise_var [batch, num_symbols]) from a phy link or a bare phy channel
-    (which gets a one-tap ZF receiver with perfect CSI)."""
-    if isinstance(link, Channel):
-        link = FlatLink(link, csi="perfect", equalizer="zf")
-    out = link(x, snr_db, generator=generator)
-    return out.x_hat, out.noise_var
-
-
-REFINE_STEPS = 50
-"""Adam steps of :func:`refine_symbols` by default (Kodak, block Rayleigh 10 dB: about one
-CPU second each per 768 x 512 image)."""
-REFINE_LR = 0.03
-"""Adam step of :func:`refine_symbols`, relative to the symbols' RMS per real dimension."""
-
-
-def refine_symbols(
-    codec: Codec,
-    images: Tensor,
-    encoded: Encoded,
-    link,
-    snr_db,
-    steps: int = REFINE_STEPS,
-    lr: float = REFINE_LR,
-    generator: torch.Generator | None = None,
-    decoder_snr_db=None,
-    pixel_weights: Tensor | None = None,
-) -> Encoded:
-    """Transmitter-side refinement of the JSCC's symbols for this very image.
-
-    The encoder is amortised: one network for every image. The transmitter can do better for
-    the image it holds, because it knows the decoder (the shared knowledge base), the
-    channel's kind (its fading distribution) and the average SNR; it does not know the draw
-    the image will meet. Starting from ``encoded``, ``steps`` Adam steps on the symbols
-    (before power normalisation) lower the MSE of the decoded image over draws of ``link``
-    from the transmitter's own ``generator``: a stochastic descent on the expected
-    distortion, with the same power per image as the encoder's symbols. The receiver and the
-    side information are unchanged (``meta`` is kept); the cost is ``steps`` decoder passes,
-    forward and backward, at the transmitter. This is the amortisation gap closed at
-    inference (stochastic latent refinement in learned compression).
-
-    Args:
-        encoded: ``codec.encode(images, ...)`` (whole images or focus mode).
-        link: what the transmitter simulates: a ``phy`` link or bare channel, as for
-            :func:`transmit_jscc`. Its draws come from ``generator``, never the real link's.
-        snr_db: the average SNR the simulated link runs at.
-        steps: Adam steps, >= 0 (0 returns ``encoded``).
-        decoder_snr_db: the SNR the receiver's decoder is told (default ``snr_db``).
-        pixel_weights: optional [batch, 1, height, width] weights of the squared error (the
-            demanded objects above the rest); default uniform.
-    Returns:
-        :class:`Encoded` with the refined unit-power symbols and the same ``meta``.
-    """
-    if steps < 0:
-        raise ValueError(f"steps must be >= 0, got {steps}")
-    if steps and not hasattr(codec, "decode_differentiable"):
-        raise ValueError(f"codec {codec.name} cannot refine symbols (no decode_differentiable)")
-    if not lr > 0:
-        raise ValueError(f"lr must be > 0, got {lr}")
-    if steps == 0:
-        return encoded
-    x = check_images(images)
-    b = x.shape[0]
-    snr = codec._snr(snr_db, b)
-    dec_snr = snr if decoder_snr_db is None else codec._snr(decoder_snr_db, b)
-    meta = encoded.meta
-    v = torch.view_as_real(encoded.symbols.to(torch.complex64)).clone()  # [b, n, 2]
-    scale = float(v.pow(2).mean().sqrt())
-    v.requires_grad_(True)
-    opt = torch.optim.Adam([v], lr=lr * scale)
-    with torch.enable_grad():
-        for _ in range(steps):
-            sym = power_normalize(torch.view_as_complex(v))
-            x_hat, nv = _run_link(link, sym, snr, generator)
-            y = codec.decode_differentiable(x_hat, meta, dec_snr, nv)
-            err = (y - x) ** 2 if pixel_weights is None else (y - x) ** 2 * pixel_weights
-            (v.grad,) = torch.autograd.grad(err.mean(), [v])  # the weights stay as they are
-            opt.step()
-    sym = power_normalize(torch.view_as_complex(v.detach()))
-    return Encoded(sym.to(torch.complex64), meta)
-
-
-def transmit_jscc(
-    codec: Codec,
-    images: Tensor,
-    link,
-    snr_db,
-    cbr: float,
-    mask=None,
-    generator: torch.Generator | None = None,
-    demand_weights=None,
-    rx_codec: Codec | None = None,
-    encoded: Encoded | None = None,
-) -> TransmitResult:
-    """Images through a semantic codec (any :class:`semcodec.SemanticCodec`) and the link.
-    The decoder gets the link's unbiased estimates with their per-symbol noise variance and
-    the average SNR (the contract's convention). With a ``mask`` and a codec without
-    ``supports_focus``, the objects' box is sent at the same symbol budget
-    (:func:`semcodec.encode_with_focus`).
-
-    Args:
-        link: ``phy.FlatLink``/``phy.OFDMLink`` with ``equalizer="zf"`` (or a bare ``phy``
-            channel: perfect-CSI ZF).
-        snr_db: float or [batch], the average Es/N0 (the encoder's and decoder's SNR input).
-        rx_codec: the receiver's codec (default the transmitter's); hashes must match.
-        encoded: ``codec.encode(images, snr_db, cbr, mask, demand_weights)`` when the caller
-            has it already (several draws of one image), else computed here.
-    """
-    x = check_images(images)
-    enc = encoded or encode_with_focus(codec, x, snr_db, cbr, mask, demand_weights)
-    with torch.no_grad():
-        x_hat, nv = _run_link(link, enc.symbols, snr_db, generator)
-    rx = rx_codec or codec
-    y = decode_received(rx, x_hat, enc.meta, snr_db, expected_sha256=codec.sha256, noise_var=nv)
-    n = x.shape[0]
-    return TransmitResult(
-        y,
-        {
-            "num_symbols": enc.meta.num_symbols * n,
-            "cbr": enc.meta.cbr,
-            "side_info_bits": enc.meta.side_info_bits() * n,
-            "failed_codewords": 0,
-        },
-    )
-
-
-def _grey(shape) -> Tensor:
-    return torch.full(shape, LOST_IMAGE_VALUE)
+from semcodec.transmit import TransmitResult, check_num_symbols, grey
 
 
 def decode_or_grey(
@@ -192,11 +43,11 @@ def decode_or_grey(
     """Wire bytes of an image sent at ``scale`` -> ([3, H, W] float32 image, True), or
     (mid-grey, False) when they are None (nothing arrived) or undecodable."""
     if data is None:
-        return _grey(shape), False
+        return grey(shape), False
     try:
         a = decode_scaled(data, image_codec, shape[1], shape[2], scale)
     except ValueError:
-        return _grey(shape), False
+        return grey(shape), False
     return torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1), True
 
 
@@ -206,19 +57,13 @@ def _check_codec(image_codec: str) -> str:
     return image_codec
 
 
-def _check_num_symbols(num_symbols) -> int:
-    if int(num_symbols) != num_symbols or int(num_symbols) < 1:
-        raise ValueError(f"num_symbols must be a positive integer, got {num_symbols!r}")
-    return int(num_symbols)
-
-
 def transmit_ideal(
     images: Tensor, snr_db: float, num_symbols: int, image_codec: str = "avif"
 ) -> TransmitResult:
     """The codec at the capacity rate ``num_symbols * log2(1 + snr)`` bits, no errors (the
     best file over quality and scale)."""
     x = check_images(images)
-    n = _check_num_symbols(num_symbols)
+    n = check_num_symbols(num_symbols)
     _check_codec(image_codec)
     bits = int(math.floor(n * math.log2(1.0 + 10.0 ** (float(snr_db) / 10.0))))
     out, qualities, sizes, scales = [], [], [], []
@@ -259,7 +104,7 @@ def _lost(img: Tensor, mcs, why: str, failed: int = 0) -> tuple[Tensor, bool, di
         "failed_codewords": failed,
         "lost": why,
     }
-    return _grey(img.shape), False, info
+    return grey(img.shape), False, info
 
 
 def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str, seed: int):
@@ -376,7 +221,7 @@ def transmit_digital(
         calibrated).
     """
     x = check_images(images)
-    n = _check_num_symbols(num_symbols)
+    n = check_num_symbols(num_symbols)
     _check_codec(image_codec)
     mode = _mcs_mode(mcs)
     kind = _calibrated_channel(mode, link, channel)
@@ -478,47 +323,3 @@ def _digital_stats(infos: list[dict], num_symbols: int, mode: str) -> dict:
         "resample_filter": RESAMPLE_FILTER,
         "mcs_choice": {AUTO: "auto", GENIE: "genie (bound)"}.get(mode, "fixed"),
     }
-
-
-def transmit_analog(
-    images: Tensor,
-    link,
-    snr_db,
-    num_symbols: int | None = None,
-    generator: torch.Generator | None = None,
-) -> TransmitResult:
-    """Uncoded pixels: two real values per complex symbol, LMMSE at the receiver.
-
-    Args:
-        num_symbols: symbols per image; None = all pixels (CBR 1/2). Fewer: the image is
-            area-downsampled to fit and bilinearly upsampled at the receiver.
-    """
-    x = check_images(images)
-    b, _, h, w = x.shape
-    src = x
-    if num_symbols is not None:
-        n = _check_num_symbols(num_symbols)
-        scale = min(1.0, math.sqrt(2 * n / (3 * h * w)))
-        hs, ws = max(1, int(h * scale)), max(1, int(w * scale))
-        while 3 * hs * ws > 2 * n and hs > 1:
-            hs -= 1
-        src = F.interpolate(x, size=(hs, ws), mode="area") if (hs, ws) != (h, w) else x
-    flat = src.reshape(b, -1)
-    if flat.shape[1] % 2:
-        flat = F.pad(flat, (0, 1), value=float(flat.mean()))
-    mean = flat.mean(dim=1, keepdim=True)
-    std = flat.std(dim=1, keepdim=True, unbiased=False).clamp_min(1e-6)
-    s = (flat - mean) / std  # unit variance per real value
-    sym = torch.view_as_complex(
-        (s * math.sqrt(0.5)).reshape(b, -1, 2).contiguous()
-    )  # mean |x|^2 = 1
-    with torch.no_grad():
-        x_hat, nv = _run_link(link, sym, snr_db, generator)
-    est = (
-        x_hat / (1.0 + nv) * math.sqrt(2.0)
-    )  # LMMSE for a unit-power source, back to unit variance
-    v = torch.view_as_real(est.to(torch.complex64)).reshape(b, -1)[:, : src[0].numel()] * std + mean
-    rec = v.reshape(src.shape)
-    if rec.shape[-2:] != (h, w):
-        rec = F.interpolate(rec, size=(h, w), mode="bilinear", align_corners=False)
-    return TransmitResult(rec.clamp(0, 1), {"num_symbols": sym.shape[1] * b, "failed_codewords": 0})

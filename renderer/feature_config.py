@@ -1,0 +1,126 @@
+"""How the feature renderer (:mod:`renderer.features`) renders and trains
+(:class:`FeatureConfig`), and its settings by view size (:data:`FEATURES_BY_SIZE`)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from renderer.train_config import settings_for_size
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """How the feature renderer renders and trains."""
+
+    channels: int = 16
+    """K: feature channels of the grid, >= 3 (the first ``3 (d + 1)^2`` start as the colour
+    coefficients of a grid field of SH degree d, and stay view-dependent; a vanilla MLP
+    field's colour logits start the first three)."""
+    downsample: int = 2
+    """Low-resolution factor per axis, >= 1 (the decoder upsamples by sub-pixel shuffle)."""
+    step_factor: float = 1.75
+    """Marching step of the low-resolution pass relative to the field's own, >= 1 (a
+    coarser step misses thin parts that no feature can bring back)."""
+    weight_threshold: float = 1e-3
+    """Samples whose volume-rendering weight is below this skip the feature lookup, in [0, 1)."""
+    hidden_channels: int = 32
+    """Width of the decoder, >= 1."""
+    extra_views: int = 3900
+    """Jittered copies of the training cameras rendered as extra teachers, >= 0: the
+    largest lever on unseen views, given the steps to use them; each costs one full
+    render."""
+    jitter_deg: float = 17.0
+    """Largest turn of a jittered camera about the scene's up axis (and half of it about a
+    horizontal axis), degrees, > 0."""
+    train_seconds: float = 3600.0
+    """Training budget (s) after the first ``pool_views`` teacher renders, > 0; the later
+    teachers are rendered within it. With ``train_steps`` it is only a cap."""
+    train_steps: int | None = 3000
+    """Optimiser steps (>= 1), or None to train for ``train_seconds``. When given, the
+    steps drive the teacher schedule: the same work on a busy machine as on an idle one."""
+    pool_views: int = 256
+    """Teacher renders held in memory at once (8-bit), >= 1. Teachers beyond the pool are
+    rendered while training, evenly over the first 80 % of the budget, each replacing the
+    oldest; the low-resolution pass of a training view is recomputed at each step. Setup
+    memory is therefore bounded at any size: ``pool_views * height * width * 3`` bytes of
+    teachers (400 px: 123 MB), ``pass_cache_mb``, the feature grid and one batch."""
+    batch_size: int = 4
+    """Views per optimiser step, >= 1."""
+    width_px: int | None = None
+    """Width of the teacher renders (the cameras' intrinsics scaled to it, aspect kept), or
+    None for the cameras' own: the size the renderer will be used at, >= 8."""
+    pass_cache_mb: int = 512
+    """Memory (MB) for keeping the held teachers' low-resolution passes instead of
+    recomputing one whenever its teacher is drawn, >= 0; part of the setup bound."""
+    grid_scale: float = 1.0
+    """Vertices of the feature grid per axis relative to the field's occupancy cells
+    (``ceil(cells * grid_scale) + 1``), in (0, 1]: a coarser grid costs proportionally less
+    per step (its gradient and Adam update touch every vertex) where the views have fewer
+    pixels than the field has cells."""
+    grid_lr: float = 0.1
+    """Adam learning rate of the feature grid, > 0."""
+    decoder_lr: float = 3e-3
+    """Adam learning rate of the decoder, > 0 (constant, as is the grid's)."""
+    render_batch: int = 8
+    """Views of a path rendered together (one sampler, density, feature read and decoder
+    call), >= 1: the same images, fewer and larger operations."""
+    progress: bool = True
+    """Progress bar on stderr."""
+
+    def __post_init__(self):
+        for name, low in (
+            ("channels", 3),
+            ("render_batch", 1),
+            ("downsample", 1),
+            ("hidden_channels", 1),
+            ("batch_size", 1),
+            ("extra_views", 0),
+            ("pool_views", 1),
+            ("pass_cache_mb", 0),
+        ):
+            if getattr(self, name) < low:
+                raise ValueError(f"{name} must be >= {low}, got {getattr(self, name)}")
+        if self.width_px is not None and self.width_px < 8:
+            raise ValueError(f"width_px must be >= 8 or None, got {self.width_px}")
+        if self.train_steps is not None and self.train_steps < 1:
+            raise ValueError(f"train_steps must be >= 1 or None, got {self.train_steps}")
+        if not 0 < self.grid_scale <= 1:
+            raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
+        if not self.step_factor >= 1:
+            raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
+        if not 0 <= self.weight_threshold < 1:
+            raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
+        for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def for_resolution(cls, size_px: int, /, **overrides) -> FeatureConfig:
+        """The settings for views ``size_px`` wide (:data:`FEATURES_BY_SIZE`: the row of the
+        largest size not above it), then ``overrides``. Teacher renders cost the square of
+        the size, so larger views get fewer teachers; from 300 px the low-resolution pass
+        is a third of the width and the feature grid three quarters of the field's."""
+        return cls(**{**settings_for_size(FEATURES_BY_SIZE, size_px), **overrides})
+
+
+FEATURES_BY_SIZE: dict[int, dict] = {
+    0: {},
+    150: {"train_steps": 8000},
+    300: {
+        "extra_views": 1500,
+        "downsample": 3,
+        "grid_scale": 0.75,
+        "pass_cache_mb": 256,
+        "train_seconds": 7200.0,
+    },
+}
+"""Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
+defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
+detail; from 300 px fewer teachers (each a full render at that size), a third-width
+pass, a feature grid at three quarters of the field's vertices per axis and half the pass
+cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
+memory at these sizes), and a higher time cap for its slower steps. Measured on lego's
+test path (README, "The renderer")."""
