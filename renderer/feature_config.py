@@ -123,4 +123,4 @@ detail; from 300 px fewer teachers (each a full render at that size), a third-wi
 pass, a feature grid at three quarters of the field's vertices per axis and half the pass
 cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
 memory at these sizes), and a higher time cap for its slower steps. Measured on lego's
-test path (README, "The renderer")."""
+test path (docs/design-notes.md, "The renderer")."""

@@ -1,8 +1,7 @@
 """How a radiance field is trained (:class:`TrainConfig`), and its settings by view size
 (:data:`GRIDS_BY_SIZE`, read through :func:`settings_for_size`).
 
-How the defaults were chosen, with the measurements: README, "Why the defaults are what
-they are".
+How the defaults were chosen, with the measurements: docs/design-notes.md.
 """
 
 from __future__ import annotations
@@ -163,4 +162,4 @@ GRIDS_BY_SIZE: dict[int, dict] = {
 """Smallest image width (px) -> :class:`TrainConfig` settings that differ from the defaults
 (:meth:`TrainConfig.for_resolution`); up to 299 px the defaults (a finer grid costs more per
 step, which a short budget at small sizes does not repay). More rays per step amortise the
-finer grid's dense per-step work (README, "Why the defaults are what they are")."""
+finer grid's dense per-step work (docs/design-notes.md)."""

@@ -149,7 +149,7 @@ def attribution_box(
     The AF modules' global pooling spreads a thin tail of attribution over every position;
     a threshold relative to the peak cuts that tail and keeps the object and the rim its
     reconstruction depends on most; a low threshold lets the tail stretch the box over most
-    of a small view, spending the symbols on background (README, "End to end").
+    of a small view, spending the symbols on background (docs/design-notes.md, "End to end").
 
     Args:
         heat: [batch, hf, wf] float32 >= 0.
