@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from semcodec.evaluation import DIGITAL
+from semcodec import DIGITAL
 
 
 def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -59,6 +59,7 @@ from renderer.cameras import (
     intersect_aabb,
     look_at,
     orbit_path,
+    pose_problem,
     project_points,
     rotate_pose_about,
 )
@@ -89,6 +90,7 @@ from renderer.volume import (
 )
 
 __all__ = [
+    "pose_problem",
     "FIELDS",
     "LPIPS_MIN_SIDE_PX",
     "RENDERERS",

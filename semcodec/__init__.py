@@ -57,7 +57,21 @@ from semcodec.contract import (
 )
 from semcodec.digital_link import transmit_digital, transmit_ideal
 from semcodec.encoded_meta import EncodedMeta, receiver_mask
-from semcodec.evaluation import LINK_SCHEMES
+from semcodec.evaluation import (
+    ANALOG,
+    DEFAULT_FIXED_MCS,
+    DIGITAL,
+    EVAL_MIN_SIDE_PX,
+    IDEAL,
+    JSCC,
+    LINK_SCHEMES,
+    SCHEME_KINDS,
+    EvalContext,
+    eval_channels,
+    load_image_folder,
+    schemes_help,
+    ssim,
+)
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
 from semcodec.focus_eval import focus_gain
 from semcodec.framed import (
@@ -74,8 +88,14 @@ from semcodec.grid import (
     focus_pixel_masks,
     full_rate_symbols,
 )
-from semcodec.image_codecs import IMAGE_CODECS, decode_image, encode_image, encode_to_budget
-from semcodec.jscc_link import refine_symbols, transmit_jscc
+from semcodec.image_codecs import (
+    IMAGE_CODECS,
+    SCALES,
+    decode_image,
+    encode_image,
+    encode_to_budget,
+)
+from semcodec.jscc_link import REFINE_STEPS, refine_symbols, transmit_jscc
 from semcodec.model import (
     MODELS,
     JSCCConfig,
@@ -94,10 +114,31 @@ from semcodec.registry import (
     parse_codec_spec,
     register_codec,
 )
+from semcodec.train_config import TrainConfig
+from semcodec.train_state import load_train_state
+from semcodec.training import build_codec, train
 from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
 __all__ = [
+    "ANALOG",
+    "DEFAULT_FIXED_MCS",
+    "DIGITAL",
+    "EVAL_MIN_SIDE_PX",
+    "IDEAL",
+    "JSCC",
+    "SCHEME_KINDS",
+    "EvalContext",
+    "eval_channels",
+    "load_image_folder",
+    "schemes_help",
+    "ssim",
+    "SCALES",
+    "REFINE_STEPS",
+    "TrainConfig",
+    "load_train_state",
+    "build_codec",
+    "train",
     "BoxMeta",
     "CODECS",
     "CodecMeta",

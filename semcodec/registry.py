@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from common.plugins import load_plugins
+from common import load_plugins
 from semcodec.contract import CODEC_MEMBERS, missing_members
 
 ENTRY_POINT_GROUP = "semcodec.codecs"

@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_link_arguments(p: argparse.ArgumentParser) -> None:
     """--images, --channel, --draws, --snr-db, --cbr, --schemes, --mcs, --refine-steps, --seed."""
-    from semcodec.evaluation import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
+    from semcodec import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
 
     side = f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} px"
     p.add_argument(
@@ -86,7 +86,7 @@ def _add_link_arguments(p: argparse.ArgumentParser) -> None:
         help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    from semcodec.jscc_link import REFINE_STEPS
+    from semcodec import REFINE_STEPS
 
     p.add_argument(
         "--refine-steps",
@@ -156,7 +156,7 @@ def mean_ci95(values) -> tuple[float, float, float]:
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
-    from semcodec.evaluation import LINK_SCHEMES, EvalContext
+    from semcodec import LINK_SCHEMES, EvalContext
 
     out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
     ctx = EvalContext(
@@ -253,12 +253,12 @@ def _inputs(args: argparse.Namespace):
     from osnerf.schemes import parse_schemes
     from phy import num_symbols_for_cbr, parse_cbr
     from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
-    from semcodec import open_codec
-    from semcodec.evaluation import (
+    from semcodec import (
         DEFAULT_FIXED_MCS,
         LINK_SCHEMES,
         eval_channels,
         load_image_folder,
+        open_codec,
     )
 
     inputs = {"--images": args.images}
@@ -328,7 +328,7 @@ def _point(
 
     from common import psnr
     from renderer import lpips
-    from semcodec.evaluation import LINK_SCHEMES, ssim
+    from semcodec import LINK_SCHEMES, ssim
 
     ps, ss, ls, t0 = [], [], [], time.perf_counter()
     extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}

@@ -70,7 +70,7 @@ def check_codec_snr(codec, snr_db: float) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from hil import AIR_SNR_DB_RANGE, FAULT_NAMES, FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ, OtaConfig
-    from semcodec.evaluation import LINK_SCHEMES
+    from semcodec import LINK_SCHEMES
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
     p.add_argument(
@@ -168,7 +168,7 @@ def _add_air_arguments(p: argparse.ArgumentParser) -> None:
 def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     """The options of the digital scheme (MCS, image codec, quality) and of jscc (CBR, codec)."""
     from phy.digital import MCS_TABLE
-    from semcodec.image_codecs import IMAGE_CODECS, SCALES
+    from semcodec import IMAGE_CODECS, SCALES
 
     p.add_argument(
         "--mcs",
@@ -304,8 +304,7 @@ def framed_settings(args, symbols_per_frame: int):
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
     from phy import parse_cbr
-    from semcodec import LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
-    from semcodec.image_codecs import IMAGE_CODECS
+    from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
 
     qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
     if not max(qlo, 1) <= args.quality <= qhi:

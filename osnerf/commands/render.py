@@ -103,7 +103,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _path_poses(path: Path):
     import torch
 
-    from renderer.cameras import pose_problem
+    from renderer import pose_problem
 
     if not path.is_file():
         raise FileNotFoundError(f"--path {path}: file not found")

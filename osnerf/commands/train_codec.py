@@ -52,7 +52,7 @@ FLAGS = {"num_threads": "--threads"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from semcodec.training import TrainConfig
+    from semcodec import TrainConfig
 
     p.add_argument(
         "--data",
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
 def parse(args: argparse.Namespace):
     """Check every input before any work: (config, data folders, validation folder, init
     checkpoint or None, output folder)."""
-    from semcodec.training import TrainConfig, build_codec, load_train_state
+    from semcodec import TrainConfig, build_codec, load_train_state
 
     cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
     build_codec(cfg, None)  # an unknown codec, architecture or checkpoint: refused before work
@@ -162,7 +162,7 @@ def parse(args: argparse.Namespace):
 def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
     """Train (resuming when asked and possible); the summary with its result header."""
     from osnerf.provenance import result_header
-    from semcodec.training import train
+    from semcodec import train
 
     try:
         summary = train(

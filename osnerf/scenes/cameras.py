@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from renderer.cameras import Intrinsics  # the one pinhole camera
+from renderer import Intrinsics  # the one pinhole camera
 
 MITSUBA_FROM_GL = np.diag([-1.0, 1.0, -1.0, 1.0])
 
