@@ -338,6 +338,7 @@ def framed_settings(args, symbols_per_frame: int):
 def run(args: argparse.Namespace) -> int:
     from hil import OtaConfig, save_sigmf
     from osnerf.cli import inputs_checked
+    from osnerf.commands.ota_record import ota_record
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
@@ -373,7 +374,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"ota: {name}: {result.frames_lost}/{result.frames_sent} frames lost", file=sys.stderr
         )
-    write_json_atomic(out, _record(args, cfg, settings, names, bursts, t0))
+    write_json_atomic(out, ota_record(args, cfg, settings, names, bursts, t0))
     print(f"ota: wrote {out}", file=sys.stderr)
     return 0
 
@@ -403,64 +404,3 @@ def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota
     for w in caught:  # one line each, not a Python warning with its source line
         print(f"ota: warning: {w.message}", file=sys.stderr)
     return result, hw
-
-
-def _record(args, cfg, settings, names, bursts, t0: float) -> dict:
-    """The result file's record: per scheme and image, the summary, every frame, the SigMF
-    paths. ``bursts``: (scheme, per-image receptions, ``hil.BurstResult``, SigMF paths)."""
-    from osnerf.provenance import result_header
-
-    results, frames, sigmf, by_scheme = [], [], [], {}
-    for scheme, per_image, result, paths in bursts:
-        rows = []
-        for b, (name, rec) in enumerate(zip(names, per_image)):
-            burst_frames = result.block_frames(b)
-            rows.append(
-                {
-                    "scheme": scheme,
-                    "image": name,
-                    "psnr": rec.psnr,
-                    "snr_db_measured": result.snr_db_measured(b),
-                    "frames_sent": len(burst_frames),
-                    "frames_lost": sum(not f.detected for f in burst_frames),
-                    **rec.stats,
-                }
-            )
-        results += rows
-        frames += [{"scheme": scheme, **vars(f)} for f in result.frames]
-        sigmf += [str(p) for p in paths]
-        by_scheme[scheme] = {
-            "mean_psnr": float(np.mean([r["psnr"] for r in rows])),
-            "frames_sent": result.frames_sent,
-            "frames_lost": result.frames_lost,
-            "snr_db_measured": result.snr_db_measured(),
-        }
-    config = {k: v for k, v in vars(args).items() if k not in ("command",)}
-    config.update(
-        {
-            "symbols_per_frame": cfg.symbols_per_frame,
-            "header_symbols": cfg.header_symbols,
-            "tx_power_dbfs": cfg.tx_power_dbfs,
-        }
-    )
-    record = result_header(config, args.seed)
-    if settings.codec is not None:
-        record["codec"] = {"name": settings.codec.name, "sha256": settings.codec.sha256}
-    record.update(
-        {
-            "results": results,
-            "sigmf": sigmf,
-            "summary": {
-                "frames_sent": sum(s["frames_sent"] for s in by_scheme.values()),
-                "frames_lost": sum(s["frames_lost"] for s in by_scheme.values()),
-                "snr_db_measured": float(
-                    np.mean([s["snr_db_measured"] for s in by_scheme.values()])
-                ),
-                "schemes": by_scheme,
-                "psnr_note": "mean of per-image PSNR (peak 1.0)",
-                "seconds": time.perf_counter() - t0,
-            },
-            "frames": frames,
-        }
-    )
-    return record
