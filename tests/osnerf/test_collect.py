@@ -211,7 +211,7 @@ def test_rate_policy_refuses_a_correlation_outside_minus_one_to_one():
 def test_plan_records_a_static_link_and_keeps_it_through_its_cache():
     """A static link (copies do not fade independently) is what the codec's AWGN simulation
     of its split represents; the plan says which one it is, also when read back."""
-    from osnerf.run.plan import RunPlan
+    from osnerf.plan import RunPlan
 
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0
