@@ -125,9 +125,9 @@ def reconstruct_and_score(
         )
         seed = scheme_seed(ctx.config.seed, scheme.name, "nerf")
         rec = reconstruct(ds, views, union, ctx.config, seed, scheme.object_routed)
-        cache.save(f"{scheme.name}_nerf", {"rgb": rec.rgb, "opacity": rec.opacity}, rec.metrics)
+        cache.save(f"{scheme.name}_nerf", *rec.to_cache())
     else:
-        rec = Reconstruction(cached[1], cached[0]["rgb"], cached[0]["opacity"])
+        rec = Reconstruction.from_cache(*cached)
     m = dict(rec.metrics)
     n_sym = int(np.sum(tx.symbols))
     seconds = {

@@ -27,6 +27,15 @@ class Reconstruction:
     rgb: np.ndarray
     opacity: np.ndarray
 
+    def to_cache(self) -> tuple[dict, dict]:
+        """(arrays, JSON info) for ``StageCache.save``."""
+        return {"rgb": self.rgb, "opacity": self.opacity}, self.metrics
+
+    @classmethod
+    def from_cache(cls, arrays: dict, info: dict) -> Reconstruction:
+        """The inverse of :meth:`to_cache`."""
+        return cls(info, arrays["rgb"], arrays["opacity"])
+
 
 def received_dataset(images: torch.Tensor, poses, intrinsics, background, aabb, masks=None):
     """The views a scheme received as a ``renderer.Dataset`` (no disk round trip).
