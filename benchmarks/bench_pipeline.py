@@ -82,10 +82,8 @@ def _over_the_air(out_dir: Path) -> dict:
                 "jscc_minus_gt_db": gap,
                 "jscc_minus_digital_db": over_digital,
                 "frames_lost": report.link.get("frames_lost"),
-                "object_oversampling": report.views["object_oversampling"],
-                "repetitions_on_demand": sorted(
-                    set(report.views["repetitions_on_demand"].values())
-                ),
+                "object_oversampling": report.views.object_oversampling,
+                "repetitions_on_demand": sorted(set(report.views.repetitions_on_demand.values())),
                 "met": gap >= -OTA_GOAL_DB if snr == OTA_GOAL_SNR_DB else None,
                 "jscc_at_least_digital": over_digital >= 0,
             }

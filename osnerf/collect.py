@@ -92,8 +92,6 @@ class Collection:
         indices: [num_sent] int indices of the selected views in ``SceneViews``.
         images: [num_sent, height, width, 3] float32 masked images (objects over background).
         masks: [num_sent, height, width] float32 union of the demanded objects' masks.
-        importance: [num_sent, height, width] float32 per-pixel demand weight
-            (max over objects of weight * mask).
         object_masks: [num_sent, num_objects, height, width] float32, one mask per
             demanded object (the encoder's feature routing input).
         candidates: indices of every view considered (the train split).
@@ -103,7 +101,6 @@ class Collection:
     indices: np.ndarray
     images: np.ndarray
     masks: np.ndarray
-    importance: np.ndarray
     candidates: np.ndarray
     reasons: dict[int, str] = field(default_factory=dict)
     object_masks: np.ndarray | None = None
@@ -115,7 +112,6 @@ class Collection:
             self.indices[keep],
             self.images[keep],
             self.masks[keep],
-            self.importance[keep],
             self.candidates,
             self.reasons,
             om,
@@ -182,14 +178,11 @@ def collect(
         [views.masks[o][idx] for o in demand.objects]
     )  # [num_objects, num_sent, h, w]
     union = per_obj.max(0)
-    w = np.asarray(demand.weights, np.float32)[:, None, None, None]
-    importance = (per_obj * w).max(0) / float(max(demand.weights))
     images = masked_images(views.images[idx], union, views.background)
     return Collection(
         idx,
         images,
         union.astype(np.float32),
-        importance.astype(np.float32),
         candidates,
         reasons,
         per_obj.transpose(1, 0, 2, 3).astype(np.float32),

@@ -3,7 +3,8 @@
 
 ``report.json`` = ``result_header(config, seed)`` (config, seed, git_commit, versions) plus
 ``Report.to_dict()``. The CLI, ``osnerf sweep``'s metric rules and the plots read it back
-with :meth:`Report.from_dict`.
+with :meth:`Report.from_dict`. View ids are ints in the types; the JSON's string keys exist
+only in ``to_dict`` / ``from_dict``.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from common import path_kind, to_json, write_files
+from osnerf.plan import ViewPlan
 from osnerf.provenance import result_header
 
 QUALITY_METRICS = ("psnr", "ssim", "lpips", "psnr_object")
@@ -75,6 +77,65 @@ class SchemeReport:
     renderers: dict | None = None
 
 
+_VIEW_MAPS = (
+    "not_sent",
+    "link_snr_db",
+    "measured_snr_db",
+    "cbr",
+    "cbr_on_demand",
+    "repetitions",
+    "repetitions_on_demand",
+)
+"""The :class:`ViewsSummary` fields keyed by view id (string keys in JSON only)."""
+
+
+@dataclass
+class ViewsSummary:
+    """The per-view plan as the report shows it (view ids as ints).
+
+    Attributes:
+        candidates: every view considered; sent_on_demand: the on-demand views.
+        not_sent: view -> why the collector skipped it; outage: views without a path.
+        link_snr_db, measured_snr_db, cbr, repetitions: per view not in outage (the whole
+            view's part of the plan).
+        cbr_on_demand, repetitions_on_demand: per on-demand view (its on-demand part).
+        object_oversampling: the plan's oversampling of on-demand views.
+        full_scene_symbols: what sending every view whole costs.
+        plan: the SCU's plan of every candidate view not in outage.
+    """
+
+    candidates: list[int] = field(default_factory=list)
+    sent_on_demand: list[int] = field(default_factory=list)
+    not_sent: dict[int, str] = field(default_factory=dict)
+    outage: list[int] = field(default_factory=list)
+    link_snr_db: dict[int, float] = field(default_factory=dict)
+    measured_snr_db: dict[int, float] = field(default_factory=dict)
+    cbr: dict[int, float] = field(default_factory=dict)
+    cbr_on_demand: dict[int, float] = field(default_factory=dict)
+    repetitions: dict[int, int] = field(default_factory=dict)
+    repetitions_on_demand: dict[int, int] = field(default_factory=dict)
+    object_oversampling: int = 1
+    full_scene_symbols: int = 0
+    plan: list[ViewPlan] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        for k in _VIEW_MAPS:
+            d[k] = {str(v): x for v, x in d[k].items()}
+        d["plan"] = [p.to_dict() for p in self.plan]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ViewsSummary:
+        body = {f.name: d[f.name] for f in dataclasses.fields(cls) if f.name in d}
+        for k in _VIEW_MAPS:
+            if k in body:
+                body[k] = {int(v): x for v, x in body[k].items()}
+        plans = body.get("plan", [])  # reports before the typed plan listed outage views too
+        body["plan"] = [ViewPlan.from_dict(p) for p in plans if not p.get("outage")]
+        return cls(**body)
+
+
 @dataclass
 class Report:
     """Everything ``osnerf run`` reports (besides the provenance header)."""
@@ -85,7 +146,7 @@ class Report:
     snr_db: float
     symbol_rate_hz: float
     codec: dict | None
-    views: dict
+    views: ViewsSummary
     schemes: dict[str, SchemeReport]
     comparisons: dict
     scu_decisions: list
@@ -94,7 +155,10 @@ class Report:
     scene_seconds: float
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["schemes"] = {n: asdict(r) for n, r in self.schemes.items()}
+        d["views"] = self.views.to_dict()
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> Report:
@@ -109,6 +173,7 @@ class Report:
             n: SchemeReport(**{k: v for k, v in s.items() if k in sfields})
             for n, s in d["schemes"].items()
         }
+        body["views"] = ViewsSummary.from_dict(d["views"])
         return cls(**body)
 
 
@@ -201,22 +266,22 @@ def plots(report: Report) -> dict[str, bytes]:
     out["schemes"] = _fig_png(fig)
     plt.close(fig)
     v = report.views
-    ids = [int(k) for k in v["measured_snr_db"]]
+    ids = list(v.measured_snr_db)
     if ids:
         fig, ax = plt.subplots(figsize=(7, 2.8))
-        ax.plot(ids, list(v["link_snr_db"].values()), "o-", label="link SNR (dB)")
-        ax.plot(ids, list(v["measured_snr_db"].values()), "s--", label="measured SNR (dB)")
+        ax.plot(ids, list(v.link_snr_db.values()), "o-", label="link SNR (dB)")
+        ax.plot(ids, list(v.measured_snr_db.values()), "s--", label="measured SNR (dB)")
         ax.set_xlabel("drone view")
         ax.set_ylabel("dB")
-        sent = set(v["sent_on_demand"])
+        sent = set(v.sent_on_demand)
         ax.plot(
             [i for i in ids if i in sent],
-            [v["measured_snr_db"][str(i)] for i in ids if i in sent],
+            [v.measured_snr_db[i] for i in ids if i in sent],
             "k*",
             label="sent on demand",
         )
         ax2 = ax.twinx()
-        ax2.step(ids, list(v["cbr"].values()), "g-", where="mid", label="CBR")
+        ax2.step(ids, list(v.cbr.values()), "g-", where="mid", label="CBR")
         ax2.set_ylabel("CBR")
         ax.legend(fontsize=7, loc="lower left")
         fig.tight_layout()

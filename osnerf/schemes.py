@@ -1,15 +1,17 @@
 """The schemes of ``osnerf run``: one table, :data:`SCHEMES`, name -> scheme class.
 
-A scheme takes the views the SCU planned (:class:`osnerf.run.plan.ViewPlan`) and their pixels,
-sends them over the run's links and returns what the receiver reconstructed
-(:class:`Transmission`). Everything else (collection, plan, links, reconstruction, scoring,
-report) is shared, so adding a scheme is one class and one line::
+A scheme takes the views the SCU planned (:class:`osnerf.plan.ViewSend`: the part of each
+view's plan it carries out) and their pixels, sends them over the run's links and returns
+what the receiver reconstructed (:class:`Transmission`; the shared types live in
+:mod:`osnerf.scheme_types` and are re-exported here). Everything else (collection, plan,
+links, reconstruction, scoring, report) is shared, so adding a scheme is one class and one
+line::
 
     @register("mine")
     class Mine(Scheme):
         object_routed = True          # sends the on-demand views (masked to the objects)
 
-        def transmit(self, ctx, plans, images, generator):
+        def transmit(self, ctx, plans, images):
             ...
             return Transmission(received, symbols)
 
@@ -25,105 +27,30 @@ the same view (a paired comparison: their difference is not draw luck).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import ClassVar
 
 import numpy as np
 import torch
 
 from common.plugins import load_plugins
+from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
 from semcodec.evaluation import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
 
-
-@dataclass
-class Transmission:
-    """What one scheme's receiver holds after sending its views.
-
-    Attributes:
-        images: [num_views, 3, height, width] float32 in [0, 1], the received views.
-        symbols: [num_views] int64 channel symbols spent per view (repetitions included).
-        rx_masks: [num_views, height, width] float32: pixels the receiver knows were sent
-            (focus box or positions), or None for whole views.
-        seconds: ``encode``, ``decode`` (and ``encode_cpu``, ``decode_cpu``, ``channel``, or
-            ``codec_and_ldpc`` for separate schemes), wall seconds over all views.
-        info: JSON-able details for the report (``failed_codewords``, ``views_lost``, ...).
-        received: [num_views] bool, False for a view the receiver knows did not arrive (a
-            failed checksum, or nothing fitted its budget): ``images`` holds mid-grey there,
-            and the radiance field trains on the other views only. None: every view arrived.
-    """
-
-    images: torch.Tensor
-    symbols: np.ndarray
-    rx_masks: np.ndarray | None = None
-    seconds: dict = field(default_factory=dict)
-    info: dict = field(default_factory=dict)
-    received: np.ndarray | None = None
-
-
-@dataclass
-class RunContext:
-    """What every scheme may use: the run's config, codec, links and plan.
-
-    Attributes:
-        config: the :class:`osnerf.run.RunConfig`.
-        links: view -> ``phy.Link`` (unbiased ZF receivers with perfect or estimated CSI).
-        plan: the SCU's :class:`osnerf.run.plan.RunPlan`.
-        codec, rx_codec: transmitter's and receiver's codecs (None when no scheme needs one).
-        background: [3] float32 background colour of the scene.
-        routing: (object masks [n_on_demand, K, h, w] tensor, K demand weights) for focus mode.
-    """
-
-    config: object
-    links: dict
-    plan: object
-    codec: object | None
-    rx_codec: object | None
-    background: np.ndarray
-    routing: tuple | None = None
-
-    def view_generator(self, view: int) -> torch.Generator:
-        """The channel draws of one view (fades, noise): from the run seed and the view only."""
-        return torch.Generator().manual_seed(
-            scheme_seed(self.config.seed, f"view {int(view)}", "link")
-        )
-
-
-class Scheme:
-    """Base class. Subclasses set the class attributes and implement :meth:`transmit`.
-
-    Class attributes:
-        name: the table key (set by :func:`register`).
-        object_routed: True: sends the on-demand views masked to the demanded objects and
-            its renderer trains inside the objects' box; False: every candidate view whole.
-        needs_codec: loads the semantic codec (checked against the knowledge base).
-        bound: None, or what the scheme bounds ("ceiling: nothing crosses the channel");
-            bounds are labelled as such in help and reports.
-        help: one line for ``--help`` and reports.
-        headline: the scheme the report's comparisons are about (the others are its baselines).
-        kind: one of ``semcodec.evaluation.SCHEME_KINDS`` (as the link-level schemes):
-            what plots and benchmarks group by.
-    """
-
-    name: ClassVar[str] = ""
-    headline: ClassVar[bool] = False
-    kind: ClassVar[str] = ""
-    seed_name: ClassVar[str | None] = None
-    """Draw the channel with another scheme's seed (a bound on the same draws), else own name."""
-    object_routed: ClassVar[bool] = True
-    needs_codec: ClassVar[bool] = False
-    bound: ClassVar[str | None] = None
-    help: ClassVar[str] = ""
-
-    def transmit(
-        self, ctx: RunContext, plans: list, images: torch.Tensor, generator: torch.Generator
-    ) -> Transmission:
-        """Send ``images`` [num_views, 3, h, w] (the views of ``plans``) and receive them."""
-        raise NotImplementedError
+__all__ = [
+    "DEFAULT_SCHEMES",
+    "SCHEMES",
+    "RunContext",
+    "Scheme",
+    "Transmission",
+    "get_scheme",
+    "load_entry_points",
+    "parse_schemes",
+    "register",
+    "scheme_seed",
+]
 
 
 SCHEMES: dict[str, type[Scheme]] = {}
@@ -196,12 +123,6 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
     return names
 
 
-def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
-    """A seed that depends on the run seed, the scheme's name and the stage only."""
-    h = hashlib.sha256(f"{int(run_seed)}/{name}/{stage}".encode()).digest()
-    return int.from_bytes(h[:8], "little") & (2**62 - 1)
-
-
 # ----------------------------------------------------------------------------- helpers
 
 
@@ -216,7 +137,7 @@ class OnDemandJSCC(Scheme):
     headline = True
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
-    def transmit(self, ctx, plans, images, generator):
+    def transmit(self, ctx, plans, images):
         from osnerf.run.jscc import send_views
 
         return send_views(ctx, plans, images, on_demand=self.object_routed)
@@ -236,7 +157,7 @@ class Digital(Scheme):
     def mcs(self, config) -> str:
         return config.mcs
 
-    def transmit(self, ctx, plans, images, generator):
+    def transmit(self, ctx, plans, images):
         import phy
         import semcodec
 
@@ -250,7 +171,7 @@ class Digital(Scheme):
                 images[k : k + 1],
                 ctx.links[p.view],
                 p.snr_db,
-                int(p.budget_symbols),
+                int(p.part.symbols),
                 mcs=self.mcs(cfg),
                 image_codec=cfg.image_codec,
                 generator=ctx.view_generator(p.view),
@@ -268,7 +189,7 @@ class Digital(Scheme):
             )
         return Transmission(
             torch.stack(out),
-            np.asarray([p.budget_symbols for p in plans], np.int64),
+            np.asarray([p.part.symbols for p in plans], np.int64),
             None,
             {"codec_and_ldpc": time.perf_counter() - t},
             {"failed_codewords": failed, "views_lost": lost, "per_view": per_view},
@@ -282,7 +203,6 @@ class DigitalGenie(Digital):
     the best image over every MCS that decodes on that draw (the same draws as digital)."""
 
     bound = "genie: knows each draw's channel and picks the MCS after seeing it"
-    seed_name = "digital"
     help = "bound: digital with the best MCS per draw, chosen after seeing the channel"
 
     def mcs(self, config) -> str:
@@ -298,13 +218,13 @@ class Analog(Scheme):
     object_routed = True
     help = "uncoded analog pixels, same views and budget as jscc"
 
-    def transmit(self, ctx, plans, images, generator):
+    def transmit(self, ctx, plans, images):
         import semcodec
 
         out = []
         t = time.perf_counter()
         for k, p in enumerate(plans):
-            n = max(1, int(p.budget_symbols) // max(p.repetitions, 1))
+            n = max(1, int(p.part.symbols) // max(p.part.repetitions, 1))
             res = semcodec.transmit_analog(
                 images[k : k + 1],
                 ctx.links[p.view],
@@ -315,7 +235,7 @@ class Analog(Scheme):
             out.append(res.images[0])
         return Transmission(
             torch.stack(out),
-            np.asarray([p.budget_symbols for p in plans], np.int64),
+            np.asarray([p.part.symbols for p in plans], np.int64),
             None,
             {"encode": 0.0, "decode": time.perf_counter() - t},
         )
@@ -340,7 +260,7 @@ class GroundTruth(Scheme):
     bound = "ceiling: the on-demand views undistorted, nothing crosses the channel"
     help = "bound: the on-demand views undistorted (ceiling)"
 
-    def transmit(self, ctx, plans, images, generator):
+    def transmit(self, ctx, plans, images):
         from semcodec.grid import focus_pixel_masks
 
         masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None

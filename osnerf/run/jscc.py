@@ -12,7 +12,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from osnerf.schemes import Transmission, scheme_seed
+from osnerf.scheme_types import Transmission, scheme_seed
 
 
 def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, generator):
@@ -70,8 +70,9 @@ def send_views(ctx, plans, images, on_demand: bool) -> Transmission:
     output for the erased positions into the edge pixels, a dark frame around every box).
 
     Args:
-        ctx: the :class:`osnerf.schemes.RunContext`.
-        plans: the views' ``ViewPlan``; images: [num_views, 3, height, width] float32.
+        ctx: the :class:`osnerf.scheme_types.RunContext`.
+        plans: the views' :class:`osnerf.plan.ViewSend` (the on-demand parts when
+            ``on_demand``, else the whole views); images: [num_views, 3, height, width] float32.
     """
     s_up = ctx.plan.oversampling if on_demand else 1
     _, _, h, w = images.shape
@@ -80,17 +81,21 @@ def send_views(ctx, plans, images, on_demand: bool) -> Transmission:
     for k, p in enumerate(plans):
         x, kw = _view_input(ctx, images[k : k + 1], k, s_up, on_demand)
         with _Timer(sec, "encode"):
-            enc = _encode(ctx, p, x, kw, on_demand)
+            enc = _encode(ctx, p, x, kw)
         with _Timer(sec, "channel", cpu=False), torch.no_grad():
             x_hat, nv = _send_blocks(
-                ctx.links[p.view], enc.symbols, p.snr_db, p.repetitions, ctx.view_generator(p.view)
+                ctx.links[p.view],
+                enc.symbols,
+                p.snr_db,
+                p.part.repetitions,
+                ctx.view_generator(p.view),
             )
         with _Timer(sec, "decode"):
             img, m = _decode(ctx, p, enc, x_hat, nv, (h, w), s_up, on_demand)
         if m is not None:  # the pixels holding anything that was sent
             rx_masks.append(m.reshape(h, s_up, w, s_up).max(axis=(1, 3)) if s_up > 1 else m)
         out.append(img)
-        symbols.append(p.repetitions * int(enc.symbols.shape[-1]))
+        symbols.append(p.part.repetitions * int(enc.symbols.shape[-1]))
         side.append(int(enc.meta.side_info_bits()))
     return Transmission(
         torch.stack(out),
@@ -128,7 +133,7 @@ def _view_input(ctx, x, k: int, s_up: int, on_demand: bool) -> tuple[torch.Tenso
     return x, kw
 
 
-def _encode(ctx, p, x, kw: dict, on_demand: bool):
+def _encode(ctx, p, x, kw: dict):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
     from semcodec import encode_with_focus, for_fusion, refine_symbols
@@ -137,13 +142,11 @@ def _encode(ctx, p, x, kw: dict, on_demand: bool):
     if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
         codec = for_fusion(codec, ctx.config.layer_fusion, "transmitter")
     with torch.no_grad():
-        enc = encode_with_focus(
-            codec, x, p.encoder_snr_db, p.focus_cbr if on_demand else p.cbr, **kw
-        )
+        enc = encode_with_focus(codec, x, p.part.encoder_snr_db, p.part.cbr, **kw)
     steps = int(ctx.config.refine_steps)
     if not steps or not hasattr(codec, "decode_differentiable"):
         return enc  # a codec whose decoder cannot be differentiated is sent as encoded
-    model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.repetitions)
+    model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.part.repetitions)
     gen = torch.Generator().manual_seed(
         scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
     )
@@ -160,7 +163,7 @@ def _encode(ctx, p, x, kw: dict, on_demand: bool):
         p.snr_db,
         steps,
         generator=gen,
-        decoder_snr_db=p.encoder_snr_db,
+        decoder_snr_db=p.part.encoder_snr_db,
         pixel_weights=wts,
     )
 
@@ -175,7 +178,7 @@ def _decode(ctx, p, enc, x_hat, nv, size, s_up: int, on_demand: bool):
     bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]
     with torch.no_grad():
         img = decode_received(
-            ctx.rx_codec, x_hat, enc.meta, p.encoder_snr_db, ctx.codec.sha256, nv
+            ctx.rx_codec, x_hat, enc.meta, p.part.encoder_snr_db, ctx.codec.sha256, nv
         )[0]
         m = receiver_mask(enc.meta, s_up * h, s_up * w) if on_demand else None
         if m is not None:

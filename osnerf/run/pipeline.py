@@ -12,21 +12,22 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from osnerf.collect import Collection, Demand
-from osnerf.report import Report, SchemeReport
+from osnerf.plan import RunPlan
+from osnerf.report import Report, SchemeReport, ViewsSummary
 from osnerf.run.cache import StageCache
 from osnerf.run.config import RunConfig
 from osnerf.run.links import build_links
-from osnerf.run.plan import RunPlan
 from osnerf.run.reconstruct import Reconstruction, received_dataset, reconstruct, view_metrics
 from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
-from osnerf.schemes import RunContext, Scheme, Transmission, get_scheme, scheme_seed
+from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
+from osnerf.schemes import get_scheme
 from osnerf.scu import RatePolicy, SemanticControlUnit
 
 METRIC_NOTES = (
@@ -92,24 +93,10 @@ def transmit(
         )
         pixels = col.images if scheme.object_routed else views.images[[p.view for p in plans]]
         images = torch.from_numpy(np.ascontiguousarray(pixels)).permute(0, 3, 1, 2).float()
-        seed = scheme_seed(ctx.config.seed, scheme.seed_name or scheme.name)
-        gen = torch.Generator().manual_seed(seed)
-        tx = scheme.transmit(ctx, plans, images, gen)
-        arrays = {"images": tx.images.numpy(), "symbols": tx.symbols}
-        for name in ("rx_masks", "received"):
-            if getattr(tx, name) is not None:
-                arrays[name] = getattr(tx, name)
-        cache.save(f"{scheme.name}_tx", arrays, {"seconds": tx.seconds, "info": tx.info})
+        tx = scheme.transmit(ctx, plans, images)
+        cache.save(f"{scheme.name}_tx", *tx.to_cache())
         return tx
-    a, info = cached
-    return Transmission(
-        torch.from_numpy(a["images"]),
-        a["symbols"],
-        a.get("rx_masks"),
-        info["seconds"],
-        info["info"],
-        a.get("received"),
-    )
+    return Transmission.from_cache(*cached)
 
 
 def reconstruct_and_score(
@@ -138,9 +125,9 @@ def reconstruct_and_score(
         )
         seed = scheme_seed(ctx.config.seed, scheme.name, "nerf")
         rec = reconstruct(ds, views, union, ctx.config, seed, scheme.object_routed)
-        cache.save(f"{scheme.name}_nerf", {"rgb": rec.rgb, "opacity": rec.opacity}, rec.metrics)
+        cache.save(f"{scheme.name}_nerf", *rec.to_cache())
     else:
-        rec = Reconstruction(cached[1], cached[0]["rgb"], cached[0]["opacity"])
+        rec = Reconstruction.from_cache(*cached)
     m = dict(rec.metrics)
     n_sym = int(np.sum(tx.symbols))
     seconds = {
@@ -300,24 +287,24 @@ def _flag(comp: dict) -> dict:
     return comp
 
 
-def views_summary(plan: RunPlan, col: Collection) -> dict:
-    """The per-view plan as the report shows it (keys are view ids as strings)."""
-    whole, sent = plan.whole(), plan.on_demand()
-    return {
-        "candidates": [int(v) for v in col.candidates],
-        "sent_on_demand": [p.view for p in sent],
-        "not_sent": {str(k): v for k, v in sorted(col.reasons.items())},
-        "outage": [p.view for p in plan.views if p.outage],
-        "link_snr_db": {str(p.view): p.snr_db for p in whole},
-        "measured_snr_db": {str(p.view): p.measured_snr_db for p in whole},
-        "cbr": {str(p.view): p.cbr for p in whole},
-        "cbr_on_demand": {str(p.view): p.focus_cbr for p in sent},
-        "repetitions": {str(p.view): p.repetitions for p in whole},
-        "repetitions_on_demand": {str(p.view): p.focus_repetitions for p in sent},
-        "object_oversampling": plan.oversampling,
-        "full_scene_symbols": plan.full_scene_symbols,
-        "plan": [asdict(p) for p in plan.views],
-    }
+def views_summary(plan: RunPlan, col: Collection) -> ViewsSummary:
+    """The per-view plan as the report shows it."""
+    whole, sent = plan.views, plan.on_demand()
+    return ViewsSummary(
+        candidates=[int(v) for v in col.candidates],
+        sent_on_demand=[p.view for p in sent],
+        not_sent={int(k): v for k, v in sorted(col.reasons.items())},
+        outage=list(plan.outage),
+        link_snr_db={p.view: p.link.snr_db for p in whole},
+        measured_snr_db={p.view: p.link.measured_snr_db for p in whole},
+        cbr={p.view: p.whole.cbr for p in whole},
+        cbr_on_demand={p.view: p.focus.cbr for p in sent if p.focus is not None},
+        repetitions={p.view: p.whole.repetitions for p in whole},
+        repetitions_on_demand={p.view: p.focus.repetitions for p in sent if p.focus is not None},
+        object_oversampling=plan.oversampling,
+        full_scene_symbols=plan.full_scene_symbols,
+        plan=list(plan.views),
+    )
 
 
 BUDGET_TOLERANCE = 0.10

@@ -27,6 +27,15 @@ class Reconstruction:
     rgb: np.ndarray
     opacity: np.ndarray
 
+    def to_cache(self) -> tuple[dict, dict]:
+        """(arrays, JSON info) for ``StageCache.save``."""
+        return {"rgb": self.rgb, "opacity": self.opacity}, self.metrics
+
+    @classmethod
+    def from_cache(cls, arrays: dict, info: dict) -> Reconstruction:
+        """The inverse of :meth:`to_cache`."""
+        return cls(info, arrays["rgb"], arrays["opacity"])
+
 
 def received_dataset(images: torch.Tensor, poses, intrinsics, background, aabb, masks=None):
     """The views a scheme received as a ``renderer.Dataset`` (no disk round trip).
@@ -75,52 +84,89 @@ def reconstruct(
         bg = np.asarray(views.background, np.float32)
         ref = gt * union[..., None] + bg * (1.0 - union[..., None])
     seen = [k for k in range(len(test)) if (union[k] > 0.5).sum() >= 4]
+    held_out = _held_out_dataset(ds, views, test, union, seen)
+    if ds.num_views == 0:  # nothing arrived: an empty field, the background everywhere
+        rgb = np.broadcast_to(np.asarray(views.background, np.float32), gt.shape).copy()
+        op = np.zeros(gt.shape[:3], np.float32)
+        training = {"nerf_steps": 0, "nerf_curve": [], "nerf_seconds": 0.0}
+        training |= {"nerf_wall_seconds": 0.0, "renderers": None}
+    else:
+        rgb, op, training = _train_and_render(ds, views, held_out, config, seed, object_routed)
+    metrics = _scores(rgb, op, gt, ref, union, seen, object_routed) | training
+    return Reconstruction(metrics, rgb, op)
+
+
+def _held_out_dataset(ds, views, test, union: np.ndarray, seen: list[int]) -> renderer.Dataset:
+    """The held-out views as a ``renderer.Dataset`` in ``ds``'s frame, with the objects'
+    masks of the views in ``seen`` (the training curve's object PSNR)."""
     curve_masks = np.zeros_like(union)
     curve_masks[seen] = union[seen] > 0.5
-    held_out = renderer.Dataset(
-        images=torch.from_numpy(np.ascontiguousarray(gt, np.float32)),
+    return renderer.Dataset(
+        images=torch.from_numpy(np.ascontiguousarray(views.images[test], np.float32)),
         poses=torch.as_tensor(views.poses[test], dtype=torch.float32),
         intrinsics=ds.intrinsics,
         background=ds.background,
         aabb=ds.aabb,
         masks=torch.from_numpy(curve_masks.astype(np.float32)),
     )
-    tc = renderer.TrainConfig(
+
+
+def _train_config(config, num_test: int) -> renderer.TrainConfig:
+    """The radiance field's training settings of the run ``config``."""
+    return renderer.TrainConfig(
         max_seconds=float(config.max_seconds),
         max_steps=config.nerf_steps,
         clock=config.nerf_clock,
         progress=False,
         eval_every_seconds=max(float(config.max_seconds) / 12, 0.5),
         eval_every_steps=max(config.nerf_steps // 12, 1) if config.nerf_steps else None,
-        eval_views=len(test),
+        eval_views=num_test,
     )
-    n = len(test)
-    renderers, wall = None, 0.0
-    if ds.num_views == 0:  # nothing arrived: an empty field, the background everywhere
-        steps, curve, seconds = 0, [], 0.0
-        rgb = np.broadcast_to(np.asarray(views.background, np.float32), gt.shape).copy()
-        op = np.zeros(gt.shape[:3], np.float32)
-    else:
-        torch.set_num_threads(min(2, torch.get_num_threads()))
-        t = time.perf_counter()
-        result = renderer.train(
-            ds, tc, generator=torch.Generator().manual_seed(seed), eval_dataset=held_out
+
+
+def _train_and_render(ds, views, held_out, config, seed: int, object_routed: bool):
+    """Train the field on ``ds`` and render the held-out views. Returns (rgb [n, h, w, 3],
+    opacity [n, h, w], the training's metrics: steps, curve, seconds, renderers)."""
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+    t = time.perf_counter()
+    result = renderer.train(
+        ds,
+        _train_config(config, held_out.num_views),
+        generator=torch.Generator().manual_seed(seed),
+        eval_dataset=held_out,
+    )
+    wall = time.perf_counter() - t
+    with torch.no_grad():
+        out = renderer.render_views(
+            result.model,
+            held_out.poses,
+            ds.intrinsics,
+            views.intrinsics.height,
+            views.intrinsics.width,
         )
-        wall = time.perf_counter() - t
-        steps, curve, seconds = result.steps, result.curve, result.seconds
-        with torch.no_grad():
-            out = renderer.render_views(
-                result.model,
-                held_out.poses,
-                ds.intrinsics,
-                views.intrinsics.height,
-                views.intrinsics.width,
-            )
-        if config.renderer_steps > 0:
-            renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
-        rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
-        op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
-    metrics = {
+    renderers = None
+    if config.renderer_steps > 0:
+        renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
+    rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
+    op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
+    training = {
+        "nerf_steps": int(result.steps),
+        "nerf_curve": [
+            {"seconds": c["seconds"], "step": c["step"], "psnr_object": c.get("masked_psnr")}
+            for c in result.curve
+        ],
+        "nerf_seconds": float(result.seconds),
+        "nerf_wall_seconds": wall,
+        "renderers": renderers,
+    }
+    return rgb, op, training
+
+
+def _scores(rgb, op, gt, ref, union, seen: list[int], object_routed: bool) -> dict:
+    """Scores of the renders ``rgb`` (opacity ``op``) of the held-out views: whole view
+    against ``ref``, over the objects against ``gt`` on the views in ``seen``."""
+    n = len(gt)
+    return {
         "psnr": float(np.mean([renderer.psnr(rgb[k], ref[k]) for k in range(n)])),
         "ssim": float(np.mean([renderer.ssim(rgb[k], ref[k]) for k in range(n)])),
         "lpips": lpips_mean(rgb, ref),
@@ -134,16 +180,7 @@ def reconstruct(
         else None,
         "num_test_views": int(n),
         "num_test_views_with_object": len(seen),
-        "nerf_steps": int(steps),
-        "nerf_curve": [
-            {"seconds": c["seconds"], "step": c["step"], "psnr_object": c.get("masked_psnr")}
-            for c in curve
-        ],
-        "nerf_seconds": float(seconds),
-        "nerf_wall_seconds": wall,
-        "renderers": renderers,
     }
-    return Reconstruction(metrics, rgb, op)
 
 
 def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool) -> dict:

@@ -1,13 +1,20 @@
-"""The semantic control unit: its decisions (:class:`SemanticControlUnit`) and its rate
-policy (:class:`RatePolicy`)."""
+"""The semantic control unit: its decisions (:class:`SemanticControlUnit`), its rate
+policy (:class:`RatePolicy`) and its typed plan (:class:`RunPlan`, one :class:`ViewPlan`
+per view)."""
 
+from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan, ViewSend
 from osnerf.scu.policy import RatePolicy, combined_snr_db
 from osnerf.scu.unit import KnowledgeBaseError, SemanticControlUnit, padded_aabb
 
 __all__ = [
+    "Allocation",
     "KnowledgeBaseError",
     "RatePolicy",
+    "RunPlan",
     "SemanticControlUnit",
+    "ViewLink",
+    "ViewPlan",
+    "ViewSend",
     "combined_snr_db",
     "padded_aabb",
 ]

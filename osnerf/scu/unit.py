@@ -1,7 +1,7 @@
 """The semantic control unit (SCU): it decides, and the pipeline carries out what it
 decides. It turns the demand into collector and encoder settings, measures each link with
-pilots, and returns one typed :class:`osnerf.run.plan.ViewPlan` per view (measured SNR, CBR,
-focus, copies, outage); it checks the knowledge base (both ends hold the same codec) and
+pilots, and returns one typed :class:`osnerf.plan.ViewPlan` per view with a propagation path
+(measured link, whole-view and on-demand parts); it checks the knowledge base (both ends hold the same codec) and
 routes each scheme's views to the renderer. It owns its decision log
 (``SemanticControlUnit.decisions``), cached with the plan, which ends up in the report.
 """
@@ -15,8 +15,8 @@ import torch
 
 import phy
 from osnerf.collect import Collection, CollectorConfig, Demand
-from osnerf.run.plan import RunPlan, ViewPlan
-from osnerf.schemes import scheme_seed
+from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan
+from osnerf.scheme_types import scheme_seed
 from osnerf.scu.policy import RatePolicy, combined_snr_db
 from semcodec.checkpoint import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
 from semcodec.codec import box_side_symbols
@@ -275,7 +275,7 @@ class SemanticControlUnit:
         width: int,
         copy_fading: phy.CopyFading,
     ) -> RunPlan:
-        """One :class:`ViewPlan` per candidate view (logged).
+        """One :class:`ViewPlan` per candidate view not in outage (logged).
 
         Args:
             candidates: every view considered; on_demand: the collector's selection.
@@ -310,34 +310,27 @@ class SemanticControlUnit:
         )
         focus = dict(zip(sent, self.focus_cbr(masks, cbr_range, sent, oversampling=s, scale=scale)))
         plans = []
-        for v in (int(v) for v in candidates):
-            if v in outage:
-                plans.append(_outage_plan(v))
-                continue
-            f = focus.get(v)
-            fr = focus_reps.get(v) if f else None
-            plans.append(
-                ViewPlan(
-                    view=v,
-                    snr_db=float(link_snr_db[v]),
-                    measured_snr_db=float(measured_snr_db[v]),
-                    encoder_snr_db=combined_snr_db(measured_snr_db[v], reps[v], snr_range_db),
-                    cbr=float(cbrs[v]),
-                    repetitions=int(reps[v]),
-                    on_demand=f is not None,
-                    focus_cbr=None if f is None else float(f),
-                    budget_symbols=int(round(f * s * height * s * width * 3)) * fr if f else 0,
-                    full_symbols=full[v],
-                    focus_repetitions=fr,
-                    focus_encoder_snr_db=None
-                    if fr is None
-                    else combined_snr_db(measured_snr_db[v], fr, snr_range_db),
-                )
+        for v in whole:
+            m_db = measured_snr_db[v]
+            whole_part = Allocation(
+                float(cbrs[v]), int(reps[v]), combined_snr_db(m_db, reps[v], snr_range_db), full[v]
             )
+            focus_part = None
+            if v in focus:
+                f, fr = float(focus[v]), int(focus_reps[v])
+                focus_part = Allocation(
+                    f,
+                    fr,
+                    combined_snr_db(m_db, fr, snr_range_db),
+                    int(round(f * s * height * s * width * 3)) * fr,
+                )
+            link = ViewLink(float(link_snr_db[v]), float(m_db))
+            plans.append(ViewPlan(v, link, whole_part, focus_part))
         if outage:
             self.log("link", "views in outage are not sent", views=sorted(outage))
         static = not self.rate_policy.copies_independent(copy_fading)
-        return RunPlan(tuple(plans), int(s), int(height), int(width), static)
+        no_path = tuple(int(v) for v in candidates if int(v) in outage)
+        return RunPlan(tuple(plans), no_path, int(s), int(height), int(width), static)
 
     def plan_run(
         self,
@@ -420,20 +413,3 @@ def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
     b = np.asarray(bounds, np.float64)
     pad = pad_fraction * float((b[1] - b[0]).max())
     return np.stack([b[0] - pad, b[1] + pad])
-
-
-def _outage_plan(view: int) -> ViewPlan:
-    """The plan of a view without a propagation path: never sent."""
-    return ViewPlan(
-        view=view,
-        snr_db=None,
-        measured_snr_db=None,
-        encoder_snr_db=None,
-        cbr=0.0,
-        repetitions=0,
-        on_demand=False,
-        focus_cbr=None,
-        budget_symbols=0,
-        full_symbols=0,
-        outage=True,
-    )

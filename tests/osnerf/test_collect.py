@@ -64,12 +64,14 @@ def test_views_without_the_object_are_never_sent():
     assert 5 not in col.indices and 6 not in col.indices  # held-out views are never candidates
 
 
-def test_two_objects_union_and_importance():
+def test_two_objects_union_and_per_object_masks():
     views = synthetic_views([1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     col = collect(views, Demand.parse("hydrant:1,tree:3"))
     assert col.indices.tolist() == [0, 1]
-    assert col.importance[1, 0, 0] == pytest.approx(1.0)  # tree carries the larger weight
-    assert col.importance[0, 3, 3] == pytest.approx(1 / 3)
+    # one mask per demanded object, in the demand's order (the encoder's routing input)
+    assert col.object_masks.shape[:2] == (2, 2)
+    assert col.object_masks[1, 1, 0, 0] == 1.0 and col.object_masks[1, 0, 0, 0] == 0.0
+    assert col.object_masks[0, 0, 3, 3] == 1.0
     assert col.masks[0].sum() == 16 and col.masks[1].sum() == 16
 
 
@@ -209,7 +211,7 @@ def test_rate_policy_refuses_a_correlation_outside_minus_one_to_one():
 def test_plan_records_a_static_link_and_keeps_it_through_its_cache():
     """A static link (copies do not fade independently) is what the codec's AWGN simulation
     of its split represents; the plan says which one it is, also when read back."""
-    from osnerf.run.plan import RunPlan
+    from osnerf.plan import RunPlan
 
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0

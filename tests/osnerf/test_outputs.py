@@ -223,14 +223,14 @@ def test_osnerf_cache_naming_a_file_is_refused_before_anything_is_written(
 def _fake_report(psnr: float, views: bool):
     """A small run report of two schemes (and its pictures) as the pipeline returns them;
     ``views=False`` has no per-view measurements, so no ``plot_views.png``."""
-    from osnerf.report import Report, SchemeReport
+    from osnerf.report import Report, SchemeReport, ViewsSummary
 
     seconds = {"encode": 0.1, "air": 0.2, "decode": 0.1, "nerf": 1.0}
     schemes = {
         name: SchemeReport(psnr, 0.5, None, psnr, None, 100, 2, seconds, 1.2)
         for name in ("jscc", "digital")
     }
-    ids = {"3": 5.0, "4": 6.0} if views else {}
+    ids = {3: 5.0, 4: 6.0} if views else {}
     report = Report(
         scene={"name": "tiny"},
         demand={"objects": ["crate"]},
@@ -238,12 +238,12 @@ def _fake_report(psnr: float, views: bool):
         snr_db=10.0,
         symbol_rate_hz=1e6,
         codec=None,
-        views={
-            "measured_snr_db": ids,
-            "link_snr_db": ids,
-            "cbr": dict.fromkeys(ids, 0.1),
-            "sent_on_demand": [3],
-        },
+        views=ViewsSummary(
+            measured_snr_db=ids,
+            link_snr_db=ids,
+            cbr=dict.fromkeys(ids, 0.1),
+            sent_on_demand=[3],
+        ),
         schemes=schemes,
         comparisons={},
         scu_decisions=[{"stage": "collector", "decision": "views 3, 4"}],

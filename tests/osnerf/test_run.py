@@ -134,7 +134,7 @@ def test_pipeline_report_structure_ranges_and_resume(env, tmp_path):
     )
     assert sch["jscc"]["symbols_sent"] < sch["full"]["symbols_sent"]
     # every object-routed scheme gets the SCU's on-demand budget per view; jscc may use less
-    budget = sum(p["budget_symbols"] for p in views["plan"] if p["on_demand"] and not p["outage"])
+    budget = sum(p["focus"]["symbols"] for p in views["plan"] if p["focus"] is not None)
     assert sch["digital"]["symbols_sent"] == budget >= sch["jscc"]["symbols_sent"] > 0
     assert sch["digital"]["views_lost"]["budget"] + sch["digital"]["views_lost"]["channel"] <= len(
         sent

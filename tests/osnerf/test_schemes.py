@@ -16,7 +16,7 @@ import torch
 import osnerf.schemes as schemes_mod
 import phy
 from osnerf.cli import main
-from osnerf.run.plan import RunPlan
+from osnerf.plan import Allocation, RunPlan, ViewSend
 from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
@@ -56,21 +56,23 @@ def test_seed_depends_on_run_seed_and_name_only():
 
 def test_a_views_channel_draws_depend_on_the_run_seed_and_the_view_only():
     # block Rayleigh: view 7's fade and noise are the same whether or not view 3 went first,
-    # whatever it sent, and whichever scheme sends (the scheme's own generator is ignored)
+    # whatever it sent, and whichever scheme sends
     link = phy.FlatLink(phy.CHANNELS["rayleigh"]())
     ctx = RunContext(SimpleNamespace(seed=5), {3: link, 7: link}, None, None, None, np.zeros(3))
     images = torch.rand(2, 3, 16, 16, generator=torch.Generator().manual_seed(0))
 
     def plan(view, budget):
-        return SimpleNamespace(view=view, snr_db=0.0, budget_symbols=budget, repetitions=1)
+        return ViewSend(
+            view, 0.0, Allocation(cbr=0.1, repetitions=1, encoder_snr_db=0.0, symbols=budget)
+        )
 
     analog = SCHEMES["analog"]()
-    both = analog.transmit(ctx, [plan(3, 300), plan(7, 200)], images, torch.Generator())
-    alone = analog.transmit(ctx, [plan(7, 200)], images[1:], torch.Generator().manual_seed(9))
+    both = analog.transmit(ctx, [plan(3, 300), plan(7, 200)], images)
+    alone = analog.transmit(ctx, [plan(7, 200)], images[1:])
     assert torch.equal(both.images[1], alone.images[0])
     other = RunContext(SimpleNamespace(seed=6), ctx.links, None, None, None, np.zeros(3))
     assert not torch.equal(
-        analog.transmit(other, [plan(7, 200)], images[1:], torch.Generator()).images[0],
+        analog.transmit(other, [plan(7, 200)], images[1:]).images[0],
         alone.images[0],
     )
 
@@ -107,9 +109,9 @@ def test_a_scheme_from_another_package_runs_beside_the_builtins(env, tmp_path, m
                 bound = None
                 help = "test plugin: blurred on-demand views"
 
-                def transmit(self, ctx, plans, images, generator):
+                def transmit(self, ctx, plans, images):
                     import torch.nn.functional as F
-                    tx = super().transmit(ctx, plans, images, generator)
+                    tx = super().transmit(ctx, plans, images)
                     tx.images = F.avg_pool2d(tx.images, 3, stride=1, padding=1, count_include_pad=False)
                     return tx
             '''
@@ -221,18 +223,16 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     ctx = RunContext(
         SimpleNamespace(seed=0, refine_steps=0),
         {0: phy.FlatLink(phy.CHANNELS["awgn"]())},
-        RunPlan((), oversampling=3, height=h, width=w, static_link=False),
+        RunPlan((), (), oversampling=3, height=h, width=w, static_link=False),
         codec,
         codec,
         np.ones(3, np.float32),
         (objects, [1.0]),
     )
-    plan = SimpleNamespace(
-        view=0, snr_db=20.0, encoder_snr_db=20.0, focus_cbr=1 / 12, repetitions=1
-    )
+    plan = ViewSend(0, 20.0, Allocation(cbr=1 / 12, repetitions=1, encoder_snr_db=20.0, symbols=0))
     noise = torch.rand(1, 3, h, w, generator=torch.Generator().manual_seed(0))
     images = objects * noise + (1 - objects)  # the object on the white background, as sent
-    tx = SCHEMES["jscc"]().transmit(ctx, [plan], images, torch.Generator())
+    tx = SCHEMES["jscc"]().transmit(ctx, [plan], images)
     box = receiver_mask(seen["meta"], 3 * h, 3 * w)  # at the decoded resolution
     inside = box.reshape(h, 3, w, 3).mean(axis=(1, 3))
     assert 0 < inside.sum() < h * w and ((inside > 0) & (inside < 1)).any()  # edges cut pixels
@@ -253,16 +253,14 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     base = torch.rand(4, 3, 6, 6, generator=g)
     images = torch.nn.functional.interpolate(base, size=(48, 48), mode="bilinear").clamp(0, 1)
     link = phy.FlatLink(phy.CHANNELS["awgn"]())
-    plans = [
-        SimpleNamespace(view=v, snr_db=5.0, encoder_snr_db=5.0, cbr=1 / 12, repetitions=2)
-        for v in range(4)
-    ]
+    part = Allocation(cbr=1 / 12, repetitions=2, encoder_snr_db=5.0, symbols=0)
+    plans = [ViewSend(v, 5.0, part) for v in range(4)]
     out = {}
     for steps in (0, 30):
         cfg = SimpleNamespace(seed=0, channel="awgn", refine_steps=steps)
-        run_plan = RunPlan((), oversampling=1, height=48, width=48, static_link=False)
+        run_plan = RunPlan((), (), oversampling=1, height=48, width=48, static_link=False)
         ctx = RunContext(cfg, dict.fromkeys(range(4), link), run_plan, codec, codec, np.ones(3))
-        out[steps] = SCHEMES["full"]().transmit(ctx, plans, images, torch.Generator())
+        out[steps] = SCHEMES["full"]().transmit(ctx, plans, images)
     assert np.array_equal(out[0].symbols, out[30].symbols)
     mse = {k: float(((t.images - images) ** 2).mean()) for k, t in out.items()}
     assert mse[30] < 0.9 * mse[0], mse

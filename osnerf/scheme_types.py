@@ -1,0 +1,137 @@
+"""What a scheme of ``osnerf run`` is and exchanges: :class:`Scheme` (the base class),
+:class:`RunContext` (what it may use), :class:`Transmission` (what its receiver holds) and
+:func:`scheme_seed`.
+
+Both the scheme table (:mod:`osnerf.schemes`) and the senders it calls
+(:mod:`osnerf.run.jscc`) import these types from here; this module imports neither, so
+neither imports the other to share them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+import torch
+
+from osnerf.plan import RunPlan, ViewSend
+
+if TYPE_CHECKING:  # annotations only: the run's config imports the scheme table
+    from osnerf.run.config import RunConfig
+
+TRANSMISSION_ARRAYS = ("rx_masks", "received")
+"""The optional arrays of a :class:`Transmission` (cached when present)."""
+
+
+def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
+    """A seed that depends on the run seed, the scheme's name and the stage only."""
+    h = hashlib.sha256(f"{int(run_seed)}/{name}/{stage}".encode()).digest()
+    return int.from_bytes(h[:8], "little") & (2**62 - 1)
+
+
+@dataclass
+class Transmission:
+    """What one scheme's receiver holds after sending its views.
+
+    Attributes:
+        images: [num_views, 3, height, width] float32 in [0, 1], the received views.
+        symbols: [num_views] int64 channel symbols spent per view (repetitions included).
+        rx_masks: [num_views, height, width] float32: pixels the receiver knows were sent
+            (focus box or positions), or None for whole views.
+        seconds: ``encode``, ``decode`` (and ``encode_cpu``, ``decode_cpu``, ``channel``, or
+            ``codec_and_ldpc`` for separate schemes), wall seconds over all views.
+        info: JSON-able details for the report (``failed_codewords``, ``views_lost``, ...).
+        received: [num_views] bool, False for a view the receiver knows did not arrive (a
+            failed checksum, or nothing fitted its budget): ``images`` holds mid-grey there,
+            and the radiance field trains on the other views only. None: every view arrived.
+    """
+
+    images: torch.Tensor
+    symbols: np.ndarray
+    rx_masks: np.ndarray | None = None
+    seconds: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+    received: np.ndarray | None = None
+
+    def to_cache(self) -> tuple[dict, dict]:
+        """(arrays, JSON info) for ``StageCache.save``."""
+        arrays = {"images": self.images.numpy(), "symbols": self.symbols}
+        for name in TRANSMISSION_ARRAYS:
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
+        return arrays, {"seconds": self.seconds, "info": self.info}
+
+    @classmethod
+    def from_cache(cls, arrays: dict, info: dict) -> Transmission:
+        """The inverse of :meth:`to_cache`."""
+        return cls(
+            torch.from_numpy(arrays["images"]),
+            arrays["symbols"],
+            arrays.get("rx_masks"),
+            info["seconds"],
+            info["info"],
+            arrays.get("received"),
+        )
+
+
+@dataclass
+class RunContext:
+    """What every scheme may use: the run's config, codec, links and plan.
+
+    Attributes:
+        config: the :class:`osnerf.run.RunConfig`.
+        links: view -> ``phy.Link`` (unbiased ZF receivers with perfect or estimated CSI).
+        plan: the SCU's :class:`osnerf.plan.RunPlan`.
+        codec, rx_codec: transmitter's and receiver's codecs (None when no scheme needs one).
+        background: [3] float32 background colour of the scene.
+        routing: (object masks [n_on_demand, K, h, w] tensor, K demand weights) for focus mode.
+    """
+
+    config: RunConfig
+    links: dict
+    plan: RunPlan
+    codec: object | None
+    rx_codec: object | None
+    background: np.ndarray
+    routing: tuple | None = None
+
+    def view_generator(self, view: int) -> torch.Generator:
+        """The channel draws of one view (fades, noise): from the run seed and the view only."""
+        return torch.Generator().manual_seed(
+            scheme_seed(self.config.seed, f"view {int(view)}", "link")
+        )
+
+
+class Scheme:
+    """Base class. Subclasses set the class attributes and implement :meth:`transmit`.
+
+    Class attributes:
+        name: the table key (set by ``osnerf.schemes.register``).
+        object_routed: True: sends the on-demand views masked to the demanded objects and
+            its renderer trains inside the objects' box; False: every candidate view whole.
+        needs_codec: loads the semantic codec (checked against the knowledge base).
+        bound: None, or what the scheme bounds ("ceiling: nothing crosses the channel");
+            bounds are labelled as such in help and reports.
+        help: one line for ``--help`` and reports.
+        headline: the scheme the report's comparisons are about (the others are its baselines).
+        kind: one of ``semcodec.evaluation.SCHEME_KINDS`` (as the link-level schemes):
+            what plots and benchmarks group by.
+    """
+
+    name: ClassVar[str] = ""
+    headline: ClassVar[bool] = False
+    kind: ClassVar[str] = ""
+    object_routed: ClassVar[bool] = True
+    needs_codec: ClassVar[bool] = False
+    bound: ClassVar[str | None] = None
+    help: ClassVar[str] = ""
+
+    def transmit(
+        self, ctx: RunContext, plans: list[ViewSend], images: torch.Tensor
+    ) -> Transmission:
+        """Send ``images`` [num_views, 3, h, w] (the views of ``plans``) and receive them.
+        Channel draws come from ``ctx.view_generator(view)``; other randomness from
+        :func:`scheme_seed` of the run seed and the scheme's name."""
+        raise NotImplementedError
