@@ -33,9 +33,9 @@ from collections.abc import Mapping
 import numpy as np
 import torch
 
-from common.plugins import load_plugins
+from common import load_plugins
 from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
-from semcodec.evaluation import ANALOG, DIGITAL, IDEAL, JSCC
+from semcodec import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
 
@@ -261,7 +261,7 @@ class GroundTruth(Scheme):
     help = "bound: the on-demand views undistorted (ceiling)"
 
     def transmit(self, ctx, plans, images):
-        from semcodec.grid import focus_pixel_masks
+        from semcodec import focus_pixel_masks
 
         masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None
         rx = None

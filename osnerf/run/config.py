@@ -152,7 +152,7 @@ class RunConfig:
 
     def _check_digital(self) -> None:
         from phy.digital import MCS_TABLE
-        from semcodec.image_codecs import IMAGE_CODECS
+        from semcodec import IMAGE_CODECS
 
         if self.mcs != "auto" and self.mcs not in MCS_TABLE:
             raise ValueError(

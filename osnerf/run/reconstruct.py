@@ -218,8 +218,7 @@ def learned_renderer_config(steps: int) -> renderer.FeatureConfig:
     view each (the seconds cap only guards against a pathological machine), 40 jittered
     teachers beside the received views' cameras, and a feature grid at half the field's
     vertices per axis: the pipeline's views have fewer pixels than its fields have cells,
-    and the coarser grid costs an eighth per step (README, "Why the defaults are what they
-    are")."""
+    and the coarser grid costs an eighth per step (docs/design-notes.md)."""
     return renderer.FeatureConfig(
         train_steps=steps,
         train_seconds=3600.0,

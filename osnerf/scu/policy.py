@@ -28,7 +28,7 @@ class RatePolicy:
     """Below this measured SNR every view costs twice its CBR, sent as two MRC-combined copies.
     On-demand views send copies only where they fade independently (``phy.CopyFading``);
     otherwise the second copy's symbols are spent as rate: on a static channel a copy buys
-    only the 3 dB combining gain, which the codec's rate beats (README, "End to end")."""
+    only the 3 dB combining gain, which the codec's rate beats (docs/design-notes.md, "End to end")."""
     copy_spread_db: float = 1.0
     """Copies can fade independently only where the per-symbol SNR spreads (std about each
     view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""
@@ -51,8 +51,8 @@ class RatePolicy:
     feature position touching the objects at least this CBR (the codec's largest CBR is
     every channel on them), and scales the rate to spend the budget, in (0, 1]: a larger
     oversampling at too few channels per position loses to a smaller one at more. A CBR per
-    position, not a fraction of the codec's largest CBR, so it holds across codecs (README,
-    "Why the defaults")."""
+    position, not a fraction of the codec's largest CBR, so it holds across codecs
+    (docs/design-notes.md, "Defaults")."""
 
     def __post_init__(self):
         if len(self.cbrs) != len(self.thresholds_db) + 1:
