@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from common import Registry
+
 
 @dataclass(frozen=True)
 class DeviceKind:
@@ -92,12 +94,15 @@ def _open_pluto(uri=None):
     return Pluto.open(uri)
 
 
-DEVICES: dict[str, DeviceKind] = {
-    "hackrf": DeviceKind("hackrf", "HackRF One", "serial", False, _find_hackrfs, _open_hackrf),
-    "pluto": DeviceKind(
-        "pluto", "ADALM-Pluto", "uri", True, _find_plutos, _open_pluto, _emulated_pluto
-    ),
-}
+DEVICES = Registry[DeviceKind](
+    "device",
+    {
+        "hackrf": DeviceKind("hackrf", "HackRF One", "serial", False, _find_hackrfs, _open_hackrf),
+        "pluto": DeviceKind(
+            "pluto", "ADALM-Pluto", "uri", True, _find_plutos, _open_pluto, _emulated_pluto
+        ),
+    },
+)
 
 
 def device_kind(name: str) -> DeviceKind:

@@ -16,6 +16,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
+from common import Registry
 from renderer.cameras import Intrinsics
 from renderer.dataset import Dataset
 from renderer.feature_config import FeatureConfig
@@ -55,10 +56,13 @@ def _features(model, dataset=None, config=None, generator=None):
     return train_features(model, dataset, config, generator)
 
 
-RENDERERS: dict[str, Callable] = {
-    "full": _full,
-    "features": _features,
-}
+RENDERERS = Registry[Callable](
+    "renderer",
+    {
+        "full": _full,
+        "features": _features,
+    },
+)
 """name -> builder ``(model, dataset=None, config=None, generator=None) -> (renderer,
 stats)``: the one table of renderers (the CLI's ``--renderer`` choices). ``full``: volume
 rendering of every pixel; ``features``: a learned feature field rendered at low resolution

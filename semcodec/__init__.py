@@ -97,7 +97,7 @@ from semcodec.image_codecs import (
 )
 from semcodec.jscc_link import REFINE_STEPS, refine_symbols, transmit_jscc
 from semcodec.model import (
-    MODELS,
+    JSCC_ARCHITECTURES,
     JSCCConfig,
     JSCCModel,
     features_to_symbols,
@@ -178,7 +178,7 @@ __all__ = [
     "transmit_ideal",
     "refine_symbols",
     "transmit_jscc",
-    "MODELS",
+    "JSCC_ARCHITECTURES",
     "BLOCK_PX",
     "Codec",
     "focus_blocks",

@@ -21,16 +21,20 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from common import Registry
 from semcodec.model import lmmse_input, side_info
 
-TRAIN_CHANNELS: dict[str, tuple[str, str]] = {
-    "awgn": ("awgn", "none"),
-    "rayleigh": ("rayleigh", "perfect"),
-    "rayleigh_fast": ("rayleigh_fast", "perfect"),
-    "rayleigh_nocsi": ("rayleigh", "none"),
-    "ofdm_rayleigh_ls": ("rayleigh", "ofdm"),
-    "ofdm_tdl_ls": ("tdl", "ofdm"),
-}
+TRAIN_CHANNELS = Registry[tuple[str, str]](
+    "training channel",
+    {
+        "awgn": ("awgn", "none"),
+        "rayleigh": ("rayleigh", "perfect"),
+        "rayleigh_fast": ("rayleigh_fast", "perfect"),
+        "rayleigh_nocsi": ("rayleigh", "none"),
+        "ofdm_rayleigh_ls": ("rayleigh", "ofdm"),
+        "ofdm_tdl_ls": ("tdl", "ofdm"),
+    },
+)
 _LINKS: dict[tuple[str, str], torch.nn.Module] = {}
 
 

@@ -31,7 +31,7 @@ from semcodec.focus import attribution_box, demand_heatmap, demand_positions, de
 from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.layer_plan import LayerPlanner
 from semcodec.model import (
-    MODELS,
+    JSCC_ARCHITECTURES,
     features_to_symbols,
     lmmse_input,
     make_model,
@@ -47,7 +47,7 @@ DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "default.
 class Codec(LayerPlanner, ChannelTruncationCodec):
     """A loaded JSCC (encoder + decoder) with its model card and hash: semcodec's own
     :class:`semcodec.SemanticCodec` and :class:`semcodec.TrainableCodec` (registry name
-    ``jscc``; architectures :data:`semcodec.MODELS`)."""
+    ``jscc``; architectures :data:`semcodec.JSCC_ARCHITECTURES`)."""
 
     supports_focus = True
     analog_layer = True
@@ -64,11 +64,11 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
     noise variance divided by this (>= 1): the noise left once the receiver has fused about
     this many receptions. Its refinement still targets each image's own error (refining
     against the fused receiver did worse end to end)."""
-    architectures = ("adjscc_s4_w96", *(m for m in MODELS if m != "adjscc_s4_w96"))
+    architectures = ("adjscc_s4_w96", *(m for m in JSCC_ARCHITECTURES if m != "adjscc_s4_w96"))
     """Architectures :meth:`untrained` builds; the first is the default."""
 
     def untrained(self, architecture: str | None = None) -> Codec:
-        """A fresh JSCC of ``architecture`` (a :data:`semcodec.MODELS` name; None = the first
+        """A fresh JSCC of ``architecture`` (a :data:`semcodec.JSCC_ARCHITECTURES` name; None = the first
         of :attr:`architectures`)."""
         model = make_model(architecture or self.architectures[0])
         name = model.cfg.name

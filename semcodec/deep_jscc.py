@@ -25,6 +25,7 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
+from common import Registry
 from phy import power_normalize, validate_snr_db
 from semcodec.channel_layers import masked_transmit
 from semcodec.checkpoint import (
@@ -45,7 +46,7 @@ class DeepJSCCConfig:
     """Architecture of a Deep JSCC model (stored in the model card).
 
     Attributes:
-        name: architecture name (a key of :data:`ARCHITECTURES`).
+        name: architecture name (a key of :data:`DEEPJSCC_ARCHITECTURES`).
         hidden: the two hidden widths (paper: 16 after the first conv, 32 after).
         num_complex_channels: complex channels per 4x4 pixel block at full rate (CBR m/48).
         snr_min_db, snr_max_db: SNR range (Es/N0, dB) it is trained for.
@@ -85,10 +86,13 @@ class DeepJSCCConfig:
         return d
 
 
-ARCHITECTURES: dict[str, DeepJSCCConfig] = {
-    "deepjscc_c16": DeepJSCCConfig(),
-    "deepjscc_c16_w64": DeepJSCCConfig(name="deepjscc_c16_w64", hidden=(64, 64)),
-}
+DEEPJSCC_ARCHITECTURES = Registry[DeepJSCCConfig](
+    "deepjscc architecture",
+    {
+        "deepjscc_c16": DeepJSCCConfig(),
+        "deepjscc_c16_w64": DeepJSCCConfig(name="deepjscc_c16_w64", hidden=(64, 64)),
+    },
+)
 
 
 def _conv(cin: int, cout: int, stride: int) -> nn.Conv2d:
@@ -123,7 +127,7 @@ class DeepJSCC(ChannelTruncationCodec):
     """A Deep JSCC codec: :class:`semcodec.SemanticCodec` and :class:`semcodec.TrainableCodec`."""
 
     supports_focus = False
-    architectures = tuple(ARCHITECTURES)
+    architectures = tuple(DEEPJSCC_ARCHITECTURES)
 
     def encode(self, images, snr_db, cbr, mask=None, demand_weights=None) -> Encoded:
         """Images [batch, 3, height, width] in [0, 1] -> [batch, m*ceil(H/4)*ceil(W/4)]
@@ -189,11 +193,9 @@ class DeepJSCC(ChannelTruncationCodec):
 
 
 def untrained(architecture: str | None = None) -> DeepJSCC:
-    """A fresh Deep JSCC of ``architecture`` (None: the first of :data:`ARCHITECTURES`)."""
-    name = architecture or next(iter(ARCHITECTURES))
-    if name not in ARCHITECTURES:
-        raise KeyError(f"unknown deepjscc architecture {name!r}; known: {sorted(ARCHITECTURES)}")
-    model = DeepJSCCModel(ARCHITECTURES[name])
+    """A fresh Deep JSCC of ``architecture`` (None: the first of :data:`DEEPJSCC_ARCHITECTURES`)."""
+    name = architecture or next(iter(DEEPJSCC_ARCHITECTURES))
+    model = DeepJSCCModel(DEEPJSCC_ARCHITECTURES[name])
     sha = weights_sha256(model.state_dict(), model.cfg)
     return DeepJSCC(model, {"name": name, "sha256": sha})
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from common import list_images, read_image
+from common import Registry, list_images, read_image
 from phy import num_symbols_for_cbr
 from semcodec.codec import Codec, learned_only
 from semcodec.contract import MIN_SIDE_PX
@@ -176,63 +176,70 @@ class LinkScheme:
 _GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on it"
 _IDEAL = "bound: the codec at the AWGN capacity of the average SNR, error free"
 
-LINK_SCHEMES: dict[str, LinkScheme] = {
-    "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, framed=JSCC_FRAMED),
-    "jscc_learned": LinkScheme(
-        _send_jscc(False, layer=False),
-        "semantic JSCC with its learned channels only (no analog refinement layer)",
-        JSCC,
-    ),
-    "jscc_refined": LinkScheme(
-        _send_jscc(True),
-        "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
-        "expected MSE over its own channel draws (knows the decoder, channel kind and "
-        "average SNR, not the draw)",
-        JSCC,
-        refines=True,
-    ),
-    "digital": LinkScheme(
-        _digital("avif"),
-        "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",
-        DIGITAL,
-        framed=DIGITAL_FRAMED,
-        mcs=AUTO,
-        image_codec="avif",
-    ),
-    "digital_genie": LinkScheme(
-        _digital("avif", GENIE),
-        f"AVIF, {_GENIE}",
-        DIGITAL,
-        _GENIE,
-        mcs=GENIE,
-        image_codec="avif",
-    ),
-    "digital_fixed": LinkScheme(
-        _digital("avif", None),
-        "AVIF + LDPC + QAM at one fixed MCS (--mcs): the cliff",
-        DIGITAL,
-        mcs="fixed",
-        image_codec="avif",
-    ),
-    "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", IDEAL, _IDEAL, image_codec="avif"),
-    "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", ANALOG),
-    "digital_webp": LinkScheme(
-        _digital("webp"),
-        "WebP + LDPC + QAM, MCS from the average SNR",
-        DIGITAL,
-        mcs=AUTO,
-        image_codec="webp",
-    ),
-    "digital_jpeg": LinkScheme(
-        _digital("jpeg"),
-        "JPEG + LDPC + QAM, MCS from the average SNR",
-        DIGITAL,
-        mcs=AUTO,
-        image_codec="jpeg",
-    ),
-    "ideal_webp": LinkScheme(_ideal("webp"), f"WebP, {_IDEAL}", IDEAL, _IDEAL, image_codec="webp"),
-    "ideal_jpeg": LinkScheme(_ideal("jpeg"), f"JPEG, {_IDEAL}", IDEAL, _IDEAL, image_codec="jpeg"),
-}
+LINK_SCHEMES = Registry[LinkScheme](
+    "link scheme",
+    {
+        "jscc": LinkScheme(_send_jscc(False), "semantic JSCC", JSCC, framed=JSCC_FRAMED),
+        "jscc_learned": LinkScheme(
+            _send_jscc(False, layer=False),
+            "semantic JSCC with its learned channels only (no analog refinement layer)",
+            JSCC,
+        ),
+        "jscc_refined": LinkScheme(
+            _send_jscc(True),
+            "semantic JSCC, symbols refined at the transmitter for this image: Adam on the "
+            "expected MSE over its own channel draws (knows the decoder, channel kind and "
+            "average SNR, not the draw)",
+            JSCC,
+            refines=True,
+        ),
+        "digital": LinkScheme(
+            _digital("avif"),
+            "AVIF + 5G LDPC + QAM, one MCS from the average SNR (no CSI at the transmitter)",
+            DIGITAL,
+            framed=DIGITAL_FRAMED,
+            mcs=AUTO,
+            image_codec="avif",
+        ),
+        "digital_genie": LinkScheme(
+            _digital("avif", GENIE),
+            f"AVIF, {_GENIE}",
+            DIGITAL,
+            _GENIE,
+            mcs=GENIE,
+            image_codec="avif",
+        ),
+        "digital_fixed": LinkScheme(
+            _digital("avif", None),
+            "AVIF + LDPC + QAM at one fixed MCS (--mcs): the cliff",
+            DIGITAL,
+            mcs="fixed",
+            image_codec="avif",
+        ),
+        "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", IDEAL, _IDEAL, image_codec="avif"),
+        "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", ANALOG),
+        "digital_webp": LinkScheme(
+            _digital("webp"),
+            "WebP + LDPC + QAM, MCS from the average SNR",
+            DIGITAL,
+            mcs=AUTO,
+            image_codec="webp",
+        ),
+        "digital_jpeg": LinkScheme(
+            _digital("jpeg"),
+            "JPEG + LDPC + QAM, MCS from the average SNR",
+            DIGITAL,
+            mcs=AUTO,
+            image_codec="jpeg",
+        ),
+        "ideal_webp": LinkScheme(
+            _ideal("webp"), f"WebP, {_IDEAL}", IDEAL, _IDEAL, image_codec="webp"
+        ),
+        "ideal_jpeg": LinkScheme(
+            _ideal("jpeg"), f"JPEG, {_IDEAL}", IDEAL, _IDEAL, image_codec="jpeg"
+        ),
+    },
+)
 """name -> :class:`LinkScheme`: the one table of link-level schemes (``eval-codec``,
 ``osnerf ota``, the codec benchmark). The run-level schemes are ``osnerf.schemes.SCHEMES``."""
 

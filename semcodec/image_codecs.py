@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from common import psnr, write_bytes
+from common import Registry, psnr, write_bytes
 
 AVIF_SPEED = 6
 SCALES = (1, 2, 4, 8, 16)
@@ -236,11 +236,14 @@ class ImageCodec:
     rebuild: Callable[[bytes, int, int], bytes] = _whole
 
 
-IMAGE_CODECS: dict[str, ImageCodec] = {
-    "avif": ImageCodec("avif", _avif, (0, 100), _avif_strip, _avif_rebuild),
-    "webp": ImageCodec("webp", _webp, (0, 100), _webp_strip, _webp_rebuild),
-    "jpeg": ImageCodec("jpeg", _jpeg, (1, 95)),
-}
+IMAGE_CODECS = Registry[ImageCodec](
+    "image codec",
+    {
+        "avif": ImageCodec("avif", _avif, (0, 100), _avif_strip, _avif_rebuild),
+        "webp": ImageCodec("webp", _webp, (0, 100), _webp_strip, _webp_rebuild),
+        "jpeg": ImageCodec("jpeg", _jpeg, (1, 95)),
+    },
+)
 """name -> :class:`ImageCodec`; unknown names raise KeyError listing the known ones."""
 
 

@@ -18,6 +18,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from common import Registry
 from semcodec.gdn import GDN
 
 SNR_SCALE_DB = 10.0  # snr_db / SNR_SCALE_DB is what the AF modules see
@@ -266,46 +267,46 @@ class JSCCModel(nn.Module):
 _RELIABILITY = {"snr_min_db": -10.0, "decoder_reliability": True}
 """The knowledge-base version 2 architectures: per-symbol reliability, trained down to -10 dB."""
 
-MODELS: dict[str, Callable[[], JSCCConfig]] = {
-    "adjscc_s4_w96_rel": partial(
-        JSCCConfig, name="adjscc_s4_w96_rel", width=96, num_res_blocks=2, **_RELIABILITY
-    ),
-    "adjscc_s4_w96_rel_c16": partial(
-        JSCCConfig,
-        name="adjscc_s4_w96_rel_c16",
-        width=96,
-        num_res_blocks=2,
-        num_complex_channels=16,
-        **_RELIABILITY,
-    ),
-    # capacity candidates for the shipped default (docs/training.md, "On a lent
-    # GPU"); no checkpoint ships for them
-    "adjscc_s4_w192_rel_c16": partial(
-        JSCCConfig,
-        name="adjscc_s4_w192_rel_c16",
-        width=192,
-        num_res_blocks=2,
-        num_complex_channels=16,
-        **_RELIABILITY,
-    ),
-    "adjscc_s4_w128_r4_rel_c16": partial(
-        JSCCConfig,
-        name="adjscc_s4_w128_r4_rel_c16",
-        width=128,
-        num_res_blocks=4,
-        num_complex_channels=16,
-        **_RELIABILITY,
-    ),
-    "adjscc_s4_w96": partial(JSCCConfig, name="adjscc_s4_w96", width=96, num_res_blocks=2),
-    "adjscc_s4_w64": partial(JSCCConfig, name="adjscc_s4_w64", width=64, num_res_blocks=1),
-    "adjscc_s4_w128": partial(JSCCConfig, name="adjscc_s4_w128", width=128, num_res_blocks=2),
-}
+JSCC_ARCHITECTURES = Registry[Callable[[], JSCCConfig]](
+    "jscc architecture",
+    {
+        "adjscc_s4_w96_rel": partial(
+            JSCCConfig, name="adjscc_s4_w96_rel", width=96, num_res_blocks=2, **_RELIABILITY
+        ),
+        "adjscc_s4_w96_rel_c16": partial(
+            JSCCConfig,
+            name="adjscc_s4_w96_rel_c16",
+            width=96,
+            num_res_blocks=2,
+            num_complex_channels=16,
+            **_RELIABILITY,
+        ),
+        # capacity candidates for the shipped default (docs/training.md, "On a lent
+        # GPU"); no checkpoint ships for them
+        "adjscc_s4_w192_rel_c16": partial(
+            JSCCConfig,
+            name="adjscc_s4_w192_rel_c16",
+            width=192,
+            num_res_blocks=2,
+            num_complex_channels=16,
+            **_RELIABILITY,
+        ),
+        "adjscc_s4_w128_r4_rel_c16": partial(
+            JSCCConfig,
+            name="adjscc_s4_w128_r4_rel_c16",
+            width=128,
+            num_res_blocks=4,
+            num_complex_channels=16,
+            **_RELIABILITY,
+        ),
+        "adjscc_s4_w96": partial(JSCCConfig, name="adjscc_s4_w96", width=96, num_res_blocks=2),
+        "adjscc_s4_w64": partial(JSCCConfig, name="adjscc_s4_w64", width=64, num_res_blocks=1),
+        "adjscc_s4_w128": partial(JSCCConfig, name="adjscc_s4_w128", width=128, num_res_blocks=2),
+    },
+)
 
 
 def make_model(name: str) -> JSCCModel:
     """Build a registered architecture; unknown names raise KeyError listing the known ones."""
-    try:
-        cfg = MODELS[name]()
-    except (KeyError, TypeError):
-        raise KeyError(f"unknown codec model {name!r}; known: {sorted(MODELS)}") from None
+    cfg = JSCC_ARCHITECTURES[name]()
     return JSCCModel(cfg)

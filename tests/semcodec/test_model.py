@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from semcodec import (
-    MODELS,
+    JSCC_ARCHITECTURES,
     JSCCConfig,
     features_to_symbols,
     learned_only,
@@ -14,7 +14,7 @@ from semcodec import (
 from semcodec.model import side_info
 
 
-@pytest.mark.parametrize("name", sorted(MODELS))
+@pytest.mark.parametrize("name", sorted(JSCC_ARCHITECTURES))
 def test_registry_builds_every_name(name):
     model = make_model(name)
     cfg = model.cfg
