@@ -8,12 +8,14 @@
   orientation) and the one list of image file suffixes.
 * ``common.quality``: the one PSNR (peak 1.0).
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
+* ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
 
 Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
 may all import it.
 """
 
+from common.errors import InputError
 from common.files import (
     atomic_path,
     check_replaceable,
@@ -35,6 +37,7 @@ from common.quality import PSNR_MAX_DB, psnr
 from common.registry import Registry
 
 __all__ = [
+    "InputError",
     "json_default",
     "load_plugins",
     "IMAGE_SUFFIXES",

@@ -82,12 +82,12 @@ class Registry(Mapping[str, T], Generic[T]):
 
         return add if entry is None else add(entry)
 
-    def load_entry_points(self) -> None:
-        """Add the entries of the entry-point group (once). Names already taken keep theirs."""
-        if self._plugins_loaded:
+    def load_entry_points(self, force: bool = False) -> None:
+        """Add the entries of the entry-point group (once; ``force`` reads the group again, for
+        a plugin installed while running). Names already taken keep their entry."""
+        if self.entry_point_group is None or (self._plugins_loaded and not force):
             return
         self._plugins_loaded = True
-        assert self.entry_point_group is not None
 
         def add(name: str, obj: Any, value: str) -> None:
             try:
@@ -97,6 +97,13 @@ class Registry(Mapping[str, T], Generic[T]):
             self.plugins[name] = value
 
         load_plugins(self.entry_point_group, self._entries, add, self.kind, self._error)
+
+    def unregister(self, name: str) -> T:
+        """Remove ``name`` and return its entry (a plugin uninstalled while running)."""
+        entry = self[name]
+        del self._entries[name]
+        self.plugins.pop(name, None)
+        return entry
 
     def names(self) -> list[str]:
         """Every name, built-ins first, in registration order."""

@@ -5,7 +5,8 @@ Each command lives in ``osnerf/commands/<name>.py`` with ``add_arguments(parser)
 Exit codes: 0 success, 2 bad arguments or input, 1 runtime failure; always with a
 one-line message naming what was wrong. A command calls :func:`inputs_checked` once it has
 read and checked its inputs: a ``ValueError``, ``KeyError`` or ``FileNotFoundError`` before
-that is bad input (2), after it a runtime failure (1); a ``UsageError`` is always bad input.
+that is bad input (2), after it a runtime failure (1); a ``common.InputError`` (``UsageError``
+among them) is always bad input.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import importlib
 import re
 import sys
 
-from common import Registry, tune_malloc
+from common import InputError, Registry, tune_malloc
 from osnerf.provenance import git_commit
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
@@ -56,7 +57,7 @@ _NEGATIVE_LIST = re.compile(rf"^-\d*\.?\d+([eE][-+]?\d+)?(/\d*\.?\d+)?(,{_NUM})*
 STDOUT_COMMANDS = ("scenes", "hil")  # their result is what they print
 
 
-class UsageError(ValueError):
+class UsageError(InputError):
     """Bad arguments or input: exit code 2."""
 
 
@@ -127,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         return rc
     except (UsageError, ValueError, KeyError, FileNotFoundError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-        if isinstance(e, UsageError) or not _inputs_checked.get():
+        if isinstance(e, InputError) or not _inputs_checked.get():
             print(f"osnerf {args.command}: error: {_first_line(msg)}", file=sys.stderr)
             return 2
         print(

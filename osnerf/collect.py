@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common import InputError
 from osnerf.scenes import SceneViews
 
 
@@ -169,7 +170,7 @@ def collect(
         else:
             reasons[int(i)] = why
     if not keep:
-        raise ValueError(
+        raise InputError(
             f"no drone camera sees the demanded object(s) {','.join(demand.objects)} well enough "
             f"(min_visible_fraction={config.min_visible_fraction}, min_pixel_fraction={config.min_pixel_fraction})"
         )

@@ -108,11 +108,9 @@ from semcodec.registry import (
     CODECS,
     CodecPluginError,
     codec_names,
-    load_codec_entry_points,
     make_codec,
     open_codec,
     parse_codec_spec,
-    register_codec,
 )
 from semcodec.train_config import TrainConfig
 from semcodec.train_state import load_train_state
@@ -153,12 +151,10 @@ __all__ = [
     "is_trainable",
     "for_fusion",
     "learned_only",
-    "load_codec_entry_points",
     "make_codec",
     "open_codec",
     "mask_box",
     "parse_codec_spec",
-    "register_codec",
     "DEFAULT_CHECKPOINT",
     "IMAGE_CODECS",
     "LOST_IMAGE_VALUE",

@@ -16,7 +16,7 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save
 
-from common import write_bytes
+from common import InputError, write_bytes
 from semcodec.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
@@ -27,7 +27,7 @@ FORMAT_VERSIONS = ("1", "2")
 2 = it also sees each symbol's reliability (``JSCCConfig.decoder_reliability``)."""
 
 
-class KnowledgeBaseMismatch(ValueError):
+class KnowledgeBaseMismatch(InputError):
     """The receiver's codec is not the one the transmitter used (hashes differ)."""
 
 

@@ -9,7 +9,7 @@ shipped checkpoint). Other packages add codecs through the entry-point group
     mycodec = mypackage.codec:make
 
 ``make_codec("NAME[:CHECKPOINT]")`` builds one. Built-in codecs register with
-:func:`register_codec` exactly as a plugin's factory would be called.
+``CODECS.register`` and are called exactly as a plugin's factory would be.
 """
 
 from __future__ import annotations
@@ -17,59 +17,33 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from common import load_plugins
+from common import Registry
 from semcodec.contract import CODEC_MEMBERS, missing_members
 
 ENTRY_POINT_GROUP = "semcodec.codecs"
 
 CodecFactory = Callable[[str | None], object]
-CODECS: dict[str, CodecFactory] = {}
-"""Registered codecs: name -> factory(checkpoint: str | None) -> codec."""
-PLUGINS: dict[str, str] = {}
-"""Codecs that came from entry points: name -> ``module:attr``."""
-_entry_points_loaded = False
 
 
 class CodecPluginError(ValueError):
     """A codec plugin failed to load, raised in its factory or returned no codec."""
 
 
-def register_codec(name: str) -> Callable[[CodecFactory], CodecFactory]:
-    """Decorator: ``@register_codec("name")`` on a factory adds it to :data:`CODECS`."""
-
-    def add(factory: CodecFactory) -> CodecFactory:
-        if not name or ":" in name or "," in name:
-            raise ValueError(f"codec name must be non-empty without ':' or ',', got {name!r}")
-        CODECS[name] = factory
-        return factory
-
-    return add
+def _callable(name: str, factory: object) -> None:
+    if not callable(factory):
+        raise TypeError("is not callable")
 
 
-def load_codec_entry_points(force: bool = False) -> dict[str, CodecFactory]:
-    """Add the codecs of the ``semcodec.codecs`` entry points (once; ``force`` rereads them).
-
-    Names already registered keep their factory. Raises :class:`CodecPluginError` (one line
-    naming the entry point) when one cannot be imported.
-    """
-    global _entry_points_loaded
-    if _entry_points_loaded and not force:
-        return CODECS
-    _entry_points_loaded = True
-
-    def add(name: str, factory, value: str) -> None:
-        if not callable(factory):
-            raise CodecPluginError(f"codec plugin {name} = {value} is not callable")
-        CODECS[name] = factory
-        PLUGINS[name] = value
-
-    load_plugins(ENTRY_POINT_GROUP, CODECS, add, "codec", CodecPluginError)
-    return CODECS
+CODECS = Registry[CodecFactory](
+    "codec", entry_points=ENTRY_POINT_GROUP, check=_callable, error=CodecPluginError
+)
+"""Registered codecs: name -> factory(checkpoint: str | None) -> codec; ``CODECS.plugins``
+names those that came from entry points (name -> ``module:attr``)."""
 
 
 def codec_names() -> list[str]:
     """Every registered codec name (built-ins and entry points), sorted: for ``--help``."""
-    return sorted(load_codec_entry_points())
+    return sorted(CODECS)
 
 
 def parse_codec_spec(spec: str) -> tuple[str, str | None]:
@@ -93,12 +67,10 @@ def make_codec(spec: str):
             checkpoint, a checkpoint of another codec).
     """
     name, checkpoint = parse_codec_spec(spec)
-    load_codec_entry_points()
-    if name not in CODECS:
-        raise KeyError(f"unknown codec {name!r}; known: {', '.join(sorted(CODECS))}")
     factory = CODECS[name]
-    where = f"codec plugin {name} = {PLUGINS[name]}" if name in PLUGINS else f"codec {name}"
-    if name in PLUGINS:
+    plugin = CODECS.plugins.get(name)
+    where = f"codec plugin {name} = {plugin}" if plugin else f"codec {name}"
+    if plugin:
         try:
             codec = factory(checkpoint)
         except Exception as e:  # noqa: BLE001 - one line naming the plugin
@@ -122,12 +94,12 @@ def open_codec(spec: str | None = None):
     if spec is None:
         return make_codec("jscc")
     name, _ = parse_codec_spec(spec)
-    if name not in load_codec_entry_points() and Path(spec).is_file():
+    if name not in CODECS and Path(spec).is_file():
         return make_codec(f"jscc:{spec}")
     return make_codec(spec)
 
 
-@register_codec("jscc")
+@CODECS.register("jscc")
 def _jscc(checkpoint: str | None = None):
     """semcodec's ADJSCC (``semcodec.load_codec``; None = the shipped checkpoint)."""
     from semcodec.codec import load_codec
@@ -135,7 +107,7 @@ def _jscc(checkpoint: str | None = None):
     return load_codec(checkpoint)
 
 
-@register_codec("deepjscc")
+@CODECS.register("deepjscc")
 def _deep_jscc(checkpoint: str | None = None):
     """Deep JSCC (Bourtsoulatze et al. 2019), :mod:`semcodec.deep_jscc`; None = untrained."""
     from semcodec.deep_jscc import make_deep_jscc

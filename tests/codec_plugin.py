@@ -5,9 +5,7 @@ module (an orthonormal 4x4 block transform, not a subclass of anything of ours) 
 import sys
 import textwrap
 
-import semcodec
 from semcodec import CODECS
-from semcodec import registry as registry_mod
 
 PLUGIN = '''
 """A codec from outside semcodec: a fixed orthonormal 4x4 block transform (block means
@@ -116,12 +114,10 @@ def install(tmp_path, monkeypatch) -> None:
         "demo_object = semcodec_plugin_demo:not_a_codec\n"
     )
     monkeypatch.syspath_prepend(str(site))
-    semcodec.load_codec_entry_points(force=True)
+    CODECS.load_entry_points(force=True)
 
 
 def uninstall(before: dict) -> None:
-    CODECS.clear()
-    CODECS.update(before)
-    for name in ("demo", "demo_broken", "demo_object"):
-        registry_mod.PLUGINS.pop(name, None)
+    for name in [n for n in CODECS if n not in before]:
+        CODECS.unregister(name)
     sys.modules.pop("semcodec_plugin_demo", None)

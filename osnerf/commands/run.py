@@ -138,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.report import write_report
     from osnerf.run import run_pipeline
     from osnerf.run.cache import check_stage_files
+    from osnerf.run.pipeline import prepare
 
     cfg = run_config(args)
     out = checks.output_dir(
@@ -153,6 +154,7 @@ def run(args: argparse.Namespace) -> int:
     if cache:
         checks.output_dir(cache, cache_flag, resumable=lambda _: True)
     check_stage_files(out / "cache" / cfg.key())
+    prepare(cfg)  # names, demand, the codecs' SNR range and knowledge base: bad input (exit 2)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     report, pictures = run_pipeline(
         cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None

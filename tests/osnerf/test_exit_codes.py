@@ -34,3 +34,16 @@ def test_the_same_error_while_reading_inputs_is_bad_input(tmp_path, capsys, monk
     monkeypatch.setattr(ber, "parse_args", _boom)
     assert main([*ARGV, "--out", str(tmp_path / "b.json")]) == 2
     assert "error: a numerical failure deep inside" in capsys.readouterr().err
+
+
+def test_input_found_bad_during_the_work_is_still_bad_input(tmp_path, capsys, monkeypatch):
+    """Some input can only be found unservable on the way (no camera sees the demand): a
+    ``common.InputError`` exits 2 after the inputs were checked too."""
+    from common import InputError
+
+    def unservable(*_args, **_kwargs):
+        raise InputError("no drone camera sees the demanded object(s) post")
+
+    monkeypatch.setattr(ber, "simulate", unservable)
+    assert main([*ARGV, "--out", str(tmp_path / "b.json")]) == 2
+    assert "error: no drone camera sees" in capsys.readouterr().err

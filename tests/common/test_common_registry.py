@@ -58,6 +58,11 @@ def test_entry_points_join_on_first_read_and_keep_built_ins(monkeypatch):
     assert table.names() == ["abs", "sqrt"]
     assert table["sqrt"](9.0) == 3.0 and table["abs"] is abs
     assert table.plugins == {"sqrt": "math:sqrt"}
+    assert table.unregister("sqrt")(4.0) == 2.0 and "sqrt" not in table and not table.plugins
+    table.load_entry_points()  # read once: an uninstalled plugin stays out
+    assert "sqrt" not in table
+    table.load_entry_points(force=True)  # read again: it is back
+    assert table.plugins == {"sqrt": "math:sqrt"}
 
 
 def test_a_broken_plugin_is_named_in_one_line(monkeypatch):
