@@ -53,14 +53,14 @@ def scheme_entry(row: dict[str, Any]):
     """The table entry of a row's scheme: ``semcodec.LINK_SCHEMES`` for the link-level
     commands (``eval-codec``, ``ota``), ``osnerf.schemes.SCHEMES`` for ``run``; a row
     without a command is looked up in both (the names they share have the same kind)."""
-    from osnerf.schemes import load_entry_points
+    from osnerf.schemes import SCHEMES
     from semcodec import LINK_SCHEMES
 
     name = row.get("scheme")
     if name is None:
         return None
-    tables = {"run": [load_entry_points()], "eval-codec": [LINK_SCHEMES], "ota": [LINK_SCHEMES]}
-    chosen = tables.get(row.get("command"), [LINK_SCHEMES, load_entry_points()])
+    tables = {"run": [SCHEMES], "eval-codec": [LINK_SCHEMES], "ota": [LINK_SCHEMES]}
+    chosen = tables.get(row.get("command"), [LINK_SCHEMES, SCHEMES])
     return next((t[str(name)] for t in chosen if str(name) in t), None)
 
 

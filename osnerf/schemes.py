@@ -33,7 +33,7 @@ from collections.abc import Mapping
 import numpy as np
 import torch
 
-from common import load_plugins
+from common import Registry
 from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
 from semcodec import ANALOG, DIGITAL, IDEAL, JSCC
 
@@ -46,48 +46,30 @@ __all__ = [
     "Scheme",
     "Transmission",
     "get_scheme",
-    "load_entry_points",
     "parse_schemes",
     "register",
     "scheme_seed",
 ]
 
 
-SCHEMES: dict[str, type[Scheme]] = {}
+def _scheme_class(name: str, cls: object) -> None:
+    """Admit a subclass of :class:`Scheme` (built in or a plugin's) and name it after its key."""
+    if not (isinstance(cls, type) and issubclass(cls, Scheme)):
+        raise TypeError(f"scheme {name!r} must subclass osnerf.schemes.Scheme, got {cls!r}")
+    cls.name = name
+
+
+SCHEMES = Registry[type[Scheme]]("scheme", entry_points=ENTRY_POINT_GROUP, check=_scheme_class)
+"""The run's schemes: name -> :class:`Scheme` subclass (plugins through ``osnerf.schemes``)."""
 
 
 def register(name: str):
-    """Class decorator: ``SCHEMES[name] = cls`` (one line per scheme)."""
-
-    def deco(cls: type[Scheme]) -> type[Scheme]:
-        if not (isinstance(cls, type) and issubclass(cls, Scheme)):
-            raise TypeError(f"scheme {name!r} must subclass osnerf.schemes.Scheme, got {cls!r}")
-        cls.name = name
-        SCHEMES[name] = cls
-        return cls
-
-    return deco
-
-
-_loaded_entry_points = False
-
-
-def load_entry_points() -> dict[str, type[Scheme]]:
-    """Add the schemes registered by other packages (``osnerf.schemes`` entry points)."""
-    global _loaded_entry_points
-    if not _loaded_entry_points:
-        _loaded_entry_points = True
-        load_plugins(
-            ENTRY_POINT_GROUP, SCHEMES, lambda name, cls, _value: register(name)(cls), "scheme"
-        )
-    return SCHEMES
+    """Class decorator: add the class to :data:`SCHEMES` as ``name`` (one line per scheme)."""
+    return SCHEMES.register(name)
 
 
 def get_scheme(name: str) -> Scheme:
-    """An instance of the scheme ``name``; ValueError listing the known ones otherwise."""
-    load_entry_points()
-    if name not in SCHEMES:
-        raise ValueError(f"unknown scheme {name!r}; known: {', '.join(SCHEMES)}")
+    """An instance of the scheme ``name``; KeyError listing the known ones otherwise."""
     return SCHEMES[name]()
 
 
@@ -107,7 +89,7 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
         SchemeListError: an empty list or entry (``"jscc,"``), a name given twice, or a
             name not in the table (the known ones listed).
     """
-    known = load_entry_points() if table is None else table
+    known = SCHEMES if table is None else table
     names = tuple(s.strip() for s in str(text).split(","))
     problem = None
     if not any(names) or "" in names:

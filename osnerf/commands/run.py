@@ -75,7 +75,7 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import RUN_CHANNELS, RunConfig
-    from osnerf.schemes import load_entry_points, parse_schemes
+    from osnerf.schemes import SCHEMES, parse_schemes
     from phy.digital import MCS_TABLE
     from semcodec import IMAGE_CODECS
 
@@ -109,7 +109,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     schemes = next(a for a in p._actions if a.dest == "schemes")
     schemes.help += "; known: " + "; ".join(
-        f"{n}: {c.help}" for n, c in load_entry_points().items()
+        f"{n}: {c.help}" for n, c in SCHEMES.items()
     ).replace("%", "%%")
     p.add_argument(
         "--out",

@@ -101,14 +101,14 @@ class RunConfig:
     layer_fusion: float = 4.0
 
     def __post_init__(self):
-        from osnerf.schemes import load_entry_points
+        from osnerf.schemes import SCHEMES
 
         get_scene(self.scene)
         if self.channel not in RUN_CHANNELS:
             raise ValueError(
                 f"channel must be one of {', '.join(RUN_CHANNELS)}, got {self.channel!r}"
             )
-        known = load_entry_points()
+        known = SCHEMES
         if not self.schemes:
             raise ValueError(f"schemes must name at least one of {', '.join(known)}")
         for s in self.schemes:
