@@ -105,6 +105,11 @@ def _psnr(x: float | None) -> str:
     return "–" if x is None else f"{x:.2f}"
 
 
+def _seeds(docs: list[dict]) -> str:
+    seeds = ", ".join(str(d["seed"]) for d in docs)
+    return f"seed {seeds}" if len(docs) == 1 else f"mean of seeds {seeds}"
+
+
 def _cbr(cbr: float) -> str:
     return str(Fraction(cbr).limit_denominator(64))
 
@@ -147,7 +152,7 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
         lost = [_lost(d["schemes"].get("digital")) for d in docs if "digital" in d["schemes"]]
         rows.append(
             [
-                f"over the air: tiny scene, emulated HackRFs, mean of {len(docs)} seeds",
+                "over the air: tiny scene, emulated HackRFs, " + _seeds(docs),
                 f"{snr:g} dB",
                 _psnr(_mean_object(docs, "jscc")),
                 _psnr(_mean_object(docs, "digital"))
