@@ -63,7 +63,13 @@ class FeatureDecoder(nn.Module):
     The output is ``sigmoid(bilinear(f[:3]) + shuffle(residual))``: with the last layer at
     zero (its start) it is the bilinear upsampling of the colour logits."""
 
-    def __init__(self, channels: int, downsample: int, hidden: int = 32):
+    def __init__(
+        self,
+        channels: int,
+        downsample: int,
+        hidden: int = 32,
+        generator: torch.Generator | None = None,
+    ):
         super().__init__()
         self.downsample = downsample
         self.body = nn.Sequential(
@@ -73,6 +79,13 @@ class FeatureDecoder(nn.Module):
             nn.LeakyReLU(0.1),
         )
         self.out = nn.Conv2d(hidden, 3 * downsample * downsample, 3, padding=1)
+        # PyTorch's default initialisation of the hidden layers, drawn from ``generator``
+        # (not the global stream): the same decoder, and the same distillation, every run
+        generator = generator if generator is not None else torch.Generator().manual_seed(0)
+        for conv in (self.body[0], self.body[2]):
+            nn.init.kaiming_uniform_(conv.weight, a=math.sqrt(5), generator=generator)
+            bound = 1 / math.sqrt(conv.weight[0].numel())
+            nn.init.uniform_(conv.bias, -bound, bound, generator=generator)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
         # channels-last convolutions: the same results as channels-first, in the layout
@@ -133,7 +146,12 @@ class FeatureRenderer:
 
     name = "features"
 
-    def __init__(self, model: RadianceField, config: FeatureConfig):
+    def __init__(
+        self,
+        model: RadianceField,
+        config: FeatureConfig,
+        generator: torch.Generator | None = None,
+    ):
         self.model = model
         self.config = config
         aabb = model.aabb
@@ -174,7 +192,7 @@ class FeatureRenderer:
         self.background = nn.Parameter(bg)
         # decoder input: the view-dependent colour logits, the K planes, the opacity
         self.decoder = FeatureDecoder(
-            config.channels + 3, config.downsample, config.hidden_channels
+            config.channels + 3, config.downsample, config.hidden_channels, generator
         )
 
     def settings(self) -> dict:

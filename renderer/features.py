@@ -60,7 +60,7 @@ def train_features(
     poses = torch.cat(
         [poses, jittered_poses(poses, up, center, config.extra_views, config.jitter_deg, generator)]
     )
-    rend = FeatureRenderer(model, config)
+    rend = FeatureRenderer(model, config, generator)
     trim_heap()  # filling the grid chunk by chunk leaves far more than the grid freed
     pool = TeacherPool(
         model,
