@@ -319,7 +319,8 @@ def framed_settings(args, symbols_per_frame: int):
             raise usage_error(f"--{e}") from None
         codec = open_codec(args.codec)
         check_codec_snr(codec, args.snr_db)
-    if "digital" in args.schemes and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
+    digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
+    if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
         )

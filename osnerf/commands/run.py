@@ -108,9 +108,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         },
     )
     schemes = next(a for a in p._actions if a.dest == "schemes")
-    schemes.help += "; known: " + "; ".join(
-        f"{n}: {c.help}" for n, c in SCHEMES.items()
-    ).replace("%", "%%")
+    schemes.help += "; known: " + "; ".join(f"{n}: {c.help}" for n, c in SCHEMES.items()).replace(
+        "%", "%%"
+    )
     p.add_argument(
         "--out",
         required=True,
@@ -154,10 +154,10 @@ def run(args: argparse.Namespace) -> int:
     if cache:
         checks.output_dir(cache, cache_flag, resumable=lambda _: True)
     check_stage_files(out / "cache" / cfg.key())
-    prepare(cfg)  # names, demand, the codecs' SNR range and knowledge base: bad input (exit 2)
+    prep = prepare(cfg)  # names, demand, the codecs' SNR range and knowledge base: exit 2
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     report, pictures = run_pipeline(
-        cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None
+        cfg, out, cache_dir=Path(args.cache_dir) if args.cache_dir else None, prepared=prep
     )
     config = {**asdict(cfg), "schemes": list(cfg.schemes), "cache_key": cfg.key()}
     write_report(out, config, cfg.seed, report, pictures)

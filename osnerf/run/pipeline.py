@@ -184,11 +184,15 @@ def export_views(folder: Path, ds) -> None:
 
 
 def run_pipeline(
-    cfg: RunConfig, out_dir: Path, cache_dir: Path | None = None
+    cfg: RunConfig,
+    out_dir: Path,
+    cache_dir: Path | None = None,
+    prepared: Prepared | None = None,
 ) -> tuple[Report, dict]:
-    """Run every stage (resuming cached ones); returns the :class:`Report` and the pictures."""
+    """Run every stage (resuming cached ones); returns the :class:`Report` and the pictures.
+    ``prepared``: :func:`prepare`'s result when the caller checked the inputs with it."""
     t_run = time.perf_counter()
-    prep = prepare(cfg)
+    prep = prepared if prepared is not None else prepare(cfg)
     cache = StageCache(Path(out_dir) / "cache" / cfg.key())
     t = time.perf_counter()
     folder = build_scene_dataset(
