@@ -269,7 +269,7 @@ def fake_pipeline(monkeypatch):
     class Fake:
         report = _fake_report(10.0, views=True)
 
-    def run_pipeline(cfg, out, cache_dir=None):
+    def run_pipeline(cfg, out, cache_dir=None, prepared=None):
         (out / "cache" / cfg.key()).mkdir(parents=True, exist_ok=True)
         return Fake.report
 
