@@ -8,6 +8,8 @@ crystal error ``ppm`` runs its sample clock at ``fs * (1 + ppm * 1e-6)`` and its
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 from dataclasses import dataclass
 
@@ -78,6 +80,27 @@ class AirChannel:
             raise ValueError(
                 "iq_gain_imbalance_db must be in [-6, 6] and iq_phase_imbalance_deg in [-30, 30]"
             )
+
+    def to_json(self) -> str:
+        """The channel as one line of JSON (complex numbers as ``[re, im]``), what an emulated
+        board's ``osnerf_air`` attribute holds; :meth:`from_json` reads it back."""
+        d = dataclasses.asdict(self)
+        d["multipath"] = [[int(k), complex(g).real, complex(g).imag] for k, g in self.multipath]
+        for name in ("direct_gain", "dc_offset"):
+            d[name] = [complex(d[name]).real, complex(d[name]).imag]
+        return json.dumps(d, separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> AirChannel:
+        """The channel :meth:`to_json` wrote; ``ValueError`` naming what is wrong otherwise."""
+        try:
+            d = json.loads(text)
+            d["multipath"] = tuple((int(k), complex(re, im)) for k, re, im in d["multipath"])
+            for name in ("direct_gain", "dc_offset"):
+                d[name] = complex(*d[name])
+            return cls(**d)
+        except (TypeError, KeyError, json.JSONDecodeError) as e:
+            raise ValueError(f"not an AirChannel in JSON: {e}") from None
 
     @classmethod
     def from_taps(cls, taps, normalize: bool = False, **kwargs) -> AirChannel:

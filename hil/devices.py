@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common import Registry
+from hil import ad9361, protocol
 
 
 @dataclass(frozen=True)
@@ -25,6 +26,9 @@ class DeviceKind:
         open: ``(id or None) -> device`` (None: the first found).
         emulator: ``(snr_db, **kwargs) -> board`` for a board served over the network
             (:meth:`hil.EmulatedPluto.for_link`), or None.
+        center_freq_range_hz: the LO range it tunes, (low, high) Hz.
+        sample_rate_range_hz: the sample rates it runs at, (low, high) S/s.
+        part: what fixes those ranges, for messages (the RF chip).
     """
 
     name: str
@@ -34,6 +38,9 @@ class DeviceKind:
     find: Callable[[], list]
     open: Callable
     emulator: Callable | None = None
+    center_freq_range_hz: tuple[float, float] = (0.0, float("inf"))
+    sample_rate_range_hz: tuple[float, float] = (0.0, float("inf"))
+    part: str = ""
 
     def open_pair(self, tx_id: str | None = None, rx_id: str | None = None):
         """``(tx, rx)`` for a link: a full-duplex kind uses one board for both ends unless
@@ -97,9 +104,28 @@ def _open_pluto(uri=None):
 DEVICES = Registry[DeviceKind](
     "device",
     {
-        "hackrf": DeviceKind("hackrf", "HackRF One", "serial", False, _find_hackrfs, _open_hackrf),
+        "hackrf": DeviceKind(
+            "hackrf",
+            "HackRF One",
+            "serial",
+            False,
+            _find_hackrfs,
+            _open_hackrf,
+            center_freq_range_hz=protocol.FREQ_RANGE_HZ,
+            sample_rate_range_hz=protocol.SAMPLE_RATE_RANGE_HZ,
+            part="MAX2837 + RFFC5072",
+        ),
         "pluto": DeviceKind(
-            "pluto", "ADALM-Pluto", "uri", True, _find_plutos, _open_pluto, _emulated_pluto
+            "pluto",
+            "ADALM-Pluto",
+            "uri",
+            True,
+            _find_plutos,
+            _open_pluto,
+            _emulated_pluto,
+            center_freq_range_hz=ad9361.LO_RANGE_HZ,
+            sample_rate_range_hz=(ad9361.FIR_SAMPLE_RATE_MIN_HZ, ad9361.SAMPLE_RATE_RANGE_HZ[1]),
+            part="AD9363, a stock Pluto",
         ),
     },
 )

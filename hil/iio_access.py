@@ -30,6 +30,31 @@ def iio_error_to_hil(exc: BaseException, what: str) -> HilError:
     return HilError(f"{what}: libiio error: {text}")
 
 
+def receive_error(exc: BaseException, waited_s: float, timeout_ms: int) -> HilError:
+    """The ``HilError`` of a failed receive that waited ``waited_s`` for its buffer: libiio
+    0.24's network backend reports its own timeout as EPIPE, so a wait as long as the
+    timeout is a timeout."""
+    if isinstance(exc, HilError):
+        return exc
+    if waited_s >= 0.95 * timeout_ms / 1000:
+        return TimedOutError(
+            f"receive: the board did not answer in time (no buffer within {timeout_ms} ms; "
+            f"libiio: {exc})"
+        )
+    return iio_error_to_hil(exc, "receive")
+
+
+def air_attribute(sdr):
+    """The debug attribute through which an emulated board's air is set
+    (``hil.pluto_context.AIR_ATTR`` of its ``ad9361-phy``), or None on a real board."""
+    from hil.pluto_context import AIR_ATTR, DEVICE_NAMES, PHY
+
+    try:
+        return sdr.ctx.find_device(DEVICE_NAMES[PHY]).debug_attrs.get(AIR_ATTR)
+    except Exception:  # noqa: BLE001 - no such device or attribute: not our emulator
+        return None
+
+
 def find_plutos() -> list[tuple[str, str]]:
     """``(uri, description)`` of every Pluto libiio finds: its USB (and DNS-SD) scan, and
     ``ip:$IIOD_REMOTE`` when that variable (libiio's default network host) is set.

@@ -117,6 +117,15 @@ class Medium:
                 self._tx[self.tx_len - self.tx_base : num_samples - self.tx_base] = 0
                 self.tx_len = int(num_samples)
 
+    def set_channel(self, channel: AirChannel, seed: int) -> None:
+        """Replace the air and the noise seed (between bursts): every receiver's noise
+        starts again from ``seed``, so the same settings give the same samples."""
+        with self.cond:
+            self.channel = channel
+            self.seed = int(seed)
+            self._rngs.clear()
+            self.cond.notify_all()
+
     def notify(self) -> None:
         with self.cond:
             self.cond.notify_all()

@@ -18,13 +18,15 @@ import warnings
 import numpy as np
 
 from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
-from hil.errors import (
-    DeviceNotFoundError,
-    HilError,
-    StreamError,
-    TimedOutError,
+from hil.errors import DeviceNotFoundError, HilError, StreamError
+from hil.iio_access import (
+    air_attribute,
+    find_plutos,
+    iio_error_to_hil,
+    import_iio,
+    receive_error,
+    release_frames,
 )
-from hil.iio_access import find_plutos, iio_error_to_hil, import_iio, release_frames
 from hil.iq import full_scale_samples
 from hil.stream import StreamStats
 
@@ -156,8 +158,27 @@ class Pluto:
             cfg.sample_rate_hz, cfg.center_freq_hz, cfg.ad9361_rx_gain_db, cfg.ad9361_tx_gain_db
         )
 
+    @property
+    def air_settable(self) -> bool:
+        """True on :class:`hil.EmulatedPluto`, whose air the host sets (:meth:`set_air`);
+        False on a real board."""
+        return not self._closed and air_attribute(self._sdr) is not None
+
+    def set_air(self, channel, *, ppm: float = 0.0, seed: int = 0) -> None:
+        """Set an emulated board's air (``hil.AirChannel`` from its TX to its RX), its
+        crystal error (ppm) and noise seed, between bursts; ``HilError`` on a real board."""
+        from hil.pluto_context import air_setting
+
+        if not self.air_settable:
+            raise HilError(f"{self.uri} is a real board: its air is not the host's to set")
+        try:
+            air_attribute(self._sdr).value = air_setting(channel, float(ppm), int(seed))
+        except Exception as e:  # noqa: BLE001 - libiio raises OSError
+            raise iio_error_to_hil(e, "set the emulated air") from e
+
     def close(self) -> None:
-        """Stop transmitting and receiving, release the buffers and the context."""
+        """Stop transmitting and receiving, release the buffers, then the context (libiio
+        reports on stderr what fails on the way, so this comes before any error line)."""
         if self._closed:
             return
         self._closed = True
@@ -166,7 +187,8 @@ class Pluto:
                 stop()
             except Exception:  # noqa: BLE001 - closing is best effort
                 pass
-        self._sdr = None
+        sdr, self._sdr = self._sdr, None
+        vars(sdr).clear()  # pyadi-iio's devices hold the context: it is destroyed now
 
     def __enter__(self) -> Pluto:
         return self
@@ -333,16 +355,7 @@ class Pluto:
         except Exception as e:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
             release_frames(e)
             waited_s = time.monotonic() - asked if parts or self._receiving else 0.0
-            if isinstance(e, HilError):
-                err = e
-            elif waited_s >= 0.95 * self.timeout_ms / 1000:
-                # libiio 0.24's network backend reports its own timeout as EPIPE
-                err = TimedOutError(
-                    f"receive: the board did not answer in time (no buffer within "
-                    f"{self.timeout_ms} ms; libiio: {e})"
-                )
-            else:
-                err = iio_error_to_hil(e, "receive")
+            err = receive_error(e, waited_s, self.timeout_ms)
             got = np.concatenate(parts)[:num_samples] if parts else np.zeros(0, np.complex64)
             err.capture = got[None, :]
             if save_to is not None and len(got):

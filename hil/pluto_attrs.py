@@ -53,6 +53,7 @@ class PlutoAttributes:
         self.tx_gain_db = DEFAULT_TX_GAIN_DB
         self.loopback = 0
         self.store: dict[tuple, str] = {}
+        self.debug_attrs = dict(DEBUG_ATTRS)  # a board may add its own (the emulated air)
 
     # ------------------------------------------------------------------ derived state
     @property
@@ -87,7 +88,7 @@ class PlutoAttributes:
                 )
             names = ch.attrs
         elif kind == "DEBUG":
-            names = DEBUG_ATTRS[dev]
+            names = self.debug_attrs[dev]
         elif kind == "BUFFER":
             names = BUFFER_ATTRS if dev != PHY else ()
         else:

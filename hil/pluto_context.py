@@ -60,6 +60,36 @@ CHANNELS = {
 DEVICE_ATTRS = {PHY: _PHY_DEV, RX_DEV: (), TX_DEV: ()}
 DEBUG_ATTRS = {PHY: ("loopback", "digital_tune"), RX_DEV: ("pseudorandom_err_check",), TX_DEV: ()}
 BUFFER_ATTRS = ("data_available", "length_align_bytes", "watermark")
+AIR_ATTR = "osnerf_air"
+"""The emulated board's own debug attribute of ``ad9361-phy`` (a real Pluto has none): its
+air as :func:`air_setting` text, written by the host before a burst (``osnerf ota``)."""
+
+
+def air_setting(channel, ppm: float, seed: int) -> str:
+    """The text of :data:`AIR_ATTR`: the ``hil.AirChannel`` from TX to RX, the board's
+    crystal error in ppm (LOs and sample clock alike) and the noise seed, as JSON."""
+    import json
+
+    return json.dumps({"air": json.loads(channel.to_json()), "ppm": ppm, "seed": seed})
+
+
+def parse_air_setting(text: str):
+    """``(hil.AirChannel, ppm, seed)`` of :func:`air_setting` text; ``ValueError`` otherwise."""
+    import json
+    import math
+
+    from hil.air import AirChannel
+    from hil.emulated_hackrf import PPM_RANGE
+
+    try:
+        d = json.loads(text)
+        channel = AirChannel.from_json(json.dumps(d["air"]))
+        ppm, seed = float(d["ppm"]), int(d["seed"])
+    except (TypeError, KeyError, ValueError) as e:
+        raise ValueError(f"{AIR_ATTR}: not an air setting ({e})") from None
+    if not (math.isfinite(ppm) and PPM_RANGE[0] <= ppm <= PPM_RANGE[1]) or seed < 0:
+        raise ValueError(f"{AIR_ATTR}: ppm must be in {list(PPM_RANGE)} and seed >= 0")
+    return channel, ppm, seed
 
 
 _DTD = (
@@ -92,8 +122,12 @@ def find_channel(dev: str, chan_id: str | None, output: bool) -> Channel | None:
     return None
 
 
-def context_xml(context_attrs: dict[str, str], description: str) -> str:
-    """The context as libiio 0.x's XML, with ``context_attrs`` as its context attributes."""
+def context_xml(
+    context_attrs: dict[str, str], description: str, debug_attrs: dict | None = None
+) -> str:
+    """The context as libiio 0.x's XML, with ``context_attrs`` as its context attributes
+    and ``debug_attrs`` (default :data:`DEBUG_ATTRS`) as each device's debug attributes."""
+    debug_attrs = DEBUG_ATTRS if debug_attrs is None else debug_attrs
     out = [
         '<?xml version="1.0" encoding="utf-8"?>',
         _DTD,
@@ -119,7 +153,7 @@ def context_xml(context_attrs: dict[str, str], description: str) -> str:
         out += [f'<attribute name="{a}" />' for a in DEVICE_ATTRS[dev]]
         if dev != PHY:
             out += [f'<buffer-attribute name="{a}" />' for a in BUFFER_ATTRS]
-        out += [f'<debug-attribute name="{a}" />' for a in DEBUG_ATTRS[dev]]
+        out += [f'<debug-attribute name="{a}" />' for a in debug_attrs[dev]]
         out.append("</device>")
     out.append("</context>")
     return "".join(out)

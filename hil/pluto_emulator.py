@@ -29,7 +29,7 @@ from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.air import RESAMPLER_TAPS, AirChannel
 from hil.medium import Medium
 from hil.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB, PlutoAttributes, iio_errno
-from hil.pluto_context import context_xml
+from hil.pluto_context import AIR_ATTR, PHY, air_setting, context_xml, parse_air_setting
 
 NETWORK_FAULTS = ("drop", "slow")
 """Faults of a served board (``osnerf hil emulate pluto --fault``), both ``after_samples``
@@ -80,6 +80,9 @@ class EmulatedPluto(PlutoAttributes):
             received (a killed or unplugged board); None: never.
         slow_after_samples: once this many samples were received, each receive reply is
             ``SLOW_REPLY_S`` late (a server that stalls); None: never.
+        air_settable: the host may set the air, crystal and seed through the debug attribute
+            ``hil.pluto_context.AIR_ATTR`` (what ``osnerf ota`` does before each burst);
+            False: the board behaves as a real one, whose air is not the host's to set.
     """
 
     def __init__(
@@ -90,8 +93,11 @@ class EmulatedPluto(PlutoAttributes):
         serial: str = "104473dc599300131100210074c83b9f0e",
         drop_after_samples: int | None = None,
         slow_after_samples: int | None = None,
+        air_settable: bool = True,
     ):
         super().__init__()  # the AD9361 settings and the lock
+        if air_settable:
+            self.debug_attrs[PHY] = (*self.debug_attrs[PHY], AIR_ATTR)
         self.medium = Medium(channel, seed=seed, wait_timeout_s=TX_UNDERRUN_S)
         self.ppm = float(ppm)
         self.serial = serial
@@ -125,6 +131,8 @@ class EmulatedPluto(PlutoAttributes):
         reference_power_dbfs: float = -9.0,
         fault: str | None = None,
         after_samples: int = 50_000,
+        ppm: float = 0.0,
+        air_settable: bool = True,
     ) -> EmulatedPluto:
         """A board whose loop has ``snr_db`` for a signal of ``reference_power_dbfs`` (the
         over-the-air frames' mean power) sent and received at the default gains
@@ -133,6 +141,8 @@ class EmulatedPluto(PlutoAttributes):
         Args:
             fault: one of :data:`NETWORK_FAULTS` or None.
             after_samples: received samples before the fault.
+            ppm: the board's crystal error (one crystal: no offset between its TX and RX).
+            air_settable: see the class.
         """
         if fault is not None and fault not in NETWORK_FAULTS:
             raise KeyError(f"unknown fault {fault!r}; known: {', '.join(NETWORK_FAULTS)}")
@@ -147,8 +157,10 @@ class EmulatedPluto(PlutoAttributes):
         return cls(
             channel,
             seed=seed,
+            ppm=ppm,
             drop_after_samples=int(after_samples) if fault == "drop" else None,
             slow_after_samples=int(after_samples) if fault == "slow" else None,
+            air_settable=air_settable,
         )
 
     # ------------------------------------------------------------------ the context
@@ -163,7 +175,26 @@ class EmulatedPluto(PlutoAttributes):
             "ad9361-phy,model": "ad9363a",
             "local,kernel": "osnerf-emulator",
         }
-        return context_xml(ctx_attrs, description)
+        return context_xml(ctx_attrs, description, self.debug_attrs)
+
+    def _read(self, dev, chan_id, output, kind, attr) -> str:
+        if (dev, kind, attr) == (PHY, "DEBUG", AIR_ATTR):
+            return air_setting(self.medium.channel, self.ppm, self.medium.seed)
+        return super()._read(dev, chan_id, output, kind, attr)
+
+    def _write(self, dev, chan_id, output, kind, attr, value) -> None:
+        if (dev, kind, attr) != (PHY, "DEBUG", AIR_ATTR):
+            return super()._write(dev, chan_id, output, kind, attr, value)
+        try:
+            channel, ppm, seed = parse_air_setting(value)
+        except ValueError as e:
+            raise iio_errno(errno.EINVAL, str(e)) from None
+        if self.rx_open or self.tx_open:
+            raise iio_errno(
+                errno.EBUSY, f"{AIR_ATTR}: a buffer is open; set the air between bursts"
+            )
+        self.medium.set_channel(channel, seed)
+        self.ppm = ppm
 
     # ------------------------------------------------------------------ buffers
     def open_rx(self) -> None:
