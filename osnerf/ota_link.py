@@ -31,16 +31,37 @@ if TYPE_CHECKING:
 
 DEVICES = ("emulated", *_HARDWARE)  # emulated HackRFs, then hil's table of real front ends
 DEFAULT_PPM = (0.0, 20.0)
+ONE_BOARD_PPM = (0.0, 0.0)  # a full-duplex board: TX and RX on one crystal
 DEFAULT_MULTIPATH = ((2, 0.4 + 0j), (5, 0.2j))
 DEFAULT_DELAY_S = 5e-6
 
 
+def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath):
+    """The one air model of every emulated path: a ``hil.AirChannel`` at ``snr_db`` for the
+    frames' mean power (``ota_cfg.tx_power_dbfs``) sent and received at ``ota_cfg``'s gains
+    of ``device`` ("emulated" HackRFs, or an emulated "pluto")."""
+    from hil import AirChannel
+
+    if device == "pluto":
+        txvga, rx_gain = ota_cfg.ad9361_tx_gain_db, ota_cfg.ad9361_rx_gain_db
+    else:
+        txvga, rx_gain = ota_cfg.txvga_gain_db, ota_cfg.lna_gain_db + ota_cfg.vga_gain_db
+    return AirChannel(
+        snr_db=float(snr_db),
+        reference_power_dbfs=ota_cfg.tx_power_dbfs,
+        reference_txvga_db=txvga,
+        reference_rx_gain_db=rx_gain,
+        delay_s=delay_s,
+        multipath=tuple(multipath),
+    )
+
+
 def open_radios(
     device: str,
-    snr_db: float,
+    snr_db: float | None,
     ota_cfg,
     seed: int = 0,
-    ppm: tuple[float, float] = DEFAULT_PPM,
+    ppm: tuple[float, float] | None = None,
     multipath=DEFAULT_MULTIPATH,
     delay_s: float = DEFAULT_DELAY_S,
     loopback: bool = False,
@@ -48,28 +69,29 @@ def open_radios(
     rx_serial: str | None = None,
 ) -> tuple[Radio, Radio, Emulator | None]:
     """(tx, rx, emulator or None): two emulated boards ``ppm`` apart with the air at
-    ``snr_db`` (``loopback``: the same without USB), or real boards of a kind of
-    ``hil.DEVICES`` (a full-duplex Pluto is both ends; its id is a libiio URI).
+    ``snr_db`` (``loopback``: the same without USB), or boards of a kind of ``hil.DEVICES``
+    (a full-duplex Pluto is both ends; its id is a libiio URI). An emulated Pluto
+    (``tx.air_settable``) gets the same air: ``snr_db``, ``multipath``, ``delay_s``, ``seed``
+    and ``ppm`` (one crystal: TX and RX equal); a real board's air is left alone.
 
     Args:
         device: "emulated" or a key of ``hil.DEVICES``.
+        snr_db: the emulated air's SNR, dB; None leaves an emulated Pluto's air as it is.
+        ppm: crystal errors (TX, RX); None: :data:`DEFAULT_PPM` for emulated HackRFs,
+            :data:`ONE_BOARD_PPM` for one full-duplex board.
         tx_serial, rx_serial: which boards (HackRF serial, Pluto URI); None: the first found.
         ota_cfg: ``hil.OtaConfig`` (its powers and gains calibrate the emulated SNR).
+    Raises:
+        ValueError: ``ppm`` with TX and RX apart for one full-duplex board.
     """
     from hil import DEVICES as HARDWARE
-    from hil import AirChannel, Emulator, HackRF, open_loopback
+    from hil import Emulator, HackRF, open_loopback
 
     if device not in DEVICES:
         raise ValueError(f"ota device must be one of {', '.join(DEVICES)}, got {device!r}")
     if device == "emulated":
-        channel = AirChannel(
-            snr_db=float(snr_db),
-            reference_power_dbfs=ota_cfg.tx_power_dbfs,
-            reference_txvga_db=ota_cfg.txvga_gain_db,
-            reference_rx_gain_db=ota_cfg.lna_gain_db + ota_cfg.vga_gain_db,
-            delay_s=delay_s,
-            multipath=tuple(multipath),
-        )
+        channel = air_channel(device, snr_db, ota_cfg, delay_s, multipath)
+        ppm = DEFAULT_PPM if ppm is None else ppm
         emu = Emulator(channel, ppm=tuple(ppm), seed=seed, wait_for_bursts=1)
         if loopback:
             return open_loopback(emu.radios[0]), open_loopback(emu.radios[1]), emu
@@ -78,7 +100,20 @@ def open_radios(
             HackRF.open(emu.serials[1], backend=emu.backend),
             emu,
         )
+    one_board = HARDWARE[device].full_duplex and rx_serial in (None, tx_serial)
+    ppm = (ONE_BOARD_PPM if one_board else DEFAULT_PPM) if ppm is None else tuple(ppm)
+    if one_board and ppm[0] != ppm[1]:
+        raise ValueError(
+            f"ppm: one {HARDWARE[device].label} is both ends of the link on one crystal, so "
+            f"TX and RX are equal, got {ppm[0]:g},{ppm[1]:g}"
+        )
     tx, rx = HARDWARE[device].open_pair(tx_serial, rx_serial)
+    if snr_db is not None and getattr(tx, "air_settable", False) and rx is tx:
+        try:
+            tx.set_air(air_channel(device, snr_db, ota_cfg, delay_s, multipath), ppm=ppm[0], seed=seed)  # fmt: skip
+        except BaseException:
+            tx.close()
+            raise
     return tx, rx, None
 
 
@@ -88,7 +123,8 @@ class OtaLink:
 
     Attributes:
         tx, rx: open front ends, ``hil.Radio`` s (see :func:`open_radios`).
-        snr_db: the air's SNR (emulated boards: fixed when they were opened).
+        snr_db: the air's SNR (emulated boards: fixed when they were opened); None for a
+            real air, which only the receiver's measurement knows.
         ota_cfg: ``hil.OtaConfig``.
         frames_sent, frames_lost: counted over every call.
         snr_db_measured: the receiver's pilot SNR of each call (None when all were lost).
@@ -96,7 +132,7 @@ class OtaLink:
 
     tx: Radio
     rx: Radio
-    snr_db: float
+    snr_db: float | None
     ota_cfg: object
     emulator: object | None = None
     frames_sent: int = 0
@@ -126,7 +162,7 @@ class OtaLink:
     def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
         from phy import LinkOutput
 
-        if snr_db is not None and abs(float(snr_db) - self.snr_db) > 1e-9:
+        if snr_db is not None and self.snr_db is not None and abs(float(snr_db) - self.snr_db) > 1e-9:
             raise ValueError(
                 f"this over-the-air link runs at {self.snr_db:g} dB, asked for {float(snr_db):g} dB"
             )

@@ -29,6 +29,7 @@ import argparse
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,13 +39,23 @@ from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
 from osnerf.commands.ota_args import (
     DEVICE_KINDS,
+    URI_FORMATS,
     parse_device,
     parse_multipath,
     parse_ppm,
+    parse_uri,
     usage_error,
 )
+from osnerf.commands.ota_radios import (
+    DEFAULT_MULTIPATH,
+    air_is_emulated,
+    check_radio_ranges,
+    check_scheme_flags,
+    measured_snr_db,
+    radio_of,
+    resolve_air,
+)
 
-DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
 MAX_IMAGES = 10_000
 OTA_CONFIG_FIELDS = (
     "sample_rate_hz",
@@ -76,8 +87,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--uri",
         default=None,
-        help="pluto: libiio URI of the board, ip:ADDRESS[:PORT] or usb:B.D.I (default: the first "
-        "found; one Pluto is both ends of the link)",
+        type=parse_uri,
+        help=f"pluto: libiio URI of the board, {URI_FORMATS} (default: the first found; one "
+        "Pluto is both ends of the link)",
     )
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
@@ -92,8 +104,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--snr-db",
         type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
-        default=15.0,
-        help="air SNR of emulated boards, dB (default 15)",
+        default=None,
+        help="air SNR of emulated boards (two emulated HackRFs, or an emulated Pluto), dB "
+        "(default 15); refused with real radios",
     )
     p.add_argument(
         "--images", required=True, help="an image file, or a folder of images (png, jpg, ...)"
@@ -124,7 +137,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         OTA_CONFIG_FIELDS,
         flags=OTA_FLAGS,
         types={
-            "sample_rate_hz": checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),
+            "sample_rate_hz": checks.number(*SAMPLE_RATE_RANGE_HZ, "Hz"),  # then each radio's
             "center_freq_hz": checks.number(*FREQ_RANGE_HZ, "Hz"),
             "max_papr_db": finite,  # OtaConfig's own check names its range
             "symbols_per_frame": checks.count(64, 1 << 20),
@@ -143,24 +156,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
-    """The emulated air between the boards: seed, crystal errors, echoes, delay."""
+    """The emulated air between the boards: seed, crystal errors, echoes, delay (refused
+    with real radios, :mod:`osnerf.commands.ota_radios`)."""
     from hil import MAX_DELAY_S
 
     p.add_argument(
-        "--seed", type=checks.seed, default=0, help="seed of the emulated air (default 0)"
+        "--seed", type=checks.seed, default=None, help="seed of the emulated air (default 0)"
     )
     p.add_argument(
-        "--ppm", default="0,20", help="crystal errors of emulated TX,RX in ppm (default 0,20)"
+        "--ppm",
+        default=None,
+        help="crystal errors of emulated TX,RX in ppm (default 0,20; one Pluto is one "
+        "crystal: TX equal to RX, default 0,0)",
     )
     p.add_argument(
         "--multipath",
-        default=DEFAULT_MULTIPATH,
+        default=None,
         help=f"echoes 'delay_samples:gain,...' or 'none' (default {DEFAULT_MULTIPATH})",
     )
     p.add_argument(
         "--delay-us",
         type=checks.number(0.0, MAX_DELAY_S * 1e6, "us"),
-        default=5.0,
+        default=None,
         help="propagation delay, microseconds (default 5)",
     )
 
@@ -172,30 +189,33 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument(
         "--mcs",
-        default="qpsk-1/2",
+        default=None,
         choices=tuple(MCS_TABLE),
         metavar="MCS",
         help=f"digital: modulation and coding, one of {', '.join(MCS_TABLE)} (default qpsk-1/2)",
     )
     p.add_argument(
-        "--image-codec", default="avif", choices=list(IMAGE_CODECS), help="digital: image codec"
+        "--image-codec",
+        default=None,
+        choices=list(IMAGE_CODECS),
+        help="digital: image codec (default avif)",
     )
     p.add_argument(
         "--quality",
         type=int,
-        default=50,
+        default=None,
         help="digital: codec quality, 1-100 (JPEG 1-95; default 50)",
     )
     p.add_argument(
         "--scale",
         type=int,
-        default=1,
+        default=None,
         choices=SCALES,
         help="digital: send the image downscaled by this factor, upscaled (Lanczos) at the "
         "receiver; for low rates at low SNR (default 1: whole)",
     )
     p.add_argument(
-        "--cbr", default="1/16", help="jscc: channel symbols per source value (default 1/16)"
+        "--cbr", default=None, help="jscc: channel symbols per source value (default 1/16)"
     )
     from semcodec import codec_names
 
@@ -275,23 +295,25 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
 
 
 def open_pair(args, ota_cfg):
-    """(tx, rx, emulator or None) for the --tx/--rx kinds; --fault is set on the receiver."""
+    """(tx, rx, emulator or None) for the --tx/--rx kinds, the air from the air flags where
+    it is emulated (``args.air``, :func:`osnerf.commands.ota_radios.resolve_air`); --fault is
+    set on the receiver."""
     from hil import Faults
     from osnerf.ota_link import open_radios
 
     kind, tx_serial, rx_serial = device_kinds(args)
+    air = {}
+    if args.air == "emulated":
+        air = {
+            "seed": args.seed,
+            "ppm": parse_ppm(args.ppm),
+            "multipath": parse_multipath(args.multipath),
+            "delay_s": args.delay_us * 1e-6,
+        }
     if kind in HARDWARE:
-        return open_radios(kind, args.snr_db, ota_cfg, tx_serial=tx_serial, rx_serial=rx_serial)
-    tx, rx, emu = open_radios(
-        "emulated",
-        args.snr_db,
-        ota_cfg,
-        seed=args.seed,
-        ppm=parse_ppm(args.ppm),
-        multipath=parse_multipath(args.multipath),
-        delay_s=args.delay_us * 1e-6,
-        loopback=kind == "loopback",
-    )
+        ids = {"tx_serial": tx_serial, "rx_serial": rx_serial}
+        return open_radios(kind, args.snr_db, ota_cfg, **air, **ids)
+    tx, rx, emu = open_radios("emulated", args.snr_db, ota_cfg, **air, loopback=kind == "loopback")
     if getattr(args, "fault", None):  # after the lead-in and half the margin: some capture
         lead = int(ota_cfg.rx_lead_s * ota_cfg.sample_rate_hz)
         emu.radios[1].faults = Faults.named(args.fault, lead + ota_cfg.rx_margin_samples // 2)
@@ -306,8 +328,8 @@ def framed_settings(args, symbols_per_frame: int):
     from phy import parse_cbr
     from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
 
-    qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
-    if not max(qlo, 1) <= args.quality <= qhi:
+    qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
+    if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
         raise usage_error(
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
@@ -318,19 +340,18 @@ def framed_settings(args, symbols_per_frame: int):
         except ValueError as e:
             raise usage_error(f"--{e}") from None
         codec = open_codec(args.codec)
-        check_codec_snr(codec, args.snr_db)
+        if args.snr_db is not None:  # a real air: the encoder's SNR is measured first
+            check_codec_snr(codec, args.snr_db)
     digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
     if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
         )
+    used = {k: getattr(args, k) for k in ("mcs", "image_codec", "quality", "scale")}
     return FramedSettings(
         snr_db=args.snr_db,
         symbols_per_frame=symbols_per_frame,
-        mcs=args.mcs,
-        image_codec=args.image_codec,
-        quality=args.quality,
-        scale=args.scale,
+        **{k: v for k, v in used.items() if v is not None},
         cbr=cbr,
         codec=codec,
     )
@@ -339,14 +360,17 @@ def framed_settings(args, symbols_per_frame: int):
 def run(args: argparse.Namespace) -> int:
     from hil import OtaConfig, save_sigmf
     from osnerf.cli import inputs_checked
-    from osnerf.commands.ota_record import ota_record
+    from osnerf.commands.ota_record import ota_record, remove_old_captures
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
 
-    device_kinds(args)
-    parse_ppm(args.ppm)
-    parse_multipath(args.multipath)
+    kind, tx_id, _ = device_kinds(args)
+    check_scheme_flags(args)
+    check_radio_ranges(args, kind)
+    parse_ppm(args.ppm or "0,0")
+    parse_multipath(args.multipath or "none")
+    resolve_air(args, kind, air_is_emulated(args, kind, tx_id))
     cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
     settings = framed_settings(args, cfg.symbols_per_frame)
     inputs = {"--images": args.images}
@@ -355,7 +379,11 @@ def run(args: argparse.Namespace) -> int:
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
+    if args.overwrite:  # the whole output set is replaced, captures included
+        remove_old_captures(sigmf_dir)
     t0 = time.perf_counter()
+    if settings.codec is not None and settings.snr_db is None:  # a real air: measure it first
+        settings = replace(settings, snr_db=measured_snr_db(args, cfg, settings, sigmf_dir))
     bursts = []
     for name in args.schemes:
         scheme = LINK_SCHEMES[name].framed
@@ -390,8 +418,8 @@ def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota
 
     kind = device_kinds(args)[0]
     tx, rx, emu = open_pair(args, cfg)
-    hw = "HackRF One (emulated)" if emu is not None else HARDWARE[kind].label
-    link = OtaLink(tx, rx, float(args.snr_db), cfg, emu)
+    hw = radio_of(kind).label + (" (emulated)" if args.air == "emulated" else "")
+    link = OtaLink(tx, rx, args.snr_db, cfg, emu)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

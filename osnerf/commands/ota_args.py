@@ -1,8 +1,11 @@
-"""`osnerf ota`'s flag values that need more than a type: the radios (``--tx``/``--rx``), the
-emulated air's echoes (``--multipath``) and clock offsets (``--ppm``). Each refusal is one
-usage error naming the flag."""
+"""`osnerf ota`'s flag values that need more than a type: the radios (``--tx``/``--rx``), a
+Pluto's libiio URI (``--uri``), the emulated air's echoes (``--multipath``) and clock
+offsets (``--ppm``). Each refusal is one usage error naming the flag."""
 
 from __future__ import annotations
+
+import argparse
+import re
 
 import numpy as np
 
@@ -24,6 +27,22 @@ def parse_device(value: str, name: str) -> tuple[str, str | None]:
             f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
         )
     return kind, serial or None
+
+
+URI_FORMATS = "ip:HOST[:PORT], usb:[BUS.ADDR.INTF] or local:"
+_URI = re.compile(
+    r"ip:(?P<host>[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])"
+    r"(?::(?P<port>\d{1,5}))?|usb:(?:\d{1,3}\.\d{1,3}\.\d{1,3})?|local:"
+)
+
+
+def parse_uri(text: str) -> str:
+    """An argparse type for ``--uri``: one of libiio's URIs a Pluto answers at (its port, if
+    any, in 1..65535)."""
+    m = _URI.fullmatch(text)
+    if m is None or (m["port"] is not None and not 1 <= int(m["port"]) <= 65535):
+        raise argparse.ArgumentTypeError(f"expected {URI_FORMATS}, got {text!r}")
+    return text
 
 
 def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:

@@ -1,5 +1,10 @@
 """The result file of `osnerf ota`: per scheme and image the PSNR and frames, the summary,
-every frame, the SigMF paths, and the provenance header (with the codec's sha256)."""
+every frame, the SigMF paths, and the provenance header (with the codec's sha256).
+
+Results are labelled with the SNR the receiver measured from the pilots
+(``snr_db_measured``), beside the SNR the emulated air was set to (``snr_db_requested``;
+null between real radios, whose air is not ours to set); the jscc encoder's SNR input is
+``codec.encoder_snr_db``."""
 
 from __future__ import annotations
 
@@ -14,6 +19,7 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     from osnerf.provenance import result_header
 
     results, frames, sigmf, by_scheme = [], [], [], {}
+    requested = args.snr_db  # None: a real air
     for scheme, per_image, result, paths in bursts:
         rows = []
         for b, (name, rec) in enumerate(zip(names, per_image)):
@@ -24,6 +30,7 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
                     "image": name,
                     "psnr": rec.psnr,
                     "snr_db_measured": result.snr_db_measured(b),
+                    "snr_db_requested": requested,
                     "frames_sent": len(burst_frames),
                     "frames_lost": sum(not f.detected for f in burst_frames),
                     **rec.stats,
@@ -37,6 +44,7 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             "frames_sent": result.frames_sent,
             "frames_lost": result.frames_lost,
             "snr_db_measured": result.snr_db_measured(),
+            "snr_db_requested": requested,
         }
     config = {k: v for k, v in vars(args).items() if k not in ("command",)}
     config.update(
@@ -48,7 +56,11 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     )
     record = result_header(config, args.seed)
     if settings.codec is not None:
-        record["codec"] = {"name": settings.codec.name, "sha256": settings.codec.sha256}
+        record["codec"] = {
+            "name": settings.codec.name,
+            "sha256": settings.codec.sha256,
+            "encoder_snr_db": settings.snr_db,
+        }
     record.update(
         {
             "results": results,
@@ -56,9 +68,10 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             "summary": {
                 "frames_sent": sum(s["frames_sent"] for s in by_scheme.values()),
                 "frames_lost": sum(s["frames_lost"] for s in by_scheme.values()),
-                "snr_db_measured": float(
-                    np.mean([s["snr_db_measured"] for s in by_scheme.values()])
+                "snr_db_measured": _mean_or_none(
+                    [s["snr_db_measured"] for s in by_scheme.values()]
                 ),
+                "snr_db_requested": requested,
                 "schemes": by_scheme,
                 "psnr_note": "mean of per-image PSNR (peak 1.0)",
                 "seconds": time.perf_counter() - t0,
@@ -67,3 +80,27 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
         }
     )
     return record
+
+
+def _mean_or_none(values: list) -> float | None:
+    """The mean of the values measured (None where every frame was lost), None if none was."""
+    known = [v for v in values if v is not None]
+    return float(np.mean(known)) if known else None
+
+
+CAPTURE_GLOBS = ("ota*.sigmf-meta", "ota*.sigmf-data")  # every SigMF file a run writes
+
+
+def remove_old_captures(sigmf_dir) -> list:
+    """``--overwrite``: the SigMF files an earlier run left in ``sigmf_dir`` (its burst, its
+    captures, a partial capture of a failed run) are removed before this run writes its own,
+    so the folder never mixes two runs. Returns the paths removed."""
+    from pathlib import Path
+
+    removed = []
+    for pattern in CAPTURE_GLOBS:
+        for path in sorted(Path(sigmf_dir).glob(pattern)):
+            if path.is_file() or path.is_symlink():
+                path.unlink()
+                removed.append(path)
+    return removed

@@ -1,0 +1,156 @@
+"""Which of `osnerf ota`'s flags a run applies, decided before any work.
+
+* Scheme flags go to one kind of scheme (``semcodec.SCHEME_KINDS``): ``--cbr`` and
+  ``--codec`` to jscc, ``--mcs``, ``--image-codec``, ``--quality`` and ``--scale`` to
+  digital. One given for a kind that ``--schemes`` does not send is refused; one left out
+  takes its default where it is used and is recorded as null where it is not.
+* Air flags (``--snr-db``, ``--ppm``, ``--multipath``, ``--delay-us``, ``--seed``) set the
+  emulated air: between two emulated HackRFs, or inside an emulated Pluto, whose air the run
+  sets through the board (``hil.Pluto.set_air``). Between real radios the air is not ours:
+  a given air flag is refused, and each is recorded as null; the result carries the SNR the
+  receiver measured.
+* Radio ranges: ``--center-freq-hz`` and ``--sample-rate-hz`` within the chosen radio's own
+  (``hil.DEVICES``: a Pluto's AD9363 tunes 325 MHz to 3.8 GHz).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from common import Registry
+from hil import DEVICES as HARDWARE
+from osnerf.commands.ota_args import parse_ppm, usage_error
+
+SIMULATED = ("emulated", "loopback")  # two emulated HackRFs, with or without USB
+DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
+
+# dest -> (flag, the scheme kind it applies to, its default there)
+SCHEME_FLAGS = Registry[tuple[str, str, object]](
+    "ota scheme flag",
+    {
+        "cbr": ("--cbr", "jscc", "1/16"),
+        "codec": ("--codec", "jscc", None),  # None: jscc with the shipped checkpoint
+        "mcs": ("--mcs", "digital", "qpsk-1/2"),
+        "image_codec": ("--image-codec", "digital", "avif"),
+        "quality": ("--quality", "digital", 50),
+        "scale": ("--scale", "digital", 1),
+    },
+)
+
+# dest -> (flag, its default on an emulated air; ppm's depends on the radios)
+AIR_FLAGS = Registry[tuple[str, object]](
+    "ota air flag",
+    {
+        "snr_db": ("--snr-db", 15.0),
+        "ppm": ("--ppm", None),
+        "multipath": ("--multipath", DEFAULT_MULTIPATH),
+        "delay_us": ("--delay-us", 5.0),
+        "seed": ("--seed", 0),
+    },
+)
+PPM_DEFAULTS = {"two boards": "0,20", "one board": "0,0"}
+
+
+def radio_of(kind: str):
+    """The ``hil.DeviceKind`` of an ``--tx``/``--rx`` kind (the simulated ones are HackRFs)."""
+    return HARDWARE["hackrf" if kind in SIMULATED else kind]
+
+
+def check_scheme_flags(args: argparse.Namespace) -> None:
+    """Refuse a scheme flag for a kind of scheme ``--schemes`` does not send; give the ones
+    left out their default where they are used."""
+    from semcodec import LINK_SCHEMES
+
+    kinds = {LINK_SCHEMES[name].kind for name in args.schemes}
+    for dest, (flag, kind, default) in SCHEME_FLAGS.items():
+        value = getattr(args, dest, None)
+        if value is not None and kind not in kinds:
+            raise usage_error(
+                f"{flag} applies to {kind} schemes only; --schemes {','.join(args.schemes)} "
+                f"sends none, so it would be recorded and never used: leave it out"
+            )
+        if value is None and kind in kinds:
+            setattr(args, dest, default)
+
+
+def check_radio_ranges(args: argparse.Namespace, kind: str) -> None:
+    """``--center-freq-hz`` and ``--sample-rate-hz`` within the radio's own ranges."""
+    hw = radio_of(kind)
+    for dest, flag, (lo, hi), unit in (
+        ("center_freq_hz", "--center-freq-hz", hw.center_freq_range_hz, "Hz"),
+        ("sample_rate_hz", "--sample-rate-hz", hw.sample_rate_range_hz, "S/s"),
+    ):
+        value = getattr(args, dest)
+        if not lo <= value <= hi:
+            raise usage_error(
+                f"{flag} {value:g} {unit} is outside the {hw.label}'s range [{lo:g}, {hi:g}] "
+                f"{unit} ({hw.part})"
+            )
+
+
+def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None) -> bool:
+    """Whether the run sets the air: simulated radios, or a Pluto that answers as
+    ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers)."""
+    if kind in SIMULATED:
+        return True
+    if kind != "pluto":
+        return False
+    from hil import Pluto
+
+    with Pluto.open(uri, configure=False) as board:
+        return board.air_settable
+
+
+def resolve_air(args: argparse.Namespace, kind: str, emulated: bool) -> None:
+    """Refuse air flags a real air cannot take; fill the emulated air's defaults.
+
+    Sets ``args.air`` ("emulated" or "real") and each air flag's value as applied (None
+    for a real air)."""
+    hw = radio_of(kind)
+    args.air = "emulated" if emulated else "real"
+    if not emulated:
+        given = [flag for dest, (flag, _) in AIR_FLAGS.items() if getattr(args, dest) is not None]
+        if given:
+            raise usage_error(
+                f"{given[0]} sets the emulated air, and the air between real {hw.label} "
+                f"boards is not ours to set: leave it out (results carry the SNR the "
+                f"receiver measured)"
+            )
+        return
+    one_board = hw.full_duplex and kind not in SIMULATED
+    for dest, (_, default) in AIR_FLAGS.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, default)
+    if args.ppm is None:
+        args.ppm = PPM_DEFAULTS["one board" if one_board else "two boards"]
+    tx_ppm, rx_ppm = parse_ppm(args.ppm)
+    if one_board and tx_ppm != rx_ppm:
+        raise usage_error(
+            f"--ppm: one {hw.label} is both ends of the link, on one crystal, so TX and RX "
+            f"are equal (e.g. 20,20), got {args.ppm!r}"
+        )
+
+
+def measured_snr_db(args, cfg, settings, sigmf_dir) -> float:
+    """Between real radios, the jscc encoder's SNR: what the receiver measures on one frame
+    of QPSK sent first (``<sigmf-dir>/ota_probe_*``), within the codec's SNR range. A real
+    transmitter knows no more of its air than that."""
+    import sys
+
+    import numpy as np
+
+    from hil import HilError, save_sigmf
+    from osnerf.commands.ota import send_over_the_air
+
+    bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
+    block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
+    result, hw = send_over_the_air(args, cfg, [block], sigmf_dir, "ota_probe")
+    save_sigmf(result, sigmf_dir / "ota_probe", cfg, hw=hw)
+    snr = result.snr_db_measured()
+    if snr is None:
+        raise HilError("the SNR probe frame was lost: no SNR to encode jscc at")
+    lo, hi = settings.codec.snr_range_db
+    print(
+        f"ota: measured {snr:.1f} dB; jscc encodes at {min(max(snr, lo), hi):g} dB", file=sys.stderr
+    )
+    return float(min(max(snr, lo), hi))
