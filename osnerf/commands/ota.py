@@ -382,8 +382,10 @@ def run(args: argparse.Namespace) -> int:
     if args.overwrite:  # the whole output set is replaced, captures included
         remove_old_captures(sigmf_dir)
     t0 = time.perf_counter()
-    if settings.codec is not None and settings.snr_db is None:  # a real air: measure it first
-        settings = replace(settings, snr_db=measured_snr_db(args, cfg, settings, sigmf_dir))
+    probe: list = []  # a real air: the jscc encoder's SNR is measured first
+    if settings.codec is not None and settings.snr_db is None:
+        snr, probe = measured_snr_db(args, cfg, settings, sigmf_dir)
+        settings = replace(settings, snr_db=snr)
     bursts = []
     for name in args.schemes:
         scheme = LINK_SCHEMES[name].framed
@@ -403,7 +405,9 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"ota: {name}: {result.frames_lost}/{result.frames_sent} frames lost", file=sys.stderr
         )
-    write_json_atomic(out, ota_record(args, cfg, settings, names, bursts, t0))
+    record = ota_record(args, cfg, settings, names, bursts, t0)
+    record["sigmf"][:0] = [str(p) for p in probe]
+    write_json_atomic(out, record)
     print(f"ota: wrote {out}", file=sys.stderr)
     return 0
 

@@ -131,10 +131,10 @@ def resolve_air(args: argparse.Namespace, kind: str, emulated: bool) -> None:
         )
 
 
-def measured_snr_db(args, cfg, settings, sigmf_dir) -> float:
+def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
     """Between real radios, the jscc encoder's SNR: what the receiver measures on one frame
-    of QPSK sent first (``<sigmf-dir>/ota_probe_*``), within the codec's SNR range. A real
-    transmitter knows no more of its air than that."""
+    of QPSK sent first, within the codec's SNR range (a real transmitter knows no more of
+    its air than that), and that burst's SigMF paths (``<sigmf-dir>/ota_probe_*``)."""
     import sys
 
     import numpy as np
@@ -145,12 +145,11 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> float:
     bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
     block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
     result, hw = send_over_the_air(args, cfg, [block], sigmf_dir, "ota_probe")
-    save_sigmf(result, sigmf_dir / "ota_probe", cfg, hw=hw)
+    paths = save_sigmf(result, sigmf_dir / "ota_probe", cfg, hw=hw)
     snr = result.snr_db_measured()
     if snr is None:
         raise HilError("the SNR probe frame was lost: no SNR to encode jscc at")
     lo, hi = settings.codec.snr_range_db
-    print(
-        f"ota: measured {snr:.1f} dB; jscc encodes at {min(max(snr, lo), hi):g} dB", file=sys.stderr
-    )
-    return float(min(max(snr, lo), hi))
+    used = float(min(max(snr, lo), hi))
+    print(f"ota: measured {snr:.1f} dB; jscc encodes at {used:.1f} dB", file=sys.stderr)
+    return used, paths
