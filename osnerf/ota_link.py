@@ -162,7 +162,11 @@ class OtaLink:
     def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
         from phy import LinkOutput
 
-        if snr_db is not None and self.snr_db is not None and abs(float(snr_db) - self.snr_db) > 1e-9:
+        if (
+            snr_db is not None
+            and self.snr_db is not None
+            and abs(float(snr_db) - self.snr_db) > 1e-9
+        ):
             raise ValueError(
                 f"this over-the-air link runs at {self.snr_db:g} dB, asked for {float(snr_db):g} dB"
             )

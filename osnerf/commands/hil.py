@@ -57,7 +57,8 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
         "--snr-db",
         type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
         default=15.0,
-        help="SNR of the board's TX-to-RX loop for over-the-air frames, dB (default 15)",
+        help="SNR of the board's TX-to-RX loop for over-the-air frames, dB, until a client "
+        "sets the air (osnerf ota does, from its own flags, before each burst) (default 15)",
     )
     p.add_argument("--seed", type=checks.seed, default=0, help="noise seed (default 0)")
     p.add_argument(

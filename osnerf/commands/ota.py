@@ -15,8 +15,9 @@ Each scheme of ``--schemes`` goes in its own burst, one after another, with its 
 A digital image whose frames do not all pass their CRC is shown as mid-grey (PSNR of that).
 
 ``--tx pluto --rx pluto [--uri URI]`` uses one ADALM-Pluto (full duplex) as both ends, real or
-emulated (``osnerf hil emulate pluto --snr-db X``: its air is set there; give ``--snr-db`` the
-same value for the codec).
+emulated (``osnerf hil emulate pluto``), whose air the run sets from the same flags. Between
+real radios the air flags are refused (:mod:`osnerf.commands.ota_radios`); results carry the
+measured SNR beside the requested one.
 
 ``--fault`` switches on an emulated USB fault of the receiving board (stall, rx-timeout,
 unplug, overrun) to rehearse how a run reports it: exit 1 with a one-line message, and the
@@ -49,6 +50,7 @@ from osnerf.commands.ota_args import (
 from osnerf.commands.ota_radios import (
     DEFAULT_MULTIPATH,
     air_is_emulated,
+    check_overruns,
     check_radio_ranges,
     check_scheme_flags,
     measured_snr_db,
@@ -146,6 +148,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         },
         defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
     )
+    p.set_defaults(max_rx_overruns=None)  # 0 where the radio counts overruns (ota_radios)
     p.add_argument(
         "--fault",
         default=None,
@@ -368,6 +371,7 @@ def run(args: argparse.Namespace) -> int:
     kind, tx_id, _ = device_kinds(args)
     check_scheme_flags(args)
     check_radio_ranges(args, kind)
+    check_overruns(args, kind)
     parse_ppm(args.ppm or "0,0")
     parse_multipath(args.multipath or "none")
     resolve_air(args, kind, air_is_emulated(args, kind, tx_id))

@@ -88,6 +88,18 @@ def check_radio_ranges(args: argparse.Namespace, kind: str) -> None:
             )
 
 
+def check_overruns(args: argparse.Namespace, kind: str) -> None:
+    """``--max-overruns`` (default 0) where the receiver counts its overruns; a Pluto on
+    libiio 0.x counts none, so there it is refused and recorded as null."""
+    if kind != "pluto":
+        args.max_rx_overruns = 0 if args.max_rx_overruns is None else args.max_rx_overruns
+    elif args.max_rx_overruns is not None:
+        raise usage_error(
+            "--max-overruns: libiio 0.x reports no receive overruns of a Pluto, so it would "
+            "be recorded and never applied: leave it out"
+        )
+
+
 def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None) -> bool:
     """Whether the run sets the air: simulated radios, or a Pluto that answers as
     ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers)."""

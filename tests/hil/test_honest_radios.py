@@ -233,3 +233,9 @@ def test_accept_unused_scheme_flags_are_recorded_as_null(tmp_path, images):
     cfg = json.loads(out.read_text())["config"]
     assert rc == 0 and cfg["cbr"] is None and cfg["codec"] is None and cfg["mcs"] == "qpsk-1/2"
     assert np.isfinite(json.loads(out.read_text())["results"][0]["psnr"])
+
+
+def test_radios_pluto_refuses_max_overruns_it_cannot_count(tmp_path, images, capsys):
+    rc, out = ota(tmp_path, images, "--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--max-overruns", "5")  # fmt: skip
+    assert rc == 2 and not out.exists()
+    one_line_error(capsys, "--max-overruns", "Pluto")
