@@ -374,14 +374,14 @@ def run(args: argparse.Namespace) -> int:
     check_overruns(args, kind)
     parse_ppm(args.ppm or "0,0")
     parse_multipath(args.multipath or "none")
-    resolve_air(args, kind, air_is_emulated(args, kind, tx_id))
     cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
-    settings = framed_settings(args, cfg.symbols_per_frame)
     inputs = {"--images": args.images}
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
     names, images = load_images(args.images, args.size, args.max_images)
+    resolve_air(args, kind, air_is_emulated(args, kind, tx_id))  # asks a Pluto which it is
+    settings = framed_settings(args, cfg.symbols_per_frame)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     if args.overwrite:  # the whole output set is replaced, captures included
         remove_old_captures(sigmf_dir)
