@@ -102,7 +102,8 @@ def check_overruns(args: argparse.Namespace, kind: str) -> None:
 
 def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None) -> bool:
     """Whether the run sets the air: simulated radios, or a Pluto that answers as
-    ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers)."""
+    ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers).
+    Without ``--uri`` the Pluto found is named in ``args.uri``, and the run uses that one."""
     if kind in SIMULATED:
         return True
     if kind != "pluto":
@@ -110,6 +111,8 @@ def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None) -> boo
     from hil import Pluto
 
     with Pluto.open(uri, configure=False) as board:
+        if uri is None:  # the first found: this run's board
+            args.uri = board.uri
         return board.air_settable
 
 

@@ -239,3 +239,12 @@ def test_radios_pluto_refuses_max_overruns_it_cannot_count(tmp_path, images, cap
     rc, out = ota(tmp_path, images, "--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--max-overruns", "5")  # fmt: skip
     assert rc == 2 and not out.exists()
     one_line_error(capsys, "--max-overruns", "Pluto")
+
+
+def test_radios_the_pluto_found_is_named_in_the_record(tmp_path, images, monkeypatch):
+    with serve(15.0) as srv:
+        monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")
+        rc, out = ota(tmp_path, images, "--schemes", "digital", "--snr-db", "20")
+        board = srv.board
+    assert rc == 0 and json.loads(out.read_text())["config"]["uri"] == srv.uri
+    assert board.medium.channel.snr_db == 20.0
