@@ -41,6 +41,7 @@ from semcodec.channel_layers import TRAIN_CHANNELS
 from semcodec.checkpoint import (
     KnowledgeBaseMismatch,
     load_checkpoint,
+    read_card,
     save_checkpoint,
     weights_sha256,
 )
@@ -54,6 +55,7 @@ from semcodec.contract import (
     box_side_symbols,
     check_images,
     is_trainable,
+    is_trained,
 )
 from semcodec.digital_link import transmit_digital, transmit_ideal
 from semcodec.encoded_meta import EncodedMeta, receiver_mask
@@ -107,14 +109,17 @@ from semcodec.model import (
 from semcodec.registry import (
     CODECS,
     CodecPluginError,
+    UntrainedCodecError,
     codec_names,
     make_codec,
     open_codec,
     parse_codec_spec,
+    plugin_origin,
+    resolve_codec_spec,
 )
 from semcodec.train_config import TrainConfig
 from semcodec.train_state import load_train_state
-from semcodec.training import build_codec, train
+from semcodec.training import build_codec, train, with_architecture
 from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
@@ -137,6 +142,7 @@ __all__ = [
     "load_train_state",
     "build_codec",
     "train",
+    "with_architecture",
     "BoxMeta",
     "CODECS",
     "CodecMeta",
@@ -149,6 +155,11 @@ __all__ = [
     "encode_with_focus",
     "focus_by_box",
     "is_trainable",
+    "is_trained",
+    "plugin_origin",
+    "read_card",
+    "resolve_codec_spec",
+    "UntrainedCodecError",
     "for_fusion",
     "learned_only",
     "make_codec",

@@ -51,7 +51,7 @@ def weights_sha256(state: dict[str, torch.Tensor], cfg) -> str:
 
 
 def save_checkpoint(
-    path: str | os.PathLike, model, card: dict | None = None, codec: str = JSCC_CODEC
+    path: str | os.PathLike, model, card: dict | None = None, codec: str | None = None
 ) -> str:
     """Write weights + card atomically; returns the sha256. The card gets the codec's
     registry name, the architecture and the hash.
@@ -61,7 +61,8 @@ def save_checkpoint(
         model: the trained ``nn.Module`` with ``cfg`` (``to_dict()``, ``cbr_range``,
             ``snr_min_db``, ``snr_max_db``; ``decoder_reliability`` for the JSCC).
         card: extra model-card fields (training data, metrics, ...).
-        codec: the name in ``semcodec.CODECS`` whose factory loads the file.
+        codec: the name in ``semcodec.CODECS`` whose factory loads the file (None: the
+            card's ``codec``, which the trainer fills in, else ``jscc``).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -69,7 +70,7 @@ def save_checkpoint(
     sha = weights_sha256(state, model.cfg)
     full = {
         **(card or {}),
-        "codec": codec,
+        "codec": codec or (card or {}).get("codec") or JSCC_CODEC,
         "format_version": "2" if getattr(model.cfg, "decoder_reliability", False) else "1",
         "architecture": model.cfg.to_dict(),
         "cbr_range": list(model.cfg.cbr_range),
@@ -80,6 +81,39 @@ def save_checkpoint(
     return sha
 
 
+def check_checkpoint_file(path: str | os.PathLike) -> Path:
+    """``path`` as a Path when it is a file; FileNotFoundError when missing, ValueError when
+    it is a folder (each naming the path as what it is)."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"checkpoint {path} is a folder, not a checkpoint file")
+    if not path.exists():
+        raise FileNotFoundError(f"checkpoint not found: {path} (no such file)")
+    return path
+
+
+def read_card(path: str | os.PathLike) -> dict:
+    """The model card of a checkpoint file (its safetensors metadata ``model_card``, a JSON
+    object whose ``codec`` names the registry codec that loads it; absent: ``jscc``).
+
+    Raises FileNotFoundError when missing, ValueError (one line) when ``path`` is a folder
+    or a file without a readable card.
+    """
+    path = check_checkpoint_file(path)
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = f.metadata() or {}
+        card = json.loads(meta[CARD_KEY])
+        if not isinstance(card, dict):
+            raise TypeError(CARD_KEY)
+    except Exception as e:  # noqa: BLE001 - safetensors raises many kinds on garbage
+        raise ValueError(
+            f"checkpoint {path} is corrupt or not a codec checkpoint: no readable model card "
+            f"({type(e).__name__})"
+        ) from None
+    return card
+
+
 def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[dict, dict, object]:
     """Read a checkpoint of registry codec ``codec``; returns (state dict, card, config).
 
@@ -88,9 +122,7 @@ def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[d
     when the file holds another codec (naming both codecs and the file's architecture and
     hash).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
+    path = check_checkpoint_file(path)
     try:
         with safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}

@@ -148,6 +148,14 @@ def is_trainable(codec) -> bool:
     return not missing_members(codec, CODEC_MEMBERS + TRAINABLE_MEMBERS)
 
 
+def is_trained(codec) -> bool:
+    """The optional member ``trained`` (bool), True when absent. A factory sets it False on
+    a codec whose weights were never trained (freshly initialised: no checkpoint named and
+    no default weights); commands run such a codec only when asked with
+    ``--allow-untrained``, and its results say "untrained"."""
+    return bool(getattr(codec, "trained", True))
+
+
 @runtime_checkable
 class CodecMeta(Protocol):
     """The side information a codec's ``encode`` returns and its ``decode`` reads: whatever

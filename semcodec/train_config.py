@@ -19,9 +19,8 @@ class TrainConfig:
     Attributes:
         codec: the codec to train, a name in ``semcodec.CODECS`` (a :class:`TrainableCodec`),
             or ``NAME:CHECKPOINT`` to start from that checkpoint's weights (as ``init``).
-        model: the codec's architecture, one of its ``architectures`` (None: its default;
-            the default value is the JSCC's ``adjscc_s4_w96``, so other codecs name theirs or
-            None).
+        model: the codec's architecture, one of its ``architectures`` (None: the codec's
+            first, its default; :func:`semcodec.training.with_architecture` fills it in).
         channel: training channel in ``semcodec.TRAIN_CHANNELS``, or a comma-separated
             mixture of them (one drawn uniformly per step).
         crop_px: side of the square random crops.
@@ -49,7 +48,7 @@ class TrainConfig:
     """
 
     codec: str = "jscc"
-    model: str | None = "adjscc_s4_w96"
+    model: str | None = None
     channel: str = "awgn"
     crop_px: int = 96
     batch_size: int = 12

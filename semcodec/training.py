@@ -52,6 +52,7 @@ __all__ = [
     "make_model",
     "train",
     "validate",
+    "with_architecture",
 ]
 
 
@@ -97,13 +98,9 @@ def validate(
     return out
 
 
-def build_codec(cfg: TrainConfig, init: Path | None = None):
-    """A fresh :class:`semcodec.TrainableCodec` of ``cfg.codec`` / ``cfg.model``, weights drawn
-    from ``torch.manual_seed(cfg.seed)`` (every rank the same), optionally started from the
-    checkpoint ``init`` of the same codec (``cfg.codec = "NAME:CHECKPOINT"`` names one too). ValueError (one line) when the codec is not
-    trainable."""
-    name, checkpoint = parse_codec_spec(cfg.codec)
-    init = init if init is not None else checkpoint
+def _trainable(name: str):
+    """The registry codec ``name``'s default instance; ValueError (one line) when it is not
+    a :class:`semcodec.TrainableCodec`."""
     base = make_codec(name)
     missing = missing_members(base, CODEC_MEMBERS + TRAINABLE_MEMBERS)
     if missing:
@@ -111,6 +108,27 @@ def build_codec(cfg: TrainConfig, init: Path | None = None):
             f"codec {name} cannot be trained here: it lacks {', '.join(missing)} "
             "(semcodec.TrainableCodec)"
         )
+    return base
+
+
+def with_architecture(cfg: TrainConfig) -> TrainConfig:
+    """``cfg`` with ``model`` named: None becomes the codec's first architecture (its
+    default), so cards and training states record what was trained."""
+    if cfg.model is not None:
+        return cfg
+    base = _trainable(parse_codec_spec(cfg.codec)[0])
+    return dataclasses.replace(cfg, model=base.architectures[0])
+
+
+def build_codec(cfg: TrainConfig, init: Path | None = None):
+    """A fresh :class:`semcodec.TrainableCodec` of ``cfg.codec`` / ``cfg.model`` (None: the
+    codec's first architecture), weights drawn from ``torch.manual_seed(cfg.seed)`` (every
+    rank the same), optionally started from the checkpoint ``init`` of the same codec
+    (``cfg.codec = "NAME:CHECKPOINT"`` names one too). ValueError (one line) when the codec
+    is not trainable."""
+    name, checkpoint = parse_codec_spec(cfg.codec)
+    init = init if init is not None else checkpoint
+    base = _trainable(name)
     if cfg.model is not None and cfg.model not in base.architectures:
         raise KeyError(
             f"unknown architecture {cfg.model!r} of codec {name}; known: "
@@ -183,12 +201,14 @@ def train(
         raise ValueError(
             f"batch_size must be a multiple of the world size {place.world_size}, got {cfg.batch_size}"
         )
+    cfg = with_architecture(cfg)
     torch.set_num_threads(cfg.num_threads)
     images, paths, data_hash, val = load_data(cfg.crop_px, train_dirs, val_dir)
     codec = build_codec(cfg, init)
     codec.module.to(place.device).train()
     card = {
         **(card_extra or {}),
+        "codec": parse_codec_spec(cfg.codec)[0],  # the registry name that loads the file
         "training": {
             "config": dataclasses.asdict(cfg),
             "data": [str(d) for d in train_dirs],
@@ -219,8 +239,16 @@ def train(
     }
 
 
+LOG_EVERY_STEPS = 50
+LOG_EVERY_S = 30.0
+"""``log.jsonl`` gets a record every ``LOG_EVERY_STEPS`` steps or ``LOG_EVERY_S`` seconds of
+training, whichever comes first, at every validation and at the end: a short or slow
+training is logged as it goes too."""
+
+
 def _loop(run: TrainRun, forward, data, val) -> dict:
-    """Steps until the budget is spent; logs every 50 steps, validates and saves (rank 0)."""
+    """Steps until the budget is spent; logs (:data:`LOG_EVERY_STEPS`), validates and saves
+    (rank 0)."""
     from tqdm import tqdm
 
     cfg, place = run.cfg, run.place
@@ -235,8 +263,8 @@ def _loop(run: TrainRun, forward, data, val) -> dict:
         file=sys.stderr,
         disable=not lead,
     )
-    last_save = last_eval = run.elapsed
-    acc = [0.0, 0.0, 0]
+    last_save = last_eval = last_log = run.elapsed
+    acc = [0.0, 0.0, 0, 0.0]  # loss, PSNR, steps, seconds since the last record
     while not run.done():
         t0 = time.perf_counter()
         out = train_step(run, forward, data)
@@ -249,33 +277,51 @@ def _loop(run: TrainRun, forward, data, val) -> dict:
                     file=sys.stderr,
                 )
             continue
-        acc = [acc[0] + out[0], acc[1] + out[1], acc[2] + 1]
+        acc = [acc[0] + out[0], acc[1] + out[1], acc[2] + 1, acc[3] + dt]
         bar.update(int(run.elapsed) - bar.n)
-        if run.step % 50 == 0:
-            rec = {
-                "step": run.step,
-                "elapsed_s": round(run.elapsed, 1),
-                "lr": lr_at(cfg, run.elapsed, run.step),
-                "loss": acc[0] / acc[2],
-                "train_psnr": acc[1] / acc[2],
-                "crops_per_s": cfg.batch_size / dt,
-            }
-            bar.set_postfix(psnr=f"{acc[1] / acc[2]:.2f}")
-            acc = [0.0, 0.0, 0]
-            if val is not None and (run.elapsed - last_eval >= cfg.eval_every_s or run.done()):
+        evaluate = val is not None and run.elapsed - last_eval >= cfg.eval_every_s
+        if evaluate or run.step % LOG_EVERY_STEPS == 0 or run.elapsed - last_log >= LOG_EVERY_S:
+            rec = _record(run, acc)
+            bar.set_postfix(psnr=f"{rec['train_psnr']:.2f}")
+            acc, last_log = [0.0, 0.0, 0, 0.0], run.elapsed
+            if evaluate and not run.done():  # the end is validated below
                 rec.update(_validate_and_save(run, val))
                 last_eval = last_save = run.elapsed
-            if lead:
-                log.write(json.dumps(rec) + "\n")
-                log.flush()
+            _write(log, rec)
         if run.elapsed - last_save >= cfg.save_every_s:
             run.checkpoint(False)
             last_save = run.elapsed
     metrics = _validate_and_save(run, val, final=True)
+    if acc[2] or metrics:
+        _write(log, {**(_record(run, acc) if acc[2] else _record_head(run)), **metrics})
     bar.close()
     if lead:
         log.close()
     return metrics
+
+
+def _record(run: TrainRun, acc: list) -> dict:
+    """One ``log.jsonl`` record: the mean loss and PSNR of the ``acc[2]`` steps since the
+    last one (``acc``: summed loss, summed PSNR, steps, seconds)."""
+    cfg = run.cfg
+    return {
+        **_record_head(run),
+        "lr": lr_at(cfg, run.elapsed, run.step),
+        "loss": acc[0] / acc[2],
+        "train_psnr": acc[1] / acc[2],
+        "crops_per_s": cfg.batch_size * acc[2] / max(acc[3], 1e-9),
+    }
+
+
+def _record_head(run: TrainRun) -> dict:
+    return {"step": run.step, "elapsed_s": round(run.elapsed, 1)}
+
+
+def _write(log, rec: dict) -> None:
+    """Append ``rec`` to the open ``log.jsonl`` (None: not rank 0) and flush it."""
+    if log is not None:
+        log.write(json.dumps(rec) + "\n")
+        log.flush()
 
 
 def _validate_and_save(run: TrainRun, val, final: bool = False) -> dict:

@@ -31,6 +31,9 @@ class ChannelTruncationCodec:
         self.card = card
         self.path = path
         self.sha256: str = card["sha256"]
+        self.trained = path is not None
+        """The contract's optional ``trained``: False for freshly initialised weights (no
+        checkpoint file; :func:`semcodec.contract.is_trained`)."""
 
     @property
     def name(self) -> str:

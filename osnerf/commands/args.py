@@ -139,6 +139,17 @@ def snr_db_list(text) -> list[float]:
 
 
 # ----------------------------------------------------------------------------- output paths
+def add_allow_untrained(p: argparse.ArgumentParser) -> None:
+    """Add ``--allow-untrained``: without it a codec without trained weights is refused."""
+    p.add_argument(
+        "--allow-untrained",
+        action="store_true",
+        help="run a codec that has no trained weights (e.g. deepjscc without a checkpoint): "
+        "a freshly initialised network, labelled untrained in the results; without it such "
+        "a codec is refused (exit 2)",
+    )
+
+
 def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:
     """Add ``--overwrite``: without it an existing output that holds results is refused.
 

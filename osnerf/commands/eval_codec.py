@@ -5,10 +5,12 @@ Reads every PNG/JPEG of ``--images`` (each at least 11x11 px: SSIM's Gaussian wi
 through every scheme at every SNR, ``--draws`` times over independent noise and fading
 draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
 "sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
-"num_images", "draws", ...}]}`` where psnr/ssim/lpips are the mean over images x draws of
-per-image values (PSNR peak 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with
-``--no-lpips`` or when an image is smaller than 31x31 px) and ``psnr_ci95`` the 95 %
-Student-t interval of that mean over the images x draws values.
+"num_images", "draws", ...}], "codec": {...}}`` (the codec's record,
+:func:`osnerf.provenance.codec_record`: sha256, trained or not, a plugin's distribution)
+where psnr/ssim/lpips are the mean over images x draws of per-image values (PSNR peak
+1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with ``--no-lpips`` or when an
+image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % Student-t interval of that
+mean over the images x draws values.
 
 Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI ZF receiver,
 ``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
@@ -117,6 +119,7 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
         "semcodec.codecs entry points), optionally with a checkpoint, or a checkpoint path "
         "(default: jscc with the shipped checkpoint)",
     )
+    checks.add_allow_untrained(p)
     p.add_argument(
         "--max-images",
         type=checks.count(1, MAX_IMAGES),
@@ -155,7 +158,7 @@ def mean_ci95(values) -> tuple[float, float, float]:
 
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
-    from osnerf.provenance import result_header, write_json_atomic
+    from osnerf.provenance import codec_record, result_header, write_json_atomic
     from semcodec import LINK_SCHEMES, EvalContext
 
     out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
@@ -196,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     doc = {**result_header(config, args.seed), "checkpoint": checkpoint, "results": []}
+    doc["codec"] = codec_record(codec, args.codec) if codec else None
     total = len(schemes) * len(snrs) * len(images) * args.draws
     # the bar is closed on the way out, by an error too: it never redraws after the message
     with tqdm(total=total, desc="eval-codec", file=sys.stderr) as bar:
@@ -258,7 +262,6 @@ def _inputs(args: argparse.Namespace):
         LINK_SCHEMES,
         eval_channels,
         load_image_folder,
-        open_codec,
     )
 
     inputs = {"--images": args.images}
@@ -287,7 +290,9 @@ def _inputs(args: argparse.Namespace):
             raise KeyError(f"--mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
     codec = None
     if any(LINK_SCHEMES[s].needs_codec for s in schemes):
-        codec = open_codec(args.codec)
+        from osnerf.provenance import open_codec
+
+        codec = open_codec(args.codec, args.allow_untrained)
         lo, hi = codec.cbr_range
         if not lo * 0.999 <= cbr <= hi * 1.001:
             raise ValueError(

@@ -230,6 +230,7 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
         "the semcodec.codecs entry points), optionally with a checkpoint, or a checkpoint path "
         "(default: jscc with the shipped checkpoint)",
     )
+    checks.add_allow_untrained(p)
 
 
 def load_images(path: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
@@ -328,8 +329,9 @@ def framed_settings(args, symbols_per_frame: int):
     """The scheme's ``semcodec.FramedSettings`` from the flags, checked: ``--quality`` in the
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
+    from osnerf.provenance import open_codec
     from phy import parse_cbr
-    from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
+    from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes
 
     qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
     if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
@@ -342,7 +344,7 @@ def framed_settings(args, symbols_per_frame: int):
             cbr = parse_cbr(args.cbr)
         except ValueError as e:
             raise usage_error(f"--{e}") from None
-        codec = open_codec(args.codec)
+        codec = open_codec(args.codec, args.allow_untrained)
         if args.snr_db is not None:  # a real air: the encoder's SNR is measured first
             check_codec_snr(codec, args.snr_db)
     digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)

@@ -16,7 +16,7 @@ import numpy as np
 def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     """The result file's record: per scheme and image, the summary, every frame, the SigMF
     paths. ``bursts``: (scheme, per-image receptions, ``hil.BurstResult``, SigMF paths)."""
-    from osnerf.provenance import result_header
+    from osnerf.provenance import codec_record, result_header
 
     results, frames, sigmf, by_scheme = [], [], [], {}
     requested = args.snr_db  # None: a real air
@@ -55,10 +55,10 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
         }
     )
     record = result_header(config, args.seed)
+    record["codec"] = None
     if settings.codec is not None:
         record["codec"] = {
-            "name": settings.codec.name,
-            "sha256": settings.codec.sha256,
+            **codec_record(settings.codec, args.codec),
             "encoder_snr_db": settings.snr_db,
         }
     record.update(

@@ -119,6 +119,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "without --overwrite",
     )
     checks.add_overwrite(p, "what a --out folder holds (another config's run, other files)")
+    checks.add_allow_untrained(p)
     p.add_argument(
         "--cache-dir",
         default=None,
@@ -130,7 +131,9 @@ def run_config(args: argparse.Namespace):
     """The ``osnerf.run.RunConfig`` of parsed arguments (validates them)."""
     from osnerf.run import RunConfig
 
-    return config_from_args(RunConfig, args, CONFIG_FIELDS, flags=FLAGS)
+    return config_from_args(
+        RunConfig, args, CONFIG_FIELDS, flags=FLAGS, allow_untrained=args.allow_untrained
+    )
 
 
 def run(args: argparse.Namespace) -> int:

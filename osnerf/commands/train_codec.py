@@ -7,7 +7,9 @@ checkpoint starts from its weights). On one process it runs as is; under ``torch
 Resumable at any world size: run the same command again and it continues from
 ``OUT/last_state.pt``.
 Writes ``OUT/best.safetensors`` and ``last.safetensors`` (weights + model card),
-``OUT/log.jsonl`` (loss, PSNR, learning rate) and ``OUT/summary.json``.
+``OUT/log.jsonl`` (loss, PSNR, learning rate; written as training goes) and
+``OUT/summary.json`` (with the record of ``best.safetensors``: its codec, sha256 and, for a
+plugin, its distribution). ``--model`` left out trains the codec's first architecture.
 """
 
 from __future__ import annotations
@@ -120,9 +122,10 @@ def run(args: argparse.Namespace) -> int:
 def parse(args: argparse.Namespace):
     """Check every input before any work: (config, data folders, validation folder, init
     checkpoint or None, output folder)."""
-    from semcodec import TrainConfig, build_codec, load_train_state
+    from semcodec import TrainConfig, build_codec, load_train_state, with_architecture
 
     cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
+    cfg = with_architecture(cfg)  # --model left out: the codec's own first architecture
     build_codec(cfg, None)  # an unknown codec, architecture or checkpoint: refused before work
     bsds = shared_data_dir() / "bsds500"
     where = "$OSNERF_DATA" if os.environ.get("OSNERF_DATA") else "the shared data folder"
@@ -179,12 +182,22 @@ def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
     return {**result_header(dataclasses.asdict(cfg), cfg.seed), **summary}
 
 
+def trained_codec(cfg, out: Path) -> dict:
+    """The record (:func:`osnerf.provenance.codec_record`) of ``OUT/best.safetensors``, loaded
+    through the codec's own factory: its sha256 and, for a plugin, its distribution."""
+    from osnerf.provenance import codec_record
+    from semcodec import open_codec, parse_codec_spec
+
+    spec = f"{parse_codec_spec(cfg.codec)[0]}:{out / 'best.safetensors'}"
+    return codec_record(open_codec(spec, allow_untrained=True), spec)
+
+
 def report(cfg, summary: dict, out: Path) -> None:
     from osnerf.provenance import write_json_atomic
 
     if int(os.environ.get("RANK", "0")) != 0:  # under torchrun, rank 0 writes
         return
-    write_json_atomic(out / "summary.json", summary)
+    write_json_atomic(out / "summary.json", {**summary, "codec": trained_codec(cfg, out)})
     print(
         f"train-codec: {summary['steps']} steps, validation {summary['validation']}; {out}",
         file=sys.stderr,

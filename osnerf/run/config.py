@@ -47,6 +47,9 @@ class RunConfig:
         codec: the transmitter's semantic codec, NAME[:CHECKPOINT] of ``semcodec.CODECS``
             (plugins included) or a checkpoint path (None: jscc, the shipped checkpoint).
         receiver_codec: the receiver's codec, the same forms (None: the same as ``codec``).
+        allow_untrained: run a codec without trained weights (freshly initialised, e.g.
+            deepjscc without a checkpoint); otherwise such a codec is refused. Not part of
+            the cache key: it changes what runs, never a result.
         mcs: the digital scheme's MCS: "auto" (from the average SNR, no CSI at the
             transmitter) or a fixed phy.digital.MCS_TABLE name.
         image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).
@@ -90,6 +93,7 @@ class RunConfig:
     symbol_rate_hz: float = 1e6
     codec: str | None = None
     receiver_codec: str | None = None
+    allow_untrained: bool = False
     mcs: str = "auto"
     image_codec: str = "avif"
     render_spp: int = 32
@@ -180,10 +184,13 @@ class RunConfig:
     @cached_property
     def _codec_sha256(self) -> tuple[str, str]:
         """(transmitter, receiver) codec weights' sha256 (opening a codec reads its checkpoint)."""
-        import semcodec
+        from osnerf.provenance import open_codec
 
-        tx = semcodec.open_codec(self.codec).sha256
-        rx = semcodec.open_codec(self.receiver_codec).sha256 if self.receiver_codec else tx
+        allow = self.allow_untrained
+        tx = open_codec(self.codec, allow, warn=False).sha256
+        rx = tx
+        if self.receiver_codec:
+            rx = open_codec(self.receiver_codec, allow, "--receiver-codec", warn=False).sha256
         return tx, rx
 
     def key(self) -> str:
@@ -191,7 +198,7 @@ class RunConfig:
         and the weights of both ends' codecs (their ``sha256``, so a checkpoint replaced under
         the same path, the shipped default included, makes another key). The list of schemes
         is not part of it: each scheme's stages are cached under its own name."""
-        d = {k: v for k, v in asdict(self).items() if k != "schemes"}
+        d = {k: v for k, v in asdict(self).items() if k not in ("schemes", "allow_untrained")}
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])

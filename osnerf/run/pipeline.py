@@ -68,14 +68,17 @@ def prepare(cfg: RunConfig) -> Prepared:
     codec = rx = None
     if any(s.needs_codec for s in schemes.values()):
         import semcodec
+        from osnerf.provenance import open_codec
 
-        codec = semcodec.open_codec(cfg.codec)
+        codec = open_codec(cfg.codec, cfg.allow_untrained)
         lo, hi = (float(v) for v in codec.snr_range_db)
         if not lo <= cfg.snr_db <= hi:
             raise ValueError(
                 f"--snr-db {cfg.snr_db:g} is outside the codec's range [{lo:g}, {hi:g}] dB"
             )
-        rx = semcodec.open_codec(cfg.receiver_codec) if cfg.receiver_codec else codec
+        rx = codec
+        if cfg.receiver_codec:
+            rx = open_codec(cfg.receiver_codec, cfg.allow_untrained, "--receiver-codec")
         scu.check_knowledge_base(codec.sha256, rx.sha256)
         rx = semcodec.for_fusion(rx, cfg.layer_fusion)
     return Prepared(demand, schemes, codec, rx, scu)
@@ -243,7 +246,7 @@ def run_pipeline(
         link=links.info,
         snr_db=cfg.snr_db,
         symbol_rate_hz=cfg.symbol_rate_hz,
-        codec=None if prep.codec is None else codec_summary(prep.codec),
+        codec=None if prep.codec is None else codec_summary(prep, cfg),
         views=views_summary(plan, col),
         schemes=results,
         comparisons=_flag(comparisons(results, prep.schemes)),
@@ -275,13 +278,21 @@ def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) ->
     }
 
 
-def codec_summary(codec) -> dict:
-    """The codec as the report shows it (its knowledge-base identity and ranges)."""
+def codec_summary(prep: Prepared, cfg: RunConfig) -> dict:
+    """The codec as the report shows it: its record (:func:`osnerf.provenance.codec_record`:
+    knowledge-base identity, trained or not, a plugin's distribution), its ranges, and the
+    receiver's record when ``cfg.receiver_codec`` names one (None: the same codec)."""
+    from osnerf.provenance import codec_record
+
+    codec = prep.codec
+    receiver = None
+    if cfg.receiver_codec is not None:
+        receiver = codec_record(prep.rx_codec, cfg.receiver_codec)
     return {
-        "sha256": codec.sha256,
-        "name": codec.name,
+        **codec_record(codec, cfg.codec),
         "cbr_range": list(codec.cbr_range),
         "snr_range_db": list(codec.snr_range_db),
+        "receiver": receiver,
     }
 
 

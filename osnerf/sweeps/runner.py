@@ -3,7 +3,8 @@
 Each point runs ``osnerf.cli.main([command, *argv, "--out", TMP])`` in a worker (in-process,
 a spawned process of a ``concurrent.futures`` pool, or a Ray task), and the worker returns
 the command's result JSON. The driver extracts the metrics (:mod:`osnerf.sweeps.metrics`)
-and appends one line per finished point to the results file (:mod:`osnerf.sweeps.store`).
+and appends one line per finished point to the results file (:mod:`osnerf.sweeps.store`),
+with the codec record of the command's result (``codec``, null for a command without one).
 Failed points are not written there: they go to ``<out>.errors.jsonl`` and are retried by
 the next run of the same spec. A point whose command rejects its arguments (exit 2: a value
 its parser accepted but the command does not) stops the sweep with a ValueError: the spec
@@ -222,6 +223,7 @@ def _record(run: _Sweep, p: Point, outcome: Outcome, out, errors, summary, bar) 
                 "argv": list(p.argv),
                 "spec_hash": spec.sha256,
                 "versions": result.get("versions"),
+                "codec": result.get("codec"),
                 "output": outcome.get("kept"),
                 "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
             },

@@ -59,7 +59,9 @@ def test_plugin_in_osnerf_run_and_the_knowledge_base_check(plugin, tmp_path, cap
     assert rep["schemes"]["jscc"]["symbols_sent"] > 0
     assert rep["schemes"]["jscc"]["psnr_received_object"] > 10.0
     bad = tmp_path / "bad"
-    rc = main([*base, "--codec", "demo", "--receiver-codec", "demo:other", "--out", str(bad)])
+    other = tmp_path / "other.ckpt"  # the demo codec's "checkpoint": any file
+    other.write_bytes(b"demo")
+    rc = main([*base, "--codec", "demo", "--receiver-codec", f"demo:{other}", "--out", str(bad)])
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert rc == 2 and "knowledge-base mismatch" in err and "dddddddddddd" in err
     assert "eeeeeeeeeeee" in err and not (bad / "report.json").exists()
