@@ -190,6 +190,12 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     checkpoint = {"name": codec.name, "sha256": codec.sha256} if codec else None
+    if codec is not None:  # what the codec declares, and whether jscc_refined refined
+        from semcodec import codec_limits, refinement_status
+
+        checkpoint["limits"] = codec_limits(codec).as_dict()
+        if any(LINK_SCHEMES[s].refines for s in schemes):
+            checkpoint["refinement"] = refinement_status(codec, args.refine_steps)
     partial = partial_path(out)
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:
@@ -259,6 +265,7 @@ def _inputs(args: argparse.Namespace):
         eval_channels,
         load_image_folder,
         open_codec,
+        require_capabilities,
     )
 
     inputs = {"--images": args.images}
@@ -288,6 +295,10 @@ def _inputs(args: argparse.Namespace):
     codec = None
     if any(LINK_SCHEMES[s].needs_codec for s in schemes):
         codec = open_codec(args.codec)
+        refine = [s for s in schemes if LINK_SCHEMES[s].refines]
+        limits = require_capabilities(codec, bool(refine), f"--schemes {','.join(refine)}")
+        if limits.line():
+            print(f"eval-codec: {limits.line()}", file=sys.stderr)
         lo, hi = codec.cbr_range
         if not lo * 0.999 <= cbr <= hi * 1.001:
             raise ValueError(
@@ -337,6 +348,7 @@ def _point(
     scales_used: dict[str, int] = {}  # images sent downscaled by each factor (1: whole)
     stats_keys = {}
     separate = False  # the scheme reported views lost (a separate source-channel code)
+    budget = None  # the codec's symbol budget over images x draws (semantic schemes)
     for ii, img in enumerate(images):
         row = []
         for d in range(args.draws):
@@ -348,6 +360,8 @@ def _point(
                 ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
             for k in extra:
                 extra[k] += int(res.stats.get(k, 0) or 0)
+            if "symbol_budget" in res.stats:  # the semantic codec's: sent against asked
+                budget = (budget or 0) + int(res.stats["symbol_budget"])
             separate = separate or "views_lost" in res.stats
             for k, v in (res.stats.get("views_lost") or {}).items():
                 lost[k] += int(v)
@@ -377,6 +391,9 @@ def _point(
         **extra,
         "seconds": round(time.perf_counter() - t0, 2),
     }
+    if budget is not None:
+        r["symbol_budget"] = budget
+        r["symbols_unused"] = budget - extra["num_symbols"]
     if separate:
         r["views_lost"] = lost
         r["mcs_used"] = mcs_used

@@ -304,7 +304,14 @@ def framed_settings(args, symbols_per_frame: int):
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
     from phy import parse_cbr
-    from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes, open_codec
+    from semcodec import (
+        IMAGE_CODECS,
+        LINK_SCHEMES,
+        FramedSettings,
+        frame_payload_bytes,
+        open_codec,
+        require_capabilities,
+    )
 
     qlo, qhi = IMAGE_CODECS[args.image_codec].quality_range
     if not max(qlo, 1) <= args.quality <= qhi:
@@ -319,6 +326,9 @@ def framed_settings(args, symbols_per_frame: int):
             raise usage_error(f"--{e}") from None
         codec = open_codec(args.codec)
         check_codec_snr(codec, args.snr_db)
+        limits = require_capabilities(codec)  # ota does not refine: nothing is refused
+        if limits.line():
+            print(f"ota: {limits.line()}", file=sys.stderr)
     digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
     if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(

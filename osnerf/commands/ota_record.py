@@ -38,6 +38,11 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             "frames_lost": result.frames_lost,
             "snr_db_measured": result.snr_db_measured(),
         }
+        if all("symbol_budget" in r for r in rows):  # the codec's: sent against asked
+            sent, budget = (sum(r[k] for r in rows) for k in ("num_symbols", "symbol_budget"))
+            by_scheme[scheme].update(
+                symbols_sent=sent, symbol_budget=budget, symbols_unused=budget - sent
+            )
     config = {k: v for k, v in vars(args).items() if k not in ("command",)}
     config.update(
         {
@@ -48,7 +53,18 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     )
     record = result_header(config, args.seed)
     if settings.codec is not None:
-        record["codec"] = {"name": settings.codec.name, "sha256": settings.codec.sha256}
+        from semcodec import codec_limits
+
+        record["codec"] = {
+            "name": settings.codec.name,
+            "sha256": settings.codec.sha256,
+            "limits": codec_limits(settings.codec).as_dict(),
+            "refinement": {
+                "on": False,
+                "steps": 0,
+                "why": "ota sends the codec's symbols as encoded",
+            },
+        }
     record.update(
         {
             "results": results,
