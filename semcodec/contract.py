@@ -393,7 +393,7 @@ def refinement_status(codec, steps: int) -> dict:
     if not codec_limits(codec).differentiable_decode:
         why = f"codec {codec.name!r} has no differentiable decode (decode_differentiable)"
         return {"on": False, "steps": 0, "why": why}
-    return {"on": True, "steps": steps, "why": f"{steps} steps per view"}
+    return {"on": True, "steps": steps, "why": f"{steps} Adam steps per image"}
 
 
 def symbol_budget(cbr: float, height: int, width: int) -> int:

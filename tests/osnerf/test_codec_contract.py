@@ -196,6 +196,33 @@ def test_refinement_reaches_the_codec_in_its_own_terms():
     assert y.shape == x.shape and codec.seen[-1][:2] == ("decode", "Meta")
 
 
+def test_a_registered_codec_with_a_differentiable_decode_refines_in_eval_codec(
+    image_40x24, tmp_path
+):
+    """A codec from outside (registered by name) that declares ``decode_differentiable``:
+    jscc_refined runs on it through the command, its tiles' own metas reach its decoder,
+    and the refinement moves its symbols."""
+    spy = _Spy()
+    semcodec.CODECS.register("spy", lambda checkpoint=None: spy)
+    try:
+        out = tmp_path / "e.json"
+        argv = ["eval-codec", "--images", str(image_40x24), "--codec", "spy", "--cbr", "1/8"]
+        argv += ["--schemes", "jscc,jscc_refined", "--snr-db", "5", "--no-lpips"]
+        assert main([*argv, "--refine-steps", "3", "--out", str(out)]) == 0
+    finally:
+        semcodec.CODECS.unregister("spy")
+    doc = json.loads(out.read_text())
+    assert doc["checkpoint"]["refinement"] == {
+        "on": True,
+        "steps": 3,
+        "why": "3 Adam steps per image",
+    }
+    psnr = {r["scheme"]: r["psnr"] for r in doc["results"]}
+    assert psnr["jscc_refined"] != psnr["jscc"], psnr
+    assert {m for _, m, _ in spy.seen} == {"Meta"}
+    assert ("differentiable", "Meta", (1,)) in spy.seen
+
+
 def test_malformed_declarations_are_refused_in_one_line():
     bad = _Spy()
     bad.input_size = (4, 4)
