@@ -396,6 +396,15 @@ def refinement_status(codec, steps: int) -> dict:
     return {"on": True, "steps": steps, "why": f"{steps} Adam steps per image"}
 
 
+def capability_record(codec, refine_steps: int | None = None) -> dict:
+    """A result file's record of the codec's declarations (``limits``) and, where the command
+    could refine (``refine_steps`` not None), whether it did (``refinement``)."""
+    out = {"limits": codec_limits(codec).as_dict()}
+    if refine_steps is not None:
+        out["refinement"] = refinement_status(codec, refine_steps)
+    return out
+
+
 def symbol_budget(cbr: float, height: int, width: int) -> int:
     """Complex symbols per image that ``cbr`` asks for: ``round(cbr * 3 * height * width)``,
     at least 1 (the budget a codec may not exceed; module docstring)."""

@@ -149,7 +149,7 @@ def fit_decode(
         for c in range(meta.grid[1]):
             inner = meta.inner[r * meta.grid[1] + c]
             n = int(inner.num_symbols)
-            part_nv = nv[:, at : at + n] if per_symbol else noise_var
+            part_nv = nv[:, at : at + n] if per_symbol and nv is not None else noise_var
             row.append(
                 _own_decode(
                     codec,

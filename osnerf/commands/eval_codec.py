@@ -156,7 +156,7 @@ def mean_ci95(values) -> tuple[float, float, float]:
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
-    from semcodec import LINK_SCHEMES, EvalContext
+    from semcodec import LINK_SCHEMES, EvalContext, capability_record
 
     out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
     ctx = EvalContext(
@@ -189,13 +189,12 @@ def run(args: argparse.Namespace) -> int:
     }
     from tqdm import tqdm
 
-    checkpoint = {"name": codec.name, "sha256": codec.sha256} if codec else None
-    if codec is not None:  # what the codec declares, and whether jscc_refined refined
-        from semcodec import codec_limits, refinement_status
-
-        checkpoint["limits"] = codec_limits(codec).as_dict()
-        if any(LINK_SCHEMES[s].refines for s in schemes):
-            checkpoint["refinement"] = refinement_status(codec, args.refine_steps)
+    refines = any(LINK_SCHEMES[s].refines for s in schemes)
+    checkpoint = None  # the codec, what it declares and whether jscc_refined refined
+    if codec is not None:
+        steps = args.refine_steps if refines else None
+        checkpoint = {"name": codec.name, "sha256": codec.sha256}
+        checkpoint.update(capability_record(codec, steps))
     partial = partial_path(out)
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:

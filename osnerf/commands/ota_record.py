@@ -53,18 +53,11 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     )
     record = result_header(config, args.seed)
     if settings.codec is not None:
-        from semcodec import codec_limits
+        from semcodec import capability_record
 
-        record["codec"] = {
-            "name": settings.codec.name,
-            "sha256": settings.codec.sha256,
-            "limits": codec_limits(settings.codec).as_dict(),
-            "refinement": {
-                "on": False,
-                "steps": 0,
-                "why": "ota sends the codec's symbols as encoded",
-            },
-        }
+        record["codec"] = {"name": settings.codec.name, "sha256": settings.codec.sha256}
+        record["codec"].update(capability_record(settings.codec, 0))
+        record["codec"]["refinement"]["why"] = "ota sends the codec's symbols as encoded"
     record.update(
         {
             "results": results,

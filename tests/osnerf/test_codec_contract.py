@@ -223,6 +223,32 @@ def test_a_registered_codec_with_a_differentiable_decode_refines_in_eval_codec(
     assert ("differentiable", "Meta", (1,)) in spy.seen
 
 
+def test_an_input_multiple_is_padded_and_cropped_and_tiles_get_their_own_noise():
+    """``input_multiple=16``: a 12 x 16 px image reaches the codec edge-padded to 16 x 16 and
+    comes back 12 x 16; a fixed-size codec's tiles each get their own slice of a per-symbol
+    noise variance."""
+    codec = _Spy()
+    codec.input_size, codec.input_multiple = None, 16
+    x = torch.rand(2, 3, 12, 16, generator=torch.Generator().manual_seed(0))
+    assert semcodec.codec_limits(codec).lacks() == [
+        "input sides multiples of 16 px: images edge-padded"
+    ]
+    enc = semcodec.fit_encode(codec, x, 10.0, 1 / 8)
+    assert enc.meta.num_symbols == 24 and (enc.meta.height, enc.meta.width) == (12, 16)
+    y = semcodec.fit_decode(codec, enc.symbols, enc.meta, 10.0)
+    assert y.shape == x.shape
+    seen = []
+    codec = _Spy()
+    codec.decode = lambda x_hat, meta, snr_db, expected_sha256=None, noise_var=None: (
+        seen.append(noise_var) or codec._out(x_hat)
+    )
+    x = torch.rand(1, 3, 16, 32, generator=torch.Generator().manual_seed(1))
+    enc = semcodec.fit_encode(codec, x, 10.0, 1 / 8)
+    nv = torch.cat([torch.full((1, 24), 0.1), torch.full((1, 24), 0.2)], dim=1)
+    assert semcodec.fit_decode(codec, enc.symbols, enc.meta, 10.0, noise_var=nv).shape == x.shape
+    assert [float(v.max()) for v in seen] == pytest.approx([0.1, 0.2])
+
+
 def test_malformed_declarations_are_refused_in_one_line():
     bad = _Spy()
     bad.input_size = (4, 4)
