@@ -282,3 +282,19 @@ def test_train_channel_returns_what_decode_receives():
     assert v.grad is not None and torch.isfinite(v.grad).all()
     with pytest.raises(KeyError, match="unknown training channel 'nope'"):
         semcodec.train_channel(x, 0.0, "nope", g)
+
+
+@pytest.mark.parametrize("name", ["jscc", "deepjscc"])
+def test_the_built_in_codecs_declarations(name):
+    """Ours refines (it declares a differentiable decode) and takes any size; Deep JSCC,
+    registered the way a plugin is, declares no differentiable decode."""
+    codec = semcodec.make_codec(name)
+    lim = semcodec.codec_limits(codec)
+    assert lim.any_size and lim.symbol_multiple == 1
+    assert lim.differentiable_decode is (name == "jscc")
+    assert semcodec.refinement_status(codec, 5)["on"] is (name == "jscc")
+    assert semcodec.refinement_status(codec, 0) == {
+        "on": False,
+        "steps": 0,
+        "why": "refinement steps set to 0",
+    }
