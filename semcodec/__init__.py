@@ -22,7 +22,8 @@ needs, and ``train_channel`` applies a training channel to its symbols (returnin
 ``input_size``, ``input_multiple``, ``symbol_multiple``) are read by ``codec_limits``;
 commands check them up front (``require_capabilities``) and tile or pad for a codec with a
 declared input size (``fit_encode`` / ``fit_decode``); ``symbol_budget`` is what a ``cbr``
-asks for, reported against what was sent. Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
+asks for, reported against what was sent.
+Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
 entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` builds one, ``open_codec`` also takes a bare checkpoint path.
 ``encode_with_focus`` / ``decode_received`` serve a focus demand with any codec (a codec
 without ``supports_focus`` sends the objects' box at the same symbol budget,

@@ -93,8 +93,8 @@ class FramedReception:
         image: [3, height, width] float32, the image shown (mid-grey when lost).
         psnr: PSNR of ``image`` against the image sent (peak 1.0).
         stats: the scheme's per-image numbers for a result file (digital: ``decoded``,
-            ``bytes``, ``frames_crc_failed``; jscc: ``decoded``, ``num_symbols``, ``symbol_budget``,
-            ``cbr``).
+            ``bytes``, ``frames_crc_failed``; jscc: ``decoded``, ``num_symbols``,
+            ``symbol_budget``, ``cbr``).
         frames_crc_ok: one per frame: its CRC verdict (False when the frame was lost), or
             None where the scheme has no CRC (jscc).
     """

@@ -47,8 +47,8 @@ def refine_symbols(
     from the transmitter's own ``generator``: a stochastic descent on the expected
     distortion, with the same power per image as the encoder's symbols. The codec must
     declare a differentiable decode (``decode_differentiable``, the contract's optional
-    capability); a focus box or tiles are unwrapped, so it sees its own meta. The receiver and the
-    side information are unchanged (``meta`` is kept); the cost is ``steps`` decoder passes,
+    capability); a focus box or tiles are unwrapped, so it sees its own meta. The receiver
+    and the side information are unchanged (``meta`` is kept); the cost is ``steps`` decoder passes,
     forward and backward, at the transmitter. This is the amortisation gap closed at
     inference (stochastic latent refinement in learned compression).
 
