@@ -44,6 +44,8 @@ class SchemeReport:
         nerf_steps, nerf_curve, nerf_wall_seconds: the radiance field's training.
         bound: None, or what this scheme bounds (not a real system).
         training_bounds: "demanded objects" or "whole scene".
+        codec_use: semantic schemes: the codec's declared limits, refinement on or off (and
+            why), symbols sent against the plan's budget (``osnerf.run.jscc.codec_use``).
         renderers: None (skipped), or for the full render and the learned renderer
             ("full", "features" of ``renderer.RENDERERS``) on the held-out views in order:
             psnr_object (as above), seconds_per_view (one thread), setup_seconds and setup_cpu_seconds
@@ -75,6 +77,7 @@ class SchemeReport:
     training_bounds: str = "demanded objects"
     help: str = ""
     renderers: dict | None = None
+    codec_use: dict | None = None
 
 
 _VIEW_MAPS = (
@@ -294,6 +297,17 @@ def _img(data: bytes, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(data).decode()}"/>'
 
 
+def codec_use_line(scheme: str, use: dict) -> str:
+    """One line of what a semantic scheme did with its codec: refinement on or off (and
+    why), symbols sent against the budget."""
+    ref = use["refinement"]
+    state = f"on ({ref['why']})" if ref["on"] else f"off ({ref['why']})"
+    return (
+        f"{scheme}: codec {use['codec']}: refinement {state}; {use['symbols_sent']} symbols sent "
+        f"of a {use['symbol_budget']} budget ({use['symbols_unused']} unused)"
+    )
+
+
 def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     """A self-contained HTML page (pictures as base64 data URIs)."""
     s = {n: asdict(r) for n, r in report.schemes.items()}
@@ -339,6 +353,11 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
         f"<li>{html.escape(n)} is a bound, not a real system: {html.escape(r.bound)}</li>"
         for n, r in report.schemes.items()
         if r.bound
+    )
+    bounds += "".join(
+        f"<li>{html.escape(codec_use_line(n, r.codec_use))}</li>"
+        for n, r in report.schemes.items()
+        if r.codec_use
     )
     dec = "".join(
         f"<li><b>{html.escape(d['stage'])}</b>: {html.escape(d['decision'])}</li>"

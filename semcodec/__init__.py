@@ -17,7 +17,13 @@ The codec contract (:mod:`semcodec.contract`), which every codec on osnerf's lin
   ``cbr_range``, ``snr_range_db``, ``supports_focus``.
 
 ``SemanticCodec`` is the runtime-checkable protocol; ``TrainableCodec`` adds what the trainer
-needs. Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
+needs, and ``train_channel`` applies a training channel to its symbols (returning what
+``decode`` receives). Optional capabilities a codec declares (``decode_differentiable``,
+``input_size``, ``input_multiple``, ``symbol_multiple``) are read by ``codec_limits``;
+commands check them up front (``require_capabilities``) and tile or pad for a codec with a
+declared input size (``fit_encode`` / ``fit_decode``); ``symbol_budget`` is what a ``cbr``
+asks for, reported against what was sent.
+Codecs register in ``CODECS`` (name -> factory(checkpoint or None)), also from the
 entry-point group ``semcodec.codecs``; ``make_codec("NAME[:CHECKPOINT]")`` builds one, ``open_codec`` also takes a bare checkpoint path.
 ``encode_with_focus`` / ``decode_received`` serve a focus demand with any codec (a codec
 without ``supports_focus`` sends the objects' box at the same symbol budget,
@@ -37,7 +43,7 @@ from semcodec.box_focus import (
     focus_by_box,
     mask_box,
 )
-from semcodec.channel_layers import TRAIN_CHANNELS
+from semcodec.channel_layers import TRAIN_CHANNELS, train_channel
 from semcodec.checkpoint import (
     KnowledgeBaseMismatch,
     load_checkpoint,
@@ -47,15 +53,24 @@ from semcodec.checkpoint import (
 )
 from semcodec.codec import DEFAULT_CHECKPOINT, Codec, for_fusion, learned_only, load_codec
 from semcodec.contract import (
+    CapabilityError,
+    CodecLimits,
     CodecMeta,
+    DifferentiableDecoder,
     Encoded,
     SemanticCodec,
     TrainableCodec,
     box_bits,
     box_side_symbols,
+    capability_record,
     check_images,
+    codec_limits,
     is_trainable,
     is_trained,
+    refinement_status,
+    require_capabilities,
+    snr_per_image,
+    symbol_budget,
 )
 from semcodec.digital_link import transmit_digital, transmit_ideal
 from semcodec.encoded_meta import EncodedMeta, receiver_mask
@@ -74,6 +89,7 @@ from semcodec.evaluation import (
     schemes_help,
     ssim,
 )
+from semcodec.fitting import TiledMeta, fit_decode, fit_encode
 from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
 from semcodec.focus_eval import focus_gain
 from semcodec.framed import (
@@ -176,6 +192,19 @@ __all__ = [
     "ReceivedBlock",
     "frame_payload_bytes",
     "TRAIN_CHANNELS",
+    "train_channel",
+    "CapabilityError",
+    "CodecLimits",
+    "DifferentiableDecoder",
+    "capability_record",
+    "codec_limits",
+    "refinement_status",
+    "require_capabilities",
+    "snr_per_image",
+    "symbol_budget",
+    "TiledMeta",
+    "fit_decode",
+    "fit_encode",
     "TransmitResult",
     "decode_image",
     "encode_image",

@@ -1,7 +1,9 @@
 """Focus for any codec: a codec without ``supports_focus`` sends the demanded objects'
 bounding box, as an image of its own, at the view's symbol budget (:func:`focus_by_box`,
 :func:`decode_box`); :func:`encode_with_focus` / :func:`decode_received` pick that or the
-codec's own focus. Built only on :mod:`semcodec.contract`.
+codec's own focus. Built only on :mod:`semcodec.contract` (and :mod:`semcodec.fitting`,
+which tiles and pads for a codec that declares an input size): the codec sees only its own
+meta, never :class:`BoxMeta`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,9 @@ from semcodec.contract import (
     box_bits,
     box_side_symbols,
     check_images,
+    symbol_budget,
 )
+from semcodec.fitting import fit_decode, fit_encode
 
 BOX_ALIGN_PX = 8  # the focus box's corners and sides are multiples of this (codecs downsample)
 
@@ -123,9 +127,9 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
         size = (max(int(rows * scale), MIN_SIDE_PX), max(int(cols * scale), MIN_SIDE_PX))
         sent = box if size == (rows, cols) else F.interpolate(box, size=size, mode="area")
         cbr = min(max(budget / (3 * size[0] * size[1]), lo), hi)
-        enc = codec.encode(sent.clamp(0, 1), snr_db, cbr)
+        enc = fit_encode(codec, sent.clamp(0, 1), snr_db, cbr)
         if enc.meta.num_symbols > budget and cbr > lo:  # the codec rounded its rate up
-            enc = codec.encode(sent.clamp(0, 1), snr_db, lo)
+            enc = fit_encode(codec, sent.clamp(0, 1), snr_db, lo)
         if enc.meta.num_symbols <= budget:
             break
         if size == (MIN_SIDE_PX, MIN_SIDE_PX):
@@ -147,13 +151,18 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
 
 
 def decode_box(
-    codec, x_hat: Tensor, meta: BoxMeta, snr_db, expected_sha256=None, noise_var=None
+    codec,
+    x_hat: Tensor,
+    meta: BoxMeta,
+    snr_db,
+    expected_sha256=None,
+    noise_var=None,
+    differentiable: bool = False,
 ) -> Tensor:
     """Receiver of :func:`focus_by_box`: [batch, 3, height, width] float32, the decoded box
-    (upsampled bilinearly when it was sent downscaled) on a mid-grey (0.5) canvas."""
-    y = codec.decode(
-        x_hat, meta.inner, snr_db, expected_sha256=expected_sha256, noise_var=noise_var
-    )
+    (upsampled bilinearly when it was sent downscaled) on a mid-grey (0.5) canvas. The codec
+    decodes its own meta of the box image (``meta.inner``)."""
+    y = fit_decode(codec, x_hat, meta.inner, snr_db, expected_sha256, noise_var, differentiable)
     top, left, rows, cols = meta.crop
     if tuple(y.shape[-2:]) != (rows, cols):
         y = F.interpolate(y, size=(rows, cols), mode="bilinear", align_corners=False)
@@ -167,22 +176,31 @@ def encode_with_focus(
 ) -> Encoded:
     """``codec.encode`` for every codec: with a ``mask`` and a codec without
     ``supports_focus``, the objects' box at the same symbol budget (``cbr`` over the whole
-    image, :func:`focus_by_box`)."""
+    image, :func:`focus_by_box`); tiled and padded where the codec declares an input size
+    (:func:`semcodec.fit_encode`)."""
     if mask is None or getattr(codec, "supports_focus", False):
-        return codec.encode(images, snr_db, cbr, mask=mask, demand_weights=demand_weights)
+        return fit_encode(codec, images, snr_db, cbr, mask=mask, demand_weights=demand_weights)
     x = check_images(images)
     try:
-        budget = max(int(round(float(cbr) * 3 * x.shape[2] * x.shape[3])), 1)
+        budget = symbol_budget(cbr, x.shape[2], x.shape[3])
     except (TypeError, ValueError):
         raise ValueError(f"cbr must be a number, got {cbr!r}") from None
     return focus_by_box(codec, x, mask, budget, snr_db)
 
 
 def decode_received(
-    codec, x_hat: Tensor, meta, snr_db, expected_sha256=None, noise_var=None
+    codec,
+    x_hat: Tensor,
+    meta,
+    snr_db,
+    expected_sha256=None,
+    noise_var=None,
+    differentiable: bool = False,
 ) -> Tensor:
     """``codec.decode`` for whatever :func:`encode_with_focus` sent (a :class:`BoxMeta` goes
-    through :func:`decode_box`)."""
+    through :func:`decode_box`, tiles through :func:`semcodec.fit_decode`). With
+    ``differentiable`` the codec's ``decode_differentiable`` (a declared capability,
+    :class:`semcodec.contract.DifferentiableDecoder`) runs instead, with autograd on."""
     if isinstance(meta, BoxMeta):
-        return decode_box(codec, x_hat, meta, snr_db, expected_sha256, noise_var)
-    return codec.decode(x_hat, meta, snr_db, expected_sha256=expected_sha256, noise_var=noise_var)
+        return decode_box(codec, x_hat, meta, snr_db, expected_sha256, noise_var, differentiable)
+    return fit_decode(codec, x_hat, meta, snr_db, expected_sha256, noise_var, differentiable)

@@ -105,3 +105,40 @@ def masked_transmit(
     z = torch.view_as_real(z.reshape(b, c2 // 2, h, w)).permute(0, 1, 4, 2, 3).reshape(b, c2, h, w)
     rel = rel.reshape(b, c2 // 2, h, w) * mask[:, ::2]
     return z * mask, side_info(snr_db, m, num_complex_channels, b), rel
+
+
+def train_channel(
+    symbols: Tensor, snr_db, channel: str, generator: torch.Generator | None = None
+) -> tuple[Tensor, Tensor]:
+    """A channel of the training mixture applied to a codec's symbols: what its ``decode``
+    receives at inference (the public route for any ``TrainableCodec.forward_train``).
+
+    Differentiable in ``symbols``. Every receiver but ``rayleigh_nocsi``'s returns
+    *unbiased* estimates ``x + e`` and the effective variance of ``e`` per symbol (the
+    contract's convention); ``rayleigh_nocsi`` returns what a receiver without CSI sees,
+    ``h x + n``, with the noise's variance.
+
+    Args:
+        symbols: [batch, num_symbols] complex64, mean ``|x|^2 = 1`` per image (the codec's
+            encoder output after power normalisation).
+        snr_db: float or [batch] Es/N0 per complex symbol, dB.
+        channel: a name of :data:`TRAIN_CHANNELS`.
+        generator: the noise and fading draws.
+    Returns:
+        (x_hat [batch, num_symbols] complex64, noise_var [batch, num_symbols] float32).
+    """
+    if channel not in TRAIN_CHANNELS:
+        raise KeyError(f"unknown training channel {channel!r}; known: {sorted(TRAIN_CHANNELS)}")
+    if not isinstance(symbols, Tensor) or not symbols.is_complex() or symbols.dim() != 2:
+        raise ValueError(
+            "symbols must be [batch, num_symbols] complex64, got "
+            f"{tuple(getattr(symbols, 'shape', ()))} {getattr(symbols, 'dtype', type(symbols))}"
+        )
+    b = symbols.shape[0]
+    snr = torch.as_tensor(snr_db, dtype=torch.float32, device=symbols.device).flatten()
+    if snr.numel() not in (1, b):
+        raise ValueError(f"snr_db must be a float or have {b} (batch) values, got {snr.numel()}")
+    out = _link(channel)(symbols.to(torch.complex64), snr.expand(b), generator=generator)
+    nv = torch.as_tensor(out.noise_var, dtype=torch.float32, device=out.x_hat.device)
+    nv = nv[:, None] if nv.dim() == 1 else nv
+    return out.x_hat.to(torch.complex64), torch.broadcast_to(nv, out.x_hat.shape).contiguous()

@@ -15,6 +15,7 @@ import torch
 
 from common import Registry, list_images, read_image
 from phy import num_symbols_for_cbr
+from semcodec.box_focus import encode_with_focus
 from semcodec.codec import Codec, learned_only
 from semcodec.contract import MIN_SIDE_PX
 from semcodec.digital_link import AUTO, GENIE, transmit_digital, transmit_ideal
@@ -78,11 +79,7 @@ def _send_jscc(refine: bool, layer: bool = True):
         if key not in ctx.encodings:  # the transmitter's symbols: once for all draws
             ctx.encodings.clear()
             tx_codec = ctx.codec if layer else learned_only(ctx.codec)
-            enc = tx_codec.encode(img, snr, cbr)
-            if refine and not hasattr(ctx.codec, "decode_differentiable"):
-                raise ValueError(
-                    f"codec {ctx.codec.name} cannot refine symbols (no decode_differentiable)"
-                )
+            enc = encode_with_focus(tx_codec, img, snr, cbr)
             if refine:  # on the transmitter's own draws, never the evaluation's
                 tx = torch.Generator().manual_seed(ctx.refine_seed)
                 enc = refine_symbols(

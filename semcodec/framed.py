@@ -27,7 +27,8 @@ import numpy as np
 import torch
 
 from common import psnr
-from semcodec.box_focus import decode_received
+from semcodec.box_focus import decode_received, encode_with_focus
+from semcodec.contract import symbol_budget
 from semcodec.digital_link import decode_or_grey
 from semcodec.image_codecs import SCALES, downscale, encode_image
 
@@ -92,7 +93,8 @@ class FramedReception:
         image: [3, height, width] float32, the image shown (mid-grey when lost).
         psnr: PSNR of ``image`` against the image sent (peak 1.0).
         stats: the scheme's per-image numbers for a result file (digital: ``decoded``,
-            ``bytes``, ``frames_crc_failed``; jscc: ``decoded``, ``num_symbols``, ``cbr``).
+            ``bytes``, ``frames_crc_failed``; jscc: ``decoded``, ``num_symbols``,
+            ``symbol_budget``, ``cbr``).
         frames_crc_ok: one per frame: its CRC verdict (False when the frame was lost), or
             None where the scheme has no CRC (jscc).
     """
@@ -182,10 +184,11 @@ def _digital_receive(received, sizes, images, settings: FramedSettings):
 
 
 def _jscc_transmit(images, settings: FramedSettings):
-    """Per image: the codec's symbols at ``cbr``. The state is each image's ``Encoded``."""
+    """Per image: the codec's symbols at ``cbr`` (tiled and padded where the codec declares
+    an input size). The state is each image's ``Encoded``."""
     codec = settings.codec
     encs = [
-        codec.encode(torch.from_numpy(img)[None], settings.snr_db, settings.cbr)
+        encode_with_focus(codec, torch.from_numpy(img)[None], settings.snr_db, settings.cbr)
         for img in np.asarray(images, np.float32)
     ]
     return [e.symbols[0].numpy() for e in encs], encs
@@ -203,6 +206,7 @@ def _jscc_receive(received, encs, images, settings: FramedSettings):
         stats = {
             "decoded": True,
             "num_symbols": int(enc.meta.num_symbols),
+            "symbol_budget": symbol_budget(settings.cbr, *img.shape[-2:]),
             "cbr": float(enc.meta.cbr),
             "side_info_bits": int(enc.meta.side_info_bits()),
         }

@@ -9,7 +9,13 @@ from torch import Tensor
 from phy import power_normalize
 from semcodec.box_focus import decode_received, encode_with_focus
 from semcodec.codec import Codec
-from semcodec.contract import Encoded, check_images
+from semcodec.contract import (
+    Encoded,
+    check_images,
+    codec_limits,
+    snr_per_image,
+    symbol_budget,
+)
 from semcodec.transmit import TransmitResult, run_link
 
 REFINE_STEPS = 50
@@ -39,8 +45,10 @@ def refine_symbols(
     the image will meet. Starting from ``encoded``, ``steps`` Adam steps on the symbols
     (before power normalisation) lower the MSE of the decoded image over draws of ``link``
     from the transmitter's own ``generator``: a stochastic descent on the expected
-    distortion, with the same power per image as the encoder's symbols. The receiver and the
-    side information are unchanged (``meta`` is kept); the cost is ``steps`` decoder passes,
+    distortion, with the same power per image as the encoder's symbols. The codec must
+    declare a differentiable decode (``decode_differentiable``, the contract's optional
+    capability); a focus box or tiles are unwrapped, so it sees its own meta. The receiver
+    and the side information are unchanged (``meta`` is kept); the cost is ``steps`` decoder passes,
     forward and backward, at the transmitter. This is the amortisation gap closed at
     inference (stochastic latent refinement in learned compression).
 
@@ -58,7 +66,7 @@ def refine_symbols(
     """
     if steps < 0:
         raise ValueError(f"steps must be >= 0, got {steps}")
-    if steps and not hasattr(codec, "decode_differentiable"):
+    if steps and not codec_limits(codec).differentiable_decode:
         raise ValueError(f"codec {codec.name} cannot refine symbols (no decode_differentiable)")
     if not lr > 0:
         raise ValueError(f"lr must be > 0, got {lr}")
@@ -66,8 +74,8 @@ def refine_symbols(
         return encoded
     x = check_images(images)
     b = x.shape[0]
-    snr = codec._snr(snr_db, b)
-    dec_snr = snr if decoder_snr_db is None else codec._snr(decoder_snr_db, b)
+    snr = snr_per_image(snr_db, b)
+    dec_snr = snr if decoder_snr_db is None else snr_per_image(decoder_snr_db, b)
     meta = encoded.meta
     v = torch.view_as_real(encoded.symbols.to(torch.complex64)).clone()  # [b, n, 2]
     scale = float(v.pow(2).mean().sqrt())
@@ -77,7 +85,7 @@ def refine_symbols(
         for _ in range(steps):
             sym = power_normalize(torch.view_as_complex(v))
             x_hat, nv = run_link(link, sym, snr, generator)
-            y = codec.decode_differentiable(x_hat, meta, dec_snr, nv)
+            y = decode_received(codec, x_hat, meta, dec_snr, noise_var=nv, differentiable=True)
             err = (y - x) ** 2 if pixel_weights is None else (y - x) ** 2 * pixel_weights
             (v.grad,) = torch.autograd.grad(err.mean(), [v])  # the weights stay as they are
             opt.step()
@@ -122,6 +130,7 @@ def transmit_jscc(
         y,
         {
             "num_symbols": enc.meta.num_symbols * n,
+            "symbol_budget": symbol_budget(cbr, x.shape[2], x.shape[3]) * n,
             "cbr": enc.meta.cbr,
             "side_info_bits": enc.meta.side_info_bits() * n,
             "failed_codewords": 0,

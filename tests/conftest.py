@@ -26,3 +26,17 @@ def plugin(tmp_path, monkeypatch):
     codec_plugin.install(tmp_path, monkeypatch)
     yield
     codec_plugin.uninstall(before)
+
+
+@pytest.fixture
+def fixed_plugin(tmp_path, monkeypatch):
+    """The codec package ``semcodec_plugin_fixed`` (``tests/codec_plugin_fixed.py``: 16x16 px
+    input, symbols in multiples of 8, no differentiable decode) installed like
+    :func:`plugin`; removed afterwards."""
+    from semcodec import CODECS
+    from tests import codec_plugin_fixed
+
+    before = dict(CODECS)
+    codec_plugin_fixed.install(tmp_path, monkeypatch)
+    yield
+    codec_plugin_fixed.uninstall(before)

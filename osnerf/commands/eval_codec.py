@@ -159,7 +159,7 @@ def mean_ci95(values) -> tuple[float, float, float]:
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
     from osnerf.provenance import codec_record, result_header, write_json_atomic
-    from semcodec import LINK_SCHEMES, EvalContext
+    from semcodec import LINK_SCHEMES, EvalContext, capability_record
 
     out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
     ctx = EvalContext(
@@ -192,7 +192,12 @@ def run(args: argparse.Namespace) -> int:
     }
     from tqdm import tqdm
 
-    checkpoint = {"name": codec.name, "sha256": codec.sha256} if codec else None
+    refines = any(LINK_SCHEMES[s].refines for s in schemes)
+    checkpoint = None  # the codec, what it declares and whether jscc_refined refined
+    if codec is not None:
+        steps = args.refine_steps if refines else None
+        checkpoint = {"name": codec.name, "sha256": codec.sha256}
+        checkpoint.update(capability_record(codec, steps))
     partial = partial_path(out)
     done = _resumable(partial, config, args.seed, checkpoint)
     if done:
@@ -262,6 +267,7 @@ def _inputs(args: argparse.Namespace):
         LINK_SCHEMES,
         eval_channels,
         load_image_folder,
+        require_capabilities,
     )
 
     inputs = {"--images": args.images}
@@ -293,6 +299,10 @@ def _inputs(args: argparse.Namespace):
         from osnerf.provenance import open_codec
 
         codec = open_codec(args.codec, args.allow_untrained)
+        refine = [s for s in schemes if LINK_SCHEMES[s].refines]
+        limits = require_capabilities(codec, bool(refine), f"--schemes {','.join(refine)}")
+        if limits.line():
+            print(f"eval-codec: {limits.line()}", file=sys.stderr)
         lo, hi = codec.cbr_range
         if not lo * 0.999 <= cbr <= hi * 1.001:
             raise ValueError(
@@ -342,6 +352,7 @@ def _point(
     scales_used: dict[str, int] = {}  # images sent downscaled by each factor (1: whole)
     stats_keys = {}
     separate = False  # the scheme reported views lost (a separate source-channel code)
+    budget = None  # the codec's symbol budget over images x draws (semantic schemes)
     for ii, img in enumerate(images):
         row = []
         for d in range(args.draws):
@@ -353,6 +364,8 @@ def _point(
                 ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
             for k in extra:
                 extra[k] += int(res.stats.get(k, 0) or 0)
+            if "symbol_budget" in res.stats:  # the semantic codec's: sent against asked
+                budget = (budget or 0) + int(res.stats["symbol_budget"])
             separate = separate or "views_lost" in res.stats
             for k, v in (res.stats.get("views_lost") or {}).items():
                 lost[k] += int(v)
@@ -382,6 +395,9 @@ def _point(
         **extra,
         "seconds": round(time.perf_counter() - t0, 2),
     }
+    if budget is not None:
+        r["symbol_budget"] = budget
+        r["symbols_unused"] = budget - extra["num_symbols"]
     if separate:
         r["views_lost"] = lost
         r["mcs_used"] = mcs_used

@@ -331,7 +331,13 @@ def framed_settings(args, symbols_per_frame: int):
     digital: a frame holds payload at ``--mcs``."""
     from osnerf.provenance import open_codec
     from phy import parse_cbr
-    from semcodec import IMAGE_CODECS, LINK_SCHEMES, FramedSettings, frame_payload_bytes
+    from semcodec import (
+        IMAGE_CODECS,
+        LINK_SCHEMES,
+        FramedSettings,
+        frame_payload_bytes,
+        require_capabilities,
+    )
 
     qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
     if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
@@ -347,6 +353,9 @@ def framed_settings(args, symbols_per_frame: int):
         codec = open_codec(args.codec, args.allow_untrained)
         if args.snr_db is not None:  # a real air: the encoder's SNR is measured first
             check_codec_snr(codec, args.snr_db)
+        limits = require_capabilities(codec)  # ota does not refine: nothing is refused
+        if limits.line():
+            print(f"ota: {limits.line()}", file=sys.stderr)
     digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
     if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(

@@ -46,6 +46,11 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             "snr_db_measured": result.snr_db_measured(),
             "snr_db_requested": requested,
         }
+        if all("symbol_budget" in r for r in rows):  # the codec's: sent against asked
+            sent, budget = (sum(r[k] for r in rows) for k in ("num_symbols", "symbol_budget"))
+            by_scheme[scheme].update(
+                symbols_sent=sent, symbol_budget=budget, symbols_unused=budget - sent
+            )
     config = {k: v for k, v in vars(args).items() if k not in ("command",)}
     config.update(
         {
@@ -57,10 +62,14 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     record = result_header(config, args.seed)
     record["codec"] = None
     if settings.codec is not None:
+        from semcodec import capability_record
+
         record["codec"] = {
             **codec_record(settings.codec, args.codec),
             "encoder_snr_db": settings.snr_db,
+            **capability_record(settings.codec, 0),
         }
+        record["codec"]["refinement"]["why"] = "ota sends the codec's symbols as encoded"
     record.update(
         {
             "results": results,

@@ -18,9 +18,10 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
-CACHE_VERSION = 15
+CACHE_VERSION = 16
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
-whole-view and on-demand parts), so an older cache is recomputed, never misread."""
+whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
+with its codec, ``codec_use``), so an older cache is recomputed, never misread."""
 
 
 @dataclass(frozen=True)

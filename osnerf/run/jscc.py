@@ -102,8 +102,27 @@ def send_views(ctx, plans, images, on_demand: bool) -> Transmission:
         np.asarray(symbols, np.int64),
         np.stack(rx_masks) if rx_masks else None,
         sec,
-        {"side_info_bits": int(sum(side)) if on_demand else 0},
+        {
+            "side_info_bits": int(sum(side)) if on_demand else 0,
+            "codec_use": codec_use(ctx, int(sum(symbols)), int(sum(p.part.symbols for p in plans))),
+        },
     )
+
+
+def codec_use(ctx, sent: int, budget: int) -> dict:
+    """What the run did with the codec, for the report: its declared limits, refinement on
+    or off (and why), and the symbols sent against the plan's budget (repetitions included;
+    a codec may send fewer than its budget, never silently)."""
+    from semcodec import codec_limits, refinement_status
+
+    return {
+        "codec": ctx.codec.name,
+        "limits": codec_limits(ctx.codec).as_dict(),
+        "refinement": refinement_status(ctx.codec, ctx.config.refine_steps),
+        "symbols_sent": sent,
+        "symbol_budget": budget,
+        "symbols_unused": budget - sent,
+    }
 
 
 class _Timer:
@@ -136,7 +155,7 @@ def _view_input(ctx, x, k: int, s_up: int, on_demand: bool) -> tuple[torch.Tenso
 def _encode(ctx, p, x, kw: dict):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
-    from semcodec import encode_with_focus, for_fusion, refine_symbols
+    from semcodec import encode_with_focus, for_fusion, refine_symbols, refinement_status
 
     codec = ctx.codec
     if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
@@ -144,8 +163,8 @@ def _encode(ctx, p, x, kw: dict):
     with torch.no_grad():
         enc = encode_with_focus(codec, x, p.part.encoder_snr_db, p.part.cbr, **kw)
     steps = int(ctx.config.refine_steps)
-    if not steps or not hasattr(codec, "decode_differentiable"):
-        return enc  # a codec whose decoder cannot be differentiated is sent as encoded
+    if not refinement_status(codec, steps)["on"]:
+        return enc  # a codec without a differentiable decode is sent as encoded (reported)
     model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.part.repetitions)
     gen = torch.Generator().manual_seed(
         scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")

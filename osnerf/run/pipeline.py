@@ -20,7 +20,7 @@ import torch
 
 from osnerf.collect import Collection, Demand
 from osnerf.plan import RunPlan
-from osnerf.report import Report, SchemeReport, ViewsSummary
+from osnerf.report import Report, SchemeReport, ViewsSummary, codec_use_line
 from osnerf.run.cache import StageCache
 from osnerf.run.config import RunConfig
 from osnerf.run.links import build_links
@@ -80,6 +80,9 @@ def prepare(cfg: RunConfig) -> Prepared:
         if cfg.receiver_codec:
             rx = open_codec(cfg.receiver_codec, cfg.allow_untrained, "--receiver-codec")
         scu.check_knowledge_base(codec.sha256, rx.sha256)
+        limits = semcodec.require_capabilities(codec)  # a malformed declaration: one line
+        if limits.line():  # what it lacks, before any work (refinement off is reported)
+            _log(limits.line())
         rx = semcodec.for_fusion(rx, cfg.layer_fusion)
     return Prepared(demand, schemes, codec, rx, scu)
 
@@ -157,6 +160,7 @@ def reconstruct_and_score(
         side_info_bits=int(tx.info.get("side_info_bits", 0)),
         views_lost=tx.info.get("views_lost"),
         failed_codewords=tx.info.get("failed_codewords"),
+        codec_use=tx.info.get("codec_use"),
         bound=scheme.bound,
         help=scheme.help,
         training_bounds="demanded objects" if scheme.object_routed else "whole scene",
@@ -237,6 +241,8 @@ def run_pipeline(
             _log(
                 f"{name}: psnr_object {results[name].psnr_object}, symbols {results[name].symbols_sent}"
             )
+            if results[name].codec_use:
+                _log(codec_use_line(name, results[name].codec_use))
     finally:
         links.close()
     test = views.indices("test")
