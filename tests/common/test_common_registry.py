@@ -67,7 +67,7 @@ def test_entry_points_join_on_first_read_and_keep_built_ins(monkeypatch):
 
 def test_a_broken_plugin_is_named_in_one_line(monkeypatch, capsys):
     """It is skipped with one warning line; the built-ins work; naming it raises its error."""
-    monkeypatch.setattr(common.plugins, "_warned", set())
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     _fake_entry_points(monkeypatch, EntryPoint("gone", "no_such_module_xyz:f", "test.broken"))
     table = Registry("function", {"abs": abs}, entry_points="test.broken", error=LookupError)
     assert table["abs"] is abs and table.names() == ["abs"] and "gone" not in table
@@ -78,7 +78,7 @@ def test_a_broken_plugin_is_named_in_one_line(monkeypatch, capsys):
 
 
 def test_a_plugin_the_check_refuses_is_named(monkeypatch, capsys):
-    monkeypatch.setattr(common.plugins, "_warned", set())
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     _fake_entry_points(monkeypatch, EntryPoint("pi", "math:pi", "test.checked"))
 
     def callable_only(name, obj):

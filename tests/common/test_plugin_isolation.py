@@ -17,7 +17,7 @@ GROUP = "test.isolated"
 def plugins(tmp_path, monkeypatch):
     """Install modules in a tmp folder on sys.path and the given entry points of ``GROUP``;
     warnings start afresh."""
-    monkeypatch.setattr(common.plugins, "_warned", set())
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     monkeypatch.syspath_prepend(str(tmp_path))
     added = []
 

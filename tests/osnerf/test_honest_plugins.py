@@ -65,7 +65,7 @@ def installed(site, monkeypatch):
     from osnerf.schemes import SCHEMES
     from semcodec import CODECS
 
-    monkeypatch.setattr(common.plugins, "_warned", set())
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     monkeypatch.syspath_prepend(str(site))
     before = [(t, dict(t)) for t in (CODECS, SCHEMES)]
     for table, _ in before:
@@ -88,7 +88,7 @@ def image(tmp_path_factory) -> Path:
     return folder
 
 
-def _osnerf(site: Path, *argv: str) -> subprocess.CompletedProcess:
+def _osnerf(site: Path, *argv: str, timeout_s: float = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(site)}
     return subprocess.run(
         [sys.executable, "-m", "osnerf.cli", *argv],
@@ -96,7 +96,7 @@ def _osnerf(site: Path, *argv: str) -> subprocess.CompletedProcess:
         env=env,
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=timeout_s,
     )
 
 
@@ -186,10 +186,16 @@ def test_plugins_a_sweep_runs_beside_broken_plugins(installed, image, tmp_path):
     assert len(rows) == 2
 
 
-def test_accept_fault_after_samples_needs_a_fault(capsys):
-    assert main(["hil", "emulate", "pluto", "--port", "0", "--fault-after-samples", "10"]) == 2
-    err = _lines(capsys.readouterr().err)
-    assert len(err) == 1 and "--fault-after-samples" in err[0] and "--fault " in err[0]
+def test_accept_fault_after_samples_needs_a_fault(tmp_path):
+    """Refused before the board serves (accepted, it would serve until SIGINT)."""
+    argv = ["hil", "emulate", "pluto", "--port", "0", "--fault-after-samples", "10"]
+    try:
+        r = _osnerf(tmp_path, *argv, timeout_s=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("hil emulate accepted --fault-after-samples without --fault and served")
+    err = _lines(r.stderr)
+    assert r.returncode == 2 and len(err) == 1, r.stderr
+    assert "--fault-after-samples" in err[0] and "--fault " in err[0]
 
 
 @pytest.mark.parametrize(
