@@ -84,7 +84,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "renderer.FeatureConfig.for_resolution)",
     )
     p.add_argument(
-        "--seed", type=checks.seed, default=0, help="learned renderers' seed (default 0)"
+        "--seed",
+        type=checks.seed,
+        default=0,
+        help="learned renderers' seed (default 0); the full renderer draws nothing and records "
+        "no seed",
     )
     p.add_argument(
         "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
@@ -176,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
         frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
     video = _write_video(frames, out_dir, args.video, args.fps, intr.width, intr.height)
     cfg = {k: v for k, v in vars(args).items() if k != "func"}
+    if not _learned(args.renderer):
+        cfg["seed"] = None  # nothing is drawn; kept as a flag since sweeps pass one to every point
     record = result_header(cfg, None)
     record.update(
         {

@@ -217,3 +217,19 @@ def test_accept_render_refuses_renderer_steps_for_the_full_renderer(tmp_path, ca
     err = _lines(capsys.readouterr().err)
     assert len(err) == 1 and "--renderer-steps applies only to a learned renderer" in err[0]
     assert "--renderer full" in err[0] and not out.exists()
+
+
+def test_accept_render_records_no_seed_for_the_full_renderer(tmp_path):
+    """The full renderer draws nothing: a seed (sweeps pass one to every point) is not
+    recorded as if it shaped the views."""
+    from renderer import load_dataset, save_model
+    from tests.renderer.sphere_scene import exact_sphere_field, write_sphere_dataset
+
+    data = write_sphere_dataset(tmp_path / "sphere")
+    model = save_model(exact_sphere_field(load_dataset(data, "train")), tmp_path / "model.pt")
+    out = tmp_path / "r"
+    argv = ["render", "--run", str(model), "--out", str(out), "--num-views", "1"]
+    assert main([*argv, "--resolution", "16", "--video", "none", "--seed", "5"]) == 0
+    record = json.loads((out / "render.json").read_text())
+    assert record["config"]["seed"] is None and record["seed"] is None
+    assert record["config"]["renderer"] == "full" and record["config"]["renderer_steps"] is None
