@@ -35,9 +35,11 @@ def warn_once(message: str) -> None:
         print(f"{program_name()}: warning: {message}", file=sys.stderr, flush=True)
 
 
-def _one_line(e: BaseException) -> str:
+def _one_line(e: BaseException, named: bool = True) -> str:
+    """The first line of ``e``'s message (at most 200 characters), after its type if ``named``."""
     lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-    return f"{type(e).__name__}: {lines[0][:200]}" if lines else type(e).__name__
+    text = lines[0][:200] if lines else ""
+    return f"{type(e).__name__}: {text}" if named and text else text or type(e).__name__
 
 
 def load_plugins(
@@ -79,6 +81,6 @@ def load_plugins(
                 add(ep.name, obj, ep.value)
                 continue
             except (TypeError, ValueError) as e:
-                failed[ep.name] = f"{where} is refused ({e})"
+                failed[ep.name] = f"{where} is refused ({_one_line(e, named=False)})"
         warn_once(f"{failed[ep.name]}; it is skipped")
     return failed
