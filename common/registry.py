@@ -11,8 +11,11 @@
 A registry is a read-only :class:`~collections.abc.Mapping` (``in``, ``items()``, iteration in
 registration order), so code that reads a table reads it as it would a dict. Entries come from
 :meth:`Registry.register` (a call or a decorator) and, for a registry with an entry-point group,
-from other packages' entry points, loaded on first read through :func:`common.plugins.load_plugins`
-(a broken plugin is named in one line, never crashes the built-ins).
+from other packages' entry points, loaded on first read through :func:`common.plugins.load_plugins`.
+A plugin that fails to load, that ``check`` refuses, that would take a name already in the
+table, or whose name holds ``:`` or ``,`` is named in one warning line and left out; every
+other entry works. Naming a plugin that failed (``table["broken"]``) raises the registry's
+``error`` with its reason in one line.
 """
 
 from __future__ import annotations
@@ -33,7 +36,8 @@ class Registry(Mapping[str, T], Generic[T]):
         entries: the built-in entries, in order.
         entry_points: an entry-point group whose entries join the table on first read.
         check: called as ``check(name, entry)`` before an entry joins; raises to refuse it.
-        error: the exception a plugin that fails to load raises (default ``ValueError``).
+        error: the exception raised on reading a plugin that failed to load (default
+            ``ValueError``).
     """
 
     def __init__(
@@ -52,6 +56,8 @@ class Registry(Mapping[str, T], Generic[T]):
         self._entries: dict[str, T] = {}
         self.plugins: dict[str, str] = {}
         """Entries that came from entry points: name -> ``module:attr``."""
+        self.broken: dict[str, str] = {}
+        """Entry points that failed to load or were refused: name -> the reason, one line."""
         self._plugins_loaded = entry_points is None
         for name, entry in (entries or {}).items():
             self.register(name, entry)
@@ -84,19 +90,31 @@ class Registry(Mapping[str, T], Generic[T]):
 
     def load_entry_points(self, force: bool = False) -> None:
         """Add the entries of the entry-point group (once; ``force`` reads the group again, for
-        a plugin installed while running). Names already taken keep their entry."""
+        a plugin installed while running). Names already taken keep their entry; a plugin
+        that would take one is named in a warning line, as is one that fails to load."""
         if self.entry_point_group is None or (self._plugins_loaded and not force):
             return
         self._plugins_loaded = True
 
         def add(name: str, obj: Any, value: str) -> None:
-            try:
-                self.register(name, obj)
-            except (TypeError, ValueError) as e:
-                raise self._error(f"{self.kind} plugin {name} = {value}: {e}") from None
+            self.register(name, obj)
             self.plugins[name] = value
+            self.broken.pop(name, None)
 
-        load_plugins(self.entry_point_group, self._entries, add, self.kind, self._error)
+        self.broken.update(load_plugins(self.entry_point_group, self.kind, add, self._skip_plugin))
+
+    def _skip_plugin(self, name: str, value: str) -> str | None:
+        """Why the entry point ``name = value`` is not loaded (see ``load_plugins``' skip)."""
+        where = f"{self.kind} plugin {name} = {value}"
+        if self.plugins.get(name) == value:
+            return ""  # loaded already
+        if name in self._entries:
+            held = self.plugins.get(name)
+            held = f"the {self.kind} plugin {held}" if held else f"a built-in {self.kind}"
+            return f"{where} is skipped: {name} is taken by {held}, which is kept"
+        if not name or ":" in name or "," in name:
+            return f"{where} is refused: a {self.kind} name cannot hold ':' or ','"
+        return None
 
     def unregister(self, name: str) -> T:
         """Remove ``name`` and return its entry (a plugin uninstalled while running)."""
@@ -114,6 +132,8 @@ class Registry(Mapping[str, T], Generic[T]):
         try:
             return self._entries[name]
         except (KeyError, TypeError):
+            if isinstance(name, str) and name in self.broken:
+                raise self._error(self.broken[name]) from None
             raise KeyError(
                 f"unknown {self.kind} {name!r}; known: {', '.join(self._entries)}"
             ) from None

@@ -87,7 +87,8 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
 
     Raises:
         SchemeListError: an empty list or entry (``"jscc,"``), a name given twice, or a
-            name not in the table (the known ones listed).
+            name not in the table (the known ones listed; a plugin that failed to load,
+            its load error).
     """
     known = SCHEMES if table is None else table
     names = tuple(s.strip() for s in str(text).split(","))
@@ -97,7 +98,8 @@ def parse_schemes(text: str, table: Mapping | None = None) -> tuple[str, ...]:
     elif len(set(names)) < len(names):
         problem = f"{next(n for n in names if names.count(n) > 1)!r} twice"
     elif any(n not in known for n in names):
-        problem = f"unknown {next(n for n in names if n not in known)!r}"
+        name = next(n for n in names if n not in known)
+        problem = getattr(known, "broken", {}).get(name) or f"unknown {name!r}"
     if problem:
         raise SchemeListError(
             f"must be a comma-separated subset of {','.join(known)}, got {text!r} ({problem})"

@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+FAULT_AFTER_SAMPLES = 50_000  # --fault-after-samples' default
+
 
 def _integer(lo: int, hi: int):
     def parse(text: str) -> int:
@@ -71,8 +73,8 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--fault-after-samples",
         type=_integer(0, 2**40),
-        default=50_000,
-        help="with --fault: received samples before the fault (default 50000)",
+        default=None,
+        help=f"with --fault: received samples before the fault (default {FAULT_AFTER_SAMPLES})",
     )
 
 
@@ -98,13 +100,19 @@ def _emulate(args: argparse.Namespace) -> int:
     from osnerf.cli import UsageError as usage_error
     from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
 
+    if args.fault is None and args.fault_after_samples is not None:
+        raise usage_error(
+            "--fault-after-samples applies only with --fault (it says when the fault "
+            "strikes); name a --fault or leave --fault-after-samples out"
+        )
+    after = FAULT_AFTER_SAMPLES if args.fault_after_samples is None else args.fault_after_samples
     board = DEVICES[args.device].emulator(
         args.snr_db,
         seed=args.seed,
         multipath=DEFAULT_MULTIPATH,
         delay_s=DEFAULT_DELAY_S,
         fault=args.fault,
-        after_samples=args.fault_after_samples,
+        after_samples=after,
     )
     try:
         server = IiodServer(board, args.address, args.port)

@@ -84,7 +84,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "renderer.FeatureConfig.for_resolution)",
     )
     p.add_argument(
-        "--seed", type=checks.seed, default=0, help="learned renderers' seed (default 0)"
+        "--seed",
+        type=checks.seed,
+        default=0,
+        help="learned renderers' seed (default 0); the full renderer draws nothing and records "
+        "no seed",
     )
     p.add_argument(
         "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
@@ -134,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
+    if not _learned(args.renderer) and args.renderer_steps is not None:
+        raise UsageError(
+            f"--renderer-steps applies only to a learned renderer (features): --renderer "
+            f"{args.renderer} renders the field directly, with no distillation steps"
+        )
     run_path = Path(args.run)
     model_path = run_path / "model.pt" if run_path.is_dir() else run_path
     if not model_path.is_file():
@@ -171,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
         frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
     video = _write_video(frames, out_dir, args.video, args.fps, intr.width, intr.height)
     cfg = {k: v for k, v in vars(args).items() if k != "func"}
+    if not _learned(args.renderer):
+        cfg["seed"] = None  # nothing is drawn; kept as a flag since sweeps pass one to every point
     record = result_header(cfg, None)
     record.update(
         {
@@ -258,12 +269,17 @@ def _renderer_config(args: argparse.Namespace, width_px: int):
     (None for the full renderer)."""
     from renderer import FeatureConfig
 
-    if args.renderer != "features":
+    if not _learned(args.renderer):
         return None
     budget = {}
     if args.renderer_steps is not None:  # the steps are the budget; no time cap
         budget = {"train_steps": args.renderer_steps, "train_seconds": checks.MAX_BUDGET_S}
     return FeatureConfig.for_resolution(width_px, width_px=width_px, progress=True, **budget)
+
+
+def _learned(renderer: str) -> bool:
+    """Whether ``renderer`` is distilled before it renders (it takes --renderer-steps)."""
+    return renderer == "features"
 
 
 def peak_memory_mb() -> float:

@@ -118,7 +118,8 @@ class RunConfig:
             raise ValueError(f"schemes must name at least one of {', '.join(known)}")
         for s in self.schemes:
             if s not in known:
-                raise ValueError(f"schemes must be a subset of {','.join(known)}, got {s!r}")
+                why = f" ({known.broken[s]})" if s in known.broken else ""
+                raise ValueError(f"schemes must be a subset of {','.join(known)}, got {s!r}{why}")
         if len(set(self.schemes)) != len(self.schemes):
             raise ValueError(f"schemes must not repeat a name, got {','.join(self.schemes)}")
         if not math.isfinite(self.snr_db):

@@ -65,14 +65,20 @@ def test_entry_points_join_on_first_read_and_keep_built_ins(monkeypatch):
     assert table.plugins == {"sqrt": "math:sqrt"}
 
 
-def test_a_broken_plugin_is_named_in_one_line(monkeypatch):
+def test_a_broken_plugin_is_named_in_one_line(monkeypatch, capsys):
+    """It is skipped with one warning line; the built-ins work; naming it raises its error."""
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     _fake_entry_points(monkeypatch, EntryPoint("gone", "no_such_module_xyz:f", "test.broken"))
     table = Registry("function", {"abs": abs}, entry_points="test.broken", error=LookupError)
+    assert table["abs"] is abs and table.names() == ["abs"] and "gone" not in table
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "function plugin gone = no_such_module_xyz:f failed" in err[0]
     with pytest.raises(LookupError, match=r"function plugin gone = no_such_module_xyz:f failed"):
-        table["abs"]
+        table["gone"]
 
 
-def test_a_plugin_the_check_refuses_is_named(monkeypatch):
+def test_a_plugin_the_check_refuses_is_named(monkeypatch, capsys):
+    monkeypatch.setattr(common.plugins, "_warned", set(), raising=False)
     _fake_entry_points(monkeypatch, EntryPoint("pi", "math:pi", "test.checked"))
 
     def callable_only(name, obj):
@@ -80,5 +86,7 @@ def test_a_plugin_the_check_refuses_is_named(monkeypatch):
             raise TypeError("not callable")
 
     table = Registry("function", entry_points="test.checked", check=callable_only)
-    with pytest.raises(ValueError, match=r"function plugin pi = math:pi: not callable"):
-        table.names()
+    assert table.names() == []
+    assert "function plugin pi = math:pi is refused (not callable)" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"function plugin pi = math:pi is refused \(not call"):
+        table["pi"]
