@@ -141,7 +141,7 @@ def test_plugins_naming_a_broken_codec_exits_2_with_its_load_error(
 ):
     for command, extra in (
         ("eval-codec", ["--cbr", "1/16"]),
-        ("ota", ["--tx", "emulated", "--rx", "emulated"]),
+        ("ota", ["--tx", "emulated", "--rx", "emulated", "--size", "32"]),
     ):
         out = tmp_path / f"{command}.json"
         argv = [command, "--images", str(image), "--snr-db", "10", "--schemes", "jscc", *extra]
