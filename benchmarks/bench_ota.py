@@ -18,8 +18,8 @@ import torch
 
 import phy
 import semcodec
+from common import load_square_images as load_images
 from osnerf.cli import main as osnerf_main
-from osnerf.commands.ota import load_images
 from osnerf.paths import shared_data_dir
 from renderer import psnr
 

@@ -30,7 +30,7 @@ from common.files import (
     write_text,
     write_torch,
 )
-from common.images import IMAGE_SUFFIXES, list_images, read_image
+from common.images import IMAGE_SUFFIXES, list_images, load_square_images, read_image
 from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
 from common.quality import PSNR_MAX_DB, psnr
@@ -46,6 +46,7 @@ __all__ = [
     "atomic_path",
     "check_replaceable",
     "list_images",
+    "load_square_images",
     "path_kind",
     "psnr",
     "read_image",

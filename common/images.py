@@ -129,3 +129,51 @@ def list_images(path: str | os.PathLike, what: str = "images") -> list[Path]:
     if not files:
         raise FileNotFoundError(f"{what} {str(p)!r}: no image files ({kinds}) in this folder")
     return files
+
+
+def load_square_images(
+    path: str | os.PathLike,
+    size: int,
+    max_images: int,
+    what: str = "images",
+    size_flag: str = "size",
+) -> tuple[list[str], np.ndarray]:
+    """The first ``max_images`` images of ``path`` (:func:`list_images`), centre-cropped to a
+    square and resized to ``size`` (Lanczos, per channel in float): (names,
+    [batch, 3, size, size] float32 in [0, 1]).
+
+    An image whose square crop is smaller than ``size`` is refused, never upscaled.
+
+    Raises:
+        InputError: an unreadable image, or one smaller than ``size`` (naming ``what`` and
+            ``size_flag``).
+        FileNotFoundError: from :func:`list_images`.
+    """
+    from PIL import Image
+
+    from common.errors import InputError
+
+    files = list_images(path, what)[:max_images]
+    out = []
+    for f in files:
+        try:
+            a = read_image(f)
+        except ValueError as e:
+            raise InputError(f"{what}: {e}") from None
+        h, w = a.shape[:2]
+        s = min(h, w)
+        if s < size:
+            raise InputError(
+                f"{what}: {f.name} is {w}x{h} px, smaller than {size_flag} {size}: it would be "
+                f"upscaled; give a larger image or a smaller {size_flag}"
+            )
+        top, left = (h - s) // 2, (w - s) // 2
+        crop = a[top : top + s, left : left + s]
+        chans = [
+            np.asarray(
+                Image.fromarray(crop[..., c], "F").resize((size, size), Image.Resampling.LANCZOS)
+            )
+            for c in range(3)
+        ]
+        out.append(np.clip(np.stack(chans), 0.0, 1.0).astype(np.float32))
+    return [f.name for f in files], np.stack(out)

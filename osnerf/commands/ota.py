@@ -33,8 +33,7 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
+from common import load_square_images
 from hil import DEVICES as HARDWARE
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
@@ -233,42 +232,6 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     checks.add_allow_untrained(p)
 
 
-def load_images(path: str, size: int, max_images: int) -> tuple[list[str], np.ndarray]:
-    """Centre-cropped, resized images of ``--images`` (a folder, or one file), read by
-    :func:`common.read_image`: (names, [batch, 3, size, size] float32 in [0, 1]).
-
-    An image whose square crop is smaller than ``size`` is refused, never upscaled.
-    """
-    from PIL import Image
-
-    from common import list_images, read_image
-
-    files = list_images(path, "--images")[:max_images]
-    out = []
-    for f in files:
-        try:
-            a = read_image(f)
-        except ValueError as e:
-            raise usage_error(f"--images: {e}") from None
-        h, w = a.shape[:2]
-        s = min(h, w)
-        if s < size:
-            raise usage_error(
-                f"--images: {f.name} is {w}x{h} px, smaller than --size {size}: it would be "
-                "upscaled; give a larger image or a smaller --size"
-            )
-        top, left = (h - s) // 2, (w - s) // 2
-        crop = a[top : top + s, left : left + s]
-        chans = [
-            np.asarray(
-                Image.fromarray(crop[..., c], "F").resize((size, size), Image.Resampling.LANCZOS)
-            )
-            for c in range(3)
-        ]
-        out.append(np.clip(np.stack(chans), 0.0, 1.0).astype(np.float32))
-    return [f.name for f in files], np.stack(out)
-
-
 # ----------------------------------------------------------------------------- devices
 def device_kinds(args) -> tuple[str, str | None, str | None]:
     """``(kind, tx_serial, rx_serial)`` of --tx/--rx: "emulated", "loopback" or "hackrf"."""
@@ -390,7 +353,9 @@ def run(args: argparse.Namespace) -> int:
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
     checks.output_dir(sigmf_dir, "--sigmf-dir", overwrite=args.overwrite, inputs=inputs)
-    names, images = load_images(args.images, args.size, args.max_images)
+    names, images = load_square_images(
+        args.images, args.size, args.max_images, "--images", "--size"
+    )
     resolve_air(args, kind, air_is_emulated(args, kind, tx_id))  # asks a Pluto which it is
     settings = framed_settings(args, cfg.symbols_per_frame)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)

@@ -97,7 +97,7 @@ def test_jscc_at_15_db_matches_the_simulated_link(tmp_path, images):
     r = d["results"][0]
     assert r["frames_lost"] == 0
     # the same codec over a simulated AWGN link at the SNR the pilots measured
-    from osnerf.commands.ota import load_images
+    from common import load_square_images as load_images
     from renderer import psnr
 
     _, imgs = load_images(str(images), 48, 1)
@@ -170,7 +170,7 @@ def test_bad_values_are_refused_before_encoding_in_the_flags_own_names(
     def no_work(*a, **k):
         raise AssertionError("images were loaded before the flags were checked")
 
-    monkeypatch.setattr(ota_cmd, "load_images", no_work)
+    monkeypatch.setattr(ota_cmd, "load_square_images", no_work)
     out = tmp_path / "o.json"
     argv = ["ota", "--schemes", "digital", "--images", str(images), "--out", str(out)]
     assert main(argv + [flag, value]) == 2

@@ -100,7 +100,7 @@ def test_jscc_matches_the_simulated_link(tmp_path, images, snr_db, tolerance_db)
     assert snr_db - 1.0 <= r["snr_db_measured"] <= snr_db + 10 * np.log10(64 / 52) + 1.5
     # one board: TX and RX LOs from one crystal, no carrier offset
     assert all(abs(f["cfo_hz"]) < 1500 for f in d["frames"])
-    from osnerf.commands.ota import load_images
+    from common import load_square_images as load_images
     from renderer import psnr
 
     _, imgs = load_images(str(images), 48, 1)

@@ -24,7 +24,7 @@ def gray16(tmp_path):
 
 
 def test_ota_reads_16_bit_grayscale_as_it_is_not_white(gray16):
-    from osnerf.commands.ota import load_images
+    from common import load_square_images as load_images
 
     path, a = gray16
     names, imgs = load_images(str(path), 64, 1)  # a single file is accepted as --images
