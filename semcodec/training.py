@@ -63,7 +63,7 @@ def train_inputs(train_dirs: list[Path], init: Path | None, data_sha256: str | N
     (``data_sha256`` when already computed)."""
     if data_sha256 is None:
         data_sha256 = files_sha256([p for d in train_dirs for p in list_images(d, "--data")])
-    return {"data": data_sha256, "init": str(init) if init is not None else None}
+    return {"data": data_sha256, "init": str(Path(init).resolve()) if init is not None else None}
 
 
 def nearest_level(levels, cbr: float) -> float:
@@ -187,7 +187,14 @@ def train(
 
     Alone or under ``torchrun`` (see the module docstring). Rank 0 writes
     ``out_dir/last.safetensors``, ``best.safetensors`` (by mean validation PSNR),
-    ``last_state.pt`` (weights, optimizer, counters) and ``log.jsonl``. Returns a summary dict.
+    ``last_state.pt`` (weights, optimizer, counters) and ``log.jsonl``. Returns a summary dict
+    (``nothing_to_do``: a resumed training that had already finished; no file was written).
+
+    A training in ``out_dir`` is resumed when ``resume`` (else started over, its files
+    replaced); one that dies before its first checkpoint removes what it wrote.
+
+    Raises:
+        ResumeRefused: resuming would change more than ``RESUMABLE_FIELDS`` (nothing written).
     """
     place = distributed.setup(cfg.device, cfg.ddp_backend)
     if cfg.batch_size % place.world_size:
