@@ -134,8 +134,14 @@ from semcodec.registry import (
     resolve_codec_spec,
 )
 from semcodec.train_config import TrainConfig
-from semcodec.train_state import load_train_state
-from semcodec.training import build_codec, train, with_architecture
+from semcodec.train_state import (
+    RESUMABLE_FIELDS,
+    ResumeRefused,
+    check_resume,
+    describe_changes,
+    load_train_state,
+)
+from semcodec.training import build_codec, train, train_inputs, with_architecture
 from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
@@ -156,9 +162,14 @@ __all__ = [
     "REFINE_STEPS",
     "TrainConfig",
     "load_train_state",
+    "RESUMABLE_FIELDS",
+    "ResumeRefused",
+    "check_resume",
+    "describe_changes",
     "build_codec",
     "train",
     "with_architecture",
+    "train_inputs",
     "BoxMeta",
     "CODECS",
     "CodecMeta",

@@ -20,6 +20,7 @@ state a run resumes from: :mod:`semcodec.train_state`.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -39,8 +40,8 @@ from semcodec.model import make_model
 from semcodec.registry import make_codec, parse_codec_spec
 from semcodec.train_batches import draw_batch, noise_generator
 from semcodec.train_config import TrainConfig, lr_at
-from semcodec.train_state import TrainRun, load_train_state
-from semcodec.training_data import list_images, load_data
+from semcodec.train_state import TRAINING_FILES, TrainRun, load_train_state
+from semcodec.training_data import files_sha256, list_images, load_data
 
 __all__ = [
     "TrainConfig",
@@ -51,9 +52,19 @@ __all__ = [
     "load_train_state",
     "make_model",
     "train",
+    "train_inputs",
     "validate",
     "with_architecture",
 ]
+
+
+def train_inputs(train_dirs: list[Path], init: Path | None, data_sha256: str | None = None):
+    """What a training's weights depend on besides its config, as its state records them:
+    ``{"data": sha256 of the training files, "init": the starting checkpoint or None}``
+    (``data_sha256`` when already computed)."""
+    if data_sha256 is None:
+        data_sha256 = files_sha256([p for d in train_dirs for p in list_images(d, "--data")])
+    return {"data": data_sha256, "init": str(Path(init).resolve()) if init is not None else None}
 
 
 def nearest_level(levels, cbr: float) -> float:
@@ -194,7 +205,14 @@ def train(
 
     Alone or under ``torchrun`` (see the module docstring). Rank 0 writes
     ``out_dir/last.safetensors``, ``best.safetensors`` (by mean validation PSNR),
-    ``last_state.pt`` (weights, optimizer, counters) and ``log.jsonl``. Returns a summary dict.
+    ``last_state.pt`` (weights, optimizer, counters) and ``log.jsonl``. Returns a summary dict
+    (``nothing_to_do``: a resumed training that had already finished; no file was written).
+
+    A training in ``out_dir`` is resumed when ``resume`` (else started over, its files
+    replaced); one that dies before its first checkpoint removes what it wrote.
+
+    Raises:
+        ResumeRefused: resuming would change more than ``RESUMABLE_FIELDS`` (nothing written).
     """
     place = distributed.setup(cfg.device, cfg.ddp_backend)
     if cfg.batch_size % place.world_size:
@@ -217,11 +235,25 @@ def train(
             "world_size": place.world_size,
         },
     }
+    run = TrainRun(cfg, codec, place, out_dir, card, train_inputs(train_dirs, init, data_hash))
+    resuming = resume and run.state_path.exists()
+    if resuming:
+        run.resume()  # ResumeRefused (nothing written) when it would change the training
+    created = not out_dir.exists()
     if place.rank == 0:
         out_dir.mkdir(parents=True, exist_ok=True)
-    run = TrainRun(cfg, codec, place, out_dir, card)
-    if resume and run.state_path.exists():
-        run.resume()
+        if not resuming:  # a fresh start replaces every file of an earlier training
+            _remove_training_files(out_dir)
+    summary = {"steps": run.step, "minutes": run.elapsed / 60, "out_dir": str(out_dir)}
+    if resuming and run.done():
+        if place.rank == 0:
+            print(
+                f"train-codec: {out_dir} has finished its training at step {run.step} "
+                f"({run.elapsed / 60:.1f} min); nothing to do (give more max_steps or a later "
+                "max_minutes to continue it)",
+                file=sys.stderr,
+            )
+        return {**summary, "validation": None, "nothing_to_do": True}
     val = val.to(place.device) if val is not None else None
     forward = _TrainForward(codec)
     if place.distributed:
@@ -230,13 +262,22 @@ def train(
         ids = [place.device.index] if place.device.type == "cuda" else None
         forward = DistributedDataParallel(forward, device_ids=ids)
     data = (codec.rate_levels, parse_train_channels(cfg.channel), images)
-    metrics = _loop(run, forward, data, val)
-    return {
-        "steps": run.step,
-        "minutes": run.elapsed / 60,
-        "validation": metrics,
-        "out_dir": str(out_dir),
-    }
+    try:
+        metrics = _loop(run, forward, data, val)
+    except BaseException:
+        if place.rank == 0 and not run.saved:  # died before its first checkpoint
+            _remove_training_files(out_dir, rmdir=created)
+        raise
+    return {**summary, "steps": run.step, "minutes": run.elapsed / 60, "validation": metrics}
+
+
+def _remove_training_files(out_dir: Path, rmdir: bool = False) -> None:
+    """Remove the files a training writes (``TRAINING_FILES``), and the folder itself when
+    ``rmdir`` and nothing else is left in it: nothing that would block a rerun."""
+    for name in TRAINING_FILES:
+        (out_dir / name).unlink(missing_ok=True)
+    if rmdir and not any(out_dir.iterdir()):
+        out_dir.rmdir()
 
 
 LOG_EVERY_STEPS = 50
@@ -253,16 +294,26 @@ def _loop(run: TrainRun, forward, data, val) -> dict:
 
     cfg, place = run.cfg, run.place
     lead = place.rank == 0
-    log = open(run.out_dir / "log.jsonl", "a") if lead else None
     budget = cfg.max_minutes * 60.0
-    bar = tqdm(
-        total=int(budget),
-        initial=int(run.elapsed),
-        unit="s",
-        desc="train-codec",
-        file=sys.stderr,
-        disable=not lead,
-    )
+    # both are closed on the way out, by an error too: the bar never redraws after its line
+    with (
+        open(run.out_dir / "log.jsonl", "a") if lead else contextlib.nullcontext() as log,
+        tqdm(
+            total=int(budget),
+            initial=int(run.elapsed),
+            unit="s",
+            desc="train-codec",
+            file=sys.stderr,
+            disable=not lead,
+        ) as bar,
+    ):
+        return _steps(run, forward, data, val, log, bar)
+
+
+def _steps(run: TrainRun, forward, data, val, log, bar) -> dict:
+    """The loop of :func:`_loop` (``log``: the open ``log.jsonl`` on rank 0, else None)."""
+    cfg, place = run.cfg, run.place
+    lead = place.rank == 0
     last_save = last_eval = last_log = run.elapsed
     acc = [0.0, 0.0, 0, 0.0]  # loss, PSNR, steps, seconds since the last record
     while not run.done():
@@ -294,9 +345,6 @@ def _loop(run: TrainRun, forward, data, val) -> dict:
     metrics = _validate_and_save(run, val, final=True)
     if acc[2] or metrics:
         _write(log, {**(_record(run, acc) if acc[2] else _record_head(run)), **metrics})
-    bar.close()
-    if lead:
-        log.close()
     return metrics
 
 

@@ -18,7 +18,9 @@ variance. Draw ``d`` of image ``i`` at SNR ``k`` uses the same seed in every sch
 random numbers: ``digital`` and ``digital_genie`` see the same fades). All input is checked
 before any work; the result file is written once, atomically, at the end. Until then every
 finished (scheme, SNR) point is kept in ``OUT.partial``: the same command run again after an
-interruption resumes from it (a partial file of another evaluation is ignored and replaced).
+interruption resumes from it. A partial file of another evaluation (another ``--seed``,
+``--images``, ``--codec``, ``--cbr``, ...) is refused with the changed fields named, and
+replaced only with ``--overwrite`` (:mod:`osnerf.commands.eval_partial`).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 
 from common import write_figure
 from osnerf.commands import args as checks
+from osnerf.commands.eval_partial import check_partial_kind, partial_path, resumable
 
 MAX_DRAWS = 10_000
 MAX_IMAGES = 100_000
@@ -105,10 +108,11 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--out",
         required=True,
-        help="result JSON path (finished points wait in OUT.partial; rerun to resume)",
+        help="result JSON path (finished points wait in OUT.partial; rerun the same command "
+        "to resume; one of another evaluation is refused unless --overwrite)",
     )
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
-    checks.add_overwrite(p, "--out and --plot")
+    checks.add_overwrite(p, "--out and --plot (and an OUT.partial of another evaluation)")
     from semcodec import codec_names
 
     p.add_argument(
@@ -199,7 +203,8 @@ def run(args: argparse.Namespace) -> int:
         checkpoint = {"name": codec.name, "sha256": codec.sha256}
         checkpoint.update(capability_record(codec, steps))
     partial = partial_path(out)
-    done = _resumable(partial, config, args.seed, checkpoint)
+    identity = {"config": config, "seed": args.seed, "checkpoint": checkpoint}
+    done = resumable(out, identity, args.overwrite)
     if done:
         print(f"eval-codec: resuming {len(done)} finished points from {partial}", file=sys.stderr)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
@@ -229,31 +234,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def partial_path(out: Path) -> Path:
-    """Where a run keeps its finished points until it completes: ``<out>.partial``."""
-    return out.with_name(out.name + ".partial")
-
-
-def _resumable(partial: Path, config: dict, seed: int, checkpoint) -> dict:
-    """{(scheme, snr_db): row} of an interrupted run of the same evaluation (same config, seed
-    and codec); {} when there is none or it was of another evaluation."""
-    import json
-
-    if not partial.is_file():
-        return {}
-    try:
-        old = json.loads(partial.read_text())
-    except (OSError, ValueError):
-        return {}
-    if (
-        old.get("config") != json.loads(json.dumps(config))
-        or old.get("seed") != seed
-        or old.get("checkpoint") != checkpoint
-    ):
-        return {}
-    return {(r["scheme"], r["snr_db"]): r for r in old.get("results", [])}
-
-
 def _inputs(args: argparse.Namespace):
     """Every input checked before any work: (out path, schemes, SNRs, CBR, fixed MCS, codec or
     None, image names, images, whether LPIPS is scored)."""
@@ -275,6 +255,7 @@ def _inputs(args: argparse.Namespace):
     if args.plot:
         checks.output_file(args.plot, "--plot", overwrite=args.overwrite, inputs=inputs)
     checks.distinct_outputs(out=args.out, plot=args.plot)
+    check_partial_kind(out)  # a folder or FIFO there is refused before any work
     torch.set_num_threads(args.threads)
     channels = eval_channels()
     if args.channel not in channels:

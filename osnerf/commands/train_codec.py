@@ -5,7 +5,12 @@ checkpoint starts from its weights). On one process it runs as is; under ``torch
 --nproc-per-node N -m osnerf.cli train-codec ...`` it trains with DDP (gloo on CPU, nccl on
 ``--device cuda``), each rank taking its share of ``--batch-size``, rank 0 writing.
 Resumable at any world size: run the same command again and it continues from
-``OUT/last_state.pt``.
+``OUT/last_state.pt``. A resume may change only what ``semcodec.RESUMABLE_FIELDS`` lists
+(more ``--max-steps``, a later ``--max-minutes``, save and validation intervals, threads,
+device); each such change is recorded in the model card's ``resumes``. Any other change
+(``--lr``, ``--seed``, ``--data``, ...) is refused with the changed fields named, unless
+``--overwrite`` (which starts over). A training that dies before its first checkpoint
+leaves nothing behind.
 Writes ``OUT/best.safetensors`` and ``last.safetensors`` (weights + model card),
 ``OUT/log.jsonl`` (loss, PSNR, learning rate; written as training goes) and
 ``OUT/summary.json`` (with the record of ``best.safetensors``: its codec, sha256 and, for a
@@ -73,8 +78,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="train into an --out folder that holds other files, or start over with "
-        "--no-resume in one that holds a training; without it such a folder is refused (exit 2)",
+        help="train into an --out folder that holds other files, or start over in one that "
+        "holds a training (with --no-resume, or when the arguments differ from that "
+        "training's); without it such a folder is refused (exit 2)",
     )
     probability = checks.number(0.0, 1.0)
     add_config_arguments(
@@ -112,20 +118,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
 
-    cfg, data, val, init, out = parse(args)
+    cfg, data, val, init, out, resume = parse(args)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
-    summary = train_codec(cfg, data, val, init, out, resume=not args.no_resume)
+    summary = train_codec(cfg, data, val, init, out, resume=resume)
     report(cfg, summary, out)
     return 0
 
 
 def parse(args: argparse.Namespace):
     """Check every input before any work: (config, data folders, validation folder, init
-    checkpoint or None, output folder)."""
-    from semcodec import TrainConfig, build_codec, load_train_state, with_architecture
+    checkpoint or None, output folder, whether to resume the training there)."""
+    from semcodec import TrainConfig, build_codec, with_architecture
 
     cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
     cfg = with_architecture(cfg)  # --model left out: the codec's own first architecture
+    _check_backend(cfg)
     build_codec(cfg, None)  # an unknown codec, architecture or checkpoint: refused before work
     bsds = shared_data_dir() / "bsds500"
     where = "$OSNERF_DATA" if os.environ.get("OSNERF_DATA") else "the shared data folder"
@@ -153,13 +160,68 @@ def parse(args: argparse.Namespace):
         resumable=lambda d: not args.no_resume and (d / "last_state.pt").is_file(),
         inputs=inputs,
     )
+    resume = not args.no_resume and _resumable(args, cfg, data, init, out)
+    return cfg, data, val, init, out, resume
+
+
+def _check_backend(cfg) -> None:
+    """``--ddp-backend`` names the process group's backend: it needs torchrun (more than one
+    process), and nccl needs ``--device cuda``."""
+    if cfg.ddp_backend == "nccl" and not cfg.device.startswith("cuda"):
+        raise UsageError(
+            f"--ddp-backend nccl needs --device cuda (got --device {cfg.device}); use gloo "
+            "(or auto) on cpu"
+        )
+    if cfg.ddp_backend != "auto" and int(os.environ.get("WORLD_SIZE", "1")) <= 1:
+        raise UsageError(
+            f"--ddp-backend {cfg.ddp_backend} applies only under torchrun with more than one "
+            "process (WORLD_SIZE > 1); leave it out to train in one process"
+        )
+
+
+def _resumable(args, cfg, data, init, out: Path) -> bool:
+    """True when ``out`` holds a training that this run continues; False when there is none,
+    or when it is another training's and ``--overwrite`` starts over.
+
+    Raises:
+        UsageError: the state is unreadable, or resuming would change a field that may not
+            change (``semcodec.RESUMABLE_FIELDS``), named with its flag, without --overwrite.
+    """
+    from semcodec import (
+        ResumeRefused,
+        check_resume,
+        describe_changes,
+        load_train_state,
+        train_inputs,
+    )
+
     state = out / "last_state.pt"
-    if not args.no_resume and state.exists():
-        try:
-            load_train_state(state)
-        except ValueError as e:
-            raise UsageError(f"{e}; start over with --no-resume --overwrite") from None
-    return cfg, data, val, init, out
+    if not state.exists():
+        return False
+    try:
+        st = load_train_state(state)
+    except ValueError as e:
+        raise UsageError(f"{e}; start over with --no-resume --overwrite") from None
+    try:
+        check_resume(st, cfg, train_inputs(data, init), state)
+    except ResumeRefused as e:
+        names = {n: flag_of(n, FLAGS) for n in CONFIG_FIELDS} | {"data": "--data", "init": "--init"}
+        what = f"changes {describe_changes(e.changes, names)}" if e.changes else None
+        if args.overwrite:
+            print(
+                f"train-codec: --overwrite: starting over in {out} (its training at step "
+                f"{st['step']}: {what or e})",
+                file=sys.stderr,
+            )
+            return False
+        if not e.changes:
+            raise checks.flag_error(e) from None
+        raise UsageError(
+            f"--out {str(out)!r} holds another training: this run {what}; rerun with its "
+            "arguments to resume it, give --overwrite to start over, or train into a new --out "
+            f"with --init {out / 'last.safetensors'}"
+        ) from None
+    return True
 
 
 def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
@@ -196,6 +258,8 @@ def report(cfg, summary: dict, out: Path) -> None:
     from osnerf.provenance import write_json_atomic
 
     if int(os.environ.get("RANK", "0")) != 0:  # under torchrun, rank 0 writes
+        return
+    if summary.get("nothing_to_do"):  # a finished training: its files stay as they are
         return
     write_json_atomic(out / "summary.json", {**summary, "codec": trained_codec(cfg, out)})
     print(

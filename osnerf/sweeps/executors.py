@@ -203,18 +203,29 @@ def _ray(
         raise ValueError(
             "--executor ray needs the 'ray' package: pip install 'osnerf[ray]'"
         ) from None
-    started = False
-    if not ray.is_initialized():
-        kwargs: dict[str, Any] = {
-            "address": ray_address,
-            "include_dashboard": False,
-            "runtime_env": ray_runtime_env,
-            "log_to_driver": False,
-        }
-        if ray_address is None and not os.environ.get("RAY_ADDRESS"):
-            kwargs["num_cpus"] = workers  # a local instance sized like the local pool
-        ray.init(**kwargs)
-        started = True
+    started = not ray.is_initialized()
+    try:
+        if started:
+            kwargs: dict[str, Any] = {
+                "address": ray_address,
+                "include_dashboard": False,
+                "runtime_env": ray_runtime_env,
+                "log_to_driver": False,
+            }
+            if ray_address is None and not os.environ.get("RAY_ADDRESS"):
+                kwargs["num_cpus"] = workers  # a local instance sized like the local pool
+            with _sigint_held():  # Ctrl-C while Ray starts: after, then shut down in full
+                ray.init(**kwargs)
+        yield from _ray_results(ray, tasks)
+    finally:
+        if started:
+            with _sigint_held():  # a second Ctrl-C does not cut the shutdown short
+                ray.shutdown()
+
+
+def _ray_results(ray, tasks: list[tuple[str, Task]]) -> Iterator[tuple[str, Outcome]]:
+    """Submit every task to Ray and yield each outcome as it finishes; cancel the rest when
+    the caller stops (an error, Ctrl-C, or the generator closed)."""
     remote = ray.remote(num_cpus=1)(execute_point)
     refs = {remote.remote(task): key for key, task in tasks}
     pending = list(refs)
@@ -233,10 +244,36 @@ def _ray(
                     }
                 yield refs[ref], outcome
     finally:
-        for ref in pending:
-            ray.cancel(ref, force=True)
-        if started:
-            ray.shutdown()
+        with _sigint_held():
+            for ref in pending:
+                ray.cancel(ref, force=True)
+
+
+@contextlib.contextmanager
+def _sigint_held():
+    """Hold Ctrl-C while Ray starts or stops, then raise it as the usual KeyboardInterrupt.
+
+    A SIGINT meanwhile is only noted (any thread of this process may take it), and it is
+    blocked in the Ray processes started meanwhile (they inherit the mask), so a Ctrl-C to
+    the terminal's process group neither cuts ``ray.init`` / ``ray.shutdown`` short nor kills
+    Ray's own processes half-way (orphans, their fatal-error traces).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted: list[int] = []
+    handler = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        signal.signal(signal.SIGINT, handler)
+    if noted:
+        raise KeyboardInterrupt
 
 
 EXECUTORS = Registry[Callable[..., Iterator[tuple[str, Outcome]]]](

@@ -27,7 +27,7 @@ from typing import Any
 from osnerf.sweeps.executors import Outcome, Task, get_executor
 from osnerf.sweeps.metrics import metric_rule
 from osnerf.sweeps.spec import Point, SweepSpec, command_options, command_parser, expand, point_key
-from osnerf.sweeps.store import append_record, open_results
+from osnerf.sweeps.store import append_record, check_results, open_results
 
 
 @dataclass
@@ -100,6 +100,7 @@ def run_sweep(
         raise ValueError(f"--workers must be >= 1, got {workers}")
     rule = metric_rule(spec.command)
     out = Path(out)
+    check_results(out, spec.sha256)  # a refusal creates nothing: no folder, no lock
     out.parent.mkdir(parents=True, exist_ok=True)
     with _exclusive(out):
         run = _Sweep(spec, rule, executor, run_executor, workers, cpus, progress, keep)
@@ -108,19 +109,43 @@ def run_sweep(
 
 @contextlib.contextmanager
 def _exclusive(out: Path):
-    """Hold ``<out>.lock`` (flock) while a sweep writes ``out``: two sweeps on one file refuse."""
+    """Hold ``<out>.lock`` (flock) while a sweep writes ``out``: two sweeps on one file refuse.
+
+    The lock file is removed when the sweep ends (while still held), so none is left beside
+    ``out``; a sweep that locked a file removed meanwhile locks the new one instead.
+    """
     import fcntl
 
     lock = out.with_name(out.name + ".lock")
-    with open(lock, "w") as f:
+    while True:
+        f = open(lock, "a")
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
+            f.close()
             raise ValueError(
                 f"--out {str(out)!r}: another sweep is writing it (lock {lock.name} is held); "
                 "wait for it or use another --out"
             ) from None
-        yield  # closing the file releases the lock
+        if _same_file(f, lock):
+            break
+        f.close()  # the sweep that held it has ended and removed it: lock the new one
+    try:
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            lock.unlink()  # still held: a sweep waiting on this file retries on a new one
+        f.close()  # releases the lock
+
+
+def _same_file(f, path: Path) -> bool:
+    """True when the open file ``f`` is still the file at ``path``."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return False
+    own = os.fstat(f.fileno())
+    return (st.st_dev, st.st_ino) == (own.st_dev, own.st_ino)
 
 
 @dataclass(frozen=True)

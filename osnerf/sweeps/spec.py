@@ -10,8 +10,10 @@ A spec is a small YAML or TOML file::
 Option names are those of the command's command line without the dashes (``snr_db`` or
 ``snr-db`` both name ``--snr-db``). The spec is checked against the command's own argparse
 options (from :func:`osnerf.cli.build_parser`) before anything runs: an unknown option, a
-value outside its choices or of the wrong type, a missing required option, an empty axis or
-an empty seed list is a one-line ``ValueError`` naming the field and what is allowed.
+value outside its choices or of the wrong type, a value that names no entry of its table (a
+codec, a channel, a scheme: :mod:`osnerf.sweeps.values`), a missing required option, an
+empty axis or an empty seed list is a one-line ``ValueError`` naming the field and what is
+allowed.
 """
 
 from __future__ import annotations
@@ -282,6 +284,22 @@ def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
     return [flag, _format_value(name, value)]
 
 
+def _check_table_values(spec: SweepSpec, opts: dict[str, argparse.Action]) -> None:
+    """Every axis and fixed value that names a table entry (a codec, a channel, ...) is
+    checked against its table now (:mod:`osnerf.sweeps.values`), before any point runs."""
+    from osnerf.sweeps.values import check_values
+
+    options = {}
+    for kind, table in (("fixed option", spec.fixed), ("axis", spec.axes)):
+        for name, values in table.items():
+            action = opts[_norm(name)]
+            if action.nargs == 0:  # a flag: true or false, nothing to look up
+                continue
+            values = values if kind == "axis" else [values]
+            options[action.dest] = (f"{kind} {name!r}", [_format_value(name, v) for v in values])
+    check_values(spec.command, options)
+
+
 def expand(spec: SweepSpec) -> list[Point]:
     """Check ``spec`` against the command's options and expand it into points.
 
@@ -310,6 +328,7 @@ def expand(spec: SweepSpec) -> list[Point]:
                     "the same file; leave it out (osnerf sweep --keep-outputs keeps each "
                     "point's own output)"
                 )
+    _check_table_values(spec, opts)
     has_seed = "seed" in opts
     if not has_seed and any(s is not None for s in spec.seeds):
         raise ValueError(f"command {spec.command!r} has no --seed option: leave 'seeds' out")

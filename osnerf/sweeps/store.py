@@ -62,6 +62,38 @@ def _parse(data: bytes, path: Path) -> tuple[list[dict[str, Any]], int]:
     return records, good
 
 
+def check_results(
+    path: str | Path, spec_hash: str, data: bytes | None = None
+) -> tuple[list[dict[str, Any]], int]:
+    """Refuse a file that is not this spec's results, changing nothing (no file: nothing to
+    refuse). Returns its records and the byte length of their valid prefix.
+
+    Raises:
+        ValueError: as :func:`open_results`.
+    """
+    path = Path(path)
+    if data is None:
+        if not path.exists():
+            return [], 0
+        data = path.read_bytes()
+    records, good = _parse(data, path)
+    torn_first = not records and data.startswith(b'{"point":')  # a crash during the first write
+    if (data.strip() and not records and not torn_first) or any(
+        "spec_hash" not in r for r in records
+    ):
+        raise ValueError(
+            f"--out {str(path)!r} exists and is not the results file of a sweep; "
+            "give another --out (nothing was changed in it)"
+        )
+    others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
+    if others:
+        raise ValueError(
+            f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
+            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
+        )
+    return records, good
+
+
 def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
     """Load a results file for appending; refuse a file that is not this spec's results; then
     repair a torn last line.
@@ -78,21 +110,7 @@ def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     data = path.read_bytes()
-    records, good = _parse(data, path)
-    torn_first = not records and data.startswith(b'{"point":')  # a crash during the first write
-    if (data.strip() and not records and not torn_first) or any(
-        "spec_hash" not in r for r in records
-    ):
-        raise ValueError(
-            f"--out {str(path)!r} exists and is not the results file of a sweep; "
-            "give another --out (nothing was changed in it)"
-        )
-    others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
-    if others:
-        raise ValueError(
-            f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
-            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
-        )
+    records, good = check_results(path, spec_hash, data)
     if good < len(data):
         torn = path.with_name(path.name + ".torn")
         with open(torn, "ab") as f:

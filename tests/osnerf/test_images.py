@@ -153,7 +153,7 @@ def test_train_codec_resumed_with_another_model_is_one_line(one_line, tmp_path, 
     argv = ["train-codec", "--data", str(data), "--val", str(data), "--crop-px", "16"]
     assert main([*argv, "--model", other, "--out", str(out)]) == 2
     err = one_line()
-    assert f"trained with jscc architecture {trained!r}, not {other!r}" in err
+    assert f"changes --model ({trained} -> {other})" in err  # refused before any weights load
     assert sorted(p.name for p in out.iterdir()) == ["last_state.pt"]
 
 
