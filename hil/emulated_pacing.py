@@ -56,7 +56,7 @@ class StreamPacer:
         """Samples the converter has taken (or sent) since the stream started."""
         if self.started_at is None:
             return 0
-        return int((self.clock() - self.started_at) * self.sample_rate_hz)
+        return int((self.clock() - self.started_at) * self.sample_rate_hz + 1e-6)  # float dust
 
     def _shortfall(self, samples: int) -> None:
         self.shortfalls += 1

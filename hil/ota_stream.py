@@ -33,8 +33,9 @@ class RingBuffer:
     """A bounded buffer of complex64 samples between a producer (the driver) and a
     consumer (the frame search), on absolute sample positions (thread-safe).
 
-    A block that does not fit behind what the consumer still holds is dropped whole and
-    counted (``dropped_samples``, ``drop_events``); its interval is kept in ``gaps`` so the
+    A block that does not fit behind what the consumer still holds (positions map to
+    slots modulo ``capacity``, so dropped samples take room too until the consumer passes
+    them) is dropped whole and counted (``dropped_samples``, ``drop_events``); its interval is kept in ``gaps`` so the
     consumer never joins samples across it.
 
     Args:
@@ -60,17 +61,10 @@ class RingBuffer:
         x = np.asarray(x, np.complex64).reshape(-1)
         n = len(x)
         with self.cond:
-            self.received_samples += n
             if self.write_pos + n - self.read_pos > self.capacity:
-                self.dropped_samples += n
-                self.drop_events += 1
-                if self.gaps and self.gaps[-1][1] == self.write_pos:
-                    self.gaps[-1] = (self.gaps[-1][0], self.write_pos + n)
-                else:
-                    self.gaps.append((self.write_pos, self.write_pos + n))
-                self.write_pos += n
-                self.cond.notify_all()
+                self.drop(n)
                 return False
+            self.received_samples += n
             i = self.write_pos % self.capacity
             first = min(n, self.capacity - i)
             self._buf[i : i + first] = x[:first]
@@ -78,6 +72,21 @@ class RingBuffer:
             self.write_pos += n
             self.cond.notify_all()
             return True
+
+    def drop(self, num_samples: int) -> None:
+        """Count ``num_samples`` that arrived with no room for them: one drop event, a gap
+        in the stream."""
+        with self.cond:
+            n = int(num_samples)
+            self.received_samples += n
+            self.dropped_samples += n
+            self.drop_events += 1
+            if self.gaps and self.gaps[-1][1] == self.write_pos:
+                self.gaps[-1] = (self.gaps[-1][0], self.write_pos + n)
+            else:
+                self.gaps.append((self.write_pos, self.write_pos + n))
+            self.write_pos += n
+            self.cond.notify_all()
 
     def close(self) -> None:
         """The producer ended: no more samples."""
@@ -102,8 +111,10 @@ class RingBuffer:
         with self.cond:
             if lo < self.read_pos or hi > self.write_pos or hi - lo > self.capacity:
                 raise ValueError(f"samples [{lo}, {hi}) are not held ({self.read_pos}..)")
-            idx = np.arange(lo, hi) % self.capacity
-            return self._buf[idx]
+            i, n = lo % self.capacity, hi - lo
+            if i + n <= self.capacity:
+                return self._buf[i : i + n].copy()
+            return np.concatenate([self._buf[i:], self._buf[: i + n - self.capacity]])
 
     def release(self, position: int) -> None:
         """The consumer needs no sample before ``position`` any more."""

@@ -164,9 +164,10 @@ def stream_over_the_air(
 
     def stop_after_last_view():
         sender.join()
-        # what the board and the driver still hold reaches the ring, then the last frame
+        # the last frame, then what the board and the driver still hold, reach the ring
         tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
-        time.sleep(tail / fs + 4 * block / fs + 0.05)
+        transfer = getattr(rx, "rx_chunk_bytes", 0) // 2
+        time.sleep((tail + transfer + 4 * block) / fs + 0.05)
         stop.set()
 
     stopper = threading.Thread(target=stop_after_last_view, name="ota-stream-stop", daemon=True)
