@@ -30,7 +30,7 @@ from osnerf.commands import args as checks
 from osnerf.commands.ota_args import usage_error
 
 STREAM_KINDS = ("emulated", "hackrf")  # radios whose driver streams (HackRFs)
-MAX_VIEWS = 100_000
+MAX_VIEWS = 10_000  # every view is framed before the stream starts
 
 # dest -> (flag, its default under --stream)
 STREAM_FLAGS = Registry[tuple[str, object]](

@@ -227,19 +227,19 @@ def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
 
 
 @pytest.mark.parametrize(
-    "extra, flag",
+    "extra, message",
     [
-        (["--views", "3"], "--views"),  # without --stream
-        (["--stream", "--tx", "loopback", "--rx", "loopback"], "--stream"),
-        (["--stream", "--schemes", "digital,jscc"], "--stream"),
-        (["--stream", "--ring-s", "0"], "--ring-s"),
+        (["--views", "3"], "--views applies to --stream only"),
+        (["--stream", "--tx", "loopback", "--rx", "loopback"], "--stream needs HackRFs"),
+        (["--stream", "--schemes", "digital,jscc"], "--stream sends one scheme"),
+        (["--stream", "--ring-s", "0"], "--ring-s: must be a number in [0.01, 60] s"),
     ],
 )
-def test_bad_stream_flags_exit_2_and_create_nothing(tmp_path, images, capsys, extra, flag):
+def test_bad_stream_flags_exit_2_and_create_nothing(tmp_path, images, capsys, extra, message):
     out = tmp_path / "o.json"
     argv = ["ota", "--schemes", "jscc", "--images", str(images), "--out", str(out), *extra]
     assert main(argv) == 2
-    assert flag in capsys.readouterr().err and not out.exists()
+    assert message in capsys.readouterr().err and not out.exists()
     assert not (tmp_path / "o_sigmf").exists()
 
 
