@@ -303,6 +303,9 @@ class StreamReceiver:
         if rep.detected:
             self.counts.duplicates += 1
             return
+        if view.index < self.next_view:  # a view already handed on: a header gone wrong
+            self.counts.header_errors += 1
+            return
         self.counts.frames_decoded += 1
         self.last_number = max(self.last_number, number)
         rep.detected = True
