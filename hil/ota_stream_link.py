@@ -32,6 +32,8 @@ class StreamRun:
 
     Attributes:
         samples_received: samples the driver handed to the ring.
+        driver_samples: samples the driver delivered by its own count (the same, unless
+            the producer failed between the two).
         ring_dropped_samples, ring_drop_events: samples (blocks) the ring had no room for.
         driver_dropped_samples: samples the driver's reader thread dropped (its queue full).
         device_overruns: overruns the board's M0 counted (-1: the firmware cannot tell).
@@ -45,6 +47,7 @@ class StreamRun:
     """
 
     samples_received: int = 0
+    driver_samples: int = 0
     ring_dropped_samples: int = 0
     ring_drop_events: int = 0
     driver_dropped_samples: int = 0
@@ -190,6 +193,7 @@ def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: li
         raise HilError("the receive stream ended without the driver's counters")
     run = StreamRun(
         samples_received=ring.received_samples,
+        driver_samples=stats.num_samples,
         ring_dropped_samples=ring.dropped_samples,
         ring_drop_events=ring.drop_events,
         driver_dropped_samples=stats.host_dropped_bytes // 2,

@@ -197,6 +197,7 @@ def test_stream_at_10_db_drops_nothing_and_reports_latency_per_view(tmp_path, im
     assert d["config"]["stream"] is True and d["config"]["views"] == 5
     assert s["dropped_samples"] == 0 and s["overruns"] == 0 and s["device_overruns"] == 0
     assert s["emulator_overrun_samples"] == 0 and s["samples_received"] >= 0.4 * 2e6  # 4 intervals
+    assert s["samples_received"] == s["driver_samples"]
     assert s["frames_found"] == s["frames_decoded"] == s["frames_sent"] == 5
     assert s["frames_lost"] == 0 and s["views_complete"] == 5
     for row in s["views"]:  # a view is out no sooner than its air time after it went in
@@ -260,8 +261,10 @@ def test_a_stalled_usb_reader_overruns_the_board_and_the_run_says_so(
     monkeypatch.setattr(UsbTransport, "read", stalling_read)
     rc, d = stream(tmp_path, images, "--views", "6", "--view-interval-s", "0.1")
     s = d["stream"]
-    assert rc == 1 and s["device_overruns"] == 1 and s["emulator_overrun_samples"] > 0
+    assert rc == 1 and s["device_overruns"] >= 1 and s["emulator_overrun_samples"] > 0
     assert s["dropped_samples"] == s["emulator_overrun_samples"] and s["ring_dropped_samples"] == 0
-    assert s["device_longest_overrun_bytes"] == 2 * s["emulator_overrun_samples"]
+    # the stall outlasted the buffer by about 0.23 s: that much was lost at once
+    longest = s["device_longest_overrun_bytes"]
+    assert 2 * 0.2 * 2e6 <= longest <= 2 * s["emulator_overrun_samples"]
     err = capsys.readouterr().err
     assert "receive overruns" in err and "the stream lost" in err
