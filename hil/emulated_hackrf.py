@@ -18,11 +18,12 @@ import numpy as np
 import usb.core
 
 from hil import protocol as p
-from hil.emulated_pacing import StreamPacer
+from hil.emulated_pacing import RX_BUFFER_BYTES, TX_BUFFER_BYTES, StreamPacer
 from hil.medium import AMP_GAIN_DB, Medium
 
 _STALE_VALUE = 100  # the stale first buffer holds this int8 value in every byte
 _M0_IDLE, _M0_RX, _M0_TX_RUN = 0, 2, 4
+RX_SAMPLES, TX_SAMPLES = RX_BUFFER_BYTES // 2, TX_BUFFER_BYTES // 2  # a paced board's buffers
 PPM_RANGE = (-200.0, 200.0)  # crystal error of an emulated board, parts per million
 
 
@@ -312,10 +313,11 @@ class EmulatedHackRF:
         self.pacer = None
         if self.paced and mode != p.MODE_OFF:
             self.tx_written = 0
-            start = self.rx_cursor if mode == p.MODE_RECEIVE else self.medium.tx_len
-            self.pacer = StreamPacer(self.sample_rate_hz, start)
             if mode == p.MODE_RECEIVE:
+                self.pacer = StreamPacer(self.sample_rate_hz, self.rx_cursor, RX_SAMPLES)
                 self.pacer.start()
+            else:
+                self.pacer = StreamPacer(self.sample_rate_hz, self.medium.tx_len, TX_SAMPLES)
         self.medium.notify()
 
     # ------------------------------------------------------------------ bulk

@@ -3,11 +3,13 @@ model (:class:`StreamPacer`).
 
 A paced board streams at its sample rate, as a real one does: a receive transfer is
 delivered no earlier than its last sample was taken, and a transmit transfer is accepted
-only while the board's buffers have room. The board holds :data:`DEVICE_BUFFER_BYTES`
-(libhackrf's four 256 KiB transfers in flight plus the M0's 32 KiB buffer). A host that
-reads later than that loses the samples that no longer fit (an overrun: the oldest ones);
-a host that writes later than the buffer lasts lets the DAC run dry (an underrun: silence
-goes out). Each is counted as one shortfall of the M0 state, with its length in bytes, as
+only while the board's buffer has room. Receiving, the board holds
+:data:`RX_BUFFER_BYTES` (four 256 KiB transfers in flight, as libhackrf keeps, plus the
+M0's 32 KiB buffer); a host that reads later than that loses the samples that no longer fit
+(an overrun: the oldest ones). Transmitting, a synchronous bulk write completes once its
+last bytes are in the M0's :data:`TX_BUFFER_BYTES`, so the writer runs at most that far
+ahead of the DAC; a host that writes later than the buffer lasts lets the DAC run dry (an
+underrun: silence goes out). Each is counted as one shortfall of the M0 state, with its length in bytes, as
 the firmware counts them; the samples lost are counted exactly.
 """
 
@@ -17,7 +19,8 @@ import time
 
 from hil import protocol as p
 
-DEVICE_BUFFER_BYTES = 4 * p.TRANSFER_BYTES + p.FLUSH_BYTES
+TX_BUFFER_BYTES = p.FLUSH_BYTES  # the M0's sample buffer
+RX_BUFFER_BYTES = 4 * p.TRANSFER_BYTES + TX_BUFFER_BYTES
 
 
 class StreamPacer:
@@ -34,7 +37,7 @@ class StreamPacer:
         self,
         sample_rate_hz: float,
         start_sample: int,
-        buffer_samples: int = DEVICE_BUFFER_BYTES // p.BYTES_PER_SAMPLE,
+        buffer_samples: int = RX_BUFFER_BYTES // p.BYTES_PER_SAMPLE,
         clock=time.monotonic,
     ):
         self.sample_rate_hz = float(sample_rate_hz)

@@ -170,7 +170,9 @@ def stream_over_the_air(
         # the last frame, then what the board and the driver still hold, reach the ring
         tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
         transfer = getattr(rx, "rx_chunk_bytes", 0) // 2
-        time.sleep((tail + transfer + 4 * block) / fs + 0.05)
+        deadline = time.monotonic() + (tail + transfer + 4 * block) / fs + 0.05
+        while time.monotonic() < deadline and receiver.next_view < len(views):
+            time.sleep(0.005)  # ends early once the last view is decoded
         stop.set()
 
     stopper = threading.Thread(target=stop_after_last_view, name="ota-stream-stop", daemon=True)

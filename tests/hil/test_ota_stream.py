@@ -84,6 +84,7 @@ def test_pacer_counts_an_underrun_when_the_host_writes_too_late(monkeypatch):
 
 
 def test_paced_emulated_hackrf_streams_at_its_rate_and_reports_overruns():
+    """Receive and transmit take the air time they carry; a stalled host loses samples."""
     emu = Emulator(ppm=(0.0, 0.0), paced=True)
     with HackRF.open(emu.serials[1], backend=emu.backend) as rx:
         rx.sample_rate_hz = 2e6
@@ -91,6 +92,11 @@ def test_paced_emulated_hackrf_streams_at_its_rate_and_reports_overruns():
         rx.rx(400_000)  # 0.2 s of air
         assert time.monotonic() - t >= 0.2  # not faster than the sample rate
         assert rx.last_stats.clean and emu.radios[1].overrun_samples == 0
+    with HackRF.open(emu.serials[0], backend=emu.backend) as tx:
+        tx.sample_rate_hz = 2e6
+        t = time.monotonic()
+        tx.tx(np.zeros(200_000, np.complex64))  # 0.1 s of air; the M0 holds 8 ms of it
+        assert time.monotonic() - t >= (200_000 - 16384) / 2e6
     board = emu.radios[1]
     board.control(protocol.OUT, protocol.SET_TRANSCEIVER_MODE, protocol.MODE_RECEIVE, 0, b"")
     board.bulk_read(1024)  # the stale buffer
