@@ -230,7 +230,8 @@ class StreamReceiver:
             for i in range(len(view.reports)):
                 self.owner[view.first_number + i] = (view, i)
         self.counts = StreamCounts()
-        self.last_number = -1  # stream-wide number of the last frame decoded
+        # stream-wide number of the last frame decoded (before any: the one before the first)
+        self.last_number = views[0].first_number - 1 if views else -1
         self.next_view = 0  # views before this one were handed on
 
     def warm_up(self) -> None:

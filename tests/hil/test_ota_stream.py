@@ -17,6 +17,7 @@ from hil import (
     PhyFrames,
     RingBuffer,
     StreamReceiver,
+    StreamView,
     build_views,
     protocol,
 )
@@ -145,6 +146,25 @@ def test_each_frame_is_found_exactly_once_across_block_boundaries(block):
     frames_sent = sum(len(v.reports) for v in views)
     assert (counts.frames_found, counts.frames_decoded, counts.duplicates) == (frames_sent, frames_sent, 0)  # fmt: skip
     assert [v.index for v in handed] == [0, 1, 2, 3] and all(v.complete for v in handed)
+    for v, x in zip(views, sent):
+        assert np.mean(np.abs(v.x_hat - x) ** 2) < 0.05
+
+
+def test_frame_numbers_carry_on_across_the_headers_12_bit_wrap():
+    rng = np.random.default_rng(3)
+    frames = PhyFrames(sample_rate_hz=2e6)
+    sent = [np.exp(2j * np.pi * rng.integers(0, 4, 2 * 256) / 4).astype(np.complex64) for _ in range(2)]  # fmt: skip
+    views, number = [], MAX_FRAMES - 3  # headers 4093, 4094 | 4095, 0
+    for v, block in enumerate(sent):
+        burst, reports, layout = build_burst([block], CFG, frames, first_number=number % MAX_FRAMES)
+        views.append(StreamView(v, number, reports, layout, len(block), burst))
+        number += len(reports)
+    ring, handed = RingBuffer(1 << 20), []
+    ring.push(_air(views, rng))
+    ring.close()
+    counts = StreamReceiver(ring, views, CFG, frames, handed.append, 4000).run()
+    assert (counts.frames_decoded, counts.header_errors) == (4, 0)
+    assert [v.complete for v in handed] == [True, True]
     for v, x in zip(views, sent):
         assert np.mean(np.abs(v.x_hat - x) ** 2) < 0.05
 
