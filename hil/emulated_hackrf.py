@@ -358,8 +358,9 @@ class EmulatedHackRF:
             ]
             if limits:
                 n = min(n, min(limits) - self.rx_cursor)
-            if self.pacer is not None:
-                self._pace_read(n)
+            pacer = self.pacer  # one stream's, even if the host switches modes meanwhile
+            if pacer is not None:
+                self._pace_read(pacer, n)
             raw = self.medium.render(
                 self, self.rx_cursor, n, lambda: self.mode == p.MODE_RECEIVE and not self.unplugged
             )
@@ -384,35 +385,34 @@ class EmulatedHackRF:
         if len(data) % 2:
             raise stall_error("odd number of bytes")
         self.events.append(("write", bytes(data)))
-        if self.pacer is not None:
+        pacer = self.pacer
+        if pacer is not None:
             n = len(data) // 2
-            gap = self.pacer.before_write(self.tx_written, n, silent=not any(data))
+            gap = pacer.before_write(self.tx_written, n, silent=not any(data))
             if gap:  # the DAC ran dry: silence went out
                 self.medium.idle_until(self.medium.tx_len + gap, underrun=True)
                 self.underrun_samples += gap
-                self._count_shortfalls()
+                self._count_shortfalls(pacer)
             self.tx_written += gap + n
         self.medium.append_tx(self, np.frombuffer(data, dtype=np.int8))
         self.m0["m0_count"] += len(data)
         self.m0["m4_count"] += len(data)
         return len(data)
 
-    def _pace_read(self, num_samples: int) -> None:
+    def _pace_read(self, pacer: StreamPacer, num_samples: int) -> None:
         """Wait for the samples of the next read to be taken; skip (and count) those lost
         to an overrun; forget the transmitter's samples no receiver needs any more."""
-        assert self.pacer is not None
-        start = self.pacer.before_read(self.rx_cursor, num_samples)
+        start = pacer.before_read(self.rx_cursor, num_samples)
         if start > self.rx_cursor:
             self.overrun_samples += start - self.rx_cursor
             self.rx_cursor = start
-            self._count_shortfalls()
+            self._count_shortfalls(pacer)
         slack = int(self.medium.channel.delay_s * self.sample_rate_hz) + (1 << 16)
         self.medium.forget_before(int(self.rx_cursor * (1 - 2 * PPM_RANGE[1] * 1e-6)) - slack)
 
-    def _count_shortfalls(self) -> None:
-        assert self.pacer is not None
-        self.m0["shortfalls"] = self.faults.shortfalls + self.pacer.shortfalls
-        self.m0["longest"] = max(self.m0["longest"], self.pacer.longest_shortfall_bytes)
+    def _count_shortfalls(self, pacer: StreamPacer) -> None:
+        self.m0["shortfalls"] = self.faults.shortfalls + pacer.shortfalls
+        self.m0["longest"] = max(self.m0["longest"], pacer.longest_shortfall_bytes)
 
     def unplug(self) -> None:
         """Pull the cable: every later request raises errno 19."""
