@@ -22,6 +22,7 @@ from hil.errors import HilError
 from hil.ota import _configure, _default_frames
 from hil.ota_config import OtaConfig
 from hil.ota_stream import RingBuffer, StreamCounts, StreamReceiver, StreamView
+from hil.radio_stream import rx_blocks
 
 BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
 
@@ -82,7 +83,7 @@ class StreamRun:
 
 def _produce(rx, ring: RingBuffer, block_samples: int, stop: threading.Event, out: dict) -> None:
     """The receiver's producer thread: the driver's blocks into the ring until ``stop``."""
-    blocks = rx.stream(block_samples)
+    blocks = rx_blocks(rx, block_samples)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -129,7 +130,8 @@ def stream_over_the_air(
     """Send ``views`` from ``tx`` while ``rx`` streams; decode on this thread.
 
     Args:
-        tx, rx: open HackRFs (real or emulated; configured here from ``cfg``).
+        tx, rx: open front ends (HackRFs, real or emulated, or one Pluto as both;
+            configured here from ``cfg``).
         views: :func:`hil.ota_stream.build_views` of the blocks to send.
         on_view: called on this thread with each view as the receiver hands it on.
         interval_s: a view every this many seconds (0: back to back).
@@ -140,7 +142,7 @@ def stream_over_the_air(
         both threads ended.
     """
     frames = frames or _default_frames(cfg)
-    for dev in (tx, rx):
+    for dev in (tx, rx) if rx is not tx else (tx,):
         _configure(dev, cfg)
     fs = cfg.sample_rate_hz
     ring = RingBuffer(max(int(ring_s * fs), 1))

@@ -6,7 +6,8 @@ receiver that streams without pause and decodes each frame as it arrives
         --images DIR --views 600 --view-interval-s 0.1 --out stream.json
 
 ``--views`` views go out (the images in turn), one every ``--view-interval-s`` seconds;
-the receiver's ring buffer holds ``--ring-s`` seconds of samples. Emulated HackRFs stream
+the receiver's ring buffer holds ``--ring-s`` seconds of samples. HackRFs and a Pluto
+stream (real or emulated). Emulated HackRFs stream
 at the configured rate against the wall clock (``hil.Emulator(paced=True)``), so a
 receiver that falls behind loses samples as a real one would. The result file has the
 usual per-view rows (PSNR, frames, SNR) and a ``stream`` section: samples received and
@@ -29,7 +30,7 @@ from common import Registry
 from osnerf.commands import args as checks
 from osnerf.commands.ota_args import usage_error
 
-STREAM_KINDS = ("emulated", "hackrf")  # radios whose driver streams (HackRFs)
+STREAM_KINDS = ("emulated", "hackrf", "pluto")  # radios whose driver streams
 MAX_VIEWS = 10_000  # every view is framed before the stream starts
 
 # dest -> (flag, its default under --stream)
@@ -48,7 +49,8 @@ def add_stream_arguments(p: argparse.ArgumentParser) -> None:
         "--stream",
         action="store_true",
         help="keep the receiver streaming and send the images as views one after another, "
-        "decoding each frame as it arrives (HackRFs, real or emulated; one scheme)",
+        "decoding each frame as it arrives (HackRFs or a Pluto, real or emulated; one "
+        "scheme)",
     )
     p.add_argument(
         "--views",
@@ -81,7 +83,7 @@ def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
         return
     if kind not in STREAM_KINDS:
         raise usage_error(
-            f"--stream needs HackRFs (--tx/--rx {' or '.join(STREAM_KINDS)}), got {kind}"
+            f"--stream needs radios that stream (--tx/--rx {', '.join(STREAM_KINDS)}), got {kind}"
         )
     if len(args.schemes) != 1:
         raise usage_error(
@@ -96,15 +98,15 @@ def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
 
 def _open_radios(args, cfg):
     """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, or
-    the --tx/--rx boards."""
-    from hil import DEVICES, Emulator, HackRF
-    from osnerf.commands.ota import device_kinds
+    the --tx/--rx boards (an emulated Pluto's air set from the air flags, as for a burst)."""
+    from hil import Emulator, HackRF
+    from osnerf.commands.ota import device_kinds, open_pair
     from osnerf.commands.ota_args import parse_multipath, parse_ppm
     from osnerf.ota_link import air_channel
 
-    kind, tx_serial, rx_serial = device_kinds(args)
+    kind = device_kinds(args)[0]
     if kind != "emulated":
-        return (*DEVICES[kind].open_pair(tx_serial, rx_serial), None)
+        return open_pair(args, cfg)
     channel = air_channel(
         "emulated", args.snr_db, cfg, args.delay_us * 1e-6, parse_multipath(args.multipath)
     )
@@ -180,11 +182,12 @@ def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) 
     for line in run.warnings:
         print(f"ota: warning: {line}", file=sys.stderr)
     print(f"ota: wrote {out}", file=sys.stderr)
-    if run.overruns > args.max_rx_overruns:  # every lost sample is part of an overrun
+    allowed = args.max_rx_overruns or 0  # None with a Pluto: libiio 0.x counts none
+    if run.overruns > allowed:  # every lost sample is part of an overrun
         print(
             f"ota: the stream lost {run.dropped_samples} samples in {run.overruns} overrun(s) "
             f"(ring {run.ring_dropped_samples}, driver {run.driver_dropped_samples}, board "
-            f"{run.device_overruns} overrun(s)), allowed {args.max_rx_overruns}: see "
+            f"{run.device_overruns} overrun(s)), allowed {allowed}: see "
             f"'stream' in {out}",
             file=sys.stderr,
         )

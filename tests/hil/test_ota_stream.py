@@ -257,7 +257,7 @@ def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
     "extra, message",
     [
         (["--views", "3"], "--views applies to --stream only"),
-        (["--stream", "--tx", "loopback", "--rx", "loopback"], "--stream needs HackRFs"),
+        (["--stream", "--tx", "loopback", "--rx", "loopback"], "--stream needs radios that stream"),
         (["--stream", "--schemes", "digital,jscc"], "--stream sends one scheme"),
         (["--stream", "--ring-s", "0"], "--ring-s: must be a number in [0.01, 60] s"),
     ],
@@ -294,3 +294,28 @@ def test_a_stalled_usb_reader_overruns_the_board_and_the_run_says_so(
     assert 2 * 0.2 * 2e6 <= longest <= 2 * s["emulator_overrun_samples"]
     err = capsys.readouterr().err
     assert "receive overruns" in err and "the stream lost" in err
+
+
+@needs_phy
+def test_stream_over_an_emulated_pluto_at_4_msps(tmp_path, images):
+    pytest.importorskip("adi", reason="pyadi-iio (and libiio0) are not installed")
+    import socket
+
+    from hil import EmulatedPluto, IiodServer
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.9", 0))
+        port = s.getsockname()[1]
+    board = EmulatedPluto.for_link(10.0, seed=0)
+    with IiodServer(board, "127.0.0.9", port).serve_in_background() as srv:
+        out = tmp_path / "pluto.json"
+        argv = ["ota", "--stream", "--tx", "pluto", "--rx", "pluto", "--uri", srv.uri]
+        argv += ["--schemes", "jscc", "--snr-db", "10", "--images", str(images), "--out"]
+        argv += [str(out), "--size", "48", "--max-images", "1", "--symbols-per-frame", "1024"]
+        argv += ["--sample-rate-hz", "4e6", "--views", "4", "--view-interval-s", "0.2"]
+        assert main(argv) == 0
+    s = json.loads(out.read_text())["stream"]
+    assert s["dropped_samples"] == 0 and s["device_overruns"] == -1  # libiio 0.x: unknown
+    assert s["frames_found"] == s["frames_decoded"] == s["frames_sent"] == 4
+    assert board.tx_underruns == 0 and s["samples_received"] == s["driver_samples"]
+    assert all(r["air_s"] < r["latency_s"] < 5.0 for r in s["views"])
