@@ -122,6 +122,17 @@ def _open_radios(args, cfg):
 def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
     """Stream ``--views`` views of ``images`` and write the result; 1 when samples were
     lost beyond ``--max-overruns``."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # the decoder keeps to one core; the driver's threads get the rest
+    try:
+        return _stream(args, cfg, settings, names, images, out, t0, probe)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
     from hil import build_views, stream_over_the_air
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
