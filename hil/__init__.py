@@ -14,6 +14,8 @@ May import ``phy`` only. Public names::
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
     decode_capture                a recorded capture decoded again, offline
+    stream_over_the_air, build_views, RingBuffer, StreamReceiver, StreamRun
+                                  views streamed one after another, decoded as they arrive
     HilError and subclasses
 """
 
@@ -51,6 +53,8 @@ from hil.ota import decode_capture, send_blocks
 from hil.ota_burst import BurstResult, FrameReport, PhyFrames
 from hil.ota_config import OtaConfig
 from hil.ota_sigmf import save_partial_capture, save_sigmf
+from hil.ota_stream import RingBuffer, StreamCounts, StreamReceiver, StreamView, build_views
+from hil.ota_stream_link import StreamRun, stream_over_the_air
 from hil.pluto import Pluto
 from hil.pluto_emulator import NETWORK_FAULTS, EmulatedPluto
 from hil.protocol import (
@@ -95,6 +99,13 @@ __all__ = [
     "save_partial_capture",
     "save_sigmf",
     "decode_capture",
+    "RingBuffer",
+    "StreamCounts",
+    "StreamReceiver",
+    "StreamRun",
+    "StreamView",
+    "build_views",
+    "stream_over_the_air",
     "send_blocks",
     "Annotation",
     "ControlRequest",

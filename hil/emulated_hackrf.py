@@ -18,10 +18,12 @@ import numpy as np
 import usb.core
 
 from hil import protocol as p
+from hil.emulated_pacing import RX_BUFFER_BYTES, TX_BUFFER_BYTES, StreamPacer
 from hil.medium import AMP_GAIN_DB, Medium
 
 _STALE_VALUE = 100  # the stale first buffer holds this int8 value in every byte
 _M0_IDLE, _M0_RX, _M0_TX_RUN = 0, 2, 4
+RX_SAMPLES, TX_SAMPLES = RX_BUFFER_BYTES // 2, TX_BUFFER_BYTES // 2  # a paced board's buffers
 PPM_RANGE = (-200.0, 200.0)  # crystal error of an emulated board, parts per million
 
 
@@ -134,6 +136,10 @@ class EmulatedHackRF:
 
     ``events`` logs what the host did, in order: ``("ctrl", ControlRequest)``,
     ``("write", bytes)`` and ``("read", num_bytes)``.
+
+    ``paced``: stream at the sample rate against the wall clock, with the board's overrun
+    and underrun model (:mod:`hil.emulated_pacing`); ``overrun_samples`` and
+    ``underrun_samples`` count the samples lost that way over the board's life.
     """
 
     def __init__(
@@ -159,6 +165,11 @@ class EmulatedHackRF:
         self.vga_gain_db = 16
         self.txvga_gain_db = 0
         self.rx_cursor = 0  # receiver timeline position, samples
+        self.paced = False
+        self.pacer: StreamPacer | None = None
+        self.tx_written = 0  # samples of the current transmit stream, silence included
+        self.overrun_samples = 0
+        self.underrun_samples = 0
         self.bytes_read = 0
         self._stale_pending = False
         self.m0 = dict(
@@ -299,6 +310,14 @@ class EmulatedHackRF:
             self._stale_pending = self.faults.stale_first_buffer
         if mode == p.MODE_TRANSMIT:
             self.medium.start_tx(self)
+        self.pacer = None
+        if self.paced and mode != p.MODE_OFF:
+            self.tx_written = 0
+            if mode == p.MODE_RECEIVE:
+                self.pacer = StreamPacer(self.sample_rate_hz, self.rx_cursor, RX_SAMPLES)
+                self.pacer.start()
+            else:
+                self.pacer = StreamPacer(self.sample_rate_hz, self.medium.tx_len, TX_SAMPLES)
         self.medium.notify()
 
     # ------------------------------------------------------------------ bulk
@@ -339,6 +358,9 @@ class EmulatedHackRF:
             ]
             if limits:
                 n = min(n, min(limits) - self.rx_cursor)
+            pacer = self.pacer  # one stream's, even if the host switches modes meanwhile
+            if pacer is not None:
+                self._pace_read(pacer, n)
             raw = self.medium.render(
                 self, self.rx_cursor, n, lambda: self.mode == p.MODE_RECEIVE and not self.unplugged
             )
@@ -363,10 +385,34 @@ class EmulatedHackRF:
         if len(data) % 2:
             raise stall_error("odd number of bytes")
         self.events.append(("write", bytes(data)))
+        pacer = self.pacer
+        if pacer is not None:
+            n = len(data) // 2
+            gap = pacer.before_write(self.tx_written, n, silent=not any(data))
+            if gap:  # the DAC ran dry: silence went out
+                self.medium.idle_until(self.medium.tx_len + gap, underrun=True)
+                self.underrun_samples += gap
+                self._count_shortfalls(pacer)
+            self.tx_written += gap + n
         self.medium.append_tx(self, np.frombuffer(data, dtype=np.int8))
         self.m0["m0_count"] += len(data)
         self.m0["m4_count"] += len(data)
         return len(data)
+
+    def _pace_read(self, pacer: StreamPacer, num_samples: int) -> None:
+        """Wait for the samples of the next read to be taken; skip (and count) those lost
+        to an overrun; forget the transmitter's samples no receiver needs any more."""
+        start = pacer.before_read(self.rx_cursor, num_samples)
+        if start > self.rx_cursor:
+            self.overrun_samples += start - self.rx_cursor
+            self.rx_cursor = start
+            self._count_shortfalls(pacer)
+        slack = int(self.medium.channel.delay_s * self.sample_rate_hz) + (1 << 16)
+        self.medium.forget_before(int(self.rx_cursor * (1 - 2 * PPM_RANGE[1] * 1e-6)) - slack)
+
+    def _count_shortfalls(self, pacer: StreamPacer) -> None:
+        self.m0["shortfalls"] = self.faults.shortfalls + pacer.shortfalls
+        self.m0["longest"] = max(self.m0["longest"], pacer.longest_shortfall_bytes)
 
     def unplug(self) -> None:
         """Pull the cable: every later request raises errno 19."""

@@ -216,6 +216,9 @@ class Emulator:
         seed: noise seed.
         wait_for_bursts: see :class:`hil.Medium` (1 for one deterministic TX burst).
         usb_api_version: bcdDevice of every board.
+        paced: every board streams at its sample rate against the wall clock, with the
+            board's overrun and underrun model (:mod:`hil.emulated_pacing`); otherwise
+            streams run as fast as the host reads and writes.
     """
 
     def __init__(
@@ -225,6 +228,7 @@ class Emulator:
         seed: int = 0,
         wait_for_bursts: int = 0,
         usb_api_version: int = 0x0108,
+        paced: bool = False,
     ):
         self.medium = Medium(channel, seed=seed, wait_for_bursts=wait_for_bursts)
         self.radios = [
@@ -235,6 +239,8 @@ class Emulator:
             )
             for i, x in enumerate(ppm)
         ]
+        for radio in self.radios:
+            radio.paced = bool(paced)
         self.backend = EmulatorBackend(self.radios)
 
     @property

@@ -188,7 +188,8 @@ class Medium:
                 seg = self._tx[lo - b : hi - b].copy() if hi > lo else np.zeros(0, np.complex64)
                 tx_freq = tx.center_freq_hz * (1 + tx.ppm * 1e-6)
                 df = tx_freq - radio.center_freq_hz * (1 + radio.ppm * 1e-6)
-        if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx:
+        # silence (an idle transmitter) stays silence: nothing to filter or resample
+        if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx and seg.any():
             if len(taps) > 1 or taps[0] != 1:
                 seg = np.convolve(seg, taps.astype(np.complex64))[: len(seg)]
             sig = fractional_resample(seg, u - lo)

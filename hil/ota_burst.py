@@ -127,12 +127,15 @@ class BurstResult:
 
 
 def build_burst(
-    blocks: list, cfg: OtaConfig, frames
+    blocks: list, cfg: OtaConfig, frames, first_number: int = 0
 ) -> tuple[np.ndarray, list[FrameReport], list[tuple]]:
     """Frame every block and lay the frames out with gaps, PAPR-clipped and scaled.
 
     Args:
         blocks: list of [num_symbols] complex64 arrays (unit mean power by convention).
+        first_number: the header number of the first frame; frame ``i`` of the burst
+            carries ``(first_number + i) % MAX_FRAMES`` (a stream of bursts numbers its
+            frames on), its report and layout stay at index ``i``.
     Returns:
         (burst [num_samples] complex64 with |I|, |Q| <= 1, reports, layout) where layout
         holds ``(block, offset, length)`` of each frame's data symbols.
@@ -160,7 +163,8 @@ def build_burst(
             chunk = block[offset : offset + cfg.symbols_per_frame]
             data = np.zeros(cfg.symbols_per_frame, np.complex64)
             data[: len(chunk)] = chunk
-            iq = frames.build(np.concatenate([header_symbols(number, cfg.header_repeat), data]))
+            header = header_symbols((first_number + number) % MAX_FRAMES, cfg.header_repeat)
+            iq = frames.build(np.concatenate([header, data]))
             p_frame = float(np.mean(np.abs(iq) ** 2))
             papr_db = max(0.0, 10 * math.log10(limit**2 / p_frame))  # the same clip level for all
             iq = clip_papr(torch.as_tensor(iq)[None], papr_db)[0].numpy() / limit

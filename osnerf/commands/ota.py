@@ -19,6 +19,9 @@ emulated (``osnerf hil emulate pluto``), whose air the run sets from the same fl
 real radios the air flags are refused (:mod:`osnerf.commands.ota_radios`); results carry the
 measured SNR beside the requested one.
 
+``--stream`` keeps the receiver streaming while views go out one after another, decoded
+as they arrive (:mod:`osnerf.commands.ota_stream`).
+
 ``--fault`` switches on an emulated USB fault of the receiving board (stall, rx-timeout,
 unplug, overrun) to rehearse how a run reports it: exit 1 with a one-line message, and the
 capture so far saved as SigMF (``<sigmf-dir>/ota_rx_partial``).
@@ -56,6 +59,7 @@ from osnerf.commands.ota_radios import (
     radio_of,
     resolve_air,
 )
+from osnerf.commands.ota_stream import add_stream_arguments, check_stream_flags, run_stream
 
 MAX_IMAGES = 10_000
 OTA_CONFIG_FIELDS = (
@@ -155,6 +159,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="emulated boards: inject this USB fault into the receiver, to see how a run "
         "reports it (exit 1; the capture so far is saved as SigMF)",
     )
+    add_stream_arguments(p)
 
 
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
@@ -346,6 +351,7 @@ def run(args: argparse.Namespace) -> int:
     check_scheme_flags(args)
     check_radio_ranges(args, kind)
     check_overruns(args, kind)
+    check_stream_flags(args, kind)
     parse_ppm(args.ppm or "0,0")
     parse_multipath(args.multipath or "none")
     cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
@@ -366,6 +372,8 @@ def run(args: argparse.Namespace) -> int:
     if settings.codec is not None and settings.snr_db is None:
         snr, probe = measured_snr_db(args, cfg, settings, sigmf_dir)
         settings = replace(settings, snr_db=snr)
+    if args.stream:  # views one after another to a receiver that never stops
+        return run_stream(args, cfg, settings, names, images, out, t0, probe)
     bursts = []
     for name in args.schemes:
         scheme = LINK_SCHEMES[name].framed

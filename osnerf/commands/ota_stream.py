@@ -1,0 +1,253 @@
+"""`osnerf ota --stream`: views sent one after another, as a flying drone sends them, to a
+receiver that streams without pause and decodes each frame as it arrives
+(:func:`hil.stream_over_the_air`).
+
+    osnerf ota --stream --tx emulated --rx emulated --schemes jscc --snr-db 10 \\
+        --images DIR --views 600 --view-interval-s 0.1 --out stream.json
+
+``--views`` views go out (the images in turn), one every ``--view-interval-s`` seconds;
+the receiver's ring buffer holds ``--ring-s`` seconds of samples. HackRFs and a Pluto
+stream (real or emulated). Emulated HackRFs stream
+at the configured rate against the wall clock (``hil.Emulator(paced=True)``), so a
+receiver that falls behind loses samples as a real one would. The result file has the
+usual per-view rows (PSNR, frames, SNR) and a ``stream`` section: samples received and
+dropped (by the board, the driver, the ring), frames found, decoded and lost, and each
+view's end-to-end latency, from the moment its transmission started to its image out of
+the decoder. A run that lost samples says so on stderr and exits 1 once the result is
+written, unless ``--max-overruns`` allows as many overruns.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from common import Registry
+from osnerf.commands import args as checks
+from osnerf.commands.ota_args import usage_error
+
+STREAM_KINDS = ("emulated", "hackrf", "pluto")  # radios whose driver streams
+MAX_VIEWS = 10_000  # every view is framed before the stream starts
+
+# dest -> (flag, its default under --stream)
+STREAM_FLAGS = Registry[tuple[str, object]](
+    "ota stream flag",
+    {
+        "views": ("--views", None),  # None: one view per image
+        "view_interval_s": ("--view-interval-s", 0.1),
+        "ring_s": ("--ring-s", 1.0),
+    },
+)
+
+
+def add_stream_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--stream",
+        action="store_true",
+        help="keep the receiver streaming and send the images as views one after another, "
+        "decoding each frame as it arrives (HackRFs or a Pluto, real or emulated; one "
+        "scheme)",
+    )
+    p.add_argument(
+        "--views",
+        type=checks.count(1, MAX_VIEWS),
+        default=None,
+        help=f"--stream: views to send, the images in turn, 1..{MAX_VIEWS} (default: one per "
+        "image)",
+    )
+    p.add_argument(
+        "--view-interval-s",
+        type=checks.number(0.0, 60.0, "s"),
+        default=None,
+        help="--stream: a view every this many seconds, 0..60 (0: back to back; default 0.1)",
+    )
+    p.add_argument(
+        "--ring-s",
+        type=checks.number(0.01, 60.0, "s"),
+        default=None,
+        help="--stream: the receiver's ring buffer, seconds of samples, 0.01..60 (default 1)",
+    )
+
+
+def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
+    """Refuse stream flags without ``--stream``, and ``--stream`` where it cannot run;
+    fill the defaults of the flags left out."""
+    if not getattr(args, "stream", False):
+        for dest, (flag, _) in STREAM_FLAGS.items():
+            if getattr(args, dest, None) is not None:
+                raise usage_error(f"{flag} applies to --stream only: add --stream or leave it out")
+        return
+    if kind not in STREAM_KINDS:
+        raise usage_error(
+            f"--stream needs radios that stream (--tx/--rx {', '.join(STREAM_KINDS)}), got {kind}"
+        )
+    if len(args.schemes) != 1:
+        raise usage_error(
+            f"--stream sends one scheme, got --schemes {','.join(args.schemes)}: run once each"
+        )
+    if getattr(args, "fault", None):
+        raise usage_error("--fault rehearses a burst's faults: leave it out with --stream")
+    for dest, (_, default) in STREAM_FLAGS.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, default)
+
+
+def _open_radios(args, cfg):
+    """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, or
+    the --tx/--rx boards (an emulated Pluto's air set from the air flags, as for a burst)."""
+    from hil import Emulator, HackRF
+    from osnerf.commands.ota import device_kinds, open_pair
+    from osnerf.commands.ota_args import parse_multipath, parse_ppm
+    from osnerf.ota_link import air_channel
+
+    kind = device_kinds(args)[0]
+    if kind != "emulated":
+        return open_pair(args, cfg)
+    channel = air_channel(
+        "emulated", args.snr_db, cfg, args.delay_us * 1e-6, parse_multipath(args.multipath)
+    )
+    emu = Emulator(channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True)
+    tx = HackRF.open(emu.serials[0], backend=emu.backend)
+    try:
+        return tx, HackRF.open(emu.serials[1], backend=emu.backend), emu
+    except BaseException:
+        tx.close()
+        raise
+
+
+def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
+    """Stream ``--views`` views of ``images`` and write the result; 1 when samples were
+    lost beyond ``--max-overruns``."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # the decoder keeps to one core; the driver's threads get the rest
+    try:
+        return _stream(args, cfg, settings, names, images, out, t0, probe)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
+    from hil import build_views, stream_over_the_air
+    from osnerf.ota_link import received_blocks
+    from osnerf.provenance import write_json_atomic
+    from semcodec import LINK_SCHEMES
+
+    scheme_name = args.schemes[0]
+    scheme = LINK_SCHEMES[scheme_name].framed
+    num_views = args.views or len(names)
+    pick = [v % len(names) for v in range(num_views)]
+    encoded = [scheme.transmit(images[i : i + 1], settings) for i in pick]  # (blocks, state)
+    views = build_views([blocks[0] for blocks, _ in encoded], cfg)
+    print(
+        f"ota: streaming {num_views} view(s) of scheme {scheme_name}, one every "
+        f"{args.view_interval_s:g} s, {sum(len(v.reports) for v in views)} frames",
+        file=sys.stderr,
+    )
+    recs: dict[int, object] = {}
+    latency: dict[int, float] = {}
+
+    def on_view(view):
+        i = pick[view.index]
+        rec = scheme.receive(
+            received_blocks(view.result()), encoded[view.index][1], images[i : i + 1], settings
+        )[0]
+        for frame, crc_ok in zip(view.reports, rec.frames_crc_ok):
+            frame.crc_ok = crc_ok
+        recs[view.index] = rec
+        latency[view.index] = time.monotonic() - view.sent_at if view.sent_at else None
+
+    # the decoder's one-off set-up before the stream: the first view is as quick as the rest
+    first = pick[0]
+    scheme.receive(received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings)  # fmt: skip
+    tx, rx, emu = _open_radios(args, cfg)
+    try:
+        run = stream_over_the_air(
+            tx,
+            rx,
+            views,
+            cfg,
+            on_view,
+            interval_s=args.view_interval_s,
+            ring_s=args.ring_s,
+            emulator=emu,
+        )
+    finally:
+        tx.close()
+        rx.close()
+    record = _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0)
+    record["sigmf"][:0] = [str(p) for p in probe]
+    write_json_atomic(out, record)
+    stream, lat = record["stream"], record["stream"]["latency_s"]
+    print(
+        f"ota: stream: {stream['samples_received']} samples, {stream['dropped_samples']} "
+        f"dropped; frames {stream['frames_decoded']}/{stream['frames_sent']} decoded; latency "
+        f"mean {lat['mean'] or 0:.3f} s, max {lat['max'] or 0:.3f} s",
+        file=sys.stderr,
+    )
+    for line in run.warnings:
+        print(f"ota: warning: {line}", file=sys.stderr)
+    print(f"ota: wrote {out}", file=sys.stderr)
+    allowed = args.max_rx_overruns or 0  # None with a Pluto: libiio 0.x counts none
+    if run.overruns > allowed:  # every lost sample is part of an overrun
+        print(
+            f"ota: the stream lost {run.dropped_samples} samples in {run.overruns} overrun(s) "
+            f"(ring {run.ring_dropped_samples}, driver {run.driver_dropped_samples}, board "
+            f"{run.device_overruns} overrun(s)), allowed {allowed}: see "
+            f"'stream' in {out}",
+            file=sys.stderr,
+        )
+        return 1
+    return 0
+
+
+def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0) -> dict:
+    """``ota_record``'s file with one row per view, and the ``stream`` section."""
+    from hil import BurstResult
+    from osnerf.commands.ota_record import ota_record
+
+    view_names = [f"{names[i]}#{v}" for v, i in enumerate(pick)]
+    reports = [replace(r, block=v.index) for v in views for r in v.reports]
+    blocks = [(v.x_hat, v.noise_var) for v in views]
+    empty = np.zeros(0, np.complex64)
+    result = BurstResult(blocks, reports, empty, empty)
+    per_view = [recs[v.index] for v in views]
+    record = ota_record(args, cfg, settings, view_names, [(args.schemes[0], per_view, result, [])], t0)  # fmt: skip
+    start = min((v.sent_at for v in views if v.sent_at is not None), default=0.0)
+    rows = []
+    for v in views:
+        rows.append(
+            {
+                "view": v.index,
+                "image": view_names[v.index],
+                "sent_at_s": None if v.sent_at is None else v.sent_at - start,
+                "air_s": len(v.burst) / cfg.sample_rate_hz,
+                "latency_s": latency.get(v.index),
+                "frames_sent": len(v.reports),
+                "frames_decoded": sum(r.detected for r in v.reports),
+                "complete": v.complete,
+            }
+        )
+    known = [r["latency_s"] for r in rows if r["latency_s"] is not None]
+    frames_sent = len(reports)
+    record["stream"] = {
+        **run.as_dict(),
+        "frames_sent": frames_sent,
+        "frames_lost": frames_sent - run.counts.frames_decoded,
+        "views_sent": len(views),
+        "views_complete": sum(v.complete for v in views),
+        "view_interval_s": args.view_interval_s,
+        "ring_s": args.ring_s,
+        "latency_s": {
+            "mean": float(np.mean(known)) if known else None,
+            "max": float(np.max(known)) if known else None,
+            "note": "from the start of a view's transmission to its image out of the decoder",
+        },
+        "views": rows,
+    }
+    return record
