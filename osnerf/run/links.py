@@ -33,8 +33,11 @@ class RunLinks:
 
     def close(self) -> None:
         if self.ota is not None:
+            measured = [float(v) for v in self.ota.snr_db_measured if v is not None]
             self.info.update(
-                frames_sent=int(self.ota.frames_sent), frames_lost=int(self.ota.frames_lost)
+                frames_sent=int(self.ota.frames_sent),
+                frames_lost=int(self.ota.frames_lost),
+                snr_db_measured=round(float(np.mean(measured)), 3) if measured else None,
             )
             self.ota.close()
 
@@ -83,6 +86,15 @@ def _ota_links(cfg: RunConfig, idx: list[int], snr: dict) -> RunLinks:
             multipath=[[d, str(g)] for d, g in DEFAULT_MULTIPATH],
             delay_s=DEFAULT_DELAY_S,
             air_snr_db=float(cfg.snr_db),
+        )
+    elif getattr(tx, "air_settable", False):  # an emulated Pluto: open_radios set its air
+        info.update(air_snr_db=float(cfg.snr_db))
+    else:  # real boards: nobody sets the air; the codec assumes snr_db, the receiver measures
+        info.update(
+            air_snr_db=None,
+            snr_db_assumed=float(cfg.snr_db),
+            note="the air between real boards is not set: snr_db is the SNR the codec and "
+            "the receiver assume, snr_db_measured the receiver's pilot estimate",
         )
     return RunLinks({i: link for i in idx}, snr, info=info, ota=link)
 

@@ -248,3 +248,31 @@ def test_radios_the_pluto_found_is_named_in_the_record(tmp_path, images, monkeyp
         board = srv.board
     assert rc == 0 and json.loads(out.read_text())["config"]["uri"] == srv.uri
     assert board.medium.channel.snr_db == 20.0
+
+
+@pytest.mark.parametrize("settable, air", [(True, 3.0), (False, None)])
+def test_radios_run_over_a_pluto_records_the_air_it_had(monkeypatch, settable, air):
+    """``osnerf run``'s link over one Pluto: an emulated board's air is set to ``snr_db``; a
+    real board's is nobody's to set, so the report says so and carries what the receiver
+    measured instead of labelling the run with an SNR the air never had."""
+    from types import SimpleNamespace
+
+    import torch
+
+    from osnerf.run.links import _ota_links
+
+    cfg = SimpleNamespace(ota_device="pluto", snr_db=3.0, seed=0)
+    with serve(12.0, air_settable=settable) as srv:
+        monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")
+        links = _ota_links(cfg, [0], {0: 3.0})
+        g = torch.Generator().manual_seed(0)
+        bits = torch.randint(0, 4, (1, 1500), generator=g)
+        x = torch.exp(1j * (torch.pi / 4 + torch.pi / 2 * bits)).to(torch.complex64)
+        try:
+            links.links[0](x, 3.0)
+        finally:
+            links.close()
+    info = links.info
+    assert info["air_snr_db"] == air and info["frames_lost"] == 0
+    assert abs(info["snr_db_measured"] - (3.0 if settable else 12.0)) < 1.5
+    assert ("note" in info) is (not settable)

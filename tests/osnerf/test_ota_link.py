@@ -52,4 +52,5 @@ def test_run_over_the_air_reports_the_frames(tmp_path):
     link = report["link"]
     assert link["channel"] == "ota" and link["device"] == "emulated"
     assert link["frames_sent"] >= 4 and link["frames_lost"] == 0
+    assert link["air_snr_db"] == 15.0 and abs(link["snr_db_measured"] - 15.0) < 1.5
     assert report["schemes"]["jscc"]["psnr_received"] > 15.0
