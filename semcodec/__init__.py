@@ -114,7 +114,7 @@ from semcodec.registry import (
 )
 from semcodec.train_config import TrainConfig
 from semcodec.train_state import load_train_state
-from semcodec.training import build_codec, train
+from semcodec.training import build_codec, train, validate
 from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
@@ -137,6 +137,7 @@ __all__ = [
     "load_train_state",
     "build_codec",
     "train",
+    "validate",
     "BoxMeta",
     "CODECS",
     "CodecMeta",
