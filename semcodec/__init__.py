@@ -141,7 +141,7 @@ from semcodec.train_state import (
     describe_changes,
     load_train_state,
 )
-from semcodec.training import build_codec, train, train_inputs, with_architecture
+from semcodec.training import build_codec, train, train_inputs, validate, with_architecture
 from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
@@ -170,6 +170,7 @@ __all__ = [
     "train",
     "with_architecture",
     "train_inputs",
+    "validate",
     "BoxMeta",
     "CODECS",
     "CodecMeta",

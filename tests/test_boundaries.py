@@ -16,7 +16,7 @@ ALLOWED = {
     "hil": {"common", "phy"},
     "osnerf": {"common", "phy", "semcodec", "renderer", "hil"},
 }
-PUBLIC_ONLY = ("tests", "benchmarks")
+PUBLIC_ONLY = ("tests", "benchmarks", "campaign")
 
 
 def _imports(path: Path):

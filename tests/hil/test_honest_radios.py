@@ -259,12 +259,12 @@ def test_radios_run_over_a_pluto_records_the_air_it_had(monkeypatch, settable, a
 
     import torch
 
-    from osnerf.run.links import _ota_links
+    from osnerf.run.links import build_links
 
-    cfg = SimpleNamespace(ota_device="pluto", snr_db=3.0, seed=0)
+    cfg = SimpleNamespace(channel="ota", ota_device="pluto", snr_db=3.0, seed=0)
     with serve(12.0, air_settable=settable) as srv:
         monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")
-        links = _ota_links(cfg, [0], {0: 3.0})
+        links = build_links(cfg, None, [0])
         g = torch.Generator().manual_seed(0)
         bits = torch.randint(0, 4, (1, 1500), generator=g)
         x = torch.exp(1j * (torch.pi / 4 + torch.pi / 2 * bits)).to(torch.complex64)

@@ -1,0 +1,140 @@
+"""The campaign on disk: ``campaign.json`` (its lines of runs and each line's best),
+``log.jsonl`` (one validation record per run, append-only) and ``lines/<line>/best.safetensors``
+(a line's best weights when they are not a shipped checkpoint).
+
+A line is one architecture trained on one recipe; each ``continue`` is a *stretch* of it that
+starts from the line's best. A best is referenced by path (relative to the campaign folder)
+and sha256: the shipped default is referenced, not copied, and a reference whose file no
+longer holds that sha256 is refused rather than trained on.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from common import InputError, to_json, write_text
+
+HERE = Path(__file__).resolve().parent
+MAX_WEIGHTS_BYTES = 10 * 1024 * 1024
+"""A best's file in the repo stays under this; larger weights are stored as float16."""
+LR_RANGE = (1e-5, 2e-3)
+"""The learning rates a campaign moves between (:func:`next_lrs`)."""
+
+
+@dataclass
+class Campaign:
+    """``campaign.json`` read into memory; :meth:`save` writes it back atomically."""
+
+    folder: Path
+    doc: dict = field(default_factory=dict)
+
+    @classmethod
+    def open(cls, folder: Path | str = HERE) -> Campaign:
+        folder = Path(folder)
+        path = folder / "campaign.json"
+        if not path.is_file():
+            raise InputError(f"--campaign: no campaign.json in {folder}")
+        try:
+            doc = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise InputError(f"--campaign: {path} is not JSON ({e.msg}, line {e.lineno})") from None
+        for key in ("validation", "lines", "default_line"):
+            if key not in doc:
+                raise InputError(f"--campaign: {path} has no {key!r}")
+        return cls(folder, doc)
+
+    @property
+    def log_path(self) -> Path:
+        return self.folder / "log.jsonl"
+
+    def line(self, name: str | None) -> tuple[str, dict]:
+        """(name, line) of ``name`` (None: the campaign's default line)."""
+        name = name or self.doc["default_line"]
+        lines = self.doc["lines"]
+        if name not in lines:
+            raise InputError(f"--line must be one of {', '.join(lines)}, got {name!r}")
+        return name, lines[name]
+
+    def best_path(self, line: dict) -> Path | None:
+        """The line's best checkpoint (None: the line starts from scratch), its sha256 checked
+        against the file's card."""
+        best = line.get("best")
+        if not best:
+            return None
+        path = (self.folder / best["path"]).resolve()
+        sha = card_of(path).get("sha256")
+        if sha != best["sha256"]:
+            raise InputError(
+                f"campaign best {best['path']} holds sha256 {str(sha)[:12]}, the campaign "
+                f"recorded {best['sha256'][:12]}: restore that file or repoint the line"
+            )
+        return path
+
+    def store_best(self, line_name: str, src: Path, card: dict) -> dict:
+        """Write ``src`` as the line's best (float16 when float32 would pass
+        :data:`MAX_WEIGHTS_BYTES`); returns the ``best`` reference."""
+        dst = self.folder / "lines" / line_name / "best.safetensors"
+        sha = write_weights(src, dst, card)
+        return {"path": str(dst.relative_to(self.folder)), "sha256": sha}
+
+    def save(self) -> None:
+        write_text(self.folder / "campaign.json", to_json(self.doc) + "\n")
+
+    def append_log(self, records: list[dict]) -> None:
+        """Append records to ``log.jsonl`` (read back, re-written whole and atomically)."""
+        old = self.log_path.read_text() if self.log_path.is_file() else ""
+        new = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
+        write_text(self.log_path, old + new)
+
+    def log(self) -> list[dict]:
+        if not self.log_path.is_file():
+            return []
+        return [json.loads(s) for s in self.log_path.read_text().splitlines() if s.strip()]
+
+
+def card_of(path: Path) -> dict:
+    """The model card inside a safetensors checkpoint (FileNotFoundError when missing)."""
+    from safetensors import safe_open
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    with safe_open(str(path), framework="pt") as f:
+        meta = f.metadata() or {}
+    return json.loads(meta.get("model_card", "{}"))
+
+
+def write_weights(src: Path, dst: Path, card: dict) -> str:
+    """Copy the JSCC checkpoint ``src`` to ``dst`` with ``card`` merged into its model card;
+    float16 weights when the float32 file passes :data:`MAX_WEIGHTS_BYTES`. Returns the sha256
+    (of what is stored: float16 weights hash as themselves)."""
+    import torch
+
+    from semcodec import make_codec
+
+    codec = make_codec(f"jscc:{src}")
+    merged = {**codec.card, **card}
+    if Path(src).stat().st_size > MAX_WEIGHTS_BYTES:
+        codec.model.to(torch.float16)
+        merged["stored_as"] = "float16 (training ran in float32)"
+    merged.pop("sha256", None)
+    return codec.save(dst, merged)  # atomic (common.write_bytes)
+
+
+def next_lrs(lrs: list[float], winner: float) -> list[float]:
+    """The next stretch's two learning rates: the winner stays and its partner moves a factor
+    2 beyond it, on the side the winner lay (the higher won: try twice it; the lower won:
+    half of it), both kept in :data:`LR_RANGE`."""
+    lo, hi = LR_RANGE
+    step = 2.0 if winner >= max(lrs) else 0.5
+    other = min(max(winner * step, lo), hi)
+    if math.isclose(other, winner):
+        other = winner / step
+    return [winner, other]
+
+
+def now_utc() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
