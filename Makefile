@@ -75,7 +75,7 @@ bench: setup
 	$(PY) -m benchmarks
 
 lint: setup
-	$(VENV)/bin/ruff check common phy semcodec renderer hil osnerf tests benchmarks
+	$(VENV)/bin/ruff check common phy semcodec renderer hil osnerf tests benchmarks campaign
 	$(VENV)/bin/mypy common phy hil semcodec/contract.py semcodec/box_focus.py
 
 clean:
