@@ -130,6 +130,7 @@ FEATURES_BY_SIZE: dict[int, dict] = {
         "setup_cpu_seconds": 170.0,
         "bake_density": True,
         "focus": 0.5,
+        "batch_size": 2,
     },
     300: {
         "extra_views": 1500,
@@ -142,7 +143,8 @@ FEATURES_BY_SIZE: dict[int, dict] = {
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked with its
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
-minutes with the baking and the final trims), half of each batch drawn where the error is;
+minutes with the baking and the final trims), batches of two views (twice the steps of four in the same budget), half of each drawn
+where the error is;
 from 300 px fewer teachers (each a full render at that size), a third-width
 pass, a feature grid at three quarters of the field's vertices per axis and half the pass
 cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
