@@ -31,12 +31,15 @@ Renderers (one table)
     ``render_path(poses, intrinsics) -> {"rgb", "seconds_per_view", ...}`` and ``settings()``.
     ``score_renderers(model, test_dataset, train_dataset=None) -> {name: {"psnr", "ssim",
     "seconds_per_view", "setup_seconds", "setup_cpu_seconds", "setup_stats", "num_views",
-    "settings"[, "speedup_vs_full"]}}``.
+    "settings"[, "speedup_vs_full", "break_even_views"]}}``;
+    ``break_even_views(setup_seconds, seconds_per_view, full_seconds_per_view)``.
 
 Lightweight renderer (§3.3, eq. 5)
     ``train_features(model, dataset=None, FeatureConfig(...)) -> (FeatureRenderer, stats)``:
-    a K-channel feature grid (the field's density kept) rendered at low resolution and a
-    decoder with sub-pixel upsampling, both distilled from the field's own renders
+    a K-channel feature grid (the field's density kept; the field's colour, and with
+    ``bake_density`` its opacity, baked at the grid's vertices by :func:`bake_field`)
+    rendered at low resolution and a decoder with sub-pixel upsampling, both fine-tuned
+    on the field's own renders
     (streamed through a bounded :class:`TeacherPool`; None: around the cameras the field
     stores, :func:`stored_cameras`).
 
@@ -53,6 +56,7 @@ Cameras
     :func:`camera_rays`, :func:`project_points`, :func:`look_at`, :func:`orbit_path`.
 """
 
+from renderer.bake import bake_field, break_even_views
 from renderer.cameras import (
     Intrinsics,
     camera_rays,
@@ -90,6 +94,8 @@ from renderer.volume import (
 )
 
 __all__ = [
+    "bake_field",
+    "break_even_views",
     "pose_problem",
     "FIELDS",
     "LPIPS_MIN_SIDE_PX",

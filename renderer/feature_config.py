@@ -61,6 +61,17 @@ class FeatureConfig:
     """Adam learning rate of the feature grid, > 0."""
     decoder_lr: float = 3e-3
     """Adam learning rate of the decoder, > 0 (constant, as is the grid's)."""
+    setup_cpu_seconds: float | None = None
+    """Budget of the whole setup in this process's CPU seconds (baking, teacher renders and
+    training), > 0, or None for none: training ends when it is spent, whatever
+    ``train_steps`` says. CPU time, not wall time: the same budget on a busy machine."""
+    bake_density: bool = False
+    """Start the first free channel (after the colour's) as the field's opacity per marching
+    step at each vertex (:func:`renderer.bake.bake_field`), so the decoder starts with the
+    field's geometry as well as its colour; needs ``channels`` above the colour's."""
+    focus: float = 0.0
+    """Share of each batch's views drawn in proportion to their teachers' last error
+    (the others uniformly), in [0, 1]: distillation spent where the error is."""
     render_batch: int = 8
     """Views of a path rendered together (one sampler, density, feature read and decoder
     call), >= 1: the same images, fewer and larger operations."""
@@ -84,6 +95,10 @@ class FeatureConfig:
             raise ValueError(f"width_px must be >= 8 or None, got {self.width_px}")
         if self.train_steps is not None and self.train_steps < 1:
             raise ValueError(f"train_steps must be >= 1 or None, got {self.train_steps}")
+        if self.setup_cpu_seconds is not None and not self.setup_cpu_seconds > 0:
+            raise ValueError(f"setup_cpu_seconds must be > 0 or None, got {self.setup_cpu_seconds}")
+        if not 0 <= self.focus <= 1:
+            raise ValueError(f"focus must be in [0, 1], got {self.focus}")
         if not 0 < self.grid_scale <= 1:
             raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
         if not self.step_factor >= 1:
@@ -108,7 +123,15 @@ class FeatureConfig:
 
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
-    150: {"train_steps": 8000},
+    150: {
+        "extra_views": 200,
+        "pool_views": 512,
+        "train_steps": None,
+        "setup_cpu_seconds": 170.0,
+        "bake_density": True,
+        "focus": 0.5,
+        "batch_size": 2,
+    },
     300: {
         "extra_views": 1500,
         "downsample": 3,
@@ -118,8 +141,11 @@ FEATURES_BY_SIZE: dict[int, dict] = {
     },
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
-defaults (:meth:`FeatureConfig.for_resolution`): from 150 px more steps for the finer
-detail; from 300 px fewer teachers (each a full render at that size), a third-width
+defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked with its
+density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
+minutes with the baking and the final trims), batches of two views (twice the steps of four in the same budget), half of each drawn
+where the error is;
+from 300 px fewer teachers (each a full render at that size), a third-width
 pass, a feature grid at three quarters of the field's vertices per axis and half the pass
 cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
 memory at these sizes), and a higher time cap for its slower steps. Measured on lego's

@@ -28,15 +28,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from renderer.bake import bake_field
 from renderer.cameras import Intrinsics, camera_rays
 from renderer.feature_config import FeatureConfig
-from renderer.fields import (
-    GridField,
-    read_rows,
-    sh_basis,
-    trilinear,
-    trilinear_corners,
-)
+from renderer.fields import GridField, read_rows, sh_basis, trilinear_corners
 from renderer.model import RadianceField
 from renderer.sampler import sample_along_rays
 from renderer.volume import packed_sum, packed_weights
@@ -154,7 +149,6 @@ class FeatureRenderer:
     ):
         self.model = model
         self.config = config
-        aabb = model.aabb
         nx, ny, nz = (
             max(2, math.ceil(int(c) * config.grid_scale) + 1) for c in model.occupancy.cells
         )
@@ -168,23 +162,18 @@ class FeatureRenderer:
                 f"channels must be >= {3 * kc} to hold the field's colour (SH degree "
                 f"{self.sh_degree}), got {config.channels}"
             )
-        axes = [
-            torch.linspace(float(aabb[0, a]), float(aabb[1, a]), n)
-            for a, n in enumerate((nx, ny, nz))
-        ]
-        zz, yy, xx = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-        points = torch.stack([xx, yy, zz], -1).reshape(-1, 3)
-        with torch.no_grad():
-            if isinstance(field, GridField):
-                coef = torch.cat(
-                    [trilinear(field.color_grid, field.aabb, p) for p in points.split(65536)]
-                )
-            else:
-                rgb = torch.cat([field(p, None)[1] for p in points.split(65536)])
-                coef = torch.logit(rgb.clamp(1e-3, 1 - 1e-3))
+        if config.bake_density and config.channels <= 3 * kc:
+            raise ValueError(
+                f"bake_density needs channels > {3 * kc} (a channel beside the colour's), "
+                f"got {config.channels}"
+            )
         self.grid_shape = (nz, ny, nx)
+        # the field baked at the grid's vertices: its colour, and its opacity when asked
+        coef, opacity = bake_field(model, self.grid_shape)
         grid = torch.zeros(nz * ny * nx, config.channels)
         grid[:, : 3 * kc] = coef
+        if config.bake_density:
+            grid[:, 3 * kc] = opacity
         self.grid = nn.Parameter(grid)
         """The feature grid, vertex-major: [num_vertices, K], vertices in (z, y, x) order."""
         bg = torch.zeros(config.channels)

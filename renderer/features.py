@@ -17,7 +17,6 @@ import sys
 import time
 
 import torch
-import torch.nn.functional as F
 
 from common import trim_heap
 from renderer.cameras import Intrinsics
@@ -32,6 +31,10 @@ TRIM_EVERY_STEPS = 100
 """Distillation steps between heap trims (:func:`common.trim_heap`): the freed temporaries
 of steps and teacher renders stay bounded, at a page fault per reused page a hundred steps
 apart."""
+
+
+FIRST_FILL_SHARE = 0.5
+"""Share of ``setup_cpu_seconds`` the first teacher renders may use before training starts."""
 
 
 def train_features(
@@ -71,12 +74,13 @@ def train_features(
         pass_bytes=config.pass_cache_mb << 20,
     )
     bar = _setup_bar(config)
-    while pool.held < pool.capacity:
+    # the first teachers fill the pool, within half of a CPU budget (the rest trains)
+    while pool.held < pool.capacity and _progress(config, 0, 0.0, cpu0) < FIRST_FILL_SHARE:
         pool.render_next(min(config.render_batch, pool.capacity - pool.held))
-        _show(bar, pool, 0.0, None, 0)
+        _show(bar, pool, _progress(config, 0, 0.0, cpu0), None, 0, cpu0)
     teacher_seconds = time.perf_counter() - t0
     trim_heap()
-    steps, loss, t0 = _distil(rend, pool, config, generator, bar)
+    steps, loss, t0 = _distil(rend, pool, config, generator, bar, cpu0)
     if bar is not None:
         bar.close()
     stats = {
@@ -88,10 +92,12 @@ def train_features(
         "steps": steps,
         "final_loss": loss,
         "capped_by_seconds": config.train_steps is not None and steps < config.train_steps,
+        "cpu_budget_seconds": config.setup_cpu_seconds,
     }
     if stats["capped_by_seconds"]:
         print(
-            f"features setup: train_seconds ({config.train_seconds:g} s) reached after {steps}"
+            f"features setup: its time budget (train_seconds {config.train_seconds:g} s,"
+            f" setup_cpu_seconds {config.setup_cpu_seconds}) reached after {steps}"
             f" of {config.train_steps} steps",
             file=sys.stderr,
         )
@@ -120,6 +126,7 @@ def _distil(
     config: FeatureConfig,
     generator: torch.Generator,
     bar,
+    cpu0: float,
 ) -> tuple[int, float, float]:
     """Adam steps on the grid and decoder against the pool's teachers until the budget is
     spent, rendering the later teachers evenly over its first 80 %: (steps, last loss,
@@ -135,33 +142,42 @@ def _distil(
     first = pool.rendered
     steps, loss = 0, float("nan")
     t0 = time.perf_counter()
-    while (frac := _progress(config, steps, time.perf_counter() - t0)) < 1.0:
+    while (frac := _progress(config, steps, time.perf_counter() - t0, cpu0)) < 1.0:
         due = first + math.ceil((pool.poses.shape[0] - first) * min(frac / 0.8, 1.0))
         if due > pool.rendered:
-            pool.render_next(max(due - pool.rendered, config.render_batch))
-        slots = pool.sample(config.batch_size, generator)
+            batch = max(due - pool.rendered, config.render_batch)
+            if config.setup_cpu_seconds is not None:  # a step at a time, within the budget
+                batch = config.render_batch
+            pool.render_next(batch)
+        slots = pool.sample(config.batch_size, generator, config.focus)
         out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
-        err = F.mse_loss(out, pool.images_of(slots))
+        per_view = (out - pool.images_of(slots)).square().mean((1, 2, 3))
+        err = per_view.mean()
+        pool.record_errors(slots, per_view)
         opt.zero_grad(set_to_none=False)  # the grid's reads add into its .grad in place
         err.backward()
         opt.step()
         steps, loss = steps + 1, float(err.detach())
         if steps % TRIM_EVERY_STEPS == 0:
             trim_heap()
-        _show(bar, pool, frac, loss, steps)
+        _show(bar, pool, frac, loss, steps, cpu0)
     return steps, loss, t0
 
 
-def _progress(config: FeatureConfig, steps: int, seconds: float) -> float:
-    """Fraction of the training budget used: by steps when given (seconds then cap it)."""
+def _progress(config: FeatureConfig, steps: int, seconds: float, cpu0: float) -> float:
+    """Fraction of the training budget used: by steps when given (seconds then cap it);
+    the setup's CPU seconds since ``cpu0`` (``time.process_time``) cap both."""
     frac = seconds / config.train_seconds
+    if config.setup_cpu_seconds is not None:
+        frac = max(frac, (time.process_time() - cpu0) / config.setup_cpu_seconds)
     if config.train_steps is not None:
         frac = max(frac, steps / config.train_steps)
     return frac
 
 
 def _setup_bar(config: FeatureConfig):
-    """Percent of the training budget, with teachers rendered, steps and loss."""
+    """Percent of the budget (steps, or the setup's CPU seconds when that is the larger
+    share), with teachers rendered, steps, CPU seconds spent and loss."""
     if not config.progress:
         return None
     from tqdm import tqdm
@@ -169,10 +185,14 @@ def _setup_bar(config: FeatureConfig):
     return tqdm(total=100, desc="features setup", unit="%", file=sys.stderr)
 
 
-def _show(bar, pool: TeacherPool, frac: float, loss: float | None, steps: int) -> None:
+def _show(bar, pool: TeacherPool, frac: float, loss: float | None, steps: int, cpu0: float) -> None:
     if bar is None:
         return
-    post = {"teachers": f"{pool.rendered}/{pool.poses.shape[0]}", "step": steps}
+    post = {
+        "teachers": f"{pool.rendered}/{pool.poses.shape[0]}",
+        "step": steps,
+        "cpu_s": f"{time.process_time() - cpu0:.0f}",
+    }
     if loss is not None:
         post["loss"] = f"{loss:.5f}"
     bar.set_postfix(post, refresh=False)

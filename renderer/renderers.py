@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from common import Registry
+from renderer.bake import break_even_views
 from renderer.cameras import Intrinsics
 from renderer.dataset import Dataset
 from renderer.feature_config import FeatureConfig
@@ -112,7 +113,7 @@ def score_renderers(
         "seconds_per_view" (the fastest of ``timing_repeats`` passes), "setup_seconds"
         and "setup_cpu_seconds" (building it: the decoder's training; wall and this
         process's CPU), "setup_stats" (the builder's), "num_views", "settings"[, "masked_psnr"]
-        [, "speedup_vs_full"]}}.
+        [, "speedup_vs_full", "break_even_views" (:func:`~renderer.bake.break_even_views`)]}}.
     """
     if timing_repeats < 1:
         raise ValueError(f"timing_repeats must be >= 1, got {timing_repeats}")
@@ -144,5 +145,9 @@ def score_renderers(
     if "full" in results:
         for name, r in results.items():
             if name != "full":
-                r["speedup_vs_full"] = results["full"]["seconds_per_view"] / r["seconds_per_view"]
+                full = results["full"]["seconds_per_view"]
+                r["speedup_vs_full"] = full / r["seconds_per_view"]
+                r["break_even_views"] = break_even_views(
+                    r["setup_seconds"], r["seconds_per_view"], full
+                )
     return results

@@ -37,6 +37,8 @@ class TeacherPool:
             self.capacity, intrinsics.height, intrinsics.width, 3, dtype=torch.uint8
         )
         self.index = torch.zeros(self.capacity, dtype=torch.long)  # camera of each slot
+        # each slot's last training error (mean squared); NaN until it is first drawn
+        self.errors = torch.full((self.capacity,), float("nan"))
         self.rendered = 0  # cameras rendered so far
         self._passes_fn, self._pass_bytes = passes, pass_bytes
         self._passes: dict[int, LowResPass] = {}  # slot -> its camera's pass
@@ -60,6 +62,7 @@ class TeacherPool:
         slots = cams % self.capacity
         self.images[slots] = (rgb.clamp(0, 1) * 255).round().to(torch.uint8)
         self.index[slots] = cams
+        self.errors[slots] = float("nan")
         self.rendered += count
         for slot in slots.tolist():
             old = self._passes.pop(slot, None)
@@ -78,9 +81,24 @@ class TeacherPool:
                 self._passes[slot] = p
                 self._held_bytes += p.nbytes
 
-    def sample(self, count: int, generator: torch.Generator) -> Tensor:
-        """``count`` slots [count] drawn uniformly from the held teachers."""
-        return torch.randint(self.held, (count,), generator=generator)
+    def sample(self, count: int, generator: torch.Generator, focus: float = 0.0) -> Tensor:
+        """``count`` slots [count] from the held teachers: ``round(count * focus)`` of them
+        drawn in proportion to their last error (:meth:`record_errors`; a teacher not yet
+        drawn counts as the largest error seen), the others uniformly."""
+        focused = round(count * focus)
+        uniform = torch.randint(self.held, (count - focused,), generator=generator)
+        if focused == 0:
+            return uniform
+        err = self.errors[: self.held]
+        seen = err[~err.isnan()]
+        top = float(seen.max()) if seen.numel() else 1.0
+        weights = torch.nan_to_num(err, nan=top).clamp_min(1e-12)
+        drawn = torch.multinomial(weights, focused, replacement=True, generator=generator)
+        return torch.cat([drawn, uniform])
+
+    def record_errors(self, slots: Tensor, errors: Tensor) -> None:
+        """Remember the training error [len(slots)] of each slot's teacher."""
+        self.errors[slots] = errors.detach().float()
 
     def poses_of(self, slots: Tensor) -> Tensor:
         return self.poses[self.index[slots]]

@@ -84,6 +84,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "renderer.FeatureConfig.for_resolution)",
     )
     p.add_argument(
+        "--renderer-cpu-seconds",
+        type=checks.seconds,
+        default=None,
+        help="features renderer: setup budget in CPU seconds (baking, teachers, training; "
+        "default: the rendered size's, renderer.FeatureConfig.for_resolution)",
+    )
+    p.add_argument(
         "--seed",
         type=checks.seed,
         default=0,
@@ -138,11 +145,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
-    if not _learned(args.renderer) and args.renderer_steps is not None:
-        raise UsageError(
-            f"--renderer-steps applies only to a learned renderer (features): --renderer "
-            f"{args.renderer} renders the field directly, with no distillation steps"
-        )
+    for flag in ("renderer_steps", "renderer_cpu_seconds"):
+        if not _learned(args.renderer) and getattr(args, flag) is not None:
+            raise UsageError(
+                f"--{flag.replace('_', '-')} applies only to a learned renderer (features): "
+                f"--renderer {args.renderer} renders the field directly, with no setup"
+            )
     run_path = Path(args.run)
     model_path = run_path / "model.pt" if run_path.is_dir() else run_path
     if not model_path.is_file():
@@ -165,6 +173,7 @@ def run(args: argparse.Namespace) -> int:
     )
     setup_seconds, setup_cpu = time.perf_counter() - t0, time.process_time() - c0
     rendered = rend.render_path(poses, intr)
+    payoff = _payoff(rend, model, poses, intr, rendered["seconds_per_view"], setup_seconds)
 
     out_dir = Path(args.out)
     for old in sorted((out_dir / "frames").glob("[0-9][0-9][0-9].png")):
@@ -194,6 +203,7 @@ def run(args: argparse.Namespace) -> int:
             "setup_cpu_seconds": setup_cpu,
             "setup_stats": setup_stats,
             "peak_memory_mb": peak_memory_mb(),
+            **payoff,
             "renderer": rend.settings(),
             "video": None if video is None else video.name,
         }
@@ -201,10 +211,38 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(out_dir / "render.json", record)
     print(
         f"render: {len(frames)} views, {args.renderer} renderer, "
-        f"{rendered['seconds_per_view']:.3f} s/view -> {out_dir}",
+        f"{rendered['seconds_per_view']:.3f} s/view, setup {setup_seconds:.1f} s, break-even "
+        f"{_views(payoff['break_even_views'])} -> {out_dir}",
         file=sys.stderr,
     )
     return 0
+
+
+PAYOFF_VIEWS = 4
+"""Views of the path the full render is timed on to price a learned renderer's setup."""
+
+
+def _payoff(rend, model, poses, intr, seconds_per_view: float, setup_seconds: float) -> dict:
+    """The full render's time per view (measured on the path's first :data:`PAYOFF_VIEWS`
+    views; the renderer's own when it is the full one) and the break-even view count
+    (``renderer.break_even_views``: setup seconds over the seconds saved per view)."""
+    from renderer import FullRenderer, break_even_views
+
+    if isinstance(rend, FullRenderer):  # nothing to pay off
+        full, even = seconds_per_view, 0.0
+    else:
+        full = FullRenderer(model).render_path(poses[:PAYOFF_VIEWS], intr)["seconds_per_view"]
+        even = break_even_views(setup_seconds, seconds_per_view, full)
+    return {
+        "full_seconds_per_view": full,
+        "break_even_views": even,
+        "break_even_note": "setup_seconds / (full_seconds_per_view - seconds_per_view); "
+        "null: it saves no time per view",
+    }
+
+
+def _views(n) -> str:
+    return "never" if n is None else f"{n:,.0f} views"
 
 
 def _camera_path(args: argparse.Namespace, model):
@@ -266,14 +304,21 @@ def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, heigh
 
 def _renderer_config(args: argparse.Namespace, width_px: int):
     """The learned renderer's settings for views ``width_px`` wide, with --renderer-steps
-    (None for the full renderer)."""
+    and --renderer-cpu-seconds (None for the full renderer)."""
     from renderer import FeatureConfig
 
     if not _learned(args.renderer):
         return None
-    budget = {}
+    budget: dict = {}
     if args.renderer_steps is not None:  # the steps are the budget; no time cap
-        budget = {"train_steps": args.renderer_steps, "train_seconds": checks.MAX_BUDGET_S}
+        budget = {
+            "train_steps": args.renderer_steps,
+            "train_seconds": checks.MAX_BUDGET_S,
+            "setup_cpu_seconds": None,
+        }
+    if args.renderer_cpu_seconds is not None:  # a CPU budget (steps, when given, cap it)
+        budget["setup_cpu_seconds"] = args.renderer_cpu_seconds
+        budget.setdefault("train_steps", None)
     return FeatureConfig.for_resolution(width_px, width_px=width_px, progress=True, **budget)
 
 

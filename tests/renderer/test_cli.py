@@ -1,6 +1,7 @@
 """`osnerf train-nerf` and `osnerf render` in-process: the result contract and bad input."""
 
 import json
+import math
 
 import cv2
 import pytest
@@ -225,6 +226,26 @@ def test_render_with_the_feature_renderer(run_dir, tmp_path):
     assert r["renderer"]["renderer"] == "features" and r["renderer"]["train_steps"] == 4
     assert r["setup_stats"]["steps"] == 4 and r["setup_cpu_seconds"] > 0
     assert r["seconds_per_view"] > 0 and 0 < r["peak_memory_mb"] < 4096
+    # the report prices the setup: views until it has paid for itself against the full
+    # render, timed on the same path
+    assert r["full_seconds_per_view"] > 0
+    saved = r["full_seconds_per_view"] - r["seconds_per_view"]
+    if saved > 0:
+        assert r["break_even_views"] == math.ceil(r["setup_seconds"] / saved)
+    else:
+        assert r["break_even_views"] is None
+
+
+def test_render_with_a_cpu_budget_and_the_full_renders_break_even(run_dir, tmp_path):
+    out = tmp_path / "budget"
+    assert _render(run_dir, out, "--renderer", "features", "--renderer-cpu-seconds", "1") == 0
+    r = json.loads((out / "render.json").read_text())
+    assert r["renderer"]["setup_cpu_seconds"] == 1.0 and r["renderer"]["train_steps"] is None
+    assert r["setup_stats"]["cpu_seconds"] < 1.0 + 1.0
+    full = tmp_path / "full"
+    assert _render(run_dir, full) == 0
+    f = json.loads((full / "render.json").read_text())
+    assert f["break_even_views"] == 0 and f["full_seconds_per_view"] == f["seconds_per_view"]
 
 
 def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, capsys):
@@ -237,6 +258,8 @@ def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, caps
 
     fails(["--renderer", "fast"], "full, features")
     fails(["--renderer", "features", "--renderer-steps", "0"], "--renderer-steps")
+    fails(["--renderer", "features", "--renderer-cpu-seconds", "0"], "--renderer-cpu-seconds")
+    fails(["--renderer-cpu-seconds", "5"], "--renderer-cpu-seconds")
     no_frames = tmp_path / "no_frames.json"
     no_frames.write_text(json.dumps({"camera_angle_x": 0.7}))
     fails(["--path", str(no_frames)], "frames")
