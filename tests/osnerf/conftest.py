@@ -1,5 +1,8 @@
-"""Shared fixtures of the ``osnerf run`` tests: a codec (the shipped default if present, else an
-untrained registered architecture), a second codec for knowledge-base refusals, a scene cache."""
+"""Shared fixtures of the ``osnerf`` tests: a codec (the shipped default if present, else an
+untrained registered architecture), a second codec for knowledge-base refusals, a scene cache,
+and Kodak crops for ``--images``."""
+
+from pathlib import Path
 
 import pytest
 import torch
@@ -33,3 +36,27 @@ def one_line(capsys):
         return err
 
     return read
+
+
+@pytest.fixture
+def kodak_crop(tmp_path, shared_data):
+    """``kodak_crop((left, top, right, bottom))``: a folder holding that crop of Kodak's first
+    image, for commands that take ``--images``."""
+
+    def make(box) -> Path:
+        from PIL import Image
+
+        folder = tmp_path / "img"
+        folder.mkdir(exist_ok=True)
+        first = sorted((shared_data / "kodak").glob("*.png"))[0]
+        Image.open(first).crop(box).save(folder / "k.png")
+        return folder
+
+    return make
+
+
+@pytest.fixture
+def kodak1(kodak_crop):
+    """Kodak's first image, cropped to 96 x 64 px."""
+    return kodak_crop((0, 0, 96, 64))
+

@@ -18,15 +18,9 @@ PRIVATE = ("_snr", "BoxMeta", "masked_transmit", "lmmse_input")
 
 
 @pytest.fixture
-def image_40x24(tmp_path, shared_data):
+def image_40x24(kodak_crop):
     """One Kodak crop, 40 x 24 px: not a multiple of the plugin's 16 px tiles."""
-    from PIL import Image
-
-    folder = tmp_path / "img"
-    folder.mkdir()
-    im = Image.open(sorted((shared_data / "kodak").glob("*.png"))[0]).crop((200, 200, 240, 224))
-    im.save(folder / "k.png")
-    return folder
+    return kodak_crop((200, 200, 240, 224))
 
 
 def test_no_private_semcodec_name_in_either_test_plugin():

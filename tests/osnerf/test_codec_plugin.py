@@ -4,20 +4,7 @@ knowledge-base check stays on (another codec's identity is refused, both hashes 
 
 import json
 
-import pytest
-
 from osnerf.cli import main
-
-
-@pytest.fixture
-def kodak1(tmp_path, shared_data):
-    from PIL import Image
-
-    folder = tmp_path / "img"
-    folder.mkdir()
-    im = Image.open(sorted((shared_data / "kodak").glob("*.png"))[0]).crop((0, 0, 96, 64))
-    im.save(folder / "k.png")
-    return folder
 
 
 def test_plugin_in_eval_codec_on_awgn_and_block_rayleigh(plugin, kodak1, tmp_path):

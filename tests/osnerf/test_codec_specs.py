@@ -157,17 +157,6 @@ def tiny(tmp_path, monkeypatch):
     sys.modules.pop("semcodec_plugin_tiny", None)
 
 
-@pytest.fixture
-def kodak1(tmp_path, shared_data):
-    from PIL import Image
-
-    folder = tmp_path / "img"
-    folder.mkdir()
-    im = Image.open(sorted((shared_data / "kodak").glob("*.png"))[0]).crop((0, 0, 96, 64))
-    im.save(folder / "k.png")
-    return folder
-
-
 def _images(folder, n: int, seed: int):
     from PIL import Image
 
