@@ -293,6 +293,6 @@ def flag_error(e: ValueError, flags: dict[str, str] | None = None) -> UsageError
     first, sep, _ = msg.partition(" ")
     if sep and first.isidentifier() and first.islower():
         renames.setdefault(first, "--" + first.replace("_", "-"))
-    for name in sorted(renames, key=len, reverse=True):
-        msg = re.sub(rf"(?<![-\w]){re.escape(name)}\b", renames[name], msg)
+    for name in sorted(renames, key=len, reverse=True):  # a word, never part of a path
+        msg = re.sub(rf"(?<![-\w/\\.]){re.escape(name)}(?![-\w/\\]|\.\w)", renames[name], msg)
     return UsageError(msg)

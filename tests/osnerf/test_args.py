@@ -96,6 +96,16 @@ def test_a_config_error_is_renamed_to_the_flag():
     assert str(e) == "--snr-min-db must be < snr_max_db, both in [-30, 60]"
 
 
+def test_a_config_error_keeps_the_paths_it_names():
+    """A field's name inside a path is part of the path, not the field: only the word is
+    renamed."""
+    from osnerf.commands.args import flag_error
+
+    msg = "data folder /work/data/train and C:\\data\\val hold no images; data.png, ./data; see data."
+    e = flag_error(ValueError(msg), {"data": "--data"})
+    assert str(e) == msg.replace("data folder", "--data folder").replace("see data.", "see --data.")
+
+
 def test_ota_refuses_an_snr_outside_the_checkpoint_card(one_line, tmp_path, capsys, images):
     from semcodec import load_codec
 
