@@ -47,7 +47,10 @@ class RayTracingConfig:
         max_num_paths_per_src: most paths kept per transmitter, in [1, 1e7].
         los, specular_reflection, diffuse_reflection, refraction, diffraction: which
             interactions are traced.
-        seed: seed of the ray sampler (results are deterministic for a seed).
+        seed: seed of the ray sampler.
+        deterministic: sionna-rt's deterministic path solver (``PathSolver(deterministic=
+            True)``): the same seed gives the same paths, in the same order, on every run;
+            without it a fixed seed does not guarantee that.
         max_positions_per_call: transmitters traced together in one solver call, in [1, 1024].
     """
 
@@ -60,6 +63,7 @@ class RayTracingConfig:
     refraction: bool = True
     diffraction: bool = False
     seed: int = 42
+    deterministic: bool = True
     max_positions_per_call: int = 64
 
     def __post_init__(self):
@@ -79,6 +83,7 @@ class RayTracingConfig:
             "diffuse_reflection",
             "refraction",
             "diffraction",
+            "deterministic",
         ):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -86,6 +91,7 @@ class RayTracingConfig:
     def solver_kwargs(self) -> dict:
         out = dataclasses.asdict(self)
         out.pop("max_positions_per_call")
+        out.pop("deterministic")  # an argument of the solver's constructor
         return out
 
 
@@ -203,7 +209,7 @@ class RayTracer:
         self.scene.rx_array = rt.PlanarArray(
             num_rows=1, num_cols=1, pattern="iso", polarization="V"
         )
-        self._solver = rt.PathSolver()
+        self._solver = rt.PathSolver(deterministic=self.config.deterministic)
         self.num_traced = 0  # positions actually traced (cache misses), for tests/benchmarks
 
     def __repr__(self) -> str:
