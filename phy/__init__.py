@@ -49,6 +49,7 @@ from phy.models import (  # noqa: E402
     assumed_channel,
     channel_kind,
     channel_link,
+    channel_record,
     receiver_description,
     symbol_model,
 )
@@ -92,6 +93,7 @@ __all__ = [
     "CopyFading",
     "assumed_channel",
     "channel_kind",
+    "channel_record",
     "channel_link",
     "measure_copy_fading",
     "measure_snr_db",

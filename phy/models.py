@@ -7,7 +7,7 @@ baseline's MCS choice and the refining transmitter):
   other simulated channel is one tap per symbol with perfect CSI. Both receivers are
   zero-forcing: unbiased estimates with the per-symbol effective noise variance.
 * :func:`channel_kind`: a link's channel as its ``phy.CHANNELS`` name (each channel carries
-  it as ``Channel.kind``).
+  it as ``Channel.kind``); :func:`channel_record`: what a result records of it.
 * :func:`assumed_channel`: the statistical model a transmitter that never sees the draw
   plans with: the channel itself where ``phy`` simulates it by its distribution; TDL-A over
   OFDM for the ray-traced responses (fixed per position, unknown to the transmitter) and
@@ -20,8 +20,9 @@ from phy.channels import CHANNELS, make_channel
 from phy.link import FlatLink, Link, OFDMLink
 from phy.ofdm import ResourceGrid
 
-OFDM_CHANNELS = frozenset({"tdl", "cdl"})
-"""Frequency-selective channel models that run over OFDM with pilot LS estimates."""
+OFDM_CHANNELS = frozenset(n for n, f in CHANNELS.items() if getattr(f, "ofdm", False))
+"""Frequency-selective channel models that run over OFDM with pilot LS estimates: the
+``phy.CHANNELS`` entries marked ``ofdm`` (tdl, cdl and the TS 38.101-4 conditions)."""
 UNKNOWN_CHANNEL_MODEL = "tdl"
 """What a transmitter assumes where it cannot know the channel's distribution."""
 
@@ -64,6 +65,15 @@ def channel_kind(link) -> str:
             f"{sorted(CHANNELS)}"
         )
     return kind
+
+
+def channel_record(link) -> dict:
+    """What a result records of a link's (or a channel's) channel: its ``Channel.record()``
+    (``{"channel": name, ...}``; TDL/CDL add the profile and the pinned TR 38.901
+    ``spec_version``), or ``{"channel": None}`` for a channel that is not ``phy``'s."""
+    ch = getattr(link, "channel", link)
+    record = getattr(ch, "record", None)
+    return record() if callable(record) else {"channel": None}
 
 
 def symbol_model(channel: str) -> str:

@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from common import psnr, read_image, write_text
+from phy import OFDM_CHANNELS
 
 CALIBRATION_PATH = Path(__file__).resolve().parent / "data" / "digital_calibration.json"
 CODEWORD_BITS = (960, 1920, 3840)
@@ -60,16 +61,16 @@ Below rate 1/5 these are the mother codeword's distinct bits (:func:`measured_le
 MEASURED = {"awgn": CODEWORD_BITS, "rayleigh_fast": (3840,)}
 BLOCK_FADING = {"rayleigh": ("awgn", "rayleigh"), "rician": ("awgn", "rician")}
 """Block-fading channel -> (curve it averages, fade distribution)."""
+_OFDM_REASON = "fast Rayleigh curve: an OFDM codeword spans many independent subcarrier fades"
 ALIASES = {
     "rician_fast": "rayleigh_fast",
-    "tdl": "rayleigh_fast",
-    "cdl": "rayleigh_fast",
+    **{name: "rayleigh_fast" for name in sorted(OFDM_CHANNELS)},
 }
-"""Channels calibrated by another one's table, and why (``ALIAS_REASONS``)."""
+"""Channels calibrated by another one's table, and why (``ALIAS_REASONS``): every OFDM
+channel of ``phy`` (tdl, cdl, the TS 38.101-4 conditions) by the fast Rayleigh table."""
 ALIAS_REASONS = {
     "rician_fast": "fast Rayleigh curve: pessimistic for a line-of-sight component",
-    "tdl": "fast Rayleigh curve: an OFDM codeword spans many independent subcarrier fades",
-    "cdl": "fast Rayleigh curve: an OFDM codeword spans many independent subcarrier fades",
+    **{name: _OFDM_REASON for name in sorted(OFDM_CHANNELS)},
 }
 RICIAN_K_DB = 6.0  # phy.RicianFading's default
 HOW = (

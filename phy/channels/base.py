@@ -60,5 +60,11 @@ class Channel(torch.nn.Module):
         mode); ``""`` here."""
         return ""
 
+    def record(self) -> dict:
+        """What a result records of this channel (JSON-serialisable): ``{"channel": kind}``
+        here; channels with parameters a result depends on add them (the TR 38.901 ones
+        their profile and pinned ``spec_version``)."""
+        return {"channel": self.kind}
+
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:  # noqa: D102
         raise NotImplementedError
