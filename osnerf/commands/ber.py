@@ -87,6 +87,7 @@ def parse_args(args: argparse.Namespace) -> dict:
     checks.distinct_outputs(out=args.out, plot=args.plot)
     return {
         "channel": args.channel,
+        "channel_params": _channel(args.channel).record(),
         "modulation": args.modulation,
         "snr_db": parse_snr_list(args.snr_db),
         "num_bits": num_bits,
@@ -98,6 +99,13 @@ def parse_args(args: argparse.Namespace) -> dict:
     }
 
 
+def _channel(name: str):
+    """The channel of ``--channel``: AWGN, or fast Rayleigh (one h per symbol)."""
+    import phy
+
+    return phy.AWGN() if name == "awgn" else phy.RayleighFading(mode="fast")
+
+
 def simulate(config: dict, seed: int) -> list[dict]:
     import torch
     from tqdm import tqdm
@@ -106,8 +114,7 @@ def simulate(config: dict, seed: int) -> list[dict]:
     from phy import ber_theory, bits_per_symbol, ser_theory, simulate_uncoded, snr_db_to_ebno_db
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    channel = phy.AWGN() if config["channel"] == "awgn" else phy.RayleighFading(mode="fast")
-    link = phy.FlatLink(channel, csi="perfect", equalizer="zf")
+    link = phy.FlatLink(_channel(config["channel"]), csi="perfect", equalizer="zf")
     generator = torch.Generator().manual_seed(seed)
     k = bits_per_symbol(config["modulation"])
     results = []

@@ -173,11 +173,14 @@ def run(args: argparse.Namespace) -> int:
         refine_steps=args.refine_steps,
         refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
     )
-    ctx.link()  # builds the channel (bad channel settings fail before any work)
+    from phy import channel_record
+
+    link = ctx.link()  # builds the channel (bad channel settings fail before any work)
     config = {
         "images": str(args.images),
         "image_names": names,
         "channel": args.channel,
+        "channel_params": channel_record(link),
         "receiver": ctx.receiver,
         "draws": args.draws,
         "interval": "95% Student-t interval of the mean over images x draws",

@@ -56,6 +56,7 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
     else:
         info = {"channel": cfg.channel, "csi": "perfect"}
     info["equalizer"] = "zf (unbiased) + per-symbol noise variance"
+    info["channel_params"] = phy.channel_record(link)
     return RunLinks({i: link for i in idx}, snr, info=info)
 
 

@@ -93,6 +93,17 @@ METRIC_RULES = Registry[MetricRule](
 )
 
 
+def channel_params(result: dict[str, Any]) -> dict[str, Any] | None:
+    """What a command's result records of its channel (``phy.channel_record``: the name and,
+    for TDL/CDL, the profile and the pinned TR 38.901 ``spec_version``): ``config`` holds it
+    for ``ber`` and ``eval-codec``, the report's ``link`` for ``run``; None where neither does."""
+    for part in ("config", "link"):
+        found = result.get(part)
+        if isinstance(found, dict) and isinstance(found.get("channel_params"), dict):
+            return found["channel_params"]
+    return None
+
+
 def metric_rule(command: str) -> MetricRule:
     """The rule for ``command`` (the default rule for commands without their own)."""
     return METRIC_RULES.get(command, DEFAULT_RULE)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from osnerf.sweeps.executors import Outcome, Task, get_executor
-from osnerf.sweeps.metrics import metric_rule
+from osnerf.sweeps.metrics import channel_params, metric_rule
 from osnerf.sweeps.spec import Point, SweepSpec, command_options, command_parser, expand, point_key
 from osnerf.sweeps.store import append_record, check_results, open_results
 
@@ -249,6 +249,7 @@ def _record(run: _Sweep, p: Point, outcome: Outcome, out, errors, summary, bar) 
                 "spec_hash": spec.sha256,
                 "versions": result.get("versions"),
                 "codec": result.get("codec"),
+                "channel": channel_params(result),
                 "output": outcome.get("kept"),
                 "finished_at": datetime.now(UTC).isoformat(timespec="seconds"),
             },
