@@ -38,17 +38,25 @@ def _codec(command: str, value: str) -> None:
 
 
 def _channel(command: str, value: str) -> None:
-    """The channels of the command: eval-codec's (``semcodec.eval_channels``), train-codec's
-    (``semcodec.TRAIN_CHANNELS``, a comma-separated mixture); others check theirs on parsing."""
-    if command == "eval-codec":
+    """The channels of the command: run's (``phy.CHANNELS`` and ``ota``), eval-codec's
+    (``semcodec.eval_channels``: ``phy.CHANNELS``, the TS 38.101-4 conditions and
+    ``raytraced`` included), ber's (``phy.THEORY_CHANNELS``), train-codec's
+    (``semcodec.TRAIN_CHANNELS``, a comma-separated mixture)."""
+    known: tuple[str, ...] | list[str] = ()
+    if command == "run":
+        from osnerf.run.config import RUN_CHANNELS as known
+    elif command == "eval-codec":
         from semcodec import eval_channels
 
-        if value not in eval_channels():
-            raise ValueError(f"unknown channel {value!r}; known: {', '.join(eval_channels())}")
+        known = eval_channels()
+    elif command == "ber":
+        from phy import THEORY_CHANNELS as known
     elif command == "train-codec":
         from semcodec import TrainConfig
 
         TrainConfig(channel=value)
+    if known and value not in known:
+        raise ValueError(f"unknown channel {value!r}; known: {', '.join(known)}")
 
 
 def _schemes(command: str, value: str) -> None:
