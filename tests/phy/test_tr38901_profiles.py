@@ -121,3 +121,17 @@ def test_a_conditions_doppler_is_the_time_correlation_of_its_response():
         measured = (h[:, lag:] * h[:, :-lag].conj()).mean().real / h.abs().pow(2).mean()
         theory = j0(2 * math.pi * 600.0 * dt)
         assert abs(float(measured) - theory) < 0.05, (lag, float(measured), theory)
+
+
+def test_the_channels_page_states_every_channel_and_each_conditions_spread_and_doppler():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "channels.md").read_text()
+    for name in phy.CHANNELS:
+        if name not in CONDITIONS:
+            assert f"`{name}`" in page, name
+    for name in CONDITIONS:
+        f = phy.CHANNELS[name]
+        spread_ns = round(FIXED_TDL_PROFILES[f.profile] * 1e9)
+        row = f"| `{name}` | TDL-{f.profile} | {spread_ns} ns |"
+        assert row in page and f"| {f.max_doppler_hz:g} Hz |" in page.split(row)[1].split("\n")[0]
