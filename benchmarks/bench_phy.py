@@ -53,6 +53,8 @@ def _channels(gen: torch.Generator) -> dict:
     for name in sorted(phy.CHANNELS):
         if name == "raytraced":
             continue  # needs a scene: benchmarked by phy.raytrace's owner
+        if hasattr(phy.CHANNELS[name], "profile"):
+            continue  # a TS 38.101-4 condition: TDLChannel, timed as "tdl"
         ch = phy.make_channel(name)
         inp = grid_x if name in phy.OFDM_CHANNELS else x
         s = _median_seconds(

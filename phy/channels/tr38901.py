@@ -117,6 +117,7 @@ class _TR38901Channel(Channel):
 
     MODELS: tuple[str, ...] = ()
     FAMILY = ""
+    kind: str = ""  # each subclass's phy.CHANNELS name; a named condition sets its own
 
     def __init__(
         self,
