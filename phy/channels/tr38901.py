@@ -309,7 +309,8 @@ class TDLChannel(_TR38901Channel):
 
 class CDLChannel(_TR38901Channel):
     """3GPP CDL-A..E between single omnidirectional vertically polarised antennas (uplink:
-    drone = UT transmits to the ground station = BS). Same arguments as :class:`TDLChannel`.
+    drone = UT transmits to the ground station = BS). Same arguments as :class:`TDLChannel`;
+    ``model`` is "A".."E" (CDL has no fixed TS 38.101-4 profiles).
     """
 
     MODELS = CDL_MODELS
