@@ -62,6 +62,15 @@ def _link(channel: str) -> torch.nn.Module:
     return _LINKS[(name, csi)]
 
 
+def train_channel_records(spec: str) -> dict[str, dict]:
+    """What a model card records of each channel of the mixture ``spec``: ``phy``'s record
+    of its link (``phy.channel_record``; TDL: profile, delay spread and the pinned TR 38.901
+    ``spec_version``)."""
+    from phy import channel_record
+
+    return {name: channel_record(_link(name)) for name in parse_train_channels(spec)}
+
+
 def channel_mask(m: Tensor, num_complex_channels: int) -> Tensor:
     """[batch, 2*C, 1, 1] float32: 1 for the real/imag planes of the first m[i] channels."""
     k = torch.arange(num_complex_channels, device=m.device).repeat_interleave(2)  # [2*C]

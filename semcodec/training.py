@@ -33,7 +33,7 @@ import torch
 from torch import nn
 
 from semcodec import distributed
-from semcodec.channel_layers import parse_train_channels
+from semcodec.channel_layers import parse_train_channels, train_channel_records
 from semcodec.contract import CODEC_MEMBERS, TRAINABLE_MEMBERS, missing_members
 from semcodec.jscc_train import forward_train, load_compatible
 from semcodec.model import make_model
@@ -229,6 +229,7 @@ def train(
         "codec": parse_codec_spec(cfg.codec)[0],  # the registry name that loads the file
         "training": {
             "config": dataclasses.asdict(cfg),
+            "channels": train_channel_records(cfg.channel),
             "data": [str(d) for d in train_dirs],
             "num_images": len(paths),
             "data_sha256": data_hash,

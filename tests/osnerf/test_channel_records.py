@@ -82,3 +82,16 @@ def test_a_sweep_refuses_an_unknown_channel_before_any_point(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "axis 'channel' value 'tdla30-11': unknown channel" in err
     assert "tdla30-10" in err and "raytraced" in err and not out.exists()
+
+
+def test_a_codec_trained_over_tdl_records_it_in_its_model_card(image_dir, tmp_path):
+    from semcodec import load_codec
+
+    out = tmp_path / "run"
+    argv = ["train-codec", "--data", str(image_dir), "--out", str(out), "--model", "adjscc_s4_w64"]
+    argv += ["--crop-px", "32", "--batch-size", "2", "--max-minutes", "0.02", "--threads", "1"]
+    assert main([*argv, "--channel", "awgn,ofdm_tdl_ls"]) == 0
+    channels = load_codec(out / "last.safetensors").card["training"]["channels"]
+    assert channels["awgn"] == {"channel": "awgn"}
+    assert channels["ofdm_tdl_ls"]["model"] == "TDL-A"
+    assert channels["ofdm_tdl_ls"]["spec_version"] == SPEC_VERSION
