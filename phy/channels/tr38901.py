@@ -160,10 +160,11 @@ class _TR38901Channel(Channel):
                     "not both"
                 )
             fd = _check_positive("max_doppler_hz", max_doppler_hz, 0.0, 1e5)
-            min_speed_m_s = fd * SPEED_OF_LIGHT_M_S / self.carrier_frequency_hz
-        self.min_speed_m_s = _check_positive("min_speed_m_s", min_speed_m_s, 0.0, 1e4)
-        hi = self.min_speed_m_s if max_speed_m_s is None else max_speed_m_s
-        self.max_speed_m_s = _check_positive("max_speed_m_s", hi, self.min_speed_m_s, 1e4)
+            self.min_speed_m_s = self.max_speed_m_s = fd * SPEED_OF_LIGHT_M_S / carrier_frequency_hz
+        else:
+            self.min_speed_m_s = _check_positive("min_speed_m_s", min_speed_m_s, 0.0, 500.0)
+            hi = self.min_speed_m_s if max_speed_m_s is None else max_speed_m_s
+            self.max_speed_m_s = _check_positive("max_speed_m_s", hi, self.min_speed_m_s, 500.0)
         self._sionna_model = None
 
     @property

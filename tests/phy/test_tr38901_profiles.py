@@ -106,6 +106,8 @@ def test_a_condition_fixes_its_profile_and_doppler():
         phy.make_channel("tdla30-10", model="B", max_doppler_hz=5.0)
     ch = phy.make_channel("tdla30-10", carrier_frequency_hz=28e9)  # the Doppler stays 10 Hz
     assert ch.max_doppler_hz == pytest.approx(10.0) and ch.max_speed_m_s < 0.2
+    with pytest.raises(ValueError, match="max_doppler_hz sets the speed"):
+        phy.TDLChannel("A30", max_doppler_hz=10.0, max_speed_m_s=3.0)
 
 
 def test_a_conditions_doppler_is_the_time_correlation_of_its_response():
