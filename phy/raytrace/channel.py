@@ -151,7 +151,8 @@ class RayTracedChannel(Channel):
         if gain_normalization == "per_position":
             p = h.abs().pow(2).mean(dim=1, keepdim=True)
             h = torch.where(p > 0, h / p.clamp_min(1e-300).sqrt(), torch.zeros_like(h))
-            scale = np.where(p.numpy() > 0, 1 / np.sqrt(p.numpy().astype(np.float64)), 0.0)
+            p64 = p.numpy().astype(np.float64)
+            scale = np.where(p64 > 0, 1 / np.sqrt(np.maximum(p64, 1e-300)), 0.0)
         else:
             assert reference_path_gain_db is not None  # checked above for "absolute"
             h = h * 10.0 ** (-float(reference_path_gain_db) / 20.0)

@@ -265,7 +265,13 @@ class RayTracer:
             di = doppler[r, t, :][vi] if doppler.size else np.zeros(0, np.float32)
             first = float(tau_abs[r, t, :][vi].min()) if vi.any() else 0.0
             out.append(
-                (ai[vi].astype(np.complex64), ti[vi].astype(np.float32), los, di.astype(np.float32), first)
+                (
+                    ai[vi].astype(np.complex64),
+                    ti[vi].astype(np.float32),
+                    los,
+                    di.astype(np.float32),
+                    first,
+                )
             )
         return out
 
