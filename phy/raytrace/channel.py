@@ -208,8 +208,8 @@ class RayTracedChannel(Channel):
             rows, cols = np.arange(x.shape[1]) * t_sym, None
         else:
             rows, cols = flat_symbol_times(x.shape[1], f.size, t_sym / f.size)
-        h = np.stack([m.response(rows, f, cols) for m in self.movers]) * self.scale[:, :, None]
-        h = torch.from_numpy(h.astype(np.complex64)).to(x.device)  # [num_positions, rows, F]
+        hn = np.stack([m.response(rows, f, cols) for m in self.movers]) * self.scale[:, :, None]
+        h = torch.from_numpy(hn.astype(np.complex64)).to(x.device)  # [num_positions, rows, F]
         if x.dim() == 2:
             h = h.reshape(len(self.movers), -1)[:, : x.shape[1]]  # [num_positions, num_symbols]
         return h
