@@ -5,11 +5,12 @@ Drones at 8 positions 30-60 m up around a ground station in sionna-rt's street c
 of each position is normalised to unit mean power and evolves with every path's Doppler
 shift (re-traced every few wavelengths). The link is ``phy.OFDMLink`` on the default
 ``phy.ResourceGrid()`` (the grid of the tdl/cdl links: 64 subcarriers at 15 kHz, pilots on
-OFDM symbols 2 and 11 of each 14-symbol slot), 64-QAM (whose corner points fall to a few degrees of phase error) at fixed SNRs, with three
-receivers: perfect CSI (the bound), LS pilots with linear interpolation in time (held
-before the first and after the last pilot symbol of a slot), and sionna's LMMSE filter
-(TDL-A frequency covariance at 100 ns, Jakes time covariance at the drone's speed). A
-denser pilot grid (a pilot symbol every 3) shows how much of the floor is the pilots'.
+OFDM symbols 2 and 11 of each 14-symbol slot), uncoded 64-QAM (its corner points cross a
+decision boundary at a few degrees of phase error) at fixed SNRs, with three receivers:
+perfect CSI (the bound), LS pilots with linear interpolation in time (held before the
+first and after the last pilot symbol of a slot), and sionna's LMMSE filter (TDL-A
+frequency covariance at 100 ns, Jakes time covariance at the drone's speed). A denser
+pilot grid (a pilot symbol every 3) shows how much of the floor is the pilots'.
 Each transmission is 20 slots (about 23 ms), starting at the position. Three SNRs: an
 error floor is a BER that stops falling as the SNR rises.
 """
