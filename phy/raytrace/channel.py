@@ -64,7 +64,7 @@ def _movers(tracer: RayTracer, positions: np.ndarray, velocities) -> list[Moving
 
 
 class RayTracedChannel(Channel):
-    """Fixed ray-traced channels of a batch of transmitter positions, plus AWGN.
+    """Ray-traced channels of a batch of transmitter positions, at rest or moving, plus AWGN.
 
     Args:
         scene: built-in scene name, ``.xml`` path or ``sionna.rt.Scene`` (ignored when
