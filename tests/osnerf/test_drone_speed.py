@@ -100,3 +100,13 @@ def test_speed_on_a_channel_without_drones_is_refused(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(ValueError, match=r"drone_speed_m_s must be in \[0, 100\] m/s"):
         RunConfig(channel="raytraced", drone_speed_m_s=101.0)
+
+
+def test_report_header_states_speed_and_doppler():
+    from osnerf.report import _motion_html
+
+    link = {"drone_speed_m_s": 15.0, "max_doppler_hz": 175.12, "median_rms_doppler_spread_hz": 0.0}
+    text = _motion_html(link)
+    assert "drone speed 15 m/s" in text and "max Doppler 175.1 Hz" in text
+    assert "RMS Doppler spread 0.0 Hz" in text
+    assert _motion_html({"channel": "awgn"}) == ""
