@@ -51,7 +51,7 @@ def _movers(tracer: RayTracer, positions: np.ndarray, velocities) -> list[Moving
     """One mover per position ([] when nothing moves)."""
     if velocities is None:
         return []
-    v = check_positions(velocities, "tx_velocities_m_s")
+    v = check_positions(velocities, "tx_velocities_m_s", "m/s")
     if v.shape[0] not in (1, len(positions)):
         raise ValueError(
             f"tx_velocities_m_s must be [3] or [num_positions={len(positions)}, 3], got shape {v.shape}"

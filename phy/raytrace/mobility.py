@@ -105,7 +105,7 @@ class MovingTransmitter:
     def __init__(self, tracer: RayTracer, position_m, velocity_m_s):
         self.tracer = tracer
         self.position_m = check_positions(position_m, "position_m")[0]
-        self.velocity_m_s = check_positions(velocity_m_s, "velocity_m_s")[0]
+        self.velocity_m_s = check_positions(velocity_m_s, "velocity_m_s", "m/s")[0]
         self._segments: dict[int, MovingCIR] = {}
 
     @property

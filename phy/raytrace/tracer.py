@@ -91,7 +91,7 @@ class RayTracingConfig:
         return out
 
 
-def check_positions(positions_m, name: str = "tx_positions_m") -> np.ndarray:
+def check_positions(positions_m, name: str = "tx_positions_m", unit: str = "metres") -> np.ndarray:
     """[num_positions, 3] float64 metres from an array-like; ``[3]`` becomes ``[1, 3]``.
 
     Raises:
@@ -105,14 +105,14 @@ def check_positions(positions_m, name: str = "tx_positions_m") -> np.ndarray:
         )
     except (TypeError, ValueError):
         raise ValueError(
-            f"{name} must be [num_positions, 3] finite metres, got {positions_m!r}"
+            f"{name} must be [num_positions, 3] finite {unit}, got {positions_m!r}"
         ) from None
     if p.ndim == 1:
         p = p[None]
     if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
-        raise ValueError(f"{name} must be [num_positions, 3] finite metres, got shape {p.shape}")
+        raise ValueError(f"{name} must be [num_positions, 3] finite {unit}, got shape {p.shape}")
     if not np.isfinite(p).all():
-        raise ValueError(f"{name} must be [num_positions, 3] finite metres, got a non-finite value")
+        raise ValueError(f"{name} must be [num_positions, 3] finite {unit}, got a non-finite value")
     return p
 
 
@@ -291,7 +291,7 @@ class RayTracer:
         pos = check_positions(tx_positions_m)
         vel = np.zeros_like(pos)
         if tx_velocities_m_s is not None:
-            v = check_positions(tx_velocities_m_s, "tx_velocities_m_s")
+            v = check_positions(tx_velocities_m_s, "tx_velocities_m_s", "m/s")
             if v.shape[0] not in (1, len(pos)):
                 raise ValueError(
                     f"tx_velocities_m_s must be [3] or [num_positions={len(pos)}, 3], "
