@@ -192,5 +192,7 @@ def test_bad_motion_input(canyon):
         RayTracedChannel(tracer=canyon, tx_positions_m=[DRONE], tx_velocities_m_s=[1.0, 0, 0])
     with pytest.raises(ValueError, match=r"tx_velocities_m_s must be \[3\] or \[num_positions=1"):
         RayTracedChannel(tracer=canyon, tx_positions_m=[DRONE], tx_velocities_m_s=[[1.0, 0, 0]] * 2)
-    with pytest.raises(ValueError, match=r"tx_velocities_m_s must be \[num_positions, 3\] finite m/s"):
+    with pytest.raises(
+        ValueError, match=r"tx_velocities_m_s must be \[num_positions, 3\] finite m/s"
+    ):
         canyon.cir([DRONE], [[float("nan"), 0.0, 0.0]])
