@@ -103,10 +103,10 @@ def test_speed_on_a_channel_without_drones_is_refused(tmp_path, capsys):
 
 
 def test_report_header_states_speed_and_doppler():
-    from osnerf.report import _motion_html
+    from osnerf.report import motion_summary
 
     link = {"drone_speed_m_s": 15.0, "max_doppler_hz": 175.12, "median_rms_doppler_spread_hz": 0.0}
-    text = _motion_html(link)
+    text = motion_summary(link)
     assert "drone speed 15 m/s" in text and "max Doppler 175.1 Hz" in text
     assert "RMS Doppler spread 0.0 Hz" in text
-    assert _motion_html({"channel": "awgn"}) == ""
+    assert motion_summary({"channel": "awgn"}) == ""
