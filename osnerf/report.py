@@ -308,9 +308,22 @@ def codec_use_line(scheme: str, use: dict) -> str:
     )
 
 
+def motion_summary(link: dict) -> str:
+    """The drones' speed and Doppler in words (a ray-traced run's link), else ``""``."""
+    if "drone_speed_m_s" not in link:
+        return ""
+    spread = link.get("median_rms_doppler_spread_hz")
+    return (
+        f"drone speed {link['drone_speed_m_s']:g} m/s, max Doppler "
+        f"{link['max_doppler_hz']:.1f} Hz, median RMS Doppler spread "
+        + ("n/a" if spread is None else f"{spread:.1f} Hz")
+    )
+
+
 def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     """A self-contained HTML page (pictures as base64 data URIs)."""
     s = {n: asdict(r) for n, r in report.schemes.items()}
+    motion = motion_summary(report.link)
     keys = [
         "psnr",
         "psnr_object",
@@ -370,7 +383,7 @@ td,th{{border:1px solid #ccc;padding:3px 6px;font-size:13px}}img{{max-width:100%
 <h1>osnerf run: {html.escape(report.scene["name"])}</h1>
 <p>demand {html.escape(", ".join(report.demand["objects"]))}; channel {html.escape(str(report.link["channel"]))};
 SNR {report.snr_db:g} dB; seed {header.get("seed")}; commit {html.escape(str(header.get("git_commit")))};
-symbol rate {report.symbol_rate_hz:g} Hz.</p>
+symbol rate {report.symbol_rate_hz:g} Hz{"; " + html.escape(motion) if motion else ""}.</p>
 <table><tr>{head}</tr>{rows}</table><ul>{bounds}</ul><ul>{comp}</ul>
 <p>{html.escape(report.metric_notes)}</p>{pics}
 <h2>Semantic control unit decisions</h2><ol>{dec}</ol></body></html>

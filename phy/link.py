@@ -17,10 +17,11 @@ from phy.channels._common import check_symbols
 from phy.channels.base import Channel
 from phy.ofdm.equalization import EQUALIZERS, equalize
 from phy.ofdm.estimation import INTERPOLATIONS, ls_channel_estimate
+from phy.ofdm.lmmse import LMMSEEstimator
 from phy.ofdm.resource_grid import ResourceGrid, extract_data, map_to_grid
 
 CSI_FLAT = ("perfect", "none")
-CSI_OFDM = ("perfect", "ls")
+CSI_OFDM = ("perfect", "ls", "lmmse")
 
 
 @dataclass
@@ -131,10 +132,13 @@ class OFDMLink(torch.nn.Module):
         grid: the :class:`ResourceGrid`.
         channel: a channel accepting ``[batch, num_ofdm_symbols, fft_size]`` grids (all flat
             channels, ``TDLChannel``, ``CDLChannel``).
-        csi: ``"perfect"`` (the channel's h) or ``"ls"`` (pilot LS estimate, interpolated);
-            with ``"ls"`` the estimation error is added to the reported ``noise_var``.
+        csi: ``"perfect"`` (the channel's h), ``"ls"`` (pilot LS estimate, interpolated) or
+            ``"lmmse"`` (sionna's LMMSE filtering of the LS pilot estimates, ``estimator``);
+            with an estimate its error variance is added to the reported ``noise_var``.
         equalizer: ``"mmse"`` or ``"zf"``.
         interpolation: ``"linear"`` or ``"nearest"`` (for ``csi="ls"``).
+        estimator: for ``csi="lmmse"``, a :class:`phy.ofdm.LMMSEEstimator` (it holds the
+            channel statistics the receiver assumes).
     """
 
     def __init__(
@@ -144,6 +148,7 @@ class OFDMLink(torch.nn.Module):
         csi: str = "ls",
         equalizer: str = "mmse",
         interpolation: str = "linear",
+        estimator: LMMSEEstimator | None = None,
     ):
         super().__init__()
         if not isinstance(grid, ResourceGrid):
@@ -160,6 +165,11 @@ class OFDMLink(torch.nn.Module):
             )
         if csi == "ls" and not grid.pilot_ofdm_symbols:
             raise ValueError("csi='ls' needs a grid with pilot_ofdm_symbols")
+        if csi == "lmmse" and not isinstance(estimator, LMMSEEstimator):
+            raise ValueError("csi='lmmse' needs estimator=phy.ofdm.LMMSEEstimator(grid, ...)")
+        if estimator is not None and estimator.grid != grid:
+            raise ValueError("estimator must be built for the link's grid")
+        self.estimator = estimator
         self.grid = grid
         self.channel = channel
         self.csi = csi
@@ -178,9 +188,13 @@ class OFDMLink(torch.nn.Module):
         g = map_to_grid(xp, self.grid)  # [batch, num_slots * num_ofdm_symbols, fft_size]
         out = self.channel(g, snr_db, generator=generator)
         nv = out.noise_var.to(torch.float32)
+        err: Tensor | float
         if self.csi == "perfect":
             h = torch.ones_like(g) if out.h is None else torch.broadcast_to(out.h, g.shape)
             err = 0.0
+        elif self.csi == "lmmse":
+            assert self.estimator is not None  # checked in __init__
+            h, err = self.estimator(out.y, nv)
         else:
             h, err = ls_channel_estimate(out.y, self.grid, nv, self.interpolation)
         x_hat, nv_eff = equalize(out.y, h, nv, self.equalizer, err)

@@ -42,8 +42,10 @@ CONFIG_FIELDS = (
     "renderer_steps",
     "refine_steps",
     "layer_fusion",
+    "drone_speed_m_s",
 )
 FLAGS = {
+    "drone_speed_m_s": "--drone-speed",
     "resolution_px": "--resolution",
     "num_train_views": "--views",
     "num_test_views": "--test-views",
@@ -74,7 +76,7 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
-    from osnerf.run.config import RUN_CHANNELS, RunConfig
+    from osnerf.run.config import DRONE_SPEED_RANGE_M_S, RUN_CHANNELS, RunConfig
     from osnerf.schemes import SCHEMES, parse_schemes
     from phy.digital import MCS_TABLE
     from semcodec import IMAGE_CODECS
@@ -98,6 +100,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "renderer_steps": checks.count(0, 100_000),
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
+            "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
         },
         choices={
             "channel": RUN_CHANNELS,

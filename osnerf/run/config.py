@@ -18,6 +18,7 @@ OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
+DRONE_SPEED_RANGE_M_S = (0.0, 100.0)
 CACHE_VERSION = 16
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
 whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
@@ -79,6 +80,11 @@ class RunConfig:
             (the SCU's pilot copies do not fade independently) the transmitter also simulates
             its split between learned channels and the layer for that receiver. 1: each
             view's own LMMSE and split.
+        drone_speed_m_s: for channel "raytraced": each drone flies at this speed (m/s, in
+            [0, 100]) along its ring around the demanded objects (level, counter-clockwise
+            seen from above) while it sends, and its channel changes with every symbol from
+            each traced path's Doppler shift (symbol ``i`` of a view at ``i /
+            symbol_rate_hz``); 0: the static channel of each position.
     """
 
     scene: str = DEFAULT_SCENE
@@ -104,6 +110,7 @@ class RunConfig:
     renderer_steps: int = 1200
     refine_steps: int = 30
     layer_fusion: float = 4.0
+    drone_speed_m_s: float = 0.0
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -145,6 +152,7 @@ class RunConfig:
                 f"renderer_steps must be an integer in [0, 100000] (0: skip), "
                 f"got {self.renderer_steps!r}"
             )
+        self._check_speed()
         if self.ota_device not in OTA_DEVICES:
             raise ValueError(
                 f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
@@ -155,6 +163,17 @@ class RunConfig:
             raise ValueError(f"symbol_rate_hz must be > 0, got {self.symbol_rate_hz!r}")
         self._check_digital()
         self.render_config()  # validates the view settings
+
+    def _check_speed(self) -> None:
+        v = self.drone_speed_m_s
+        lo, hi = DRONE_SPEED_RANGE_M_S
+        if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+            raise ValueError(f"drone_speed_m_s must be in [{lo:g}, {hi:g}] m/s, got {v!r}")
+        if v > 0 and self.channel != "raytraced":
+            raise ValueError(
+                f"drone_speed_m_s moves the drones of channel raytraced only, got "
+                f"{v!r} with channel {self.channel!r}"
+            )
 
     def _check_digital(self) -> None:
         from phy.digital import MCS_TABLE

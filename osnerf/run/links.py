@@ -2,7 +2,8 @@
 
 Every receiver is unbiased (zero-forcing, sionna's LMMSE convention) and reports the
 effective noise variance per symbol: perfect CSI on flat channels, LS pilot estimates over
-OFDM for ``tdl``/``cdl``, each drone position's ray-traced response for ``raytraced``, and
+OFDM for ``tdl``/``cdl``, each drone position's ray-traced response for ``raytraced`` (that
+changes over the view's symbols when the drones fly, ``drone_speed_m_s``), and
 ``phy`` OFDM frames between two HackRFs for ``ota``.
 """
 
@@ -101,10 +102,12 @@ def _ota_links(cfg: RunConfig, idx: list[int], snr: dict) -> RunLinks:
 
 
 def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
-    from osnerf.scenes import drone_channels
+    from osnerf.scenes import drone_channels, flight_velocities
     from phy.raytrace import PerPositionChannel
 
-    ch = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
+    pos = views.drone_positions_m[idx]
+    vel = flight_velocities(views.meta, pos, cfg.drone_speed_m_s)
+    ch = drone_channels(views.folder, views.meta, pos, velocities_m_s=vel)
     gain = ch.path_gain_db
     ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
     links, snrs, outage = {}, {}, set()
@@ -112,11 +115,15 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
         if ch.outage[k]:
             outage.add(i)
             continue
-        links[i] = phy.FlatLink(PerPositionChannel(ch.h[k]), csi="perfect", equalizer="zf")
+        mover = None if ch.movers is None else ch.movers[k]
+        channel = PerPositionChannel(
+            ch.h[k], mover, ch.subcarrier_frequencies_hz, 1.0 / cfg.symbol_rate_hz
+        )
+        links[i] = phy.FlatLink(channel, csi="perfect", equalizer="zf")
         snrs[i] = float(cfg.snr_db + gain[k] - ref)
     info = {
         "channel": "raytraced",
-        "csi": "perfect",
+        "csi": "perfect" if ch.movers is None else "perfect (h at each symbol's time)",
         "equalizer": "zf (unbiased) + per-symbol noise variance",
         "path_gain_db": {i: float(g) for i, g in zip(idx, gain)},
         "reference_path_gain_db": ref,
@@ -124,5 +131,26 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
         "num_subcarriers": int(ch.h.shape[1]),
         "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
         "stats": ch.stats,
+        **_motion_info(cfg, views.meta, ch, idx),
     }
     return RunLinks(links, snrs, outage, info)
+
+
+def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:
+    """What the report says about the drones' motion: speed, Doppler, symbol timing."""
+    from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
+
+    spread = np.asarray(ch.stats["rms_doppler_spread_hz"], np.float64)
+    live = ~np.asarray(ch.outage, bool)
+    return {
+        "drone_speed_m_s": float(cfg.drone_speed_m_s),
+        "max_doppler_hz": max_doppler_hz(cfg.drone_speed_m_s, meta["carrier_frequency_hz"]),
+        "rms_doppler_spread_hz": {i: float(s) for i, s, ok in zip(idx, spread, live) if ok},
+        "median_rms_doppler_spread_hz": float(np.median(spread[live])) if live.any() else None,
+        "motion": "drones fly level along their ring (counter-clockwise seen from above); "
+        "symbol i of a view is sent at i / symbol_rate_hz and rides subcarrier i mod "
+        "num_subcarriers; each path's Doppler shift (sionna-rt) turns its phase, re-traced "
+        f"every {RETRACE_WAVELENGTHS:g} wavelengths of flight"
+        if cfg.drone_speed_m_s > 0
+        else "drones at rest: one fixed response per position",
+    }

@@ -23,7 +23,12 @@ from osnerf.scenes.dataset import (
     default_cache_dir,
     load_scene_views,
 )
-from osnerf.scenes.radio import DroneChannels, drone_channels, write_radio_scene
+from osnerf.scenes.radio import (
+    DroneChannels,
+    drone_channels,
+    flight_velocities,
+    write_radio_scene,
+)
 from osnerf.scenes.registry import DEFAULT_SCENE, SCENES, get_scene
 from osnerf.scenes.spec import Part, SceneGeometry, SceneInfo
 
@@ -42,6 +47,7 @@ __all__ = [
     "check_demand",
     "default_cache_dir",
     "drone_channels",
+    "flight_velocities",
     "get_scene",
     "load_scene_views",
     "look_at",

@@ -3,7 +3,8 @@
 ``write_radio_scene`` turns a :class:`SceneGeometry` into a sionna-rt XML scene whose
 shapes are the very PLY files the optical renders use, so a drone's position fixes both
 its camera view and its channel to the ground station. ``drone_channels`` asks
-``phy.raytrace`` for the channel of every drone position.
+``phy.raytrace`` for the channel of every drone position; ``flight_velocities`` gives
+each drone its velocity along its ring, for a channel that changes while it flies.
 """
 
 from __future__ import annotations
@@ -56,6 +57,8 @@ class DroneChannels:
         path_gain_db: [num_positions] float, mean |h|^2 in dB (-inf in outage).
         stats: per-position statistics from phy.raytrace (lists), or {}.
         subcarrier_frequencies_hz: [num_subcarriers] baseband offsets.
+        movers: one ``phy.raytrace.MovingTransmitter`` per position when the drones move,
+            else None.
     """
 
     h: np.ndarray
@@ -63,6 +66,7 @@ class DroneChannels:
     path_gain_db: np.ndarray
     stats: dict
     subcarrier_frequencies_hz: np.ndarray
+    movers: list | None = None
 
 
 def radio_scene_path(folder: Path, meta: dict) -> str:
@@ -77,6 +81,22 @@ def subcarrier_frequencies(num_subcarriers: int, spacing_hz: float) -> np.ndarra
     return (k * spacing_hz).astype(np.float64)
 
 
+def flight_velocities(meta: dict, positions_m: np.ndarray, speed_m_s: float) -> np.ndarray:
+    """[num_positions, 3] velocities of drones flying their ring at ``speed_m_s``.
+
+    Each drone flies level along the tangent of its circle about the vertical axis through
+    ``meta["trajectory_center_m"]`` (counter-clockwise seen from above, the order in which
+    the ring's views are laid out); a drone right above the centre flies along +x.
+    """
+    pos = np.asarray(positions_m, np.float64).reshape(-1, 3)
+    centre = np.asarray(meta.get("trajectory_center_m", (0.0, 0.0, 0.0)), np.float64)
+    r = pos[:, :2] - centre[:2]
+    tangent = np.c_[-r[:, 1], r[:, 0], np.zeros(len(pos))]  # z x r
+    norm = np.linalg.norm(tangent, axis=1, keepdims=True)
+    tangent = np.where(norm > 1e-9, tangent / np.maximum(norm, 1e-300), [1.0, 0.0, 0.0])
+    return float(speed_m_s) * tangent
+
+
 def drone_channels(
     folder: Path,
     meta: dict,
@@ -84,6 +104,7 @@ def drone_channels(
     num_subcarriers: int = 64,
     subcarrier_spacing_hz: float = 30e3,
     max_depth: int = 2,
+    velocities_m_s: np.ndarray | None = None,
 ) -> DroneChannels:
     """Ray-trace each drone position to the ground station (``phy.raytrace.RayTracer``).
 
@@ -91,8 +112,11 @@ def drone_channels(
         folder, meta: a dataset folder and its transforms.json dict (radio scene, ground
             station, carrier).
         positions_m: [num_positions, 3] transmitter (drone) positions, metres.
+        velocities_m_s: [num_positions, 3] drone velocities (e.g. :func:`flight_velocities`);
+            None or all zero: at rest.
     Returns:
-        :class:`DroneChannels` with the absolute (path-loss included) CFR per position.
+        :class:`DroneChannels` with the absolute (path-loss included) CFR per position at
+        t = 0, the Doppler statistics and, for moving drones, their movers.
     """
     import phy.raytrace as prt
 
@@ -109,7 +133,10 @@ def drone_channels(
     outage = np.asarray(outage.detach().cpu()).astype(bool)
     with np.errstate(divide="ignore"):
         gain_db = 10 * np.log10(np.mean(np.abs(h) ** 2, axis=1))
-    st = tracer.stats(pos)
+    moving = velocities_m_s is not None and np.any(velocities_m_s)
+    vel = np.asarray(velocities_m_s, np.float64) if moving else None
+    st = tracer.stats(pos, vel)
+    movers = [prt.MovingTransmitter(tracer, p, v) for p, v in zip(pos, vel)] if moving else None
     stats = {
         "path_gain_db": st.path_gain_db.tolist(),
         "rms_delay_spread_s": st.rms_delay_spread_s.tolist(),
@@ -117,5 +144,6 @@ def drone_channels(
         "num_paths": st.num_paths.tolist(),
         "los": st.los.tolist(),
         "outage": st.outage.tolist(),
+        "rms_doppler_spread_hz": st.rms_doppler_spread_hz.tolist(),
     }
-    return DroneChannels(h, outage, gain_db, stats, freqs)
+    return DroneChannels(h, outage, gain_db, stats, freqs, movers)

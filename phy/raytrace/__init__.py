@@ -4,6 +4,12 @@
 """
 
 from phy.raytrace.channel import GAIN_NORMALIZATIONS, PerPositionChannel, RayTracedChannel
+from phy.raytrace.mobility import (
+    RETRACE_WAVELENGTHS,
+    MovingCIR,
+    MovingTransmitter,
+    max_doppler_hz,
+)
 from phy.raytrace.scene import builtin_scenes, load_scene
 from phy.raytrace.stats import RayStats, cir_stats
 from phy.raytrace.tracer import (
@@ -15,6 +21,10 @@ from phy.raytrace.tracer import (
 )
 
 __all__ = [
+    "RETRACE_WAVELENGTHS",
+    "MovingCIR",
+    "MovingTransmitter",
+    "max_doppler_hz",
     "GAIN_NORMALIZATIONS",
     "RayCIR",
     "RayStats",

@@ -6,6 +6,14 @@ Symbols are frequency-domain: either OFDM-shaped ``[batch, num_ofdm_symbols, fft
 symbols fill OFDM symbols one after the other). Row ``b`` of the batch uses position ``b``;
 a single position serves every row.
 
+A moving drone (``tx_velocities_m_s``, and ``ofdm_symbol_duration_s``) changes the channel
+over the transmission with each path's Doppler shift (:mod:`phy.raytrace.mobility`), which
+starts at the drone's position at t = 0: OFDM symbol ``l`` of a grid is sent at
+``l * ofdm_symbol_duration_s``; flat symbol ``i`` at ``i * ofdm_symbol_duration_s /
+num_subcarriers`` (in time order, filling the OFDM symbols). At rest it is the fixed
+response above, exactly. :class:`PerPositionChannel` is the same for one position, with its
+own symbol duration.
+
 Gain normalisation:
 * ``"per_position"`` (default): each position's CFR is scaled to unit mean ``|h|^2`` over
   the subcarriers, so ``snr_db`` is the mean received SNR and only the frequency
@@ -27,13 +35,36 @@ from torch import Tensor
 
 from phy.channels.base import Channel, ChannelOutput
 from phy.conventions import snr_db_to_noise_var, validate_snr_db
+from phy.raytrace.mobility import MovingTransmitter, flat_symbol_times
 from phy.raytrace.tracer import RayTracer, RayTracingConfig, check_frequencies, check_positions
 
 GAIN_NORMALIZATIONS = ("per_position", "absolute")
 
 
+def _check_duration(v, name: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be > 0 seconds for a moving transmitter, got {v!r}")
+    return float(v)
+
+
+def _movers(tracer: RayTracer, positions: np.ndarray, velocities) -> list[MovingTransmitter]:
+    """One mover per position ([] when nothing moves)."""
+    if velocities is None:
+        return []
+    v = check_positions(velocities, "tx_velocities_m_s", "m/s")
+    if v.shape[0] not in (1, len(positions)):
+        raise ValueError(
+            f"tx_velocities_m_s must be [3] or [num_positions={len(positions)}, 3], got shape {v.shape}"
+        )
+    v = np.broadcast_to(v, positions.shape)
+    if not v.any():
+        return []
+    tracer.cir(positions, v)  # trace every position in one solver call
+    return [MovingTransmitter(tracer, p, vi) for p, vi in zip(positions, v)]
+
+
 class RayTracedChannel(Channel):
-    """Fixed ray-traced channels of a batch of transmitter positions, plus AWGN.
+    """Ray-traced channels of a batch of transmitter positions, at rest or moving, plus AWGN.
 
     Args:
         scene: built-in scene name, ``.xml`` path or ``sionna.rt.Scene`` (ignored when
@@ -49,10 +80,14 @@ class RayTracedChannel(Channel):
         reference_path_gain_db: path gain that maps to ``snr_db`` with ``"absolute"``.
         config: :class:`RayTracingConfig` for the path solver.
         tracer: an existing :class:`RayTracer` (shares its scene and cache).
+        tx_velocities_m_s: [num_positions, 3] or [3] drone velocities (m/s); None or all
+            zero: at rest.
+        ofdm_symbol_duration_s: time between OFDM symbols, cyclic prefix included (> 0),
+            needed for a moving drone (module docstring).
     """
 
     kind = "raytraced"
-    h: Tensor  # registered buffers (see __init__)
+    h: Tensor  # registered buffers (see __init__): the response at t = 0
     outage: Tensor
 
     def __init__(
@@ -68,6 +103,8 @@ class RayTracedChannel(Channel):
         reference_path_gain_db: float | None = None,
         config: RayTracingConfig | None = None,
         tracer: RayTracer | None = None,
+        tx_velocities_m_s=None,
+        ofdm_symbol_duration_s: float | None = None,
     ):
         super().__init__()
         if gain_normalization not in GAIN_NORMALIZATIONS:
@@ -101,18 +138,31 @@ class RayTracedChannel(Channel):
         self.tracer = tracer or RayTracer(scene, rx_position_m, carrier_frequency_hz, config)
         self.gain_normalization = gain_normalization
         self.reference_path_gain_db = reference_path_gain_db
-        h, outage = self.tracer.cfr(positions, freqs)  # [num_positions, num_subcarriers]
+        self.movers = _movers(self.tracer, positions, tx_velocities_m_s)
+        if self.movers:
+            self.ofdm_symbol_duration_s = _check_duration(
+                ofdm_symbol_duration_s, "ofdm_symbol_duration_s"
+            )
+            h0 = np.stack([m.response([0.0], freqs)[0] for m in self.movers])
+            h = torch.from_numpy(h0.astype(np.complex64))
+            outage = torch.from_numpy(~(np.abs(h0) > 0).any(axis=1))
+        else:
+            h, outage = self.tracer.cfr(positions, freqs)  # [num_positions, num_subcarriers]
         if gain_normalization == "per_position":
             p = h.abs().pow(2).mean(dim=1, keepdim=True)
             h = torch.where(p > 0, h / p.clamp_min(1e-300).sqrt(), torch.zeros_like(h))
+            p64 = p.numpy().astype(np.float64)
+            scale = np.where(p64 > 0, 1 / np.sqrt(np.maximum(p64, 1e-300)), 0.0)
         else:
             assert reference_path_gain_db is not None  # checked above for "absolute"
             h = h * 10.0 ** (-float(reference_path_gain_db) / 20.0)
+            scale = np.full((len(h), 1), 10.0 ** (-float(reference_path_gain_db) / 20.0))
+        self.scale = scale  # [num_positions, 1] float64, applied to the moving response
         self.tx_positions_m = positions
         self.subcarrier_frequencies_hz = freqs
         self.register_buffer("h", h.to(torch.complex64), persistent=False)
         self.register_buffer("outage", outage, persistent=False)
-        self.stats = self.tracer.stats(positions)
+        self.stats = self.tracer.stats(positions, tx_velocities_m_s if self.movers else None)
 
     @property
     def num_positions(self) -> int:
@@ -138,16 +188,31 @@ class RayTracedChannel(Channel):
                 f"x has batch {batch}, but the channel holds {self.num_positions} positions: "
                 "batch must equal num_positions (or use one position)"
             )
-        h = self.h.to(x.device).expand(batch, -1)
         outage = self.outage.to(x.device).expand(batch)
+        if x.dim() == 3 and x.shape[2] != self.num_subcarriers:
+            raise ValueError(
+                f"x has fft_size {x.shape[2]}, the channel has {self.num_subcarriers} subcarriers"
+            )
+        if self.movers:
+            return self._moving_channel(x).expand(batch, *x.shape[1:]), outage
+        h = self.h.to(x.device).expand(batch, -1)
         if x.dim() == 3:
-            if x.shape[2] != self.num_subcarriers:
-                raise ValueError(
-                    f"x has fft_size {x.shape[2]}, the channel has {self.num_subcarriers} subcarriers"
-                )
             return h[:, None, :], outage
         idx = torch.arange(x.shape[1], device=x.device) % self.num_subcarriers
         return h[:, idx], outage
+
+    def _moving_channel(self, x: Tensor) -> Tensor:
+        """[num_positions, *x.shape[1:]] complex64: each position's response over time."""
+        f, t_sym = self.subcarrier_frequencies_hz, self.ofdm_symbol_duration_s
+        if x.dim() == 3:
+            rows, cols = np.arange(x.shape[1]) * t_sym, None
+        else:
+            rows, cols = flat_symbol_times(x.shape[1], f.size, t_sym / f.size)
+        hn = np.stack([m.response(rows, f, cols) for m in self.movers]) * self.scale[:, :, None]
+        h = torch.from_numpy(hn.astype(np.complex64)).to(x.device)  # [num_positions, rows, F]
+        if x.dim() == 2:
+            h = h.reshape(len(self.movers), -1)[:, : x.shape[1]]  # [num_positions, num_symbols]
+        return h
 
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
         """Args: x [batch, num_symbols] or [batch, num_ofdm_symbols, fft_size] complex64;
@@ -179,25 +244,55 @@ class PerPositionChannel(Channel):
     """A frequency-selective channel fixed by one position (its ray-traced CFR).
 
     Symbol ``k`` of a block rides subcarrier ``k mod num_subcarriers``; the CFR is normalised
-    to unit mean power, so ``snr_db`` is the received SNR of this position.
+    to unit mean power at t = 0, so ``snr_db`` is the received SNR of this position. With a
+    ``mover`` the drone flies on during the block: symbol ``k`` is sent at
+    ``k * symbol_duration_s`` and sees the response at that time (the same normalisation).
 
     Args:
         h: [num_subcarriers] complex64 frequency response.
+        mover: the moving drone (:class:`phy.raytrace.MovingTransmitter`), or None (at rest).
+        subcarrier_frequencies_hz: [num_subcarriers] offsets of ``h``'s subcarriers (with
+            ``mover``).
+        symbol_duration_s: time between successive symbols (with ``mover``), > 0.
     """
 
     kind = "raytraced"
     h: Tensor  # registered buffer
 
-    def __init__(self, h):
+    def __init__(
+        self,
+        h,
+        mover: MovingTransmitter | None = None,
+        subcarrier_frequencies_hz=None,
+        symbol_duration_s: float | None = None,
+    ):
         super().__init__()
         h = torch.as_tensor(np.asarray(h, np.complex64))
         p = float((h.abs() ** 2).mean())
         self.register_buffer("h", h / math.sqrt(p) if p > 0 else h)
+        self.mover = mover if mover is not None and mover.speed_m_s > 0 else None
+        if self.mover is not None:
+            self.symbol_duration_s = _check_duration(symbol_duration_s, "symbol_duration_s")
+            self.freqs = check_frequencies(subcarrier_frequencies_hz)
+            if self.freqs.size != h.numel():
+                raise ValueError(
+                    f"subcarrier_frequencies_hz has {self.freqs.size} entries, h has {h.numel()}"
+                )
+            self.scale = 1 / math.sqrt(p) if p > 0 else 1.0
+
+    def response(self, num_symbols: int) -> Tensor:
+        """[num_symbols] complex64: the (normalised) channel of each symbol of a block."""
+        n = self.h.numel()
+        if self.mover is None:
+            return self.h[torch.arange(num_symbols) % n]
+        rows, cols = flat_symbol_times(num_symbols, n, self.symbol_duration_s)
+        h = self.mover.response(rows, self.freqs, cols).reshape(-1)[:num_symbols] * self.scale
+        return torch.from_numpy(h.astype(np.complex64))
 
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
         validate_snr_db(snr_db)
         n = x.shape[-1]
-        hk = self.h[torch.arange(n) % self.h.numel()].expand(x.shape[0], n)  # [batch, num_symbols]
+        hk = self.response(n).expand(x.shape[0], n)  # [batch, num_symbols]
         nv = float(snr_db_to_noise_var(float(snr_db)))
         noise = torch.complex(
             torch.randn(x.shape, generator=generator), torch.randn(x.shape, generator=generator)

@@ -5,7 +5,10 @@ For one position with valid paths ``i`` of power ``p_i = |a_i|^2`` and delay ``t
 * path gain ``G = sum_i p_i`` (wideband, linear; ``path_gain_db = 10 log10 G``);
 * RMS delay spread ``sqrt(sum p_i tau_i^2 / G - (sum p_i tau_i / G)^2)``;
 * Rician K factor estimate ``max_i p_i / (G - max_i p_i)``: the dominant path against the
-  rest (the LoS path when there is one); ``inf`` for a single path.
+  rest (the LoS path when there is one); ``inf`` for a single path;
+* for a moving transmitter whose paths have Doppler shifts ``f_i``: the mean Doppler
+  ``sum p_i f_i / G`` and the RMS Doppler spread ``sqrt(sum p_i f_i^2 / G - mean^2)``, the
+  power-weighted spread of the Doppler spectrum (0 at rest).
 
 In outage (no path) nothing is NaN: ``path_gain_db = -inf``, delay spread 0, K factor 0.
 """
@@ -30,6 +33,8 @@ class RayStats:
         num_paths: [num_positions] int64 valid paths.
         los: [num_positions] bool, a line-of-sight path exists.
         outage: [num_positions] bool, no path at all.
+        mean_doppler_hz: [num_positions] float64 power-weighted mean Doppler shift.
+        rms_doppler_spread_hz: [num_positions] float64 RMS Doppler spread (0 at rest).
     """
 
     path_gain_db: np.ndarray
@@ -38,6 +43,8 @@ class RayStats:
     num_paths: np.ndarray
     los: np.ndarray
     outage: np.ndarray
+    mean_doppler_hz: np.ndarray
+    rms_doppler_spread_hz: np.ndarray
 
     @property
     def k_factor_db(self) -> np.ndarray:
@@ -60,12 +67,26 @@ class RayStats:
                 "num_paths": int(self.num_paths[i]),
                 "los": bool(self.los[i]),
                 "outage": bool(self.outage[i]),
+                "mean_doppler_hz": float(self.mean_doppler_hz[i]),
+                "rms_doppler_spread_hz": float(self.rms_doppler_spread_hz[i]),
             }
             for i in range(len(self.outage))
         ]
 
 
-def cir_stats(a: np.ndarray, tau_s: np.ndarray, valid: np.ndarray, los: np.ndarray) -> RayStats:
+def _weighted_spread(p: np.ndarray, x: np.ndarray, safe: np.ndarray):
+    """Power-weighted mean and RMS spread of ``x`` over the paths (axis 1)."""
+    mean = (p * x).sum(axis=1) / safe
+    return mean, np.sqrt(np.maximum((p * x**2).sum(axis=1) / safe - mean**2, 0.0))
+
+
+def cir_stats(
+    a: np.ndarray,
+    tau_s: np.ndarray,
+    valid: np.ndarray,
+    los: np.ndarray,
+    doppler_hz: np.ndarray | None = None,
+) -> RayStats:
     """Statistics from padded CIRs.
 
     Args:
@@ -73,6 +94,7 @@ def cir_stats(a: np.ndarray, tau_s: np.ndarray, valid: np.ndarray, los: np.ndarr
         tau_s: [num_positions, max_paths] float delays in seconds.
         valid: [num_positions, max_paths] bool.
         los: [num_positions] bool.
+        doppler_hz: [num_positions, max_paths] float Doppler shifts (None: at rest).
     Returns:
         :class:`RayStats`.
     """
@@ -81,8 +103,9 @@ def cir_stats(a: np.ndarray, tau_s: np.ndarray, valid: np.ndarray, los: np.ndarr
     gain = p.sum(axis=1)
     outage = gain <= 0.0
     safe = np.where(outage, 1.0, gain)
-    mean_tau = (p * tau).sum(axis=1) / safe
-    var_tau = np.maximum((p * tau**2).sum(axis=1) / safe - mean_tau**2, 0.0)
+    _, spread_tau = _weighted_spread(p, tau, safe)
+    fd = np.zeros_like(p) if doppler_hz is None else np.where(valid, doppler_hz, 0.0)
+    mean_fd, spread_fd = _weighted_spread(p, fd.astype(np.float64), safe)
     p_max = p.max(axis=1, initial=0.0)
     rest = gain - p_max
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -91,9 +114,11 @@ def cir_stats(a: np.ndarray, tau_s: np.ndarray, valid: np.ndarray, los: np.ndarr
     k = np.where(outage, 0.0, k)
     return RayStats(
         path_gain_db=path_gain_db,
-        rms_delay_spread_s=np.where(outage, 0.0, np.sqrt(var_tau)),
+        rms_delay_spread_s=np.where(outage, 0.0, spread_tau),
         k_factor=k,
         num_paths=valid.sum(axis=1).astype(np.int64),
         los=np.asarray(los, dtype=bool) & ~outage,
         outage=outage,
+        mean_doppler_hz=np.where(outage, 0.0, mean_fd),
+        rms_doppler_spread_hz=np.where(outage, 0.0, spread_fd),
     )

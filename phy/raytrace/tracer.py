@@ -5,12 +5,14 @@ batch of transmitter (drone) positions it runs sionna-rt's ``PathSolver`` once w
 transmitter per position, keeps each position's channel impulse response (path
 coefficients ``a`` and delays ``tau``, delays relative to the first arrival, i.e. perfect
 timing), and turns it into a frequency response with sionna.phy's ``cir_to_ofdm_channel``.
-Antennas are single isotropic, vertically polarised (SISO). The channel is a snapshot per
-position: no Doppler.
+Antennas are single isotropic, vertically polarised (SISO). A transmitter may move: given
+its velocity, sionna-rt also returns each path's Doppler shift (``Paths.doppler``) and the
+absolute delay of the first arrival, from which :mod:`phy.raytrace.mobility` evolves the
+channel in time. The scene and the receiver are static.
 
 CIRs are cached in-process by (scene, receiver position, carrier, solver settings,
-transmitter position rounded to 0.1 mm), so a trajectory that revisits positions, or a
-second call with other subcarriers, does not trace again.
+transmitter position rounded to 0.1 mm, velocity rounded to 0.1 mm/s), so a trajectory
+that revisits positions, or a second call with other subcarriers, does not trace again.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from torch import Tensor
 from phy.raytrace.scene import import_rt, load_scene, scene_key
 from phy.raytrace.stats import RayStats, cir_stats
 
-_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray, bool]] = {}
+_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray, bool, np.ndarray, float]] = {}
 _CACHE_MAX = 200_000
 _TX_PREFIX = "osnerf_tx_"
 _RX_NAME = "osnerf_rx"
@@ -95,7 +97,7 @@ class RayTracingConfig:
         return out
 
 
-def check_positions(positions_m, name: str = "tx_positions_m") -> np.ndarray:
+def check_positions(positions_m, name: str = "tx_positions_m", unit: str = "metres") -> np.ndarray:
     """[num_positions, 3] float64 metres from an array-like; ``[3]`` becomes ``[1, 3]``.
 
     Raises:
@@ -109,14 +111,14 @@ def check_positions(positions_m, name: str = "tx_positions_m") -> np.ndarray:
         )
     except (TypeError, ValueError):
         raise ValueError(
-            f"{name} must be [num_positions, 3] finite metres, got {positions_m!r}"
+            f"{name} must be [num_positions, 3] finite {unit}, got {positions_m!r}"
         ) from None
     if p.ndim == 1:
         p = p[None]
     if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
-        raise ValueError(f"{name} must be [num_positions, 3] finite metres, got shape {p.shape}")
+        raise ValueError(f"{name} must be [num_positions, 3] finite {unit}, got shape {p.shape}")
     if not np.isfinite(p).all():
-        raise ValueError(f"{name} must be [num_positions, 3] finite metres, got a non-finite value")
+        raise ValueError(f"{name} must be [num_positions, 3] finite {unit}, got a non-finite value")
     return p
 
 
@@ -143,12 +145,18 @@ class RayCIR:
         tau_s: [num_positions, max_paths] float32 delays after the first arrival (0 padding).
         valid: [num_positions, max_paths] bool.
         los: [num_positions] bool, a line-of-sight path exists.
+        doppler_hz: [num_positions, max_paths] float32 Doppler shift of each path (0 for a
+            transmitter at rest, and for padding).
+        first_delay_s: [num_positions] float64 absolute delay of the first arrival (0 in
+            outage); the carrier phase ``a`` leaves out (``a`` uses relative delays).
     """
 
     a: np.ndarray
     tau_s: np.ndarray
     valid: np.ndarray
     los: np.ndarray
+    doppler_hz: np.ndarray
+    first_delay_s: np.ndarray
 
     @property
     def outage(self) -> np.ndarray:
@@ -219,21 +227,30 @@ class RayTracer:
         )
 
     # ------------------------------------------------------------------ tracing
-    def _trace(self, positions: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, bool]]:
-        """Run the path solver for [M, 3] positions; one (a, tau, los) per position."""
+    def _trace(self, positions: np.ndarray, velocities: np.ndarray) -> list[tuple]:
+        """Run the path solver for [M, 3] positions moving at [M, 3] velocities; one
+        (a, tau, los, doppler, first_delay) per position."""
         import mitsuba as mi
 
         rt = import_rt()
         scene = self.scene
         names = [f"{_TX_PREFIX}{i}" for i in range(len(positions))]
-        for name, p in zip(names, positions):
-            scene.add(rt.Transmitter(name, position=mi.Point3f(*map(float, p))))
+        for name, p, v in zip(names, positions, velocities):
+            scene.add(
+                rt.Transmitter(
+                    name,
+                    position=mi.Point3f(*map(float, p)),
+                    velocity=mi.Vector3f(*map(float, v)),
+                )
+            )
         scene.add(rt.Receiver(_RX_NAME, position=mi.Point3f(*map(float, self.rx_position_m))))
         try:
             paths = self._solver(scene, synthetic_array=True, **self.config.solver_kwargs())
             a, tau = paths.cir(normalize_delays=True, out_type="numpy")
             valid = np.asarray(paths.valid.numpy(), dtype=bool)  # [num_rx, num_tx, num_paths]
             inter = np.asarray(paths.interactions.numpy())  # [max_depth, num_rx, num_tx, num_paths]
+            doppler = np.asarray(paths.doppler.numpy())  # [num_rx, num_tx, num_paths]
+            tau_abs = np.asarray(paths.tau.numpy())  # [num_rx, num_tx, num_paths]
             rx_names, tx_names = list(scene.receivers), list(scene.transmitters)
         finally:
             for name in names:
@@ -251,28 +268,51 @@ class RayTracer:
             vi = valid[r, t, :] if valid.size else np.zeros(0, bool)
             vi = vi & (ti >= 0)
             los = bool((vi & (inter[:, r, t, :] == 0).all(axis=0)).any()) if vi.size else False
-            out.append((ai[vi].astype(np.complex64), ti[vi].astype(np.float32), los))
+            di = doppler[r, t, :][vi] if doppler.size else np.zeros(0, np.float32)
+            first = float(tau_abs[r, t, :][vi].min()) if vi.any() else 0.0
+            out.append(
+                (
+                    ai[vi].astype(np.complex64),
+                    ti[vi].astype(np.float32),
+                    los,
+                    di.astype(np.float32),
+                    first,
+                )
+            )
         return out
 
-    def _pos_key(self, p: np.ndarray) -> tuple:
-        return (*self._key, tuple(np.round(p, 4)))
+    def _pos_key(self, p: np.ndarray, v: np.ndarray) -> tuple:
+        return (*self._key, tuple(np.round(p, 4)), tuple(np.round(v, 4)))
 
-    def cir(self, tx_positions_m) -> RayCIR:
+    def cir(self, tx_positions_m, tx_velocities_m_s=None) -> RayCIR:
         """Channel impulse responses for transmitter positions (traced once, then cached).
 
         Args:
             tx_positions_m: [num_positions, 3] (or [3]) metres.
+            tx_velocities_m_s: [num_positions, 3] (or [3]: one for all) metres per second;
+                None: at rest (no Doppler).
         Returns:
             :class:`RayCIR`.
         """
         pos = check_positions(tx_positions_m)
-        keys = [self._pos_key(p) for p in pos]
+        vel = np.zeros_like(pos)
+        if tx_velocities_m_s is not None:
+            v = check_positions(tx_velocities_m_s, "tx_velocities_m_s", "m/s")
+            if v.shape[0] not in (1, len(pos)):
+                raise ValueError(
+                    f"tx_velocities_m_s must be [3] or [num_positions={len(pos)}, 3], "
+                    f"got shape {v.shape}"
+                )
+            vel = np.broadcast_to(v, pos.shape).copy()
+        keys = [self._pos_key(p, v) for p, v in zip(pos, vel)]
         missing = list(dict.fromkeys(k for k in keys if k not in _CACHE))
         if missing:
-            todo = np.array([k[-1] for k in missing], dtype=np.float64)
+            todo = np.array([k[-2] for k in missing], dtype=np.float64)
+            todo_v = np.array([k[-1] for k in missing], dtype=np.float64)
             step = self.config.max_positions_per_call
             for s in range(0, len(todo), step):
-                for k, res in zip(missing[s : s + step], self._trace(todo[s : s + step])):
+                traced = self._trace(todo[s : s + step], todo_v[s : s + step])
+                for k, res in zip(missing[s : s + step], traced):
                     if len(_CACHE) >= _CACHE_MAX:
                         _CACHE.pop(next(iter(_CACHE)))
                     _CACHE[k] = res
@@ -283,10 +323,13 @@ class RayTracer:
         a = np.zeros((n, max_paths), np.complex64)
         tau = np.zeros((n, max_paths), np.float32)
         valid = np.zeros((n, max_paths), bool)
-        for i, (ai, ti, _) in enumerate(entries):
+        doppler = np.zeros((n, max_paths), np.float32)
+        for i, (ai, ti, _, di, _) in enumerate(entries):
             a[i, : len(ai)], tau[i, : len(ti)], valid[i, : len(ai)] = ai, ti, True
+            doppler[i, : len(di)] = di
         los = np.array([e[2] for e in entries], dtype=bool)
-        return RayCIR(a, tau, valid, los)
+        first = np.array([e[4] for e in entries], dtype=np.float64)
+        return RayCIR(a, tau, valid, los, doppler, first)
 
     def cfr(self, tx_positions_m, subcarrier_frequencies_hz) -> tuple[Tensor, Tensor]:
         """Per-subcarrier frequency response for each transmitter position.
@@ -313,7 +356,8 @@ class RayTracer:
         h = torch.where(outage[:, None], torch.zeros_like(h), h)
         return h, outage
 
-    def stats(self, tx_positions_m) -> RayStats:
-        """Path gain, RMS delay spread, K factor, number of paths, LoS and outage per position."""
-        c = self.cir(tx_positions_m)
-        return cir_stats(c.a, c.tau_s, c.valid, c.los)
+    def stats(self, tx_positions_m, tx_velocities_m_s=None) -> RayStats:
+        """Path gain, RMS delay spread, K factor, number of paths, LoS, outage, and (for a
+        moving transmitter) the Doppler spread per position."""
+        c = self.cir(tx_positions_m, tx_velocities_m_s)
+        return cir_stats(c.a, c.tau_s, c.valid, c.los, c.doppler_hz)

@@ -1,0 +1,112 @@
+"""``--drone-speed``: moving drones on the run's ray-traced links, what the report says about
+them, the static links unchanged at rest, and bad speeds refused in one line."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from osnerf.cli import main
+from osnerf.run import RunConfig
+from osnerf.run.links import build_links
+from osnerf.scenes import RenderConfig, build_scene_dataset, flight_velocities, load_scene_views
+
+TINY = RenderConfig(resolution_px=16, num_train_views=4, num_test_views=1, spp=4, mask_spp=1)
+C = 299_792_458.0
+
+
+@pytest.fixture(scope="module")
+def views(tmp_path_factory):
+    folder = build_scene_dataset(
+        "tiny", ("post",), TINY, cache_dir=tmp_path_factory.mktemp("scenes"), progress=False
+    )
+    return load_scene_views(folder)
+
+
+def _cfg(speed: float) -> RunConfig:
+    return RunConfig(scene="tiny", channel="raytraced", drone_speed_m_s=speed, snr_db=10.0)
+
+
+def test_flight_is_level_along_the_ring():
+    meta = {"trajectory_center_m": [1.0, 2.0, 0.0]}
+    pos = np.array([[11.0, 2.0, 5.0], [1.0, -8.0, 9.0], [1.0, 2.0, 20.0]])
+    v = flight_velocities(meta, pos, 15.0)
+    np.testing.assert_allclose(v, [[0.0, 15.0, 0.0], [15.0, 0.0, 0.0], [15.0, 0.0, 0.0]])
+
+
+@pytest.mark.raytracing
+def test_moving_drones_change_the_link_and_the_report_says_so(views):
+    idx = views.indices("train")
+    fc = float(views.meta["carrier_frequency_hz"])
+    links = build_links(_cfg(15.0), views, idx)
+    info = links.info
+    fd = 15.0 * fc / C
+    assert info["drone_speed_m_s"] == 15.0 and info["max_doppler_hz"] == pytest.approx(fd)
+    spreads = np.array(list(info["rms_doppler_spread_hz"].values()))
+    assert len(spreads) == len(idx) and np.all((spreads >= 0) & (spreads <= fd))
+    assert info["median_rms_doppler_spread_hz"] == pytest.approx(np.median(spreads))
+    assert "Doppler" in info["motion"]
+    # the tiny plot's drones see the station in line of sight: the channel of each view
+    # turns, symbol after symbol, at the Doppler shift of the direct path, v . k f_c / c
+    pos = views.drone_positions_m[idx]
+    vel = flight_velocities(views.meta, pos, 15.0)
+    ts = 1.0 / _cfg(15.0).symbol_rate_hz
+    for k, i in enumerate(idx):
+        to_station = np.asarray(views.meta["ground_station_m"]) - pos[k]
+        f_los = vel[k] @ to_station / np.linalg.norm(to_station) * fc / C
+        h = links.links[int(i)].channel.response(64 * 40)
+        same_carrier = np.angle((h[64:] * h[:-64].conj()).numpy())  # 64 symbols apart
+        np.testing.assert_allclose(same_carrier, 2 * math.pi * f_los * 64 * ts, rtol=0.01)
+    assert not torch.allclose(h[:64], h[-64:])
+
+
+@pytest.mark.raytracing
+def test_at_rest_the_run_links_are_the_static_ones(views):
+    from osnerf.scenes import drone_channels
+    from phy import FlatLink
+    from phy.raytrace import PerPositionChannel
+
+    idx = views.indices("train")
+    links = build_links(_cfg(0.0), views, idx)
+    assert links.info["drone_speed_m_s"] == 0.0 and links.info["max_doppler_hz"] == 0.0
+    assert set(links.info["rms_doppler_spread_hz"].values()) == {0.0}
+    static = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
+    x = torch.ones(1, 500, dtype=torch.complex64)
+    for k, i in enumerate(idx):
+        old = FlatLink(PerPositionChannel(static.h[k]), csi="perfect", equalizer="zf")
+        a = old(x, 3.0, generator=torch.Generator().manual_seed(k))
+        b = links.links[int(i)](x, 3.0, generator=torch.Generator().manual_seed(k))
+        assert torch.equal(a.x_hat, b.x_hat) and torch.equal(a.noise_var, b.noise_var)
+
+
+@pytest.mark.parametrize("speed", ["-1", "100.5", "nan", "fast"])
+def test_bad_speed_is_one_line_naming_the_flag_and_range(tmp_path, capsys, speed):
+    out = tmp_path / "run"
+    argv = ["run", "--channel", "raytraced", f"--drone-speed={speed}", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--drone-speed" in err and "[0, 100] m/s" in err
+    assert not out.exists()
+
+
+def test_speed_on_a_channel_without_drones_is_refused(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", "--channel", "rayleigh", "--drone-speed", "15", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--drone-speed" in err and "raytraced" in err
+    assert not out.exists()
+    with pytest.raises(ValueError, match=r"drone_speed_m_s must be in \[0, 100\] m/s"):
+        RunConfig(channel="raytraced", drone_speed_m_s=101.0)
+
+
+def test_report_header_states_speed_and_doppler():
+    from osnerf.report import motion_summary
+
+    link = {"drone_speed_m_s": 15.0, "max_doppler_hz": 175.12, "median_rms_doppler_spread_hz": 0.0}
+    text = motion_summary(link)
+    assert "drone speed 15 m/s" in text and "max Doppler 175.1 Hz" in text
+    assert "RMS Doppler spread 0.0 Hz" in text
+    assert motion_summary({"channel": "awgn"}) == ""
