@@ -44,7 +44,6 @@ _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
 _POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
 _ROWS_PER_PRODUCT = 2048  # segments per matrix product of the segment correlation
 _COMB_BLOCK = 1024  # segments per overlap-save block of the search's comb correlation
-_COMB_BLOCKS_PER_PASS = 2  # overlap-save blocks per FFT call (keeps the temporaries in cache)
 _QUICK = 0.25  # the quick look needs this share of the detection threshold
 _HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
@@ -147,7 +146,7 @@ def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
 
     The taps sit one segment apart, so with ``w`` as rows of ``seg`` samples each column
     (one phase within the segment) is correlated with T dense taps: overlap-save FFTs of
-    ``_COMB_BLOCK`` rows (fewer for a short ``w``), all columns at once.
+    ``_COMB_BLOCK`` rows (fewer for a short ``w``) down the columns, all columns at once.
     """
     taps = comb.size
     nout = w.size - (taps - 1) * seg
@@ -155,22 +154,17 @@ def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
     block = min(_COMB_BLOCK, scipy.fft.next_fast_len(q + taps - 1))
     hop = block - taps + 1
     nb = -(-q // hop)
-    whole = w.size // seg
-    w_rows = w[: whole * seg].reshape(whole, seg)
-    g = _comb_spectrum(comb.tobytes(), block)
-    out = np.empty((nb, hop, seg), np.complex64)
-    for b0 in range(0, nb, _COMB_BLOCKS_PER_PASS):  # a few blocks at a time: cache-sized
-        b1 = min(b0 + _COMB_BLOCKS_PER_PASS, nb)
-        r0, r1 = b0 * hop, (b1 - 1) * hop + block  # rows of w these blocks read
-        wt = np.zeros((seg, r1 - r0), np.complex64)  # [seg, rows]: w by column
-        wt[:, : max(0, min(r1, whole) - r0)] = w_rows[r0:r1].T
-        if r0 <= whole < r1:
-            wt[: w.size - whole * seg, whole - r0] = w[whole * seg :]
-        frames = np.lib.stride_tricks.sliding_window_view(wt, block, axis=-1)[:, ::hop]
-        spec = scipy.fft.fft(frames, axis=-1)  # [seg, blocks, block]
+    need = (nb - 1) * hop + block  # rows of w the blocks read (zeros past its end)
+    padded = np.empty(need * seg, np.complex64)
+    padded[: w.size] = w
+    padded[w.size :] = 0
+    rows = padded.reshape(need, seg)
+    g = _comb_spectrum(comb.tobytes(), block)[:, None]
+    out = np.empty((nb * hop, seg), np.complex64)
+    for i in range(0, nb * hop, hop):  # one block of rows, every column: cache-sized
+        spec = scipy.fft.fft(rows[i : i + block], axis=0)
         spec *= g
-        spec = scipy.fft.ifft(spec, axis=-1, overwrite_x=True)
-        out[b0:b1] = spec[:, :, :hop].transpose(1, 2, 0)
+        out[i : i + hop] = scipy.fft.ifft(spec, axis=0, overwrite_x=True)[:hop]
     return out.reshape(-1)[:nout]
 
 

@@ -1,0 +1,159 @@
+"""The receiver chain as it was before the whole-capture correlation: the reference search
+(:mod:`phy.detection_reference`) and demodulation, kept unchanged for the benchmark's
+side-by-side timing and the equivalence test (the same frames, the same decoded bits).
+
+Only the functions that changed are copied; the rest is :mod:`phy.receiver`'s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from phy import estimation
+from phy.detection_reference import find_preambles
+from phy.frame import FrameConfig, _as_complex_1d
+from phy.ofdm.equalization import EQUALIZERS
+from phy.receiver import (
+    FrameResult,
+    _best_channel,
+    _carrier_sums,
+    _channel,
+    _dc_estimate,
+    _layout,
+    _not_detected,
+    _phasor,
+    _ramp,
+    _row_sums,
+    _windows,
+    _without_dc,
+)
+
+
+def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
+    """:func:`phy.receiver.find_frames` with the reference search."""
+    return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
+
+
+def receive_frame(
+    iq,
+    cfg: FrameConfig = FrameConfig(),
+    num_symbols: int = 1,
+    search_from: int = 0,
+    equalizer: str = "mmse",
+) -> FrameResult:
+    """:func:`phy.receiver.receive_frame` with the reference search and demodulation.
+
+    Args:
+        iq: [num_samples] complex64 (numpy or torch), full scale 1.0.
+        cfg: the frame configuration the transmitter used.
+        num_symbols: payload symbols the frame carries.
+        search_from: sample index where the search starts.
+        equalizer: ``"mmse"`` or ``"zf"`` (see :func:`phy.equalize`).
+    Returns:
+        :class:`FrameResult`; ``detected`` is False when no complete frame was found.
+    """
+    raw = _as_complex_1d(iq, "iq")
+    if not isinstance(num_symbols, int) or num_symbols < 1:
+        raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
+    if equalizer not in EQUALIZERS:
+        raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
+    if not isinstance(search_from, int) or not 0 <= search_from < max(1, raw.size):
+        raise ValueError(f"search_from must be an integer in [0, {raw.size}), got {search_from!r}")
+    length = cfg.num_samples(num_symbols)
+    # a complete frame starts no later than raw.size - length: search only there, and from
+    # one preamble before search_from, so that a preamble cut by search_from is found as
+    # itself (and skipped) rather than through its sidelobes
+    first = max(0, search_from - cfg.sync_length)
+    region = raw[first : max(first, raw.size - length + cfg.sync_length)]
+    for det in find_preambles(_without_dc(region), cfg):
+        start, cfo = det.start + first, det.cfo
+        if search_from <= start and start + length <= raw.size:
+            frame = raw[start : start + length] - _dc_estimate(raw, start, length)
+            res = _demodulate(frame, cfo, num_symbols, cfg, equalizer)
+            res.start_index = int(start)
+            return res
+    return _not_detected(num_symbols)
+
+
+def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
+    """Recover the payload of ``frame`` [length] complex64 (DC removed, starting at the
+    sync preamble's first sample) whose CFO is about ``cfo`` subcarriers."""
+    lay = _layout(cfg, num_symbols)
+    n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
+    used, pk = lay.used, lay.pilots
+    kr, kc = lay.k_row, lay.k_col
+    x_conj = np.conj(lay.x_known)
+    locked = cfg.carrier_freq_hz is not None
+    eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
+    h, slope_hint = None, None
+    for _ in range(4):  # timing-drift iterations (one when it comes from the CFO)
+        tau = eps * lay.times  # [rows] samples of drift
+        shifts = np.clip(np.round(tau), -(cp - cfg.backoff - 1), cfg.backoff).astype(np.int64)
+        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
+        delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
+        # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
+        # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
+        ramp_known = _ramp(delay, kr, kc, n)
+        yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
+        if h is None:  # first look: the two training symbols
+            first = kr < 2
+            h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
+            y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
+            diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
+            noise_var = lts_noise_var = max(float(np.mean(np.abs(diff) ** 2)) / 2, 1e-12)
+        for _ in range(2):
+            a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
+            snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
+            phi, slope = estimation.track_phase(a, snr_row, slope_hint)
+            slope_hint = slope
+            rot = _phasor(-phi)  # [rows]
+            obs = yx * rot[kr]
+            sums = _carrier_sums(obs, lay)
+            # Cp's noise level from the richest model (per-carrier means): unbiased whichever
+            # model is right, so a low training-difference estimate cannot pick a noisy model
+            scatter = float(np.vdot(obs, obs).real) - float(np.sum(np.abs(sums) ** 2 / lay.counts))
+            cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
+            h, factor, taps = _best_channel(sums, lay, cp_noise)
+            dof = max(kr.size - taps - lay.rows, 1)
+            e = obs - h[kc]
+            noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
+        if locked:
+            break
+        data_rows = kr >= 2
+        z = (obs[data_rows] * np.conj(h[kc[data_rows]])).reshape(lay.rows - 2, -1)
+        d_eps = estimation.track_delay(
+            z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
+        )
+        eps += d_eps
+        if abs(d_eps) * lay.times[-1] < 0.02:
+            break
+
+    mse = np.zeros(n, np.float32)
+    mse[used] = noise_var * factor
+    assert h is not None  # set on the loop's first pass
+    h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
+    # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
+    h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+    y_d = y[lay.d_flat]  # [num_symbols] in payload order
+    s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
+    gain = h_d.real * h_d.real + h_d.imag * h_d.imag
+    # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
+    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
+    x_hat = y_d * np.conj(h_d) * inv
+    nv = s_eff * inv
+    signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
+    cfo_total = cfo + slope / (2 * np.pi * s) * n
+    return FrameResult(
+        symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
+        noise_var=torch.from_numpy(np.ascontiguousarray(nv, np.float32)),
+        start_index=-1,
+        cfo_hz=cfo_total * cfg.subcarrier_spacing_hz,
+        cfo_subcarriers=float(cfo_total),
+        sco_ppm=float(eps * 1e6),
+        snr_db_estimate=10 * math.log10(signal / lts_noise_var),
+        detected=True,
+        effective_snr_db=10 * math.log10(signal / noise_var),
+    )
