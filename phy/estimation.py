@@ -15,9 +15,11 @@ it holds at -10 dB per sample where one OFDM symbol's pilots alone do not.
 
 from __future__ import annotations
 
+import cmath
 import math
 
 import numpy as np
+import scipy.fft
 
 PHASE_WINDOW_SNR = 30.0  # per-symbol phases are smoothed over rows until this pooled SNR
 DRIFT_SIGNIFICANCE = 4.0  # a timing drift is kept when it is this many standard errors
@@ -88,15 +90,17 @@ def track_phase(
     idx = np.arange(rows)
     if slope_hint is None:
         m = 4 << max(0, math.ceil(math.log2(max(rows, 1))))
-        spec = np.fft.fft(a, m)
-        w = 2 * np.pi * (((int(np.argmax(np.abs(spec))) / m) + 0.5) % 1.0 - 0.5)
+        spec = scipy.fft.fft(a, m)
+        power = spec.real * spec.real
+        power += spec.imag * spec.imag
+        w = 2 * np.pi * (((int(np.argmax(power)) / m) + 0.5) % 1.0 - 0.5)
     else:
         w = float(slope_hint)
     if rows >= 2:
         b = a * np.exp(-1j * w * idx)
         h = rows // 2
-        w += float(np.angle(b[h : 2 * h].sum() * np.conj(b[:h].sum()))) / h
-    phi0 = float(np.angle(np.sum(a * np.exp(-1j * w * idx))))
+        w += cmath.phase(complex(b[h : 2 * h].sum()) * complex(b[:h].sum()).conjugate()) / h
+    phi0 = cmath.phase(complex(a @ np.exp(-1j * w * idx)))
     line = phi0 + w * idx
     width = int(math.ceil(PHASE_WINDOW_SNR / max(snr_row, 1e-6))) | 1
     if width >= rows:

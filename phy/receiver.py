@@ -110,6 +110,7 @@ class _Layout:
     d_flat: np.ndarray  # [num_symbols] row * fft_size + FFT bin (natural order)
     used: np.ndarray  # used carriers (centred order)
     used_nat: np.ndarray  # their FFT bins (natural order)
+    centred: np.ndarray  # [fft_size] carrier (centred order) of each FFT bin
     pilots: np.ndarray  # pilot carriers (centred order)
     pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
     num_training_values: int  # known entries of the two training rows (come first)
@@ -167,6 +168,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         d_flat=d_row * n + (d_col + n // 2) % n,
         used=used,
         used_nat=(used + n // 2) % n,
+        centred=(np.arange(n) + n // 2) % n,
         pilots=pk,
         pilot_in_used=np.searchsorted(used, pk),
         num_training_values=2 * used.size,
@@ -257,7 +259,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     h, slope_hint = None, None
     for _ in range(4):  # timing-drift iterations (one when it comes from the CFO)
         tau = eps * lay.times  # [rows] samples of drift
-        shifts = np.clip(np.round(tau), -(cp - cfg.backoff - 1), cfg.backoff).astype(np.int64)
+        shifts = np.minimum(np.maximum(np.round(tau), -(cp - cfg.backoff - 1)), cfg.backoff)
+        shifts = shifts.astype(np.int64)
         y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
@@ -269,7 +272,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
             y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
-            noise_var = lts_noise_var = max(float(np.mean(np.abs(diff) ** 2)) / 2, 1e-12)
+            noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         for _ in range(2):
             a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
             snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
@@ -300,9 +303,13 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     assert h is not None  # set on the loop's first pass
-    h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
+    h_nat = h[lay.centred]  # [fft_size] natural order
     # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
-    h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
+        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
+        h_d = h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
+    else:
+        h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
     y_d = y[lay.d_flat]  # [num_symbols] in payload order
     s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
@@ -310,7 +317,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
     x_hat = y_d * np.conj(h_d) * inv
     nv = s_eff * inv
-    signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
+    h_used = h[used]
+    signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
         symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
@@ -329,10 +337,15 @@ def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.n
     """The delay ramp exp(-2 pi j delay[row] f / n) of each row's window at the entries
     (``rows[i]``, carrier ``cols[i]`` in centred order, f = cols - n / 2): [num_entries]
     complex64. One table of n values when every row has the same delay (no timing drift)."""
-    c = np.float32(-2 * np.pi / n)
     if delay.size and np.all(delay == delay[0]):
-        return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (delay[0] * c))[cols]
-    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * c)
+        return _ramp_table(float(delay[0]), n)[cols]
+    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * np.float32(-2 * np.pi / n))
+
+
+def _ramp_table(delay: float, n: int) -> np.ndarray:
+    """[n] complex64: exp(-2 pi j delay f / n) at every carrier f - n / 2 (centred order)."""
+    c = np.float32(-2 * np.pi / n)
+    return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
 
 
 def _phasor(angle: np.ndarray) -> np.ndarray:

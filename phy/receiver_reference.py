@@ -25,7 +25,6 @@ from phy.receiver import (
     _layout,
     _not_detected,
     _phasor,
-    _ramp,
     _row_sums,
     _windows,
     _without_dc,
@@ -107,7 +106,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         for _ in range(2):
             a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
             snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
-            phi, slope = estimation.track_phase(a, snr_row, slope_hint)
+            phi, slope = _track_phase(a, snr_row, slope_hint)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
             obs = yx * rot[kr]
@@ -157,3 +156,51 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
     )
+
+
+def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:
+    """The delay ramp exp(-2 pi j delay[row] f / n) of each row's window at the entries
+    (``rows[i]``, carrier ``cols[i]`` in centred order, f = cols - n / 2): [num_entries]
+    complex64. One table of n values when every row has the same delay (no timing drift)."""
+    c = np.float32(-2 * np.pi / n)
+    if delay.size and np.all(delay == delay[0]):
+        return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (delay[0] * c))[cols]
+    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * c)
+
+
+def _track_phase(
+    a: np.ndarray, snr_row: float, slope_hint: float | None = None
+) -> tuple[np.ndarray, float]:
+    """Common phase of every row from its pilot sums ``a[l] = g exp(j phi[l]) + noise``.
+
+    A line (residual CFO) found by an FFT across rows and refined by the phase between the
+    halves, then the residual smoothed over as many rows as it takes to reach
+    ``estimation.PHASE_WINDOW_SNR`` (1 row at high SNR: tracks phase noise; the line alone when the
+    rows are very noisy).
+
+    Args:
+        a: [num_rows] complex.
+        snr_row: SNR of one row's sum, ``|g|^2 / noise`` (linear).
+        slope_hint: a previous estimate of the slope (skips the FFT search).
+    Returns:
+        (phi [num_rows] float64 radians, slope radians per row).
+    """
+    rows = a.size
+    idx = np.arange(rows)
+    if slope_hint is None:
+        m = 4 << max(0, math.ceil(math.log2(max(rows, 1))))
+        spec = np.fft.fft(a, m)
+        w = 2 * np.pi * (((int(np.argmax(np.abs(spec))) / m) + 0.5) % 1.0 - 0.5)
+    else:
+        w = float(slope_hint)
+    if rows >= 2:
+        b = a * np.exp(-1j * w * idx)
+        h = rows // 2
+        w += float(np.angle(b[h : 2 * h].sum() * np.conj(b[:h].sum()))) / h
+    phi0 = float(np.angle(np.sum(a * np.exp(-1j * w * idx))))
+    line = phi0 + w * idx
+    width = int(math.ceil(estimation.PHASE_WINDOW_SNR / max(snr_row, 1e-6))) | 1
+    if width >= rows:
+        return line, w
+    resid = a * np.exp(-1j * line)
+    return line + np.angle(estimation._moving_sum(resid, width)), w
