@@ -274,7 +274,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         for _ in range(2):
-            a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
+            a = _row_sums_against(yx, np.conj(h), lay)  # [rows]
             snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
             phi, slope = estimation.track_phase(a, snr_row, slope_hint)
             slope_hint = slope
@@ -356,12 +356,12 @@ def _phasor(angle: np.ndarray) -> np.ndarray:
     return out
 
 
-def _row_sums(v: np.ndarray, lay: _Layout) -> np.ndarray:
-    """[rows] complex sums of known-value entries ``v`` [num_known] by row (the training
-    rows come first, then the data rows with the same number of pilots each)."""
+def _row_sums_against(yx: np.ndarray, h_conj: np.ndarray, lay: _Layout) -> np.ndarray:
+    """[rows] sums by row of ``yx * h_conj[k_col]`` (known values) as two matrix products (the training rows
+    hold every used carrier in order, the data rows the pilots in order)."""
     nt = lay.num_training_values
-    head = v[:nt].reshape(2, -1).sum(axis=1)
-    tail = v[nt:].reshape(lay.rows - 2, -1).sum(axis=1)
+    head = yx[:nt].reshape(2, -1) @ h_conj[lay.used]
+    tail = yx[nt:].reshape(lay.rows - 2, -1) @ h_conj[lay.pilots]
     return np.concatenate([head, tail])
 
 

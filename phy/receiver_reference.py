@@ -22,10 +22,10 @@ from phy.receiver import (
     _carrier_sums,
     _channel,
     _dc_estimate,
+    _Layout,
     _layout,
     _not_detected,
     _phasor,
-    _row_sums,
     _windows,
     _without_dc,
 )
@@ -204,3 +204,12 @@ def _track_phase(
         return line, w
     resid = a * np.exp(-1j * line)
     return line + np.angle(estimation._moving_sum(resid, width)), w
+
+
+def _row_sums(v: np.ndarray, lay: _Layout) -> np.ndarray:
+    """[rows] complex sums of known-value entries ``v`` [num_known] by row (the training
+    rows come first, then the data rows with the same number of pilots each)."""
+    nt = lay.num_training_values
+    head = v[:nt].reshape(2, -1).sum(axis=1)
+    tail = v[nt:].reshape(lay.rows - 2, -1).sum(axis=1)
+    return np.concatenate([head, tail])
