@@ -275,7 +275,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         for _ in range(2):
             a = _row_sums_against(yx, np.conj(h), lay)  # [rows]
-            snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
+            h_pk = h[pk]
+            snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
             phi, slope = estimation.track_phase(a, snr_row, slope_hint)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
@@ -283,7 +284,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             sums = _carrier_sums(obs, lay)
             # Cp's noise level from the richest model (per-carrier means): unbiased whichever
             # model is right, so a low training-difference estimate cannot pick a noisy model
-            scatter = float(np.vdot(obs, obs).real) - float(np.sum(np.abs(sums) ** 2 / lay.counts))
+            scatter = float(np.vdot(obs, obs).real) - float(np.vdot(sums, sums / lay.counts).real)
             cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
             h, factor, taps = _best_channel(sums, lay, cp_noise)
             dof = max(kr.size - taps - lay.rows, 1)
@@ -291,8 +292,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
         if locked:
             break
-        data_rows = kr >= 2
-        z = (obs[data_rows] * np.conj(h[kc[data_rows]])).reshape(lay.rows - 2, -1)
+        z = obs[lay.num_training_values :].reshape(lay.rows - 2, -1) * np.conj(h[pk])
         d_eps = estimation.track_delay(
             z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
         )
