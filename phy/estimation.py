@@ -106,6 +106,8 @@ def track_phase(
     if width >= rows:
         return line, w
     resid = a * np.exp(-1j * line)
+    if width == 1:  # each row's own phase (a moving sum over one row is the row)
+        return line + np.angle(resid), w
     return line + np.angle(_moving_sum(resid, width)), w
 
 
