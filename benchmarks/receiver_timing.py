@@ -135,7 +135,7 @@ def rate_run(rate: float, rng: np.random.Generator) -> dict:
     return out
 
 
-def profile(rate: float, rng: np.random.Generator, top: int = 12) -> dict:
+def profile(rate: float, rng: np.random.Generator, top: int = 12, runs: int = 20) -> dict:
     """Where the new chain's time goes: cProfile's own time per function over receive_frame
     and find_frames (shares of the total; the profiler inflates small calls)."""
     cfg = phy.FrameConfig(sample_rate_hz=rate)
@@ -150,7 +150,7 @@ def profile(rate: float, rng: np.random.Generator, top: int = 12) -> dict:
         fn()
         prof = cProfile.Profile()
         prof.enable()
-        for _ in range(5):
+        for _ in range(runs):
             fn()
         prof.disable()
         stats = pstats.Stats(prof).stats  # {(file, line, func): (cc, nc, tt, ct, callers)}
@@ -159,7 +159,7 @@ def profile(rate: float, rng: np.random.Generator, top: int = 12) -> dict:
         out[name] = [
             {
                 "function": f"{k[0].rsplit('/', 1)[-1]}:{k[2]}",
-                "calls_per_run": v[1] / 5,
+                "calls_per_run": v[1] / runs,
                 "own_share": v[2] / total,
                 "cumulative_share": v[3] / total,
             }

@@ -303,13 +303,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     assert h is not None  # set on the loop's first pass
-    h_nat = h[lay.centred]  # [fft_size] natural order
-    # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
-    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
-        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
-        h_d = h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
-    else:
-        h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+    h_d = _model_at_data(h, rot, delay, lay)
     y_d = y[lay.d_flat]  # [num_symbols] in payload order
     s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
@@ -331,6 +325,17 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
     )
+
+
+def _model_at_data(h: np.ndarray, rot: np.ndarray, delay: np.ndarray, lay: _Layout) -> np.ndarray:
+    """The model ``h[k] exp(j phi[l]) ramp[l, k]`` at the payload's data elements only:
+    [num_symbols] complex64 (``rot`` = exp(-j phi) per row, ``h`` in centred order)."""
+    n = lay.fft_size
+    h_nat = h[lay.centred]  # [fft_size] natural order
+    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
+        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
+        return h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
+    return h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
 
 
 def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:
