@@ -97,15 +97,20 @@ def track_phase(
     else:
         w = float(slope_hint)
     if rows >= 2:
-        b = a * np.exp(-1j * w * idx)
+        b = np.exp(-1j * w * idx)  # the line removed, summed over each half
         h = rows // 2
-        w += cmath.phase(complex(b[h : 2 * h].sum()) * complex(b[:h].sum()).conjugate()) / h
-    phi0 = cmath.phase(complex(a @ np.exp(-1j * w * idx)))
+        w += (
+            cmath.phase(complex(a[h : 2 * h] @ b[h : 2 * h]) * complex(a[:h] @ b[:h]).conjugate())
+            / h
+        )
+    unrotated = np.exp(-1j * w * idx)
+    phi0 = cmath.phase(complex(a @ unrotated))
     line = phi0 + w * idx
     width = int(math.ceil(PHASE_WINDOW_SNR / max(snr_row, 1e-6))) | 1
     if width >= rows:
         return line, w
-    resid = a * np.exp(-1j * line)
+    resid = a * unrotated
+    resid *= cmath.exp(-1j * phi0)  # a exp(-j line)
     if width == 1:  # each row's own phase (a moving sum over one row is the row)
         return line + np.angle(resid), w
     return line + np.angle(_moving_sum(resid, width)), w

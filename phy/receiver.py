@@ -305,7 +305,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     assert h is not None  # set on the loop's first pass
     h_d = _model_at_data(h, rot, delay, lay)
     y_d = y[lay.d_flat]  # [num_symbols] in payload order
-    s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
+    s_eff = (noise_var + mse)[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
     # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
     inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
