@@ -144,18 +144,22 @@ def track_delay(
     nb = rows // block
     if nb < 2:
         return 0.0
-    zb = z[: nb * block].reshape(nb, block, -1).sum(axis=1)  # [num_blocks, num_pilots]
-    tb = times[: nb * block].reshape(nb, block).mean(axis=1)
-    g = np.sum(zb[:, pairs + 1] * np.conj(zb[:, pairs]), axis=1)  # [num_blocks]
-    tau = -np.angle(g) / pair_step * fft_size / (2 * np.pi)
+    if block == 1:  # every row a block of its own
+        zb, tb = z, times
+    else:
+        zb = z[: nb * block].reshape(nb, block, -1).sum(axis=1)  # [num_blocks, num_pilots]
+        tb = times[: nb * block].reshape(nb, block).mean(axis=1)
+    g = np.einsum("ij,ij->i", zb[:, pairs + 1], np.conj(zb[:, pairs]))  # [num_blocks]
+    tau = np.angle(g) * (-fft_size / (2 * np.pi * pair_step))
     wgt = np.abs(g)
     sw = max(float(wgt.sum()), 1e-30)
-    tm = float(np.sum(wgt * tb)) / sw
-    sxx = float(np.sum(wgt * (tb - tm) ** 2)) / sw
+    dt = tb - float(wgt @ tb) / sw
+    wdt = wgt * dt
+    sxx = float(wdt @ dt) / sw
     if sxx <= 0 or nb < 4:
         return 0.0
-    slope = float(np.sum(wgt * (tb - tm) * tau)) / sw / sxx
-    resid = tau - (float(np.sum(wgt * tau)) / sw + slope * (tb - tm))
-    var_slope = float(np.sum(wgt * resid**2)) / sw / sxx / (nb - 2)
+    slope = float(wdt @ tau) / sw / sxx
+    resid = tau - (float(wgt @ tau) / sw + slope * dt)
+    var_slope = float(wgt @ (resid * resid)) / sw / sxx / (nb - 2)
     # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
     return slope if slope**2 > DRIFT_SIGNIFICANCE**2 * var_slope else 0.0

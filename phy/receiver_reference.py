@@ -123,9 +123,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             break
         data_rows = kr >= 2
         z = (obs[data_rows] * np.conj(h[kc[data_rows]])).reshape(lay.rows - 2, -1)
-        d_eps = estimation.track_delay(
-            z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
-        )
+        d_eps = _track_delay(z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row)
         eps += d_eps
         if abs(d_eps) * lay.times[-1] < 0.02:
             break
@@ -213,3 +211,48 @@ def _row_sums(v: np.ndarray, lay: _Layout) -> np.ndarray:
     head = v[:nt].reshape(2, -1).sum(axis=1)
     tail = v[nt:].reshape(lay.rows - 2, -1).sum(axis=1)
     return np.concatenate([head, tail])
+
+
+def _track_delay(
+    z: np.ndarray,
+    pairs: np.ndarray,
+    pair_step: int,
+    times: np.ndarray,
+    fft_size: int,
+    snr_row: float,
+) -> float:
+    """Timing drift (samples per sample: the sampling-clock offset) from pilot observations.
+
+    Rows are pooled in blocks until a block's pilots reach ``estimation.PHASE_WINDOW_SNR``; each
+    block's delay comes from the phase step between pilots ``pair_step`` carriers apart;
+    a weighted line through the blocks' delays against time gives the drift.
+
+    Args:
+        z: [num_rows, num_pilots] complex: pilot observations with the channel, common phase
+            and the current drift model removed (about ``|h|^2`` times the residual ramp).
+        pairs: [num_pairs] pilot indices j whose pilot j + 1 sits ``pair_step`` carriers above.
+        times: [num_rows] sample time of each row.
+    Returns:
+        the residual drift (add it to the current model's); 0 when it is not
+        ``estimation.DRIFT_SIGNIFICANCE`` standard errors away from 0.
+    """
+    rows = z.shape[0]
+    block = min(rows, int(math.ceil(estimation.PHASE_WINDOW_SNR / max(snr_row, 1e-6))))
+    nb = rows // block
+    if nb < 2:
+        return 0.0
+    zb = z[: nb * block].reshape(nb, block, -1).sum(axis=1)  # [num_blocks, num_pilots]
+    tb = times[: nb * block].reshape(nb, block).mean(axis=1)
+    g = np.sum(zb[:, pairs + 1] * np.conj(zb[:, pairs]), axis=1)  # [num_blocks]
+    tau = -np.angle(g) / pair_step * fft_size / (2 * np.pi)
+    wgt = np.abs(g)
+    sw = max(float(wgt.sum()), 1e-30)
+    tm = float(np.sum(wgt * tb)) / sw
+    sxx = float(np.sum(wgt * (tb - tm) ** 2)) / sw
+    if sxx <= 0 or nb < 4:
+        return 0.0
+    slope = float(np.sum(wgt * (tb - tm) * tau)) / sw / sxx
+    resid = tau - (float(np.sum(wgt * tau)) / sw + slope * (tb - tm))
+    var_slope = float(np.sum(wgt * resid**2)) / sw / sxx / (nb - 2)
+    # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
+    return slope if slope**2 > estimation.DRIFT_SIGNIFICANCE**2 * var_slope else 0.0

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.signal import resample
 
 import phy
 from phy import detection, detection_reference, receiver_reference
@@ -108,3 +109,24 @@ def test_receiver_decodes_the_reference_bits(case, equalizer):
         frm = new.start_index + 1
         if frm >= r.size:
             break
+
+
+@pytest.mark.parametrize("locked", [False, True])
+def test_receiver_with_clock_drift_decodes_the_reference_bits(locked):
+    """A sampling-clock offset (the window follows the drift, estimated from the pilots or
+    from the CFO when both radios share a crystal) takes the receiver's other paths."""
+    cfg = phy.FrameConfig(carrier_freq_hz=2.4e9) if locked else CFG
+    rng = np.random.default_rng(8)
+    t = phy.build_frame(_qpsk(4000, rng), cfg).astype(np.complex128)
+    t = resample(t, round(t.size * (1 + 80e-6)))  # the receiver samples 80 ppm fast
+    s = np.r_[np.zeros(900), t, np.zeros(700)] * (10 ** (15 / 20) / cfg.rms_amplitude)
+    s = s * np.exp(2j * np.pi * 0.6 * np.arange(s.size) / cfg.fft_size)
+    s += (rng.standard_normal(s.size) + 1j * rng.standard_normal(s.size)) / math.sqrt(2)
+    r = s.astype(np.complex64)
+    new = phy.receive_frame(r, cfg, 4000)
+    ref = receiver_reference.receive_frame(r, cfg, 4000)
+    assert new.detected and (new.start_index, new.detected) == (ref.start_index, ref.detected)
+    assert abs(new.sco_ppm) > 5  # a drift was followed (per-row windows and ramps)
+    assert new.sco_ppm == pytest.approx(ref.sco_ppm, abs=1e-3)
+    assert np.array_equal(_bits(new), _bits(ref))
+    np.testing.assert_allclose(new.symbols.numpy(), ref.symbols.numpy(), atol=1e-3)
