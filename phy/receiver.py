@@ -268,8 +268,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         ramp_known = _ramp(delay, kr, kc, n)
         yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
         if h is None:  # first look: the two training symbols
-            first = kr < 2
-            h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
+            nt = lay.num_training_values  # the training rows' values come first
+            h = _channel(yx[:nt], lay, lay.smoother_training, training_only=True)
             y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
