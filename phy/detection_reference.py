@@ -1,6 +1,6 @@
-"""The frame search as it was before the whole-capture correlation: kept unchanged as the
-reference that the benchmark times beside :mod:`phy.detection` and that the equivalence test
-holds it to (the same frames at the same offsets, the same CFOs to rounding).
+"""The previous implementation of the frame search, kept unchanged as the reference that the
+benchmark times beside :mod:`phy.detection` and that the equivalence test holds it to (the
+same frames at the same offsets, the same CFOs to rounding).
 
 The statistics are :mod:`phy.detection`'s (see its docstring); only the way they are computed
 differs there.

@@ -1,8 +1,9 @@
-"""The receiver chain as it was before the whole-capture correlation: the reference search
+"""The previous implementation of the receiver chain: the reference search
 (:mod:`phy.detection_reference`) and demodulation, kept unchanged for the benchmark's
 side-by-side timing and the equivalence test (the same frames, the same decoded bits).
 
-Only the functions that changed are copied; the rest is :mod:`phy.receiver`'s.
+Only the functions that changed are copied (with the estimators they called); the rest is
+:mod:`phy.receiver`'s and :mod:`phy.estimation`'s.
 """
 
 from __future__ import annotations
