@@ -1,13 +1,14 @@
 """phy throughput: channel simulation rate per channel (with sionna's AWGN side by side),
 OFDM link rate, and the over-the-air receiver chain (detection + sync + OFDM demodulation +
-estimation + equalisation) in samples/s against real time at 20 MS/s.
+estimation + equalisation) in samples/s against real time at 20 MS/s; then the chain stage by
+stage at 2, 10 and 20 MS/s beside the reference implementation, with a profile
+(:mod:`benchmarks.receiver_timing`).
 
 Timings are wall-clock medians on a shared machine: read ratios, not absolute numbers.
 """
 
 from __future__ import annotations
 
-import math
 import statistics
 import time
 from pathlib import Path
@@ -16,6 +17,7 @@ import numpy as np
 import torch
 
 import phy
+from benchmarks import receiver_timing
 
 REPEATS = 5
 
@@ -88,18 +90,7 @@ def _links(gen: torch.Generator) -> dict:
     return out
 
 
-def _frame_capture(rng, cfg, n: int, snr_db: float, cfo: float) -> tuple[np.ndarray, np.ndarray]:
-    """(payload [n] QPSK, capture [2000 + frame + 2000] complex64): multipath, CFO, AWGN."""
-    bits = rng.integers(0, 2, size=(n, 2))
-    x = (((1 - 2 * bits[:, 0]) + 1j * (1 - 2 * bits[:, 1])) / math.sqrt(2)).astype(np.complex64)
-    t = phy.build_frame(x, cfg)
-    s = np.r_[np.zeros(2000), t, np.zeros(2000)].astype(np.complex128)
-    s = np.convolve(s, [1, 0, 0.4j, 0, 0.2])[: s.size] * np.exp(
-        2j * np.pi * cfo * np.arange(s.size) / cfg.fft_size
-    )
-    nv = np.mean(np.abs(t) ** 2) * 10 ** (-snr_db / 10)
-    r = s + math.sqrt(nv / 2) * (rng.standard_normal(s.size) + 1j * rng.standard_normal(s.size))
-    return x, r.astype(np.complex64)
+_frame_capture = receiver_timing.frame_capture
 
 
 def _receiver(rng: np.random.Generator) -> dict:
@@ -154,4 +145,5 @@ def run(out_dir: Path) -> dict:
         "channels": _channels(gen),
         "links": _links(gen),
         "receiver_chain": _receiver(np.random.default_rng(0)),
+        "receiver_stages": receiver_timing.run_all(np.random.default_rng(1)),
     }

@@ -34,8 +34,6 @@ import numpy as np
 import scipy.fft
 from scipy import stats
 
-from phy.sync import correct_cfo
-
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
 # sample passes it, high enough that few noise samples reach the coherent check
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
@@ -44,7 +42,6 @@ _CHUNK = 1 << 18  # samples per search chunk (bounded memory for long captures)
 _POWER_BLOCK = 64  # samples per block of the search's noise-level estimate
 _ROWS_PER_PRODUCT = 2048  # segments per matrix product of the segment correlation
 _COMB_BLOCK = 1024  # segments per overlap-save block of the search's comb correlation
-_COMB_BLOCKS_PER_PASS = 2  # overlap-save blocks per FFT call (keeps the temporaries in cache)
 _QUICK = 0.25  # the quick look needs this share of the detection threshold
 _HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
@@ -147,7 +144,7 @@ def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
 
     The taps sit one segment apart, so with ``w`` as rows of ``seg`` samples each column
     (one phase within the segment) is correlated with T dense taps: overlap-save FFTs of
-    ``_COMB_BLOCK`` rows (fewer for a short ``w``), all columns at once.
+    ``_COMB_BLOCK`` rows (fewer for a short ``w``) down the columns, all columns at once.
     """
     taps = comb.size
     nout = w.size - (taps - 1) * seg
@@ -155,22 +152,17 @@ def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
     block = min(_COMB_BLOCK, scipy.fft.next_fast_len(q + taps - 1))
     hop = block - taps + 1
     nb = -(-q // hop)
-    whole = w.size // seg
-    w_rows = w[: whole * seg].reshape(whole, seg)
-    g = _comb_spectrum(comb.tobytes(), block)
-    out = np.empty((nb, hop, seg), np.complex64)
-    for b0 in range(0, nb, _COMB_BLOCKS_PER_PASS):  # a few blocks at a time: cache-sized
-        b1 = min(b0 + _COMB_BLOCKS_PER_PASS, nb)
-        r0, r1 = b0 * hop, (b1 - 1) * hop + block  # rows of w these blocks read
-        wt = np.zeros((seg, r1 - r0), np.complex64)  # [seg, rows]: w by column
-        wt[:, : max(0, min(r1, whole) - r0)] = w_rows[r0:r1].T
-        if r0 <= whole < r1:
-            wt[: w.size - whole * seg, whole - r0] = w[whole * seg :]
-        frames = np.lib.stride_tricks.sliding_window_view(wt, block, axis=-1)[:, ::hop]
-        spec = scipy.fft.fft(frames, axis=-1)  # [seg, blocks, block]
+    need = (nb - 1) * hop + block  # rows of w the blocks read (zeros past its end)
+    padded = np.empty(need * seg, np.complex64)
+    padded[: w.size] = w
+    padded[w.size :] = 0
+    rows = padded.reshape(need, seg)
+    g = _comb_spectrum(comb.tobytes(), block)[:, None]
+    out = np.empty((nb * hop, seg), np.complex64)
+    for i in range(0, nb * hop, hop):  # one block of rows, every column: cache-sized
+        spec = scipy.fft.fft(rows[i : i + block], axis=0)
         spec *= g
-        spec = scipy.fft.ifft(spec, axis=-1, overwrite_x=True)
-        out[b0:b1] = spec[:, :, :hop].transpose(1, 2, 0)
+        out[i : i + hop] = scipy.fft.ifft(spec, axis=0, overwrite_x=True)[:hop]
     return out.reshape(-1)[:nout]
 
 
@@ -186,24 +178,21 @@ def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     w = np.conj(c[:-seg])
     w *= c[seg:]  # [num_samples - 2L + 1]: neighbouring segments
     d = _comb_correlate(w, comb, seg)  # [num_samples - N + 1]
-    sq = d.view(np.float32).reshape(-1, 2)
-    np.square(sq, out=sq)
-    power = sq[:, 0] + sq[:, 1]
+    power = d.real * d.real
+    power += d.imag * d.imag
     nb = -(-power.size // _POWER_BLOCK)
     per = n // _POWER_BLOCK
     # the variance of D is (K - 1) E|w|^2: estimated from w itself, block-wise (for white
     # noise E|w|^2 = (E|c|^2)^2; OFDM data, whose tones repeat from segment to segment,
     # has twice that, and normalising by |c|^2 would let it through 8 times as often)
     wv = w.view(np.float32)
-    w2 = np.square(wv)
-    p = w2[0::2] + w2[1::2]  # |w|^2
-    whole = p.size // _POWER_BLOCK
+    whole = w.size // _POWER_BLOCK
     sums = np.zeros(nb + per, np.float64)
-    sums[: min(whole, sums.size)] = (
-        p[: whole * _POWER_BLOCK].reshape(whole, -1).sum(1, dtype=np.float64)[: sums.size]
-    )
+    head = wv[: whole * 2 * _POWER_BLOCK].reshape(whole, -1)[: sums.size]
+    sums[: head.shape[0]] = np.einsum("ij,ij->i", head, head)  # |w|^2 per block
     if whole < sums.size:
-        sums[whole] = float(np.sum(p[whole * _POWER_BLOCK :], dtype=np.float64))
+        tail = wv[whole * 2 * _POWER_BLOCK :].astype(np.float64)
+        sums[whole] = float(tail @ tail)
     cs = np.concatenate([[0.0], np.cumsum(sums)])
     level = (cs[per : per + nb] - cs[:nb]) / n  # mean |w|^2 over each block's window
     return c, power, ((k - 1) * np.maximum(level, 1e-30)).astype(np.float32)
@@ -224,10 +213,12 @@ def coherent_metric(
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
     k = cover.size
-    v = c[lags[:, None] + seg * np.arange(k)[None, :]]  # [num_lags, K]
-    v *= cover.astype(np.float32)
-    spec = scipy.fft.fft(v, _OVERSAMPLE * k, axis=-1)
-    q = (spec.real**2 + spec.imag**2) / (k * seg * np.maximum(energy, 1e-30))[:, None]
+    v = np.zeros((lags.size, _OVERSAMPLE * k), np.complex64)  # zero-padded rows
+    np.multiply(c[lags[:, None] + seg * np.arange(k)], cover.astype(np.float32), out=v[:, :k])
+    spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)
+    p = spec.real * spec.real
+    p += spec.imag * spec.imag
+    q = p / (k * seg * np.maximum(energy, 1e-30))[:, None]
     return q, spec
 
 
@@ -257,6 +248,13 @@ def _half_sample_base(cfg) -> np.ndarray:
     seg = base.size
     j = np.fft.fftfreq(seg) * seg  # signed line index
     return np.fft.ifft(np.fft.fft(base) * np.exp(-1j * np.pi * j / seg)).astype(np.complex64)
+
+
+@functools.lru_cache(maxsize=16)
+def _preamble(cfg) -> np.ndarray:
+    """[N] complex64: the sync preamble at unit power, ``cover[j // L] base[j % L]``."""
+    base, cover, _ = _search_plan(cfg)
+    return (cover[:, None] * base[None, :]).reshape(-1).astype(np.complex64)
 
 
 def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
@@ -308,10 +306,13 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # skews the correlation's peak by a sample at the edge of the CFO range, so the
     # strongest path is looked for again there)
     early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
-    region = x[early[0] : early[-1] + n]
-    region = correct_cfo(region, f * cfg.fft_size, cfg.fft_size)
-    c_f = segment_correlation(region, _search_plan(cfg)[0])  # timing on the grid
-    qf = np.abs(_segment_sums(c_f, early - early[0], cover, seg, 0.0).sum(axis=1)) ** 2
+    # (the whole preamble with f applied against the region: the same sums as correlating
+    # the corrected region segment by segment; exp(2j pi f (k L + m)) as segment x sample)
+    ramp = np.multiply.outer(
+        np.exp(2j * np.pi * f * seg * np.arange(k)), np.exp(2j * np.pi * f * np.arange(seg))
+    )
+    template = _preamble(cfg) * ramp.reshape(-1).astype(np.complex64)
+    qf = np.abs(np.correlate(x[early[0] : early[-1] + n], template, "valid")) ** 2
     qf /= n * np.maximum(energy[early - lo], 1e-30)
     near = np.abs(early - peak) <= 2
     best = int(np.flatnonzero(near)[np.argmax(qf[near])])

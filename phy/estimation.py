@@ -15,9 +15,11 @@ it holds at -10 dB per sample where one OFDM symbol's pilots alone do not.
 
 from __future__ import annotations
 
+import cmath
 import math
 
 import numpy as np
+import scipy.fft
 
 PHASE_WINDOW_SNR = 30.0  # per-symbol phases are smoothed over rows until this pooled SNR
 DRIFT_SIGNIFICANCE = 4.0  # a timing drift is kept when it is this many standard errors
@@ -88,20 +90,29 @@ def track_phase(
     idx = np.arange(rows)
     if slope_hint is None:
         m = 4 << max(0, math.ceil(math.log2(max(rows, 1))))
-        spec = np.fft.fft(a, m)
-        w = 2 * np.pi * (((int(np.argmax(np.abs(spec))) / m) + 0.5) % 1.0 - 0.5)
+        spec = scipy.fft.fft(a, m)
+        power = spec.real * spec.real
+        power += spec.imag * spec.imag
+        w = 2 * np.pi * (((int(np.argmax(power)) / m) + 0.5) % 1.0 - 0.5)
     else:
         w = float(slope_hint)
     if rows >= 2:
-        b = a * np.exp(-1j * w * idx)
+        b = np.exp(-1j * w * idx)  # the line removed, summed over each half
         h = rows // 2
-        w += float(np.angle(b[h : 2 * h].sum() * np.conj(b[:h].sum()))) / h
-    phi0 = float(np.angle(np.sum(a * np.exp(-1j * w * idx))))
+        w += (
+            cmath.phase(complex(a[h : 2 * h] @ b[h : 2 * h]) * complex(a[:h] @ b[:h]).conjugate())
+            / h
+        )
+    unrotated = np.exp(-1j * w * idx)
+    phi0 = cmath.phase(complex(a @ unrotated))
     line = phi0 + w * idx
     width = int(math.ceil(PHASE_WINDOW_SNR / max(snr_row, 1e-6))) | 1
     if width >= rows:
         return line, w
-    resid = a * np.exp(-1j * line)
+    resid = a * unrotated
+    resid *= cmath.exp(-1j * phi0)  # a exp(-j line)
+    if width == 1:  # each row's own phase (a moving sum over one row is the row)
+        return line + np.angle(resid), w
     return line + np.angle(_moving_sum(resid, width)), w
 
 
@@ -133,18 +144,22 @@ def track_delay(
     nb = rows // block
     if nb < 2:
         return 0.0
-    zb = z[: nb * block].reshape(nb, block, -1).sum(axis=1)  # [num_blocks, num_pilots]
-    tb = times[: nb * block].reshape(nb, block).mean(axis=1)
-    g = np.sum(zb[:, pairs + 1] * np.conj(zb[:, pairs]), axis=1)  # [num_blocks]
-    tau = -np.angle(g) / pair_step * fft_size / (2 * np.pi)
+    if block == 1:  # every row a block of its own
+        zb, tb = z, times
+    else:
+        zb = z[: nb * block].reshape(nb, block, -1).sum(axis=1)  # [num_blocks, num_pilots]
+        tb = times[: nb * block].reshape(nb, block).mean(axis=1)
+    g = np.einsum("ij,ij->i", zb[:, pairs + 1], np.conj(zb[:, pairs]))  # [num_blocks]
+    tau = np.angle(g) * (-fft_size / (2 * np.pi * pair_step))
     wgt = np.abs(g)
     sw = max(float(wgt.sum()), 1e-30)
-    tm = float(np.sum(wgt * tb)) / sw
-    sxx = float(np.sum(wgt * (tb - tm) ** 2)) / sw
+    dt = tb - float(wgt @ tb) / sw
+    wdt = wgt * dt
+    sxx = float(wdt @ dt) / sw
     if sxx <= 0 or nb < 4:
         return 0.0
-    slope = float(np.sum(wgt * (tb - tm) * tau)) / sw / sxx
-    resid = tau - (float(np.sum(wgt * tau)) / sw + slope * (tb - tm))
-    var_slope = float(np.sum(wgt * resid**2)) / sw / sxx / (nb - 2)
+    slope = float(wdt @ tau) / sw / sxx
+    resid = tau - (float(wgt @ tau) / sw + slope * dt)
+    var_slope = float(wgt @ (resid * resid)) / sw / sxx / (nb - 2)
     # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
     return slope if slope**2 > DRIFT_SIGNIFICANCE**2 * var_slope else 0.0

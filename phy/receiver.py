@@ -110,6 +110,7 @@ class _Layout:
     d_flat: np.ndarray  # [num_symbols] row * fft_size + FFT bin (natural order)
     used: np.ndarray  # used carriers (centred order)
     used_nat: np.ndarray  # their FFT bins (natural order)
+    centred: np.ndarray  # [fft_size] carrier (centred order) of each FFT bin
     pilots: np.ndarray  # pilot carriers (centred order)
     pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
     num_training_values: int  # known entries of the two training rows (come first)
@@ -167,6 +168,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         d_flat=d_row * n + (d_col + n // 2) % n,
         used=used,
         used_nat=(used + n // 2) % n,
+        centred=(np.arange(n) + n // 2) % n,
         pilots=pk,
         pilot_in_used=np.searchsorted(used, pk),
         num_training_values=2 * used.size,
@@ -257,7 +259,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     h, slope_hint = None, None
     for _ in range(4):  # timing-drift iterations (one when it comes from the CFO)
         tau = eps * lay.times  # [rows] samples of drift
-        shifts = np.clip(np.round(tau), -(cp - cfg.backoff - 1), cfg.backoff).astype(np.int64)
+        shifts = np.minimum(np.maximum(np.round(tau), -(cp - cfg.backoff - 1)), cfg.backoff)
+        shifts = shifts.astype(np.int64)
         y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
@@ -265,14 +268,15 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         ramp_known = _ramp(delay, kr, kc, n)
         yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
         if h is None:  # first look: the two training symbols
-            first = kr < 2
-            h = _channel(yx[first], lay, lay.smoother_training, training_only=True)
+            nt = lay.num_training_values  # the training rows' values come first
+            h = _channel(yx[:nt], lay, lay.smoother_training, training_only=True)
             y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
-            noise_var = lts_noise_var = max(float(np.mean(np.abs(diff) ** 2)) / 2, 1e-12)
+            noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         for _ in range(2):
-            a = _row_sums(yx * np.conj(h[kc]), lay)  # [rows]
-            snr_row = float(np.sum(np.abs(h[pk]) ** 2)) / noise_var  # one data row's sum
+            a = _row_sums_against(yx, np.conj(h), lay)  # [rows]
+            h_pk = h[pk]
+            snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
             phi, slope = estimation.track_phase(a, snr_row, slope_hint)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
@@ -280,7 +284,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             sums = _carrier_sums(obs, lay)
             # Cp's noise level from the richest model (per-carrier means): unbiased whichever
             # model is right, so a low training-difference estimate cannot pick a noisy model
-            scatter = float(np.vdot(obs, obs).real) - float(np.sum(np.abs(sums) ** 2 / lay.counts))
+            scatter = float(np.vdot(obs, obs).real) - float(np.vdot(sums, sums / lay.counts).real)
             cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
             h, factor, taps = _best_channel(sums, lay, cp_noise)
             dof = max(kr.size - taps - lay.rows, 1)
@@ -288,8 +292,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
         if locked:
             break
-        data_rows = kr >= 2
-        z = (obs[data_rows] * np.conj(h[kc[data_rows]])).reshape(lay.rows - 2, -1)
+        z = obs[lay.num_training_values :].reshape(lay.rows - 2, -1) * np.conj(h[pk])
         d_eps = estimation.track_delay(
             z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
         )
@@ -300,17 +303,16 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     assert h is not None  # set on the loop's first pass
-    h_nat = np.fft.ifftshift(h).astype(np.complex64)  # [fft_size] natural order
-    # the model h[k] exp(j phi[l]) ramp[l, k] at the payload's data elements only
-    h_d = h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+    h_d = _model_at_data(h, rot, delay, lay)
     y_d = y[lay.d_flat]  # [num_symbols] in payload order
-    s_eff = noise_var + mse[lay.d_col]  # noise plus channel-estimation error (unit-power x)
+    s_eff = (noise_var + mse)[lay.d_col]  # noise plus channel-estimation error (unit-power x)
     gain = h_d.real * h_d.real + h_d.imag * h_d.imag
     # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
     inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
     x_hat = y_d * np.conj(h_d) * inv
     nv = s_eff * inv
-    signal = max(float(np.mean(np.abs(h[used]) ** 2 - mse[used])), 1e-30)
+    h_used = h[used]
+    signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
     return FrameResult(
         symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
@@ -325,14 +327,30 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     )
 
 
+def _model_at_data(h: np.ndarray, rot: np.ndarray, delay: np.ndarray, lay: _Layout) -> np.ndarray:
+    """The model ``h[k] exp(j phi[l]) ramp[l, k]`` at the payload's data elements only:
+    [num_symbols] complex64 (``rot`` = exp(-j phi) per row, ``h`` in centred order)."""
+    n = lay.fft_size
+    h_nat = h[lay.centred]  # [fft_size] natural order
+    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
+        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
+        return h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
+    return h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
+
+
 def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.ndarray:
     """The delay ramp exp(-2 pi j delay[row] f / n) of each row's window at the entries
     (``rows[i]``, carrier ``cols[i]`` in centred order, f = cols - n / 2): [num_entries]
     complex64. One table of n values when every row has the same delay (no timing drift)."""
-    c = np.float32(-2 * np.pi / n)
     if delay.size and np.all(delay == delay[0]):
-        return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (delay[0] * c))[cols]
-    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * c)
+        return _ramp_table(float(delay[0]), n)[cols]
+    return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * np.float32(-2 * np.pi / n))
+
+
+def _ramp_table(delay: float, n: int) -> np.ndarray:
+    """[n] complex64: exp(-2 pi j delay f / n) at every carrier f - n / 2 (centred order)."""
+    c = np.float32(-2 * np.pi / n)
+    return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
 
 
 def _phasor(angle: np.ndarray) -> np.ndarray:
@@ -343,12 +361,12 @@ def _phasor(angle: np.ndarray) -> np.ndarray:
     return out
 
 
-def _row_sums(v: np.ndarray, lay: _Layout) -> np.ndarray:
-    """[rows] complex sums of known-value entries ``v`` [num_known] by row (the training
-    rows come first, then the data rows with the same number of pilots each)."""
+def _row_sums_against(yx: np.ndarray, h_conj: np.ndarray, lay: _Layout) -> np.ndarray:
+    """[rows] sums by row of ``yx * h_conj[k_col]`` (known values) as two matrix products (the training rows
+    hold every used carrier in order, the data rows the pilots in order)."""
     nt = lay.num_training_values
-    head = v[:nt].reshape(2, -1).sum(axis=1)
-    tail = v[nt:].reshape(lay.rows - 2, -1).sum(axis=1)
+    head = yx[:nt].reshape(2, -1) @ h_conj[lay.used]
+    tail = yx[nt:].reshape(lay.rows - 2, -1) @ h_conj[lay.pilots]
     return np.concatenate([head, tail])
 
 
