@@ -4,6 +4,7 @@
 """
 
 from phy.raytrace.channel import GAIN_NORMALIZATIONS, PerPositionChannel, RayTracedChannel
+from phy.raytrace.radiomap import RadioMap, RadioMapConfig, radio_map
 from phy.raytrace.scene import builtin_scenes, load_scene
 from phy.raytrace.stats import RayStats, cir_stats
 from phy.raytrace.tracer import (
@@ -16,6 +17,8 @@ from phy.raytrace.tracer import (
 
 __all__ = [
     "GAIN_NORMALIZATIONS",
+    "RadioMap",
+    "RadioMapConfig",
     "RayCIR",
     "RayStats",
     "PerPositionChannel",
@@ -27,4 +30,5 @@ __all__ = [
     "cir_stats",
     "clear_cache",
     "load_scene",
+    "radio_map",
 ]
