@@ -42,6 +42,8 @@ CONFIG_FIELDS = (
     "renderer_steps",
     "refine_steps",
     "layer_fusion",
+    "view_selection",
+    "max_views",
 )
 FLAGS = {
     "resolution_px": "--resolution",
@@ -76,6 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import RUN_CHANNELS, RunConfig
     from osnerf.schemes import SCHEMES, parse_schemes
+    from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
     from semcodec import IMAGE_CODECS
 
@@ -98,6 +101,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "renderer_steps": checks.count(0, 100_000),
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
+            "max_views": checks.count(1, 512),
         },
         choices={
             "channel": RUN_CHANNELS,
@@ -105,6 +109,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "image_codec": tuple(IMAGE_CODECS),
             "ota_device": OTA_DEVICES,
             "nerf_clock": ("wall", "cpu"),
+            "view_selection": tuple(VIEW_SELECTIONS),
         },
     )
     schemes = next(a for a in p._actions if a.dest == "schemes")

@@ -211,6 +211,14 @@ def run_pipeline(
     col = prep.scu.collect(views)
     links = build_links(cfg, views, col.candidates)
     try:
+        if cfg.view_selection != "sight" or cfg.max_views is not None:
+            col = prep.scu.choose_views(
+                col,
+                links.snr_db,
+                view_directions(views, prep.demand.objects),
+                cfg.view_selection,
+                cfg.max_views,
+            )
         codec = prep.codec
         plan, col = prep.scu.plan_run(
             collection=col,
@@ -268,6 +276,13 @@ def run_pipeline(
         "received": received,
         "renders": renders,
     }
+
+
+def view_directions(views: SceneViews, objects) -> dict[int, np.ndarray]:
+    """view -> [3] from the centre of the objects' bounds to the view's drone (metres)."""
+    b = np.asarray([views.meta["object_aabb"][o] for o in objects], np.float64)  # [k, 2, 3]
+    centre = (b[:, 0].min(0) + b[:, 1].max(0)) / 2
+    return {k: p - centre for k, p in enumerate(views.drone_positions_m)}
 
 
 def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) -> dict:

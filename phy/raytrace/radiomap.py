@@ -138,7 +138,8 @@ def radio_map(
     sc.rx_array = rt.PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
     sc.add(rt.Transmitter(_TX_NAME, position=mi.Point3f(*map(float, tx[0]))))
     solver = rt.RadioMapSolver()
-    layers, x, y = [], None, None
+    layers: list[np.ndarray] = []
+    x = y = np.zeros(0)
     try:
         for z in alt:
             rm = solver(
