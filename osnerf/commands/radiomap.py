@@ -82,8 +82,7 @@ def _finite_or_none(a: np.ndarray) -> list:
 
 def run(args: argparse.Namespace) -> int:
     import phy.raytrace as prt
-    from common import write_files
-    from common.files import to_json
+    from common import to_json, write_files
     from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header
     from osnerf.scenes import DEFAULT_SCENE, RenderConfig, get_scene
