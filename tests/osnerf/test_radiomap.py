@@ -11,6 +11,7 @@ import pytest
 from osnerf.cli import main
 
 
+@pytest.mark.raytracing
 def test_radiomap_writes_picture_numbers_and_provenance(tmp_path, capsys):
     out = tmp_path / "map"
     argv = ["radiomap", "--scene", "tiny", "--out", str(out), "--views", "4"]
@@ -55,6 +56,7 @@ def _crosses(p, q, lo, hi) -> bool:
     return t0 <= t1
 
 
+@pytest.mark.raytracing
 def test_the_shed_shadows_the_drones_whose_line_to_the_station_crosses_it():
     """The same drone ring on firefighter and firefighter_shadow: the drones whose straight
     line to the ground station crosses the shed (3 m tall, above every drone and the

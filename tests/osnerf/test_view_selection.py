@@ -143,3 +143,31 @@ def test_bad_selection_flags_are_one_line_errors(tmp_path, capsys, extra, messag
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not out.exists()
+
+
+@pytest.mark.raytracing
+def test_a_raytraced_run_sends_the_views_the_rule_chose(tmp_path):
+    """End to end on the tiny scene over ray-traced links: ``radio`` sends the visible views
+    with the highest link SNR, the default (sight) every visible view; the report names the
+    rule and each chosen view's reasons."""
+    import json
+
+    small = ["--scene", "tiny", "--channel", "raytraced", "--snr-db", "5", "--schemes", "gt"]
+    small += ["--resolution", "24", "--views", "8", "--test-views", "1", "--nerf-steps", "5"]
+    small += ["--renderer-steps", "0", "--cache-dir", str(tmp_path / "cache")]
+    assert main(["run", *small, "--out", str(tmp_path / "sight")]) == 0
+    assert main(["run", *small, "--view-selection", "radio", "--max-views", "2",
+                 "--out", str(tmp_path / "radio")]) == 0  # fmt: skip
+    sight = json.loads((tmp_path / "sight" / "report.json").read_text())
+    radio = json.loads((tmp_path / "radio" / "report.json").read_text())
+    visible = [v for v in sight["views"]["candidates"] if str(v) not in sight["views"]["not_sent"]]
+    visible = [v for v in visible if v not in sight["views"]["outage"]]
+    assert sight["views"]["sent_on_demand"] == visible and len(visible) > 2
+    assert not [d for d in sight["scu_decisions"] if d["stage"] == "selection"]
+    snr = {int(k): v for k, v in radio["views"]["link_snr_db"].items()}
+    best = sorted(visible, key=lambda v: (-snr[v], v))[:2]
+    assert sorted(radio["views"]["sent_on_demand"]) == sorted(best)
+    assert radio["config"]["view_selection"] == "radio" and radio["config"]["max_views"] == 2
+    log = [d for d in radio["scu_decisions"] if d["stage"] == "selection"]
+    assert log[0]["views"] == best and [d["view"] for d in log[1:]] == best
+    assert [d["expected_snr_db"] for d in log[1:]] == pytest.approx([snr[v] for v in best])
