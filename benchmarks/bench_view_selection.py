@@ -4,7 +4,8 @@ On ``firefighter_shadow`` (a shed blocks the radio paths of the drones on the hy
 side; their cameras still see it) with ``--channel raytraced`` (the SNR is set at the
 median drone position, so a shadowed drone receives less), ``osnerf run`` sends
 ``MAX_VIEWS`` on-demand views chosen by ``--view-selection sight`` (greedy coverage of the
-viewing directions) and by ``joint`` (coverage gain times link quality), for each seed.
+viewing directions) and by ``joint`` (coverage gain times link quality), for each seed,
+at two SNRs (at the median position).
 Records each scheme's object PSNR, the views each selection chose with their expected SNR,
 and draws the scene's radio map with both selections marked (``radiomap.png``).
 Small settings (48 px, 500 NeRF steps, no learned renderer): minutes per run.
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 SCENE = "firefighter_shadow"
-SNR_DB = 10.0
+SNRS_DB = (10.0, 0.0)
 MAX_VIEWS = 6
 SEEDS = (0, 1, 2)
 SELECTIONS = ("sight", "joint")
@@ -29,7 +30,7 @@ SCHEMES = "jscc,digital,gt"
 SMALL = ["--resolution", "48", "--nerf-steps", "500", "--renderer-steps", "0"]
 
 
-def _argv(selection: str, seed: int) -> list[str]:
+def _argv(selection: str, seed: int, snr_db: float) -> list[str]:
     return [
         "run",
         "--scene",
@@ -37,7 +38,7 @@ def _argv(selection: str, seed: int) -> list[str]:
         "--channel",
         "raytraced",
         "--snr-db",
-        str(SNR_DB),
+        str(snr_db),
         "--schemes",
         SCHEMES,
         "--seed",
@@ -50,10 +51,10 @@ def _argv(selection: str, seed: int) -> list[str]:
     ]
 
 
-def _one(run_dir: Path, selection: str, seed: int) -> dict:
+def _one(run_dir: Path, selection: str, seed: int, snr_db: float) -> dict:
     from osnerf.cli import main
 
-    argv = _argv(selection, seed)
+    argv = _argv(selection, seed, snr_db)
     t = time.perf_counter()
     if main([*argv, "--out", str(run_dir), "--overwrite"]) != 0:
         raise RuntimeError(f"osnerf {' '.join(argv)} failed")
@@ -64,6 +65,7 @@ def _one(run_dir: Path, selection: str, seed: int) -> dict:
     return {
         "selection": selection,
         "seed": seed,
+        "snr_db_at_median_position": snr_db,
         "command": "osnerf " + " ".join(argv),
         "wall_seconds": time.perf_counter() - t,
         "views": sent,
@@ -88,42 +90,55 @@ def _picture(out: Path, rows: list[dict]) -> str:
     return str(write_figure(out / "radiomap.png", fig, dpi=110, bbox_inches="tight"))
 
 
+def _summary(rows: list[dict]) -> dict:
+    """Per selection and scheme: mean and std of object PSNR over seeds; joint minus sight."""
+    by = {sel: [r for r in rows if r["selection"] == sel] for sel in SELECTIONS}
+    schemes = list(rows[0]["psnr_object"])
+    return {
+        "psnr_object_mean_std": {
+            sel: {
+                n: {
+                    "mean": float(np.mean([r["psnr_object"][n] for r in mine])),
+                    "std": float(np.std([r["psnr_object"][n] for r in mine])),
+                }
+                for n in schemes
+            }
+            for sel, mine in by.items()
+        },
+        "joint_minus_sight_psnr_object_db": {
+            n: float(
+                np.mean(
+                    [
+                        a["psnr_object"][n] - b["psnr_object"][n]
+                        for a, b in zip(by["joint"], by["sight"])
+                    ]
+                )
+            )
+            for n in schemes
+        },
+    }
+
+
 def run(out_dir: Path) -> dict:
     out = Path(out_dir) / "view_selection"
-    rows = [_one(out / f"{sel}_seed{seed}", sel, seed) for seed in SEEDS for sel in SELECTIONS]
-    summary = {}
-    for sel in SELECTIONS:
-        mine = [r for r in rows if r["selection"] == sel]
-        summary[sel] = {
-            n: {
-                "mean": float(np.mean([r["psnr_object"][n] for r in mine])),
-                "std": float(np.std([r["psnr_object"][n] for r in mine])),
-            }
-            for n in mine[0]["psnr_object"]
-        }
-    joint_minus_sight = {
-        n: float(
-            np.mean(
-                [
-                    a["psnr_object"][n] - b["psnr_object"][n]
-                    for a, b in zip(
-                        (r for r in rows if r["selection"] == "joint"),
-                        (r for r in rows if r["selection"] == "sight"),
-                    )
-                ]
-            )
-        )
-        for n in summary["sight"]
-    }
+    rows = [
+        _one(out / f"{sel}_{snr:g}dB_seed{seed}", sel, seed, snr)
+        for snr in SNRS_DB
+        for seed in SEEDS
+        for sel in SELECTIONS
+    ]
     return {
         "scene": SCENE,
-        "snr_db_at_median_position": SNR_DB,
+        "snrs_db_at_median_position": list(SNRS_DB),
         "max_views": MAX_VIEWS,
         "seeds": list(SEEDS),
         "runs": rows,
-        "psnr_object_mean_std": summary,
-        "joint_minus_sight_psnr_object_db": joint_minus_sight,
-        "picture": _picture(out, rows),
+        "by_snr_db": {
+            f"{snr:g}": _summary([r for r in rows if r["snr_db_at_median_position"] == snr])
+            for snr in SNRS_DB
+        },
+        "picture": _picture(out, [r for r in rows if r["snr_db_at_median_position"] == SNRS_DB[0]]),
         "notes": "psnr_object: mean over held-out views; gt sends undistorted views (bound): "
-        "its difference is the views' geometry alone; jscc/digital add the links",
+        "its difference is the views' geometry alone; jscc/digital add the links; a rerun "
+        "resumes each run from its cached stages",
     }
