@@ -80,30 +80,13 @@ def _finite_or_none(a: np.ndarray) -> list:
     return [float(x) if np.isfinite(x) else None for x in np.asarray(a, np.float64)]
 
 
-def run(args: argparse.Namespace) -> int:
-    import phy.raytrace as prt
-    from common import to_json, write_files
-    from osnerf.cli import inputs_checked
+def _result(rm, args: argparse.Namespace) -> dict:
+    """radiomap.json: provenance, the map's settings and each candidate's gains."""
     from osnerf.provenance import result_header
-    from osnerf.scenes import DEFAULT_SCENE, RenderConfig, get_scene
-    from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
 
-    scene = args.scene or DEFAULT_SCENE
-    try:
-        get_scene(scene)
-    except KeyError as e:
-        raise checks.UsageError(f"--scene: {e.args[0]}") from None
-    target = _target(scene, args.demand)
-    out = checks.output_dir(args.out, "--out", overwrite=args.overwrite)
-    map_config = prt.RadioMapConfig(
-        samples_per_tx=args.samples, max_depth=args.max_depth, seed=args.seed
-    )
-    render = RenderConfig(num_train_views=args.views)
-    inputs_checked()
-    rm = scene_radio_map(scene, target, render, map_config, args.cell_size_m)
     m = rm.map
     config = {
-        "scene": scene,
+        "scene": rm.scene,
         "target": list(rm.target),
         "views": args.views,
         "samples_per_tx": args.samples,
@@ -136,6 +119,31 @@ def run(args: argparse.Namespace) -> int:
         "candidate (traced gain minus the median over candidates not in outage); "
         "map_path_gain_db: the map's cell holding the candidate on the plane at its altitude",
     }
+    return body
+
+
+def run(args: argparse.Namespace) -> int:
+    import phy.raytrace as prt
+    from common import to_json, write_files
+    from osnerf.cli import inputs_checked
+    from osnerf.scenes import DEFAULT_SCENE, RenderConfig, get_scene
+    from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
+
+    scene = args.scene or DEFAULT_SCENE
+    try:
+        get_scene(scene)
+    except KeyError as e:
+        raise checks.UsageError(f"--scene: {e.args[0]}") from None
+    target = _target(scene, args.demand)
+    out = checks.output_dir(args.out, "--out", overwrite=args.overwrite)
+    map_config = prt.RadioMapConfig(
+        samples_per_tx=args.samples, max_depth=args.max_depth, seed=args.seed
+    )
+    render = RenderConfig(num_train_views=args.views)
+    inputs_checked()
+    rm = scene_radio_map(scene, target, render, map_config, args.cell_size_m)
+    m = rm.map
+    body = _result(rm, args)
     npz = io.BytesIO()
     np.savez(
         npz,

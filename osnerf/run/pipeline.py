@@ -211,14 +211,7 @@ def run_pipeline(
     col = prep.scu.collect(views)
     links = build_links(cfg, views, col.candidates)
     try:
-        if cfg.view_selection != "sight" or cfg.max_views is not None:
-            col = prep.scu.choose_views(
-                col,
-                links.snr_db,
-                view_directions(views, prep.demand.objects),
-                cfg.view_selection,
-                cfg.max_views,
-            )
+        col = choose_views(cfg, prep, col, links.snr_db, views)
         codec = prep.codec
         plan, col = prep.scu.plan_run(
             collection=col,
@@ -276,6 +269,17 @@ def run_pipeline(
         "received": received,
         "renders": renders,
     }
+
+
+def choose_views(
+    cfg: RunConfig, prep: Prepared, col: Collection, snr_db: dict, views
+) -> Collection:
+    """The SCU's choice among the collected views (``--view-selection``, ``--max-views``);
+    the default (sight, no count) keeps every view untouched."""
+    if cfg.view_selection == "sight" and cfg.max_views is None:
+        return col
+    directions = view_directions(views, prep.demand.objects)
+    return prep.scu.choose_views(col, snr_db, directions, cfg.view_selection, cfg.max_views)
 
 
 def view_directions(views: SceneViews, objects) -> dict[int, np.ndarray]:
