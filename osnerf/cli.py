@@ -41,6 +41,10 @@ COMMANDS = Registry[tuple[str, str]](
             "send images over the air (HackRF One or ADALM-Pluto, real or emulated)",
         ),
         "scenes": ("osnerf.commands.scenes", "list built-in scenes and their objects"),
+        "radiomap": (
+            "osnerf.commands.radiomap",
+            "a scene's radio map (sionna-rt) with the candidate drone positions marked",
+        ),
         "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
         "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),
         "plot": ("osnerf.commands.plot", "plots from a sweep results file"),

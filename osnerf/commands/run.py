@@ -43,6 +43,8 @@ CONFIG_FIELDS = (
     "refine_steps",
     "layer_fusion",
     "drone_speed_m_s",
+    "view_selection",
+    "max_views",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -78,6 +80,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import DRONE_SPEED_RANGE_M_S, RUN_CHANNELS, RunConfig
     from osnerf.schemes import SCHEMES, parse_schemes
+    from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
     from semcodec import IMAGE_CODECS
 
@@ -101,6 +104,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
             "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
+            "max_views": checks.count(1, 512),
         },
         choices={
             "channel": RUN_CHANNELS,
@@ -108,6 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "image_codec": tuple(IMAGE_CODECS),
             "ota_device": OTA_DEVICES,
             "nerf_clock": ("wall", "cpu"),
+            "view_selection": tuple(VIEW_SELECTIONS),
         },
     )
     schemes = next(a for a in p._actions if a.dest == "schemes")

@@ -85,6 +85,14 @@ class RunConfig:
             seen from above) while it sends, and its channel changes with every symbol from
             each traced path's Doppler shift (symbol ``i`` of a view at ``i /
             symbol_rate_hz``); 0: the static channel of each position.
+        view_selection: how the SCU picks among the views the collector found (a name of
+            ``osnerf.scu.VIEW_SELECTIONS``): "sight" (every visible view; with ``max_views``,
+            greedy coverage of the object's viewing directions), "radio" (the highest
+            expected SNR) or "joint" (coverage gain times link quality). A view's expected
+            SNR is the SNR its link runs at (with "raytraced": ``snr_db`` plus its traced
+            path gain over the median position's).
+        max_views: the most views sent on demand, in [1, 512] ("radio" and "joint" need it);
+            None: every view the collector found.
     """
 
     scene: str = DEFAULT_SCENE
@@ -111,6 +119,8 @@ class RunConfig:
     refine_steps: int = 30
     layer_fusion: float = 4.0
     drone_speed_m_s: float = 0.0
+    view_selection: str = "sight"
+    max_views: int | None = None
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -161,6 +171,7 @@ class RunConfig:
             raise ValueError(f"nerf_clock must be 'wall' or 'cpu', got {self.nerf_clock!r}")
         if not self.symbol_rate_hz > 0:
             raise ValueError(f"symbol_rate_hz must be > 0, got {self.symbol_rate_hz!r}")
+        self._check_selection()
         self._check_digital()
         self.render_config()  # validates the view settings
 
@@ -173,6 +184,23 @@ class RunConfig:
             raise ValueError(
                 f"drone_speed_m_s moves the drones of channel raytraced only, got "
                 f"{v!r} with channel {self.channel!r}"
+            )
+
+    def _check_selection(self) -> None:
+        from osnerf.scu import VIEW_SELECTIONS
+
+        if self.view_selection not in VIEW_SELECTIONS:
+            raise ValueError(
+                f"view_selection must be one of {', '.join(VIEW_SELECTIONS)}, "
+                f"got {self.view_selection!r}"
+            )
+        m = self.max_views
+        if m is not None and (isinstance(m, bool) or not isinstance(m, int) or not 1 <= m <= 512):
+            raise ValueError(f"max_views must be an integer in [1, 512], got {m!r}")
+        if m is None and self.view_selection != "sight":
+            raise ValueError(
+                f"view_selection {self.view_selection!r} chooses among the visible views: "
+                "give max_views"
             )
 
     def _check_digital(self) -> None:

@@ -211,6 +211,7 @@ def run_pipeline(
     col = prep.scu.collect(views)
     links = build_links(cfg, views, col.candidates)
     try:
+        col = choose_views(cfg, prep, col, links.snr_db, views)
         codec = prep.codec
         plan, col = prep.scu.plan_run(
             collection=col,
@@ -268,6 +269,24 @@ def run_pipeline(
         "received": received,
         "renders": renders,
     }
+
+
+def choose_views(
+    cfg: RunConfig, prep: Prepared, col: Collection, snr_db: dict, views
+) -> Collection:
+    """The SCU's choice among the collected views (``--view-selection``, ``--max-views``);
+    the default (sight, no count) keeps every view untouched."""
+    if cfg.view_selection == "sight" and cfg.max_views is None:
+        return col
+    directions = view_directions(views, prep.demand.objects)
+    return prep.scu.choose_views(col, snr_db, directions, cfg.view_selection, cfg.max_views)
+
+
+def view_directions(views: SceneViews, objects) -> dict[int, np.ndarray]:
+    """view -> [3] from the centre of the objects' bounds to the view's drone (metres)."""
+    b = np.asarray([views.meta["object_aabb"][o] for o in objects], np.float64)  # [k, 2, 3]
+    centre = (b[:, 0].min(0) + b[:, 1].max(0)) / 2
+    return {k: p - centre for k, p in enumerate(views.drone_positions_m)}
 
 
 def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) -> dict:

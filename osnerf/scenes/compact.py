@@ -7,6 +7,8 @@ same meshes, with ITU materials, are the radio scene.
 
 from __future__ import annotations
 
+import dataclasses
+
 from osnerf.scenes import textures as tx
 from osnerf.scenes.geometry import box, cylinder, disk, merge
 from osnerf.scenes.spec import Part, SceneGeometry
@@ -134,6 +136,25 @@ def _ground() -> list[Part]:
             "concrete",
         ),
     ]
+
+
+SHED_CENTER_M = (4.5, -4.3, 0.0)
+SHED_SIZE_M = (0.6, 0.9, 3.0)
+
+
+def build_firefighter_shadow() -> SceneGeometry:
+    """The firefighter plot with a tall shed (``shed``) between the ground station and the
+    drone positions on the hydrant's -y side: their radio paths are blocked while their
+    cameras still see the hydrant (the shed stands behind them, outside the ring)."""
+    base = build_firefighter()
+    shed = Part(
+        "shed",
+        "shed_walls",
+        box(SHED_CENTER_M, SHED_SIZE_M, tile_m=0.6),
+        tx.windows(seed=13, wall=(0.55, 0.55, 0.6)),
+        "concrete",
+    )
+    return dataclasses.replace(base, name="firefighter_shadow", parts=(*base.parts, shed))
 
 
 def build_tiny() -> SceneGeometry:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common import Registry
 from osnerf.scenes.city import build_munich
-from osnerf.scenes.compact import build_firefighter, build_tiny
+from osnerf.scenes.compact import build_firefighter, build_firefighter_shadow, build_tiny
 from osnerf.scenes.spec import SceneInfo
 
 SCENES = Registry[SceneInfo]("scene")
@@ -29,6 +29,19 @@ register(
         objects=("hydrant", "building", "tree"),
         default_demand=("hydrant",),
         build=build_firefighter,
+        elevations_deg=(20.0, 40.0),
+        fov_deg=40.0,
+        min_radius_m=2.5,
+    )
+)
+register(
+    SceneInfo(
+        name="firefighter_shadow",
+        description="the firefighter plot with a tall shed that blocks the radio paths of the "
+        "drones on the hydrant's -y side (their cameras still see it)",
+        objects=("hydrant", "building", "tree", "shed"),
+        default_demand=("hydrant",),
+        build=build_firefighter_shadow,
         elevations_deg=(20.0, 40.0),
         fov_deg=40.0,
         min_radius_m=2.5,

@@ -66,6 +66,15 @@ class SemanticControlUnit:
         )
         return col
 
+    def choose_views(
+        self, collection: Collection, snr_db: dict, directions_m: dict, rule: str, max_views
+    ) -> Collection:
+        """At most ``max_views`` of the collection's views by ``rule``, each logged with why
+        (:func:`osnerf.scu.selection.choose_views`)."""
+        from osnerf.scu.selection import choose_views
+
+        return choose_views(self.log, collection, snr_db, directions_m, rule, max_views)
+
     def check_knowledge_base(self, transmitter_sha256: str, receiver_sha256: str) -> None:
         """Refuse to run when the two ends hold different codecs.
 

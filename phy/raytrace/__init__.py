@@ -10,6 +10,7 @@ from phy.raytrace.mobility import (
     MovingTransmitter,
     max_doppler_hz,
 )
+from phy.raytrace.radiomap import RadioMap, RadioMapConfig, radio_map
 from phy.raytrace.scene import builtin_scenes, load_scene
 from phy.raytrace.stats import RayStats, cir_stats
 from phy.raytrace.tracer import (
@@ -26,6 +27,8 @@ __all__ = [
     "MovingTransmitter",
     "max_doppler_hz",
     "GAIN_NORMALIZATIONS",
+    "RadioMap",
+    "RadioMapConfig",
     "RayCIR",
     "RayStats",
     "PerPositionChannel",
@@ -37,4 +40,5 @@ __all__ = [
     "cir_stats",
     "clear_cache",
     "load_scene",
+    "radio_map",
 ]
