@@ -69,6 +69,11 @@ class FeatureConfig:
     """Start the first free channel (after the colour's) as the field's opacity per marching
     step at each vertex (:func:`renderer.bake.bake_field`), so the decoder starts with the
     field's geometry as well as its colour; needs ``channels`` above the colour's."""
+    sample_colour: bool = False
+    """Composite each sample's colour (the sigmoid of its view-dependent logits) as the
+    field does, not the logits: at a surface's edge and where the samples of a ray differ
+    in colour, compositing logits is not the field's image; the decoder then has less to
+    correct."""
     focus: float = 0.0
     """Share of each batch's views drawn in proportion to their teachers' last error
     (the others uniformly), in [0, 1]: distillation spent where the error is."""
