@@ -74,11 +74,6 @@ class FeatureConfig:
     field does, not the logits: at a surface's edge and where the samples of a ray differ
     in colour, compositing logits is not the field's image; the decoder then has less to
     correct."""
-    grid_share: float = 1.0
-    """Share of the training budget in which the feature grid trains with the decoder, in
-    (0, 1]; after it the grid is fixed, each teacher's decoder input is computed once and
-    kept (half precision), and the steps train the decoder alone: many more of them in the
-    same budget, as the grid's gradient no longer dominates a step."""
     focus: float = 0.0
     """Share of each batch's views drawn in proportion to their teachers' last error
     (the others uniformly), in [0, 1]: distillation spent where the error is."""
@@ -109,8 +104,6 @@ class FeatureConfig:
             raise ValueError(f"setup_cpu_seconds must be > 0 or None, got {self.setup_cpu_seconds}")
         if not 0 <= self.focus <= 1:
             raise ValueError(f"focus must be in [0, 1], got {self.focus}")
-        if not 0 < self.grid_share <= 1:
-            raise ValueError(f"grid_share must be in (0, 1], got {self.grid_share}")
         if not 0 < self.grid_scale <= 1:
             raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
         if not self.step_factor >= 1:

@@ -17,7 +17,6 @@ import sys
 import time
 
 import torch
-from torch import Tensor
 
 from common import trim_heap
 from renderer.cameras import Intrinsics
@@ -142,7 +141,6 @@ def _distil(
     )
     first = pool.rendered
     steps, loss = 0, float("nan")
-    planes: dict | None = None  # slot -> (camera, its decoder input) once the grid is fixed
     t0 = time.perf_counter()
     while (frac := _progress(config, steps, time.perf_counter() - t0, cpu0)) < 1.0:
         due = first + math.ceil((pool.poses.shape[0] - first) * min(frac / 0.8, 1.0))
@@ -152,13 +150,7 @@ def _distil(
                 batch = config.render_batch
             pool.render_next(batch)
         slots = pool.sample(config.batch_size, generator, config.focus)
-        if frac < config.grid_share:
-            out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
-        else:  # the grid fixed: each teacher's decoder input computed once, then kept
-            if planes is None:
-                planes, opt = {}, _decoder_only(rend, opt, config)
-            x = torch.cat([_kept_planes(rend, pool, planes, s) for s in slots.tolist()])
-            out = rend.decoder(x.float())[:, :, : intr.height, : intr.width].permute(0, 2, 3, 1)
+        out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
         per_view = (out - pool.images_of(slots)).square().mean((1, 2, 3))
         err = per_view.mean()
         pool.record_errors(slots, per_view)
@@ -170,30 +162,6 @@ def _distil(
             trim_heap()
         _show(bar, pool, frac, loss, steps, cpu0)
     return steps, loss, t0
-
-
-def _decoder_only(rend: FeatureRenderer, opt: torch.optim.Adam, config: FeatureConfig):
-    """Fix the grid: an Adam over the decoder alone that keeps its moments so far (an
-    update of the grid, even with no gradient, would cost a pass over all of it)."""
-    rend.grid.requires_grad_(False)
-    rend.background.requires_grad_(False)
-    params = list(rend.decoder.parameters())
-    decoder_opt = torch.optim.Adam(params, config.decoder_lr, fused=True)
-    for q in params:
-        if q in opt.state:
-            decoder_opt.state[q] = opt.state[q]
-    return decoder_opt
-
-
-def _kept_planes(rend: FeatureRenderer, pool: TeacherPool, planes: dict, slot: int) -> Tensor:
-    """The decoder input [1, C, h, w] (half precision) of the teacher in ``slot``, computed
-    with the fixed grid the first time it is drawn (again when a later teacher replaced it)."""
-    cam = int(pool.index[slot])
-    if slot not in planes or planes[slot][0] != cam:
-        with torch.no_grad():
-            p = pool.passes_of(torch.tensor([slot]))[0]
-            planes[slot] = (cam, rend.planes(p).half())
-    return planes[slot][1]
 
 
 def _progress(config: FeatureConfig, steps: int, seconds: float, cpu0: float) -> float:

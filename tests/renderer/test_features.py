@@ -332,29 +332,3 @@ def test_distillation_repeats_exactly_from_its_seed(sphere_model):
         assert torch.equal(p, q)
     other, _ = train_features(model, train_set, cfg, torch.Generator().manual_seed(4))
     assert not torch.equal(other.decoder.body[0].weight, a.decoder.body[0].weight)
-
-
-def test_after_its_share_of_the_budget_the_grid_is_fixed_and_the_decoder_trains_on(
-    sphere_model,
-):
-    """With ``grid_share`` 0.5 of ten steps the first five train grid and decoder as a
-    five-step run does (same seed, same teachers); the last five leave the grid as it was
-    and train the decoder alone, on decoder inputs kept per teacher."""
-    model, train_set = sphere_model
-    common = dict(channels=8, downsample=2, extra_views=0, batch_size=2, progress=False)
-    half, _ = train_features(
-        model,
-        train_set,
-        FeatureConfig(train_steps=10, grid_share=0.5, **common),
-        torch.Generator().manual_seed(3),
-    )
-    five, stats = train_features(
-        model, train_set, FeatureConfig(train_steps=5, **common), torch.Generator().manual_seed(3)
-    )
-    assert stats["steps"] == 5
-    start = FeatureRenderer(model, FeatureConfig(**common))
-    assert not torch.equal(five.grid, start.grid)  # the grid trained in the first steps
-    assert torch.equal(half.grid, five.grid)
-    assert not torch.equal(half.decoder.out.weight, five.decoder.out.weight)
-    with pytest.raises(ValueError, match="grid_share must be in"):
-        FeatureConfig(grid_share=0.0)
