@@ -156,10 +156,11 @@ FEATURES_BY_SIZE: dict[int, dict] = {
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked with its
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
-minutes with the baking and the final trims), batches of two views (twice the steps of four in the same budget), half of each drawn
-where the error is;
-from 300 px fewer teachers (each a full render at that size), a third-width
-pass, a feature grid at three quarters of the field's vertices per axis and half the pass
-cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
-memory at these sizes), and a higher time cap for its slower steps. Measured on lego's
-test path (docs/design-notes.md, "The renderer")."""
+minutes with the baking and the final trims), batches of two views (twice the steps of four
+in the same budget), half of each drawn where the error is, each sample's colour composited
+as the field composites it, and a finer marching step than below (thin parts the coarser
+step misses are the part of the error the decoder cannot bring back); from 300 px the same
+within nine CPU-minutes (each teacher a full render at that size), a third-width pass, a
+feature grid at three quarters of the field's vertices per axis and half the pass cache
+(beside the cache, the grid with its gradient and two Adam moments dominates setup memory at
+these sizes). Measured on lego's test path (docs/renderer.md)."""
