@@ -135,7 +135,6 @@ FEATURES_BY_SIZE: dict[int, dict] = {
         "setup_cpu_seconds": 170.0,
         "bake_density": True,
         "sample_colour": True,
-        "step_factor": 1.3,
         "focus": 0.5,
         "batch_size": 2,
     },
@@ -157,9 +156,8 @@ FEATURES_BY_SIZE: dict[int, dict] = {
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked with its
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
 minutes with the baking and the final trims), batches of two views (twice the steps of four
-in the same budget), half of each drawn where the error is, each sample's colour composited
-as the field composites it, and a finer marching step than below (thin parts the coarser
-step misses are the part of the error the decoder cannot bring back); from 300 px the same
+in the same budget), half of each drawn where the error is, and each sample's colour
+composited as the field composites it; from 300 px the same
 within nine CPU-minutes (each teacher a full render at that size), a third-width pass, a
 feature grid at three quarters of the field's vertices per axis and half the pass cache
 (beside the cache, the grid with its gradient and two Adam moments dominates setup memory at
