@@ -69,6 +69,11 @@ class FeatureConfig:
     """Start the first free channel (after the colour's) as the field's opacity per marching
     step at each vertex (:func:`renderer.bake.bake_field`), so the decoder starts with the
     field's geometry as well as its colour; needs ``channels`` above the colour's."""
+    sample_colour: bool = False
+    """Composite each sample's colour (the sigmoid of its view-dependent logits) as the
+    field does, not the logits: at a surface's edge and where the samples of a ray differ
+    in colour, compositing logits is not the field's image; the decoder then has less to
+    correct."""
     focus: float = 0.0
     """Share of each batch's views drawn in proportion to their teachers' last error
     (the others uniformly), in [0, 1]: distillation spent where the error is."""
@@ -129,24 +134,31 @@ FEATURES_BY_SIZE: dict[int, dict] = {
         "train_steps": None,
         "setup_cpu_seconds": 170.0,
         "bake_density": True,
+        "sample_colour": True,
         "focus": 0.5,
         "batch_size": 2,
     },
     300: {
-        "extra_views": 1500,
+        "extra_views": 200,
+        "pool_views": 512,
         "downsample": 3,
         "grid_scale": 0.75,
         "pass_cache_mb": 256,
-        "train_seconds": 7200.0,
+        "train_steps": None,
+        "setup_cpu_seconds": 540.0,
+        "bake_density": True,
+        "sample_colour": True,
+        "focus": 0.5,
+        "batch_size": 2,
     },
 }
 """Smallest image width (px) -> :class:`FeatureConfig` settings that differ from the
 defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked with its
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
-minutes with the baking and the final trims), batches of two views (twice the steps of four in the same budget), half of each drawn
-where the error is;
-from 300 px fewer teachers (each a full render at that size), a third-width
-pass, a feature grid at three quarters of the field's vertices per axis and half the pass
-cache (beside the cache, the grid with its gradient and two Adam moments dominates setup
-memory at these sizes), and a higher time cap for its slower steps. Measured on lego's
-test path (docs/design-notes.md, "The renderer")."""
+minutes with the baking and the final trims), batches of two views (twice the steps of four
+in the same budget), half of each drawn where the error is, and each sample's colour
+composited as the field composites it; from 300 px the same
+within nine CPU-minutes (each teacher a full render at that size), a third-width pass, a
+feature grid at three quarters of the field's vertices per axis and half the pass cache
+(beside the cache, the grid with its gradient and two Adam moments dominates setup memory at
+these sizes). Measured on lego's test path (docs/renderer.md)."""

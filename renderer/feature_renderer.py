@@ -36,6 +36,9 @@ from renderer.model import RadianceField
 from renderer.sampler import sample_along_rays
 from renderer.volume import packed_sum, packed_weights
 
+COLOUR_EPS = 1e-4
+"""Composited colours are clamped to [eps, 1 - eps] before the decoder takes their logit."""
+
 
 def low_res_intrinsics(intrinsics: Intrinsics, downsample: int) -> Intrinsics:
     """The camera whose pixel (i, j) covers full-resolution pixels [s i, s i + s) x [s j,
@@ -56,7 +59,9 @@ class FeatureDecoder(nn.Module):
     [batch, 3, s h, s w] colour.
 
     The output is ``sigmoid(bilinear(f[:3]) + shuffle(residual))``: with the last layer at
-    zero (its start) it is the bilinear upsampling of the colour logits."""
+    zero (its start) it is the bilinear upsampling of the colour logits. With
+    ``colour_input`` the first three planes are colours in [0, 1], not logits, and the
+    output is ``sigmoid(logit(bilinear(f[:3])) + shuffle(residual))``."""
 
     def __init__(
         self,
@@ -64,9 +69,11 @@ class FeatureDecoder(nn.Module):
         downsample: int,
         hidden: int = 32,
         generator: torch.Generator | None = None,
+        colour_input: bool = False,
     ):
         super().__init__()
         self.downsample = downsample
+        self.colour_input = colour_input
         self.body = nn.Sequential(
             nn.Conv2d(channels + 1, hidden, 3, padding=1),
             nn.LeakyReLU(0.1),
@@ -91,6 +98,8 @@ class FeatureDecoder(nn.Module):
         s = self.downsample
         x = x.contiguous(memory_format=torch.channels_last)
         base = F.interpolate(x[:, :3], scale_factor=s, mode="bilinear", align_corners=False)
+        if self.colour_input:
+            base = torch.logit(base.clamp(COLOUR_EPS, 1.0 - COLOUR_EPS))
         return torch.sigmoid(base + F.pixel_shuffle(self.out(self.body(x)), s))
 
 
@@ -181,7 +190,11 @@ class FeatureRenderer:
         self.background = nn.Parameter(bg)
         # decoder input: the view-dependent colour logits, the K planes, the opacity
         self.decoder = FeatureDecoder(
-            config.channels + 3, config.downsample, config.hidden_channels, generator
+            config.channels + 3,
+            config.downsample,
+            config.hidden_channels,
+            generator,
+            colour_input=config.sample_colour,
         )
 
     def settings(self) -> dict:
@@ -249,13 +262,24 @@ class FeatureRenderer:
         return torch.cat([img, p.opacity[:, None]], 1).t().reshape(1, k + 1, h, w)
 
     def planes(self, p: LowResPass, values: Tensor | None = None) -> Tensor:
-        """[1, 3 + K + 1, h, w]: the decoder's input, the colour logits seen along each
-        pixel's ray (the composited SH coefficients times the ray's basis: the ray's
-        direction is the same at all its samples, so this equals compositing the
-        view-dependent colour sample by sample), then :meth:`features`."""
+        """[1, 3 + K + 1, h, w]: the decoder's input, the colour seen along each pixel's ray,
+        then :meth:`features`. The colour is the composited SH coefficients times the ray's
+        basis (logits: the ray's direction is the same at all its samples, so this equals
+        compositing the view-dependent logits sample by sample), or with
+        ``config.sample_colour`` the composite of each sample's colour (the sigmoid of its
+        logits; the background's colour where transparent), as the field renders it."""
+        if values is None:
+            values = self.read(p.positions)
         f = self.features(p, values)
         kc = p.basis.shape[1]
         h, w = p.size
+        if self.config.sample_colour:
+            coef = values[:, : 3 * kc].reshape(-1, 3, kc)
+            rgb = torch.sigmoid((coef * p.basis.index_select(0, p.rays)[:, None]).sum(-1))
+            colour = packed_sum(p.weights[:, None] * rgb, p.rays, p.opacity.shape[0])
+            bg = torch.sigmoid(self.background[0 : 3 * kc : kc])
+            colour = (colour + (1.0 - p.opacity)[:, None] * bg).t().reshape(1, 3, h, w)
+            return torch.cat([colour, f], 1)
         coef = f[0, : 3 * kc].reshape(3, kc, h * w)
         colour = (coef * p.basis.t()[None]).sum(1).reshape(1, 3, h, w)
         return torch.cat([colour, f], 1)

@@ -111,6 +111,41 @@ def test_view_dependent_colour_starts_as_the_fields(sphere_model):
         FeatureRenderer(model, FeatureConfig(channels=8))
 
 
+def test_sample_colour_starts_as_the_full_render_at_every_pixel(sphere_model):
+    """Compositing each sample's colour (``sample_colour``), not its logits, reproduces the
+    field's own image at full resolution and its step, the sphere's soft edge and a colour
+    that varies along the rays included; composited logits are off at those pixels. The
+    decoder's gradient reaches the grid through the per-sample colours."""
+    import copy
+
+    model, train_set = sphere_model
+    model = copy.deepcopy(model)
+    model.field.set_sh_degree(1)
+    with torch.no_grad():
+        grid = model.field.color_grid
+        grid.copy_(2.0 * torch.randn(grid.shape, generator=torch.Generator().manual_seed(3)))
+    pose, intr = train_set.poses[2], train_set.intrinsics
+    ref = render_views(model, pose[None], intr)["rgb"][0]
+    errors = {}
+    for sample_colour in (True, False):
+        cfg = FeatureConfig(
+            channels=13,
+            downsample=1,
+            step_factor=1.0,
+            weight_threshold=0.0,
+            sample_colour=sample_colour,
+            progress=False,
+        )
+        out = FeatureRenderer(model, cfg).render_path(pose[None], intr)["rgb"][0]
+        errors[sample_colour] = float((out - ref).abs().max())
+    assert errors[True] < 2e-3 < 0.05 < errors[False]
+    cfg = FeatureConfig(channels=13, sample_colour=True, progress=False)
+    rend = FeatureRenderer(model, cfg)
+    out = rend.decode([rend.low_res_pass(pose, intr)], intr.height, intr.width)
+    (out - ref).square().mean().backward()
+    assert float(rend.grid.grad[:, :12].abs().sum()) > 0
+
+
 def test_reads_are_trilinear_and_their_sparse_gradient_is_the_dense_one(sphere_model):
     """The vertex-major read equals ``F.grid_sample``'s trilinear interpolation of the same
     grid, and its sparse gradient, added into a zeroed ``.grad``, equals autograd's dense
@@ -247,6 +282,10 @@ def test_settings_by_image_size():
     assert mid.bake_density and mid.train_steps is None and mid.setup_cpu_seconds <= 180
     assert mid.extra_views < small.extra_views and mid.focus > 0 == small.focus
     assert large.extra_views < small.extra_views and large.downsample > mid.downsample
+    # from 150 px each sample's colour is composited; from 300 px too, baked and within ten
+    # CPU-minutes
+    assert mid.sample_colour and large.sample_colour and not small.sample_colour
+    assert large.bake_density and large.train_steps is None and large.setup_cpu_seconds <= 600
     # the grid (with gradient and two Adam moments) and the pass cache shrink where views are
     # large: their memory, not the teachers', set the 400 px setup peak
     assert large.grid_scale < mid.grid_scale and large.pass_cache_mb < mid.pass_cache_mb
