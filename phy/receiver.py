@@ -80,7 +80,11 @@ def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -
     only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
     start is a delay the caller's model removes."""
     w = -2 * np.pi * cfo / fft_size
-    win = np.lib.stride_tricks.sliding_window_view(frame, fft_size)[starts]  # a copy
+    frame = np.ascontiguousarray(frame)
+    every = np.lib.stride_tricks.as_strided(  # every window, a view (no copy, no checks)
+        frame, (frame.size - fft_size + 1, fft_size), (frame.itemsize, frame.itemsize)
+    )
+    win = every[starts]  # a copy
     win *= np.exp(1j * w * starts).astype(np.complex64)[:, None]
     win *= np.exp(1j * w * np.arange(fft_size)).astype(np.complex64)
     return scipy.fft.fft(win, axis=-1, norm="ortho", overwrite_x=True)
@@ -303,14 +307,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     assert h is not None  # set on the loop's first pass
-    h_d = _model_at_data(h, rot, delay, lay)
-    y_d = y[lay.d_flat]  # [num_symbols] in payload order
-    s_eff = (noise_var + mse)[lay.d_col]  # noise plus channel-estimation error (unit-power x)
-    gain = h_d.real * h_d.real + h_d.imag * h_d.imag
-    # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
-    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
-    x_hat = y_d * np.conj(h_d) * inv
-    nv = s_eff * inv
+    x_hat, nv = _equalized(y, h, rot, delay, (noise_var + mse), lay, equalizer)
     h_used = h[used]
     signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
@@ -327,14 +324,36 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     )
 
 
+def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
+    """(x_hat, noise variance) [num_symbols] in payload order: the one-tap equaliser against
+    the model ``h[k] exp(j phi[l]) ramp[l, k]`` at the data elements of ``y`` [rows * n];
+    ``s_car`` [n] the noise plus channel-estimation error per carrier (unit-power x).
+
+    ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s). With one
+    window delay for every row the row factor has unit modulus, so the weights are per
+    carrier, ``conj(h_k) / (|h_k|^2 + s_k)``, and one product over the grid applies them and
+    the row phases; else the model is evaluated at each data element."""
+    n = lay.fft_size
+    if not (delay.size and np.all(delay == delay[0])):
+        h_d = _model_at_data(h, rot, delay, lay)
+        gain = h_d.real * h_d.real + h_d.imag * h_d.imag
+        s_eff = s_car[lay.d_col]
+        inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
+        return y[lay.d_flat] * np.conj(h_d) * inv, s_eff * inv
+    h_ramp = h[lay.centred] * _ramp_table(float(delay[0]), n)[lay.centred]  # natural order
+    s_nat = s_car[lay.centred]
+    gain = h_ramp.real * h_ramp.real + h_ramp.imag * h_ramp.imag
+    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_nat)
+    g = np.multiply.outer(rot, np.conj(h_ramp) * inv).reshape(-1)  # [rows * n] weights
+    g *= y
+    return g[lay.d_flat], (s_nat * inv)[lay.d_bin]
+
+
 def _model_at_data(h: np.ndarray, rot: np.ndarray, delay: np.ndarray, lay: _Layout) -> np.ndarray:
     """The model ``h[k] exp(j phi[l]) ramp[l, k]`` at the payload's data elements only:
     [num_symbols] complex64 (``rot`` = exp(-j phi) per row, ``h`` in centred order)."""
     n = lay.fft_size
     h_nat = h[lay.centred]  # [fft_size] natural order
-    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
-        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
-        return h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
     return h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
 
 
