@@ -85,9 +85,12 @@ def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -
         frame, (frame.size - fft_size + 1, fft_size), (frame.itemsize, frame.itemsize)
     )
     win = every[starts]  # a copy
-    win *= np.exp(1j * w * starts).astype(np.complex64)[:, None]
-    win *= np.exp(1j * w * np.arange(fft_size)).astype(np.complex64)
-    return scipy.fft.fft(win, axis=-1, norm="ortho", overwrite_x=True)
+    # the rotation (and the transform's 1 / sqrt(n)) as one table: row phase x sample phase
+    col = np.exp(1j * w * np.arange(fft_size)) / math.sqrt(fft_size)
+    win *= np.multiply.outer(
+        np.exp(1j * w * starts).astype(np.complex64), col.astype(np.complex64)
+    )
+    return scipy.fft.fft(win, axis=-1, overwrite_x=True)
 
 
 @dataclass(frozen=True)
@@ -257,7 +260,6 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
     used, pk = lay.used, lay.pilots
     kr, kc = lay.k_row, lay.k_col
-    x_conj = np.conj(lay.x_known)
     locked = cfg.carrier_freq_hz is not None
     eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
     h, slope_hint = None, None
@@ -269,8 +271,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
         # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
-        ramp_known = _ramp(delay, kr, kc, n)
-        yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
+        yx = y[lay.k_flat] * _known_factor(cfg, num_symbols, delay)  # observations of h e^{j phi}
         if h is None:  # first look: the two training symbols
             nt = lay.num_training_values  # the training rows' values come first
             h = _channel(yx[:nt], lay, lay.smoother_training, training_only=True)
@@ -322,6 +323,23 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
     )
+
+
+def _known_factor(cfg: FrameConfig, num_symbols: int, delay: np.ndarray) -> np.ndarray:
+    """[num_known] complex64 ``conj(x ramp)`` at the known entries: what takes their FFT
+    values to observations of ``h exp(j phi)`` (one table per delay when every row has it)."""
+    if delay.size and np.all(delay == delay[0]):
+        return _uniform_known_factor(cfg, num_symbols, float(delay[0]))
+    lay = _layout(cfg, num_symbols)
+    return np.conj(lay.x_known) * np.conj(_ramp(delay, lay.k_row, lay.k_col, lay.fft_size))
+
+
+@functools.lru_cache(maxsize=32)
+def _uniform_known_factor(cfg: FrameConfig, num_symbols: int, delay: float) -> np.ndarray:
+    lay = _layout(cfg, num_symbols)
+    out = np.conj(lay.x_known) * np.conj(_ramp_table(delay, lay.fft_size)[lay.k_col])
+    out.flags.writeable = False
+    return out
 
 
 def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
