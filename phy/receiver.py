@@ -87,9 +87,7 @@ def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -
     win = every[starts]  # a copy
     # the rotation (and the transform's 1 / sqrt(n)) as one table: row phase x sample phase
     col = np.exp(1j * w * np.arange(fft_size)) / math.sqrt(fft_size)
-    win *= np.multiply.outer(
-        np.exp(1j * w * starts).astype(np.complex64), col.astype(np.complex64)
-    )
+    win *= np.multiply.outer(np.exp(1j * w * starts).astype(np.complex64), col.astype(np.complex64))
     return scipy.fft.fft(win, axis=-1, overwrite_x=True)
 
 
