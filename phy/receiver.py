@@ -22,7 +22,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from phy import estimation
+from phy import _kernels, estimation
 from phy.detection import find_preambles
 from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
 from phy.ofdm.equalization import EQUALIZERS
@@ -102,6 +102,7 @@ class _Layout:
     k_row: np.ndarray  # [num_known] row of each known value
     k_col: np.ndarray  # [num_known] carrier (centred order)
     k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
+    k_pos: np.ndarray  # [num_known] position of its carrier among the used ones
     x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
     counts: np.ndarray  # [num_used] observations per used carrier
     smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
@@ -158,6 +159,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         k_row=k_row,
         k_col=k_col,
         k_flat=k_row * n + (k_col + n // 2) % n,
+        k_pos=np.searchsorted(used, k_col),
         x_known=x[k_row, k_col],
         counts=counts,
         smoothers=(
@@ -257,7 +259,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
     used, pk = lay.used, lay.pilots
-    kr, kc = lay.k_row, lay.k_col
+    kr = lay.k_row
+    p_mats, factors, dofs = lay.smoothers
     locked = cfg.carrier_freq_hz is not None
     eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
     h, slope_hint = None, None
@@ -276,23 +279,21 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
+        h_used = h[used]
         for _ in range(2):
-            a = _row_sums_against(yx, np.conj(h), lay)  # [rows]
-            h_pk = h[pk]
+            a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)  # [rows] yx conj(h)
+            h_pk = h_used[lay.pilot_in_used]
             snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
             phi, slope = estimation.track_phase(a, snr_row, slope_hint)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
-            obs = yx * rot[kr]
-            sums = _carrier_sums(obs, lay)
-            # Cp's noise level from the richest model (per-carrier means): unbiased whichever
-            # model is right, so a low training-difference estimate cannot pick a noisy model
-            scatter = float(np.vdot(obs, obs).real) - float(np.vdot(sums, sums / lay.counts).real)
-            cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
-            h, factor, taps = _best_channel(sums, lay, cp_noise)
-            dof = max(kr.size - taps - lay.rows, 1)
-            e = obs - h[kc]
-            noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
+            # the channel model with the least Mallows' Cp and the noise of its residuals
+            obs, h_used, best, noise_var = _kernels.refine(
+                yx, rot, kr, lay.k_pos, lay.counts, p_mats, dofs, lay.rows
+            )
+            factor = factors[best]
+        h = np.zeros(n, np.complex64)
+        h[used] = h_used
         if locked:
             break
         z = obs[lay.num_training_values :].reshape(lay.rows - 2, -1) * np.conj(h[pk])
@@ -347,8 +348,8 @@ def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
 
     ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s). With one
     window delay for every row the row factor has unit modulus, so the weights are per
-    carrier, ``conj(h_k) / (|h_k|^2 + s_k)``, and one product over the grid applies them and
-    the row phases; else the model is evaluated at each data element."""
+    carrier, ``conj(h_k) / (|h_k|^2 + s_k)``, applied with the row phases in one pass over the
+    payload; else the model is evaluated at each data element."""
     n = lay.fft_size
     if not (delay.size and np.all(delay == delay[0])):
         h_d = _model_at_data(h, rot, delay, lay)
@@ -360,9 +361,9 @@ def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
     s_nat = s_car[lay.centred]
     gain = h_ramp.real * h_ramp.real + h_ramp.imag * h_ramp.imag
     inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_nat)
-    g = np.multiply.outer(rot, np.conj(h_ramp) * inv).reshape(-1)  # [rows * n] weights
-    g *= y
-    return g[lay.d_flat], (s_nat * inv)[lay.d_bin]
+    return _kernels.apply_weights(
+        y, rot, np.conj(h_ramp) * inv, s_nat * inv, lay.d_row, lay.d_bin, n
+    )
 
 
 def _model_at_data(h: np.ndarray, rot: np.ndarray, delay: np.ndarray, lay: _Layout) -> np.ndarray:
@@ -396,15 +397,6 @@ def _phasor(angle: np.ndarray) -> np.ndarray:
     return out
 
 
-def _row_sums_against(yx: np.ndarray, h_conj: np.ndarray, lay: _Layout) -> np.ndarray:
-    """[rows] sums by row of ``yx * h_conj[k_col]`` (known values) as two matrix products (the training rows
-    hold every used carrier in order, the data rows the pilots in order)."""
-    nt = lay.num_training_values
-    head = yx[:nt].reshape(2, -1) @ h_conj[lay.used]
-    tail = yx[nt:].reshape(lay.rows - 2, -1) @ h_conj[lay.pilots]
-    return np.concatenate([head, tail])
-
-
 def _carrier_sums(obs: np.ndarray, lay: _Layout, training_only: bool = False) -> np.ndarray:
     """[num_used] complex sums per used carrier of observations ``obs`` [num_known] (the
     training rows' alone when ``training_only``)."""
@@ -419,7 +411,8 @@ def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
     """The candidate channel model with the least Mallows' Cp, ``sum_k c_k |o_k - h_k|^2 +
     2 noise_var dof`` (``o_k`` the mean observation of carrier k, ``c_k`` their count): an
     unbiased estimate of the count-weighted estimation error, so a short delay window wins
-    at low SNR and longer models win when truncation bias exceeds noise.
+    at low SNR and longer models win when truncation bias exceeds noise (the numpy form of
+    the selection in :func:`phy._kernels.refine`, which the receiver uses).
 
     Returns:
         (h [fft_size] complex64 centred order, mse factor [num_used], dof).

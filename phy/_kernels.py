@@ -1,0 +1,87 @@
+"""Compiled loops of the receiver's estimation and equalisation (numba, cached on disk): the
+per-frame work that numpy would spread over dozens of calls on small arrays, as one pass over
+the known (or the payload's) entries. Products of complex64 values stay complex64; sums
+accumulate in 64 bits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def row_sums(yx, h_used, k_row, k_pos, rows):  # pragma: no cover - compiled
+    """[rows] complex64: by row, the sum of ``yx[i] conj(h_used[k_pos[i]])``."""
+    acc = np.zeros(rows, np.complex128)
+    for i in range(yx.size):
+        acc[k_row[i]] += yx[i] * np.conj(h_used[k_pos[i]])
+    return acc.astype(np.complex64)
+
+
+@njit(cache=True)
+def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cover - compiled
+    """One channel update with the common phase ``rot`` [rows] removed.
+
+    The observations ``obs = yx rot[k_row]`` of ``h`` are summed per used carrier (``k_pos``);
+    each candidate model j (``h_j = p_mats[j] @ sums``, ``dofs[j]`` taps) is scored by
+    Mallows' Cp, ``sum_k c_k |o_k - h_jk|^2 + 2 noise dofs[j]`` (``o_k`` the mean observation
+    of carrier k, ``c_k = counts[k]`` their number): an unbiased estimate of the count-weighted
+    estimation error, so a short delay window wins at low SNR and longer models win when
+    truncation bias exceeds noise. Cp's noise level comes from the richest model (per-carrier
+    means): unbiased whichever model is right, so a low training-difference estimate cannot
+    pick a noisy model.
+
+    Returns:
+        (obs [num_known] complex64, h [num_used] complex64 of the least-Cp model, its index,
+        the noise variance of the residuals ``obs - h[k_pos]`` over their degrees of freedom).
+    """
+    m, nu, nm = yx.size, counts.size, p_mats.shape[0]
+    obs = np.empty(m, np.complex64)
+    sums = np.zeros(nu, np.complex128)
+    energy = 0.0
+    for i in range(m):
+        o = yx[i] * rot[k_row[i]]
+        obs[i] = o
+        sums[k_pos[i]] += o
+        energy += o.real * o.real + o.imag * o.imag
+    spread = 0.0
+    for k in range(nu):
+        spread += (sums[k].real ** 2 + sums[k].imag ** 2) / counts[k]
+    cp_noise = max((energy - spread) / max(m - nu - rows, 1), 1e-12)
+    sums64 = sums.astype(np.complex64)
+    best, best_cp = 0, np.inf
+    h_best = np.zeros(nu, np.complex64)
+    h = np.empty(nu, np.complex64)
+    for j in range(nm):
+        cp = 2.0 * cp_noise * dofs[j]
+        for k in range(nu):
+            v = 0j
+            for q in range(nu):
+                v += p_mats[j, k, q] * sums64[q]
+            h[k] = v
+            d = sums[k] / counts[k] - h[k]
+            cp += counts[k] * (d.real * d.real + d.imag * d.imag)
+        if cp < best_cp:
+            best, best_cp = j, cp
+            h_best[:] = h
+    dof = max(m - int(dofs[best]) - rows, 1)
+    resid = 0.0
+    for i in range(m):
+        e = obs[i] - h_best[k_pos[i]]
+        resid += e.real * e.real + e.imag * e.imag
+    return obs, h_best, best, max(resid / dof, 1e-12)
+
+
+@njit(cache=True)
+def apply_weights(y, rot, weight, noise, d_row, d_bin, n):  # pragma: no cover - compiled
+    """(x [num_symbols] complex64 ``y[row, bin] rot[row] weight[bin]``, noise[bin]) at the
+    payload's data elements (``y`` [rows * n], rows and bins of each element)."""
+    m = d_row.size
+    x = np.empty(m, np.complex64)
+    nv = np.empty(m, np.float32)
+    for i in range(m):
+        r, b = d_row[i], d_bin[i]
+        x[i] = y[r * n + b] * (rot[r] * weight[b])
+        nv[i] = noise[b]
+    return x, nv
