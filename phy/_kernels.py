@@ -85,3 +85,46 @@ def apply_weights(y, rot, weight, noise, d_row, d_bin, n):  # pragma: no cover -
         x[i] = y[r * n + b] * (rot[r] * weight[b])
         nv[i] = noise[b]
     return x, nv
+
+
+@njit(cache=True)
+def window_energies(e, n):  # pragma: no cover - compiled
+    """[e.size - n + 1] float64: the energy of each window of ``n`` samples of ``e``
+    (differences of the running sum of |e|^2, as a cumulative sum would give them)."""
+    cs = np.empty(e.size + 1, np.float64)
+    cs[0] = 0.0
+    acc = 0.0
+    for i in range(e.size):
+        re = np.float64(e[i].real)
+        acc += re * re + np.float64(e[i].imag * e[i].imag)
+        cs[i + 1] = acc
+    return cs[n:] - cs[: cs.size - n]
+
+
+@njit(cache=True)
+def half_phase(c, at, cover, seg, f):  # pragma: no cover - compiled
+    """The phase from the first to the second half of the preamble's cover-removed segment
+    correlations ``c[at + k seg] cover[k]`` once a CFO of ``f`` cycles/sample is removed."""
+    k = cover.size
+    h = k // 2
+    first, second = 0j, 0j
+    for i in range(2 * h):
+        v = c[at + seg * i] * (cover[i] * np.exp(-2j * np.pi * f * seg * i))
+        if i < h:
+            first += v
+        else:
+            second += v
+    return np.angle(second * np.conj(first))
+
+
+@njit(cache=True)
+def cfo_template(preamble, f, seg, k):  # pragma: no cover - compiled
+    """[k seg] complex64: the preamble with a CFO of ``f`` cycles/sample applied,
+    ``exp(2j pi f (i seg + m))`` as segment phase times sample phase."""
+    out = np.empty(k * seg, np.complex64)
+    b = np.exp(2j * np.pi * f * np.arange(seg))
+    for i in range(k):
+        a = np.exp(2j * np.pi * f * seg * i)
+        for m in range(seg):
+            out[i * seg + m] = preamble[i * seg + m] * np.complex64(a * b[m])
+    return out
