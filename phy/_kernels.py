@@ -128,3 +128,19 @@ def cfo_template(preamble, f, seg, k):  # pragma: no cover - compiled
         for m in range(seg):
             out[i * seg + m] = preamble[i * seg + m] * np.complex64(a * b[m])
     return out
+
+
+@njit(cache=True)
+def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
+    """[num_windows, n] complex64: ``frame[s : s + n]`` for each start s, times
+    ``exp(1j w (s + m)) / sqrt(n)`` at its sample m (row phase times sample phase)."""
+    col = (np.exp(1j * w * np.arange(n)) / np.sqrt(n)).astype(np.complex64)
+    out = np.empty((starts.size, n), np.complex64)
+    for r in range(starts.size):
+        s = starts[r]
+        if s < 0 or s + n > frame.size:
+            raise IndexError("a window runs past the frame")
+        a = np.complex64(np.exp(1j * w * s))
+        for m in range(n):
+            out[r, m] = frame[s + m] * (a * col[m])
+    return out

@@ -80,14 +80,8 @@ def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -
     only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
     start is a delay the caller's model removes."""
     w = -2 * np.pi * cfo / fft_size
-    frame = np.ascontiguousarray(frame)
-    every = np.lib.stride_tricks.as_strided(  # every window, a view (no copy, no checks)
-        frame, (frame.size - fft_size + 1, fft_size), (frame.itemsize, frame.itemsize)
-    )
-    win = every[starts]  # a copy
-    # the rotation (and the transform's 1 / sqrt(n)) as one table: row phase x sample phase
-    col = np.exp(1j * w * np.arange(fft_size)) / math.sqrt(fft_size)
-    win *= np.multiply.outer(np.exp(1j * w * starts).astype(np.complex64), col.astype(np.complex64))
+    # the rotation (and the transform's 1 / sqrt(n)) applied while the windows are gathered
+    win = _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size)
     return scipy.fft.fft(win, axis=-1, overwrite_x=True)
 
 
