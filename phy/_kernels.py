@@ -144,3 +144,40 @@ def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
         for m in range(n):
             out[r, m] = frame[s + m] * (a * col[m])
     return out
+
+
+@njit(cache=True)
+def phase_line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
+    """The rest of :func:`phy.estimation.track_phase` once its slope search gave ``w``
+    (radians per row): refined by the phase between the halves, the line through the rows'
+    sums ``a`` [rows], then the residual smoothed over as many rows as it takes to reach
+    ``window_snr``. Returns (phi [rows] float64 radians, slope)."""
+    rows = a.size
+    h = rows // 2
+    if rows >= 2:
+        first, second = 0j, 0j
+        for i in range(2 * h):
+            v = a[i] * np.exp(-1j * w * i)
+            if i < h:
+                first += v
+            else:
+                second += v
+        w += np.angle(second * np.conj(first)) / h
+    unrotated = np.exp(-1j * w * np.arange(rows))
+    total = 0j
+    for i in range(rows):
+        total += a[i] * unrotated[i]
+    phi0 = np.angle(total)
+    line = phi0 + w * np.arange(rows)
+    width = int(np.ceil(window_snr / max(snr_row, 1e-6))) | 1
+    if width >= rows:
+        return line, w
+    resid = a * unrotated * np.exp(-1j * phi0)
+    if width > 1:  # centred moving sum over width rows, truncated at the ends
+        half = width // 2
+        cs = np.zeros(rows + 1, np.complex128)
+        for i in range(rows):
+            cs[i + 1] = cs[i] + resid[i]
+        for i in range(rows):
+            resid[i] = cs[min(i + half + 1, rows)] - cs[max(i - half, 0)]
+    return line + np.angle(resid), w

@@ -278,7 +278,9 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)  # [rows] yx conj(h)
             h_pk = h_used[lay.pilot_in_used]
             snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
-            phi, slope = estimation.track_phase(a, snr_row, slope_hint)
+            # estimation.track_phase, its line and smoothing compiled
+            w = estimation.slope_search(a) if slope_hint is None else slope_hint
+            phi, slope = _kernels.phase_line(a, w, estimation.PHASE_WINDOW_SNR, snr_row)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
             # the channel model with the least Mallows' Cp and the noise of its residuals
