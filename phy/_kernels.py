@@ -181,3 +181,42 @@ def phase_line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
         for i in range(rows):
             resid[i] = cs[min(i + half + 1, rows)] - cs[max(i - half, 0)]
     return line + np.angle(resid), w
+
+
+@njit(cache=True)
+def delay_drift(
+    obs, h_pk, pairs, pair_step, times, fft_size, window_snr, snr_row, significance
+):  # pragma: no cover - compiled
+    """:func:`phy.estimation.track_delay` on ``z = obs conj(h_pk)`` (``obs`` the data rows'
+    pilot observations, [rows * num_pilots] row-major): the residual drift, or 0."""
+    rows, npk = times.size, h_pk.size
+    block = min(rows, int(np.ceil(window_snr / max(snr_row, 1e-6))))
+    nb = rows // block
+    if nb < 2:
+        return 0.0
+    g = np.zeros(nb, np.complex128)
+    tb = np.zeros(nb, np.float64)
+    zb = np.empty(npk, np.complex128)
+    hc = np.conj(h_pk)
+    for b in range(nb):
+        zb[:] = 0
+        for r in range(b * block, (b + 1) * block):
+            for p in range(npk):
+                zb[p] += obs[r * npk + p] * hc[p]
+            tb[b] += times[r]
+        tb[b] /= block
+        for j in pairs:
+            g[b] += zb[j + 1] * np.conj(zb[j])
+    tau = np.angle(g) * (-fft_size / (2 * np.pi * pair_step))
+    wgt = np.abs(g)
+    sw = max(wgt.sum(), 1e-30)
+    dt = tb - (wgt * tb).sum() / sw
+    wdt = wgt * dt
+    sxx = (wdt * dt).sum() / sw
+    if sxx <= 0 or nb < 4:
+        return 0.0
+    slope = (wdt * tau).sum() / sw / sxx
+    resid = tau - ((wgt * tau).sum() / sw + slope * dt)
+    var_slope = (wgt * resid * resid).sum() / sw / sxx / (nb - 2)
+    # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
+    return slope if slope**2 > significance**2 * var_slope else 0.0

@@ -292,9 +292,16 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         h[used] = h_used
         if locked:
             break
-        z = obs[lay.num_training_values :].reshape(lay.rows - 2, -1) * np.conj(h[pk])
-        d_eps = estimation.track_delay(
-            z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
+        d_eps = _kernels.delay_drift(  # estimation.track_delay, compiled
+            obs[lay.num_training_values :],
+            h[pk],
+            lay.pairs,
+            cfg.pilot_subcarrier_spacing,
+            lay.times[2:],
+            n,
+            estimation.PHASE_WINDOW_SNR,
+            snr_row,
+            estimation.DRIFT_SIGNIFICANCE,
         )
         eps += d_eps
         if abs(d_eps) * lay.times[-1] < 0.02:
