@@ -386,10 +386,13 @@ def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.n
     return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * np.float32(-2 * np.pi / n))
 
 
+@functools.lru_cache(maxsize=64)
 def _ramp_table(delay: float, n: int) -> np.ndarray:
     """[n] complex64: exp(-2 pi j delay f / n) at every carrier f - n / 2 (centred order)."""
     c = np.float32(-2 * np.pi / n)
-    return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
+    out = _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
+    out.flags.writeable = False  # cached: shared by every caller
+    return out
 
 
 def _phasor(angle: np.ndarray) -> np.ndarray:
