@@ -74,9 +74,22 @@ def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cov
 
 
 @njit(cache=True)
-def apply_weights(y, rot, weight, noise, d_row, d_bin, n):  # pragma: no cover - compiled
-    """(x [num_symbols] complex64 ``y[row, bin] rot[row] weight[bin]``, noise[bin]) at the
-    payload's data elements (``y`` [rows * n], rows and bins of each element)."""
+def equalize(y, rot, h, ramp, s_car, centred, d_row, d_bin, zf):  # pragma: no cover - compiled
+    """One-tap equalisation of the payload's data elements of ``y`` [rows * n] when every row
+    has the same window delay: per FFT bin b (carrier ``centred[b]``) the model
+    ``g = h ramp`` and the weight ``conj(g) / |g|^2`` (ZF) or ``conj(g) / (|g|^2 + s)``
+    (MMSE, ``s = s_car``), applied with the row phase ``rot[row]`` (``exp(-j phi)``).
+    Returns (x [num_symbols] complex64, noise variance ``s / (|g|^2 [+ s])`` float32)."""
+    n = centred.size
+    weight = np.empty(n, np.complex64)
+    noise = np.empty(n, np.float32)
+    for b in range(n):
+        k = centred[b]
+        g = h[k] * ramp[k]
+        gain = g.real * g.real + g.imag * g.imag
+        inv = np.float32(1.0) / (max(gain, np.float32(1e-24)) if zf else gain + s_car[k])
+        weight[b] = np.conj(g) * inv
+        noise[b] = s_car[k] * inv
     m = d_row.size
     x = np.empty(m, np.complex64)
     nv = np.empty(m, np.float32)

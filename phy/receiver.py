@@ -360,12 +360,9 @@ def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
         s_eff = s_car[lay.d_col]
         inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
         return y[lay.d_flat] * np.conj(h_d) * inv, s_eff * inv
-    h_ramp = h[lay.centred] * _ramp_table(float(delay[0]), n)[lay.centred]  # natural order
-    s_nat = s_car[lay.centred]
-    gain = h_ramp.real * h_ramp.real + h_ramp.imag * h_ramp.imag
-    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_nat)
-    return _kernels.apply_weights(
-        y, rot, np.conj(h_ramp) * inv, s_nat * inv, lay.d_row, lay.d_bin, n
+    ramp = _ramp_table(float(delay[0]), n)
+    return _kernels.equalize(
+        y, rot, h, ramp, s_car, lay.centred, lay.d_row, lay.d_bin, equalizer == "zf"
     )
 
 
