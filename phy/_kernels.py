@@ -233,3 +233,26 @@ def delay_drift(
     var_slope = (wgt * resid * resid).sum() / sw / sxx / (nb - 2)
     # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
     return slope if slope**2 > significance**2 * var_slope else 0.0
+
+
+@njit(cache=True)
+def segment_rows(c, lags, cover, seg, width):  # pragma: no cover - compiled
+    """[num_lags, width] complex64: ``c[lag + k seg] cover[k]`` for k < K, zeros after."""
+    k = cover.size
+    v = np.zeros((lags.size, width), np.complex64)
+    for i in range(lags.size):
+        for j in range(k):
+            v[i, j] = c[lags[i] + seg * j] * np.float32(cover[j])
+    return v
+
+
+@njit(cache=True)
+def normalised_power(spec, energy, scale):  # pragma: no cover - compiled
+    """[num_lags, num_bins] float64: ``|spec|^2 / (scale max(energy, 1e-30))`` by row."""
+    q = np.empty(spec.shape, np.float64)
+    for i in range(spec.shape[0]):
+        den = scale * max(energy[i], 1e-30)
+        for j in range(spec.shape[1]):
+            s = spec[i, j]
+            q[i, j] = np.float32(s.real * s.real + s.imag * s.imag) / den
+    return q

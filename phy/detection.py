@@ -215,13 +215,11 @@ def coherent_metric(
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
     k = cover.size
-    v = np.zeros((lags.size, _OVERSAMPLE * k), np.complex64)  # zero-padded rows
-    np.multiply(c[lags[:, None] + seg * np.arange(k)], cover.astype(np.float32), out=v[:, :k])
-    spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)
-    p = spec.real * spec.real
-    p += spec.imag * spec.imag
-    q = p / (k * seg * np.maximum(energy, 1e-30))[:, None]
-    return q, spec
+    if lags.size and (lags.min() < 0 or lags.max() + seg * (k - 1) >= c.size):
+        raise IndexError("the lags' segments run past the correlations")
+    v = _kernels.segment_rows(c, np.asarray(lags, np.int64), cover, seg, _OVERSAMPLE * k)
+    spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)  # zero-padded rows
+    return _kernels.normalised_power(spec, np.asarray(energy, np.float64), k * seg), spec
 
 
 def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
