@@ -34,6 +34,8 @@ import numpy as np
 import scipy.fft
 from scipy import stats
 
+from phy import _kernels
+
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
 # sample passes it, high enough that few noise samples reach the coherent check
 _OVERSAMPLE = 4  # CFO hypotheses per segment-FFT bin spacing 1 / (K L)
@@ -213,13 +215,11 @@ def coherent_metric(
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
     k = cover.size
-    v = np.zeros((lags.size, _OVERSAMPLE * k), np.complex64)  # zero-padded rows
-    np.multiply(c[lags[:, None] + seg * np.arange(k)], cover.astype(np.float32), out=v[:, :k])
-    spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)
-    p = spec.real * spec.real
-    p += spec.imag * spec.imag
-    q = p / (k * seg * np.maximum(energy, 1e-30))[:, None]
-    return q, spec
+    if lags.size and (lags.min() < 0 or lags.max() + seg * (k - 1) >= c.size):
+        raise IndexError("the lags' segments run past the correlations")
+    v = _kernels.segment_rows(c, np.asarray(lags, np.int64), cover, seg, _OVERSAMPLE * k)
+    spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)  # zero-padded rows
+    return _kernels.normalised_power(spec, np.asarray(energy, np.float64), k * seg), spec
 
 
 def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
@@ -230,13 +230,6 @@ def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
     delta = 0.5 * (a - c) / den if den < 0 else 0.0
     f = ((v_bin + delta) / m + 0.5) % 1.0 - 0.5  # cycles per segment
     return f / seg
-
-
-def _segment_sums(c: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int, f: float):
-    """[num_lags, K] cover-removed segment correlations, CFO f (cycles/sample) removed."""
-    k = cover.size
-    rot = cover * np.exp(-2j * np.pi * f * seg * np.arange(k))
-    return c[lags[:, None] + seg * np.arange(k)[None, :]] * rot[None, :]
 
 
 @functools.lru_cache(maxsize=16)
@@ -269,9 +262,7 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     hi = min(x.size - n, d1 + _SPAN)
     if hi < max(lo, d1 - _SPAN):
         return None
-    e = x[lo : hi + n]
-    cs = np.concatenate([[0.0], np.cumsum(e.real.astype(np.float64) ** 2 + e.imag**2)])
-    energy = cs[n:] - cs[:-n]  # [hi - lo + 1] window energies from lo
+    energy = _kernels.window_energies(x[lo : hi + n], n)  # [hi - lo + 1] windows from lo
     lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
     q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
     # a quick look at the search peak and its neighbours: most noise candidates stop here
@@ -294,9 +285,7 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     peak = int(lags[i])
     f = _cfo_cycles(spec[i], int(j), seg)
     # fine CFO: the phase between the preamble's halves once the coarse f is removed
-    v = _segment_sums(c, np.array([peak - c_at]), cover, seg, f)[0]
-    h = k // 2
-    f += float(np.angle(v[h : 2 * h].sum() * np.conj(v[:h].sum()))) / (2 * np.pi * h * seg)
+    f += _kernels.half_phase(c, peak - c_at, cover, seg, f) / (2 * np.pi * (k // 2) * seg)
     cfo = f * cfg.fft_size
     if abs(cfo) > cfg.max_cfo_subcarriers:
         return None
@@ -308,10 +297,7 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
     # (the whole preamble with f applied against the region: the same sums as correlating
     # the corrected region segment by segment; exp(2j pi f (k L + m)) as segment x sample)
-    ramp = np.multiply.outer(
-        np.exp(2j * np.pi * f * seg * np.arange(k)), np.exp(2j * np.pi * f * np.arange(seg))
-    )
-    template = _preamble(cfg) * ramp.reshape(-1).astype(np.complex64)
+    template = _kernels.cfo_template(_preamble(cfg), f, seg, k)
     qf = np.abs(np.correlate(x[early[0] : early[-1] + n], template, "valid")) ** 2
     qf /= n * np.maximum(energy[early - lo], 1e-30)
     near = np.abs(early - peak) <= 2

@@ -69,6 +69,16 @@ def _moving_sum(a: np.ndarray, width: int) -> np.ndarray:
     return c[np.minimum(i + half + 1, a.size)] - c[np.maximum(i - half, 0)]
 
 
+def slope_search(a: np.ndarray) -> float:
+    """The slope (radians per row) of the line ``exp(j w l)`` that best fits ``a`` [rows]:
+    the strongest bin of a zero-padded FFT across rows (four bins per 1 / rows)."""
+    m = 4 << max(0, math.ceil(math.log2(max(a.size, 1))))
+    spec = scipy.fft.fft(a, m)
+    power = spec.real * spec.real
+    power += spec.imag * spec.imag
+    return 2 * np.pi * (((int(np.argmax(power)) / m) + 0.5) % 1.0 - 0.5)
+
+
 def track_phase(
     a: np.ndarray, snr_row: float, slope_hint: float | None = None
 ) -> tuple[np.ndarray, float]:
@@ -88,14 +98,7 @@ def track_phase(
     """
     rows = a.size
     idx = np.arange(rows)
-    if slope_hint is None:
-        m = 4 << max(0, math.ceil(math.log2(max(rows, 1))))
-        spec = scipy.fft.fft(a, m)
-        power = spec.real * spec.real
-        power += spec.imag * spec.imag
-        w = 2 * np.pi * (((int(np.argmax(power)) / m) + 0.5) % 1.0 - 0.5)
-    else:
-        w = float(slope_hint)
+    w = slope_search(a) if slope_hint is None else float(slope_hint)
     if rows >= 2:
         b = np.exp(-1j * w * idx)  # the line removed, summed over each half
         h = rows // 2

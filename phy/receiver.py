@@ -22,7 +22,7 @@ import numpy as np
 import scipy.fft
 import torch
 
-from phy import estimation
+from phy import _kernels, estimation
 from phy.detection import find_preambles
 from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
 from phy.ofdm.equalization import EQUALIZERS
@@ -80,10 +80,9 @@ def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -
     only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
     start is a delay the caller's model removes."""
     w = -2 * np.pi * cfo / fft_size
-    win = np.lib.stride_tricks.sliding_window_view(frame, fft_size)[starts]  # a copy
-    win *= np.exp(1j * w * starts).astype(np.complex64)[:, None]
-    win *= np.exp(1j * w * np.arange(fft_size)).astype(np.complex64)
-    return scipy.fft.fft(win, axis=-1, norm="ortho", overwrite_x=True)
+    # the rotation (and the transform's 1 / sqrt(n)) applied while the windows are gathered
+    win = _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size)
+    return scipy.fft.fft(win, axis=-1, overwrite_x=True)
 
 
 @dataclass(frozen=True)
@@ -97,6 +96,7 @@ class _Layout:
     k_row: np.ndarray  # [num_known] row of each known value
     k_col: np.ndarray  # [num_known] carrier (centred order)
     k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
+    k_pos: np.ndarray  # [num_known] position of its carrier among the used ones
     x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
     counts: np.ndarray  # [num_used] observations per used carrier
     smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
@@ -153,6 +153,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         k_row=k_row,
         k_col=k_col,
         k_flat=k_row * n + (k_col + n // 2) % n,
+        k_pos=np.searchsorted(used, k_col),
         x_known=x[k_row, k_col],
         counts=counts,
         smoothers=(
@@ -252,8 +253,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
     used, pk = lay.used, lay.pilots
-    kr, kc = lay.k_row, lay.k_col
-    x_conj = np.conj(lay.x_known)
+    kr = lay.k_row
+    p_mats, factors, dofs = lay.smoothers
     locked = cfg.carrier_freq_hz is not None
     eps = -cfo * cfg.subcarrier_spacing_hz / cfg.carrier_freq_hz if locked else 0.0
     h, slope_hint = None, None
@@ -265,36 +266,42 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
         # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
-        ramp_known = _ramp(delay, kr, kc, n)
-        yx = y[lay.k_flat] * x_conj * np.conj(ramp_known)  # observations of h e^{j phi}
+        yx = y[lay.k_flat] * _known_factor(cfg, num_symbols, delay)  # observations of h e^{j phi}
         if h is None:  # first look: the two training symbols
             nt = lay.num_training_values  # the training rows' values come first
             h = _channel(yx[:nt], lay, lay.smoother_training, training_only=True)
             y0, y1 = y[lay.used_nat], y[n + lay.used_nat]
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
+        h_used = h[used]
         for _ in range(2):
-            a = _row_sums_against(yx, np.conj(h), lay)  # [rows]
-            h_pk = h[pk]
+            a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)  # [rows] yx conj(h)
+            h_pk = h_used[lay.pilot_in_used]
             snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
-            phi, slope = estimation.track_phase(a, snr_row, slope_hint)
+            # estimation.track_phase, its line and smoothing compiled
+            w = estimation.slope_search(a) if slope_hint is None else slope_hint
+            phi, slope = _kernels.phase_line(a, w, estimation.PHASE_WINDOW_SNR, snr_row)
             slope_hint = slope
             rot = _phasor(-phi)  # [rows]
-            obs = yx * rot[kr]
-            sums = _carrier_sums(obs, lay)
-            # Cp's noise level from the richest model (per-carrier means): unbiased whichever
-            # model is right, so a low training-difference estimate cannot pick a noisy model
-            scatter = float(np.vdot(obs, obs).real) - float(np.vdot(sums, sums / lay.counts).real)
-            cp_noise = max(scatter / max(kr.size - lay.counts.size - lay.rows, 1), 1e-12)
-            h, factor, taps = _best_channel(sums, lay, cp_noise)
-            dof = max(kr.size - taps - lay.rows, 1)
-            e = obs - h[kc]
-            noise_var = max(float(np.vdot(e, e).real) / dof, 1e-12)
+            # the channel model with the least Mallows' Cp and the noise of its residuals
+            obs, h_used, best, noise_var = _kernels.refine(
+                yx, rot, kr, lay.k_pos, lay.counts, p_mats, dofs, lay.rows
+            )
+            factor = factors[best]
+        h = np.zeros(n, np.complex64)
+        h[used] = h_used
         if locked:
             break
-        z = obs[lay.num_training_values :].reshape(lay.rows - 2, -1) * np.conj(h[pk])
-        d_eps = estimation.track_delay(
-            z, lay.pairs, cfg.pilot_subcarrier_spacing, lay.times[2:], n, snr_row
+        d_eps = _kernels.delay_drift(  # estimation.track_delay, compiled
+            obs[lay.num_training_values :],
+            h[pk],
+            lay.pairs,
+            cfg.pilot_subcarrier_spacing,
+            lay.times[2:],
+            n,
+            estimation.PHASE_WINDOW_SNR,
+            snr_row,
+            estimation.DRIFT_SIGNIFICANCE,
         )
         eps += d_eps
         if abs(d_eps) * lay.times[-1] < 0.02:
@@ -303,14 +310,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     mse = np.zeros(n, np.float32)
     mse[used] = noise_var * factor
     assert h is not None  # set on the loop's first pass
-    h_d = _model_at_data(h, rot, delay, lay)
-    y_d = y[lay.d_flat]  # [num_symbols] in payload order
-    s_eff = (noise_var + mse)[lay.d_col]  # noise plus channel-estimation error (unit-power x)
-    gain = h_d.real * h_d.real + h_d.imag * h_d.imag
-    # ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s_eff)
-    inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
-    x_hat = y_d * np.conj(h_d) * inv
-    nv = s_eff * inv
+    x_hat, nv = _equalized(y, h, rot, delay, (noise_var + mse), lay, equalizer)
     h_used = h[used]
     signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
     cfo_total = cfo + slope / (2 * np.pi * s) * n
@@ -327,14 +327,50 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     )
 
 
+def _known_factor(cfg: FrameConfig, num_symbols: int, delay: np.ndarray) -> np.ndarray:
+    """[num_known] complex64 ``conj(x ramp)`` at the known entries: what takes their FFT
+    values to observations of ``h exp(j phi)`` (one table per delay when every row has it)."""
+    if delay.size and np.all(delay == delay[0]):
+        return _uniform_known_factor(cfg, num_symbols, float(delay[0]))
+    lay = _layout(cfg, num_symbols)
+    return np.conj(lay.x_known) * np.conj(_ramp(delay, lay.k_row, lay.k_col, lay.fft_size))
+
+
+@functools.lru_cache(maxsize=32)
+def _uniform_known_factor(cfg: FrameConfig, num_symbols: int, delay: float) -> np.ndarray:
+    lay = _layout(cfg, num_symbols)
+    out = np.conj(lay.x_known) * np.conj(_ramp_table(delay, lay.fft_size)[lay.k_col])
+    out.flags.writeable = False
+    return out
+
+
+def _equalized(y, h, rot, delay, s_car, lay: _Layout, equalizer: str):
+    """(x_hat, noise variance) [num_symbols] in payload order: the one-tap equaliser against
+    the model ``h[k] exp(j phi[l]) ramp[l, k]`` at the data elements of ``y`` [rows * n];
+    ``s_car`` [n] the noise plus channel-estimation error per carrier (unit-power x).
+
+    ZF: y / h as y conj(h) / |h|^2 (a real division); MMSE: y conj(h) / (|h|^2 + s). With one
+    window delay for every row the row factor has unit modulus, so the weights are per
+    carrier, ``conj(h_k) / (|h_k|^2 + s_k)``, applied with the row phases in one pass over the
+    payload; else the model is evaluated at each data element."""
+    n = lay.fft_size
+    if not (delay.size and np.all(delay == delay[0])):
+        h_d = _model_at_data(h, rot, delay, lay)
+        gain = h_d.real * h_d.real + h_d.imag * h_d.imag
+        s_eff = s_car[lay.d_col]
+        inv = 1.0 / (np.maximum(gain, np.float32(1e-24)) if equalizer == "zf" else gain + s_eff)
+        return y[lay.d_flat] * np.conj(h_d) * inv, s_eff * inv
+    ramp = _ramp_table(float(delay[0]), n)
+    return _kernels.equalize(
+        y, rot, h, ramp, s_car, lay.centred, lay.d_row, lay.d_bin, equalizer == "zf"
+    )
+
+
 def _model_at_data(h: np.ndarray, rot: np.ndarray, delay: np.ndarray, lay: _Layout) -> np.ndarray:
     """The model ``h[k] exp(j phi[l]) ramp[l, k]`` at the payload's data elements only:
     [num_symbols] complex64 (``rot`` = exp(-j phi) per row, ``h`` in centred order)."""
     n = lay.fft_size
     h_nat = h[lay.centred]  # [fft_size] natural order
-    if delay.size and np.all(delay == delay[0]):  # one ramp for every row: fold it into h
-        h_ramp = h_nat * _ramp_table(float(delay[0]), n)[lay.centred]
-        return h_ramp[lay.d_bin] * np.conj(rot)[lay.d_row]
     return h_nat[lay.d_bin] * np.conj(rot)[lay.d_row] * _ramp(delay, lay.d_row, lay.d_col, n)
 
 
@@ -347,10 +383,13 @@ def _ramp(delay: np.ndarray, rows: np.ndarray, cols: np.ndarray, n: int) -> np.n
     return _phasor(delay[rows] * (cols - n // 2).astype(np.float32) * np.float32(-2 * np.pi / n))
 
 
+@functools.lru_cache(maxsize=64)
 def _ramp_table(delay: float, n: int) -> np.ndarray:
     """[n] complex64: exp(-2 pi j delay f / n) at every carrier f - n / 2 (centred order)."""
     c = np.float32(-2 * np.pi / n)
-    return _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
+    out = _phasor(np.arange(-(n // 2), n - n // 2, dtype=np.float32) * (np.float32(delay) * c))
+    out.flags.writeable = False  # cached: shared by every caller
+    return out
 
 
 def _phasor(angle: np.ndarray) -> np.ndarray:
@@ -359,15 +398,6 @@ def _phasor(angle: np.ndarray) -> np.ndarray:
     out = np.empty(a.shape, np.complex64)
     out.real, out.imag = np.cos(a), np.sin(a)
     return out
-
-
-def _row_sums_against(yx: np.ndarray, h_conj: np.ndarray, lay: _Layout) -> np.ndarray:
-    """[rows] sums by row of ``yx * h_conj[k_col]`` (known values) as two matrix products (the training rows
-    hold every used carrier in order, the data rows the pilots in order)."""
-    nt = lay.num_training_values
-    head = yx[:nt].reshape(2, -1) @ h_conj[lay.used]
-    tail = yx[nt:].reshape(lay.rows - 2, -1) @ h_conj[lay.pilots]
-    return np.concatenate([head, tail])
 
 
 def _carrier_sums(obs: np.ndarray, lay: _Layout, training_only: bool = False) -> np.ndarray:
@@ -384,7 +414,8 @@ def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
     """The candidate channel model with the least Mallows' Cp, ``sum_k c_k |o_k - h_k|^2 +
     2 noise_var dof`` (``o_k`` the mean observation of carrier k, ``c_k`` their count): an
     unbiased estimate of the count-weighted estimation error, so a short delay window wins
-    at low SNR and longer models win when truncation bias exceeds noise.
+    at low SNR and longer models win when truncation bias exceeds noise (the numpy form of
+    the selection in :func:`phy._kernels.refine`, which the receiver uses).
 
     Returns:
         (h [fft_size] complex64 centred order, mse factor [num_used], dof).
