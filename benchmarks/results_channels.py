@@ -80,9 +80,10 @@ def doppler_section(folder: Path = RESULTS) -> list[str]:
     ]
     lines += _table(header, rows)
     lines.append("")
+    bits = sorted({row["bits_per_point"] for row in r["rows"]})
     lines.append(
-        "BER over all bits sent at each point; the RMS Doppler spread is the median over the "
-        "positions. "
+        f"BER over the {' or '.join(f'{b:,}' for b in bits)} bits sent at each point (0: no "
+        "error in them); the RMS Doppler spread is the median over the positions. "
         "A BER that stops falling as the SNR rises is an error floor: the channel moves "
         "between pilot symbols faster than the interpolation follows; denser pilots or "
         "LMMSE's time covariance lower it, perfect CSI is the bound."

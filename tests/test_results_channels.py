@@ -79,3 +79,30 @@ def test_results_page_holds_the_new_sections():
     doc, _ = results.render()
     for title in ("## Moving drones: uncoded BER against speed", "## Views chosen by sight"):
         assert title in doc
+
+
+def test_doppler_section_states_pilots_and_ber_per_receiver(tmp_path):
+    grid = {"pilot_ofdm_symbols": [2, 11], "num_ofdm_symbols_per_slot": 14}
+    row = {
+        "speed_m_s": 30.0,
+        "max_doppler_hz": 240.2,
+        "median_rms_doppler_spread_hz": 1.5,
+        "snr_db": 45.0,
+        "bits_per_point": 1000,
+        **dict.fromkeys(results_channels.BER_COLUMNS.values(), 0.0),
+        "ber_sparse_ls": 0.0018,
+    }
+    doc = {
+        "modulation": "64qam",
+        "scene": "simple_street_canyon",
+        "carrier_frequency_hz": 2.4e9,
+        "slots_per_transmission": 20,
+        "grids": {"sparse": {**grid, "max_pilot_spacing_s": 0.00075}},
+        "interpolation": "ls: linear",
+        "rows": [row],
+    }
+    (tmp_path / "doppler.json").write_text(json.dumps(_header(doc)))
+    text = "\n".join(results_channels.doppler_section(tmp_path))
+    assert "| 30 | 240 | 1.50 | 45 | 0 | 1.8e-03 | 0 | 0 | 0 |" in text
+    assert "pilots on OFDM symbols [2, 11] of 14 (at most 0.75 ms apart)" in text
+    assert "`python -m benchmarks doppler`, commit 0123456" in text
