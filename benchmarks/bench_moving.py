@@ -3,7 +3,8 @@
 Runs ``osnerf run --channel raytraced --drone-speed V`` on the default scene at 5 dB (at the
 median drone position) with jscc and digital, small settings (300 NeRF steps, no learned
 renderer), one seed, and records per speed each scheme's object PSNR and symbols sent, and
-the report's drone speed, maximum Doppler and median RMS Doppler spread. The receiver in
+the report's drone speed, maximum Doppler, median and largest RMS Doppler spread over the
+views, and how many views have a spread (more than one traced path). The receiver in
 ``osnerf run`` keeps perfect CSI of the channel at each symbol's time: pilots and the
 LS/LMMSE estimators are measured in the ``doppler`` benchmark. Each run's folder is
 ``moving_<V>ms``; a report from the same clean commit and arguments is reused.
@@ -20,7 +21,13 @@ SPEEDS_M_S = (0, 15)
 SNR_DB = 5
 SCHEMES = "jscc,digital"
 SMALL = ["--nerf-steps", "300", "--renderer-steps", "0", "--seed", "0"]
-LINK_KEYS = ("drone_speed_m_s", "max_doppler_hz", "median_rms_doppler_spread_hz")
+LINK_KEYS = (
+    "carrier_frequency_hz",
+    "drone_speed_m_s",
+    "max_doppler_hz",
+    "median_rms_doppler_spread_hz",
+)
+SPREAD_FLOOR_HZ = 0.1  # a view's RMS Doppler spread below this is one path's rounding
 
 
 def _argv(speed: float) -> list[str]:
@@ -46,11 +53,15 @@ def _one(out: Path, speed: float) -> dict:
     argv = _argv(speed)
     wall = _run(run_dir, argv)
     report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
+    spreads = list(report.link.get("rms_doppler_spread_hz", {}).values())
     return {
         "drone_speed_m_s": speed,
         "command": "osnerf " + " ".join(argv),
         "wall_seconds": wall or None,
         "link": {k: report.link.get(k) for k in LINK_KEYS},
+        "max_rms_doppler_spread_hz": max(spreads, default=None),
+        "views_with_doppler_spread": sum(x > SPREAD_FLOOR_HZ for x in spreads),
+        "views_traced": len(spreads),
         "psnr_object": {n: s.psnr_object for n, s in report.schemes.items()},
         "symbols_sent": {n: s.symbols_sent for n, s in report.schemes.items()},
     }
