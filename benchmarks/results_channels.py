@@ -111,18 +111,36 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
     for row in r["rows"]:
         link = row["link"]
         spread = link.get("median_rms_doppler_spread_hz")
+        largest = row.get("max_rms_doppler_spread_hz")
+        spread_views = (
+            f"{row['views_with_doppler_spread']} of {row['views_traced']}"
+            if "views_traced" in row
+            else "–"
+        )
         rows.append(
             [
                 f"{link['drone_speed_m_s']:g}",
                 f"{link['max_doppler_hz']:.0f}",
                 "–" if spread is None else f"{spread:.2f}",
+                "–" if largest is None else f"{largest:.1f}",
+                spread_views,
                 *(f"{row['psnr_object'][n]:.2f}" for n in schemes),
                 *(f"{row['symbols_sent'][n]:,}" for n in schemes),
             ]
         )
     header = ["speed (m/s)", "max Doppler (Hz)", "median RMS Doppler spread (Hz)"]
+    header += ["largest spread (Hz)", "views with a spread"]
     header += [f"{n} object PSNR" for n in schemes] + [f"{n} symbols" for n in schemes]
     lines += _table(header, rows)
+    carrier = r["rows"][0]["link"].get("carrier_frequency_hz")
+    lines.append("")
+    lines.append(
+        "Max Doppler is `v f_c / c`"
+        + (f" at {carrier / 1e9:g} GHz" if carrier else "")
+        + ". The RMS Doppler spread is per view, over its traced paths: a view with one path "
+        "has none (its channel only rotates, and perfect CSI follows the rotation), so the "
+        "median is 0 where most views trace a single path."
+    )
     return lines + [""]
 
 

@@ -24,11 +24,14 @@ def test_moving_section_shows_speed_doppler_psnr_and_perfect_csi(tmp_path):
         },
         "psnr_object": {"jscc": 19.27, "digital": 18.5},
         "symbols_sent": {"jscc": 21924, "digital": 26000},
+        "max_rms_doppler_spread_hz": 82.5,
+        "views_with_doppler_spread": 3,
+        "views_traced": 32,
     }
     doc = {"command": "osnerf run --drone-speed V", "snr_db_at_median_position": 5, "rows": [row]}
     (tmp_path / "moving.json").write_text(json.dumps(_header(doc)))
     text = "\n".join(results_channels.moving_section(tmp_path))
-    assert "| 15 | 120 | 3.25 | 19.27 | 18.50 | 21,924 | 26,000 |" in text
+    assert "| 15 | 120 | 3.25 | 82.5 | 3 of 32 | 19.27 | 18.50 | 21,924 | 26,000 |" in text
     assert "perfect CSI" in text and "commit 0123456" in text
 
 
