@@ -7,7 +7,8 @@ It reads only what the benchmarks write there: ``osnerf eval-codec`` result file
 (``codec_<channel>_separate.json``, ``codec_<channel>_jscc_<sha12>.json``, from
 ``python -m benchmarks codec``) and ``osnerf run`` reports (``pipeline_demo/report.json``,
 ``pipeline_tiny_ota_<snr>dB_seed<seed>/report.json``, from ``python -m benchmarks
-pipeline``), plus the shipped checkpoints' model cards. Every number it prints carries the
+pipeline``), the moving-drone and view-selection benchmarks (:mod:`benchmarks.results_channels`),
+plus the shipped checkpoints' model cards. Every number it prints carries the
 commit that made it. A missing file leaves its rows out, never a stale number in.
 """
 
@@ -21,6 +22,8 @@ from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 from statistics import mean
+
+from benchmarks import results_channels
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench-results"
@@ -344,6 +347,7 @@ def render() -> tuple[str, list[str]]:
         *demo_section(demo),
         *ota_section(ota),
         *codec_section(codec),
+        *results_channels.sections(),
         *checkpoint_section(),
     ]
     return "\n".join(doc).rstrip() + "\n", head
