@@ -23,6 +23,11 @@ class FeatureConfig:
     coarser step misses thin parts that no feature can bring back)."""
     weight_threshold: float = 1e-3
     """Samples whose volume-rendering weight is below this skip the feature lookup, in [0, 1)."""
+    min_transmittance: float = 0.0
+    """Rays of the low-resolution pass end once their transmittance falls below this (early
+    ray termination: the samples behind are never evaluated), in [0, 1); 0 marches every
+    sample. At or below ``weight_threshold`` the kept samples are the same and only the
+    opacity changes, by less than this."""
     hidden_channels: int = 32
     """Width of the decoder, >= 1."""
     extra_views: int = 3900
@@ -108,6 +113,8 @@ class FeatureConfig:
             raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
         if not self.step_factor >= 1:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
+        if not 0 <= self.min_transmittance < 1:
+            raise ValueError(f"min_transmittance must be in [0, 1), got {self.min_transmittance}")
         if not 0 <= self.weight_threshold < 1:
             raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
         for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):
@@ -129,6 +136,8 @@ class FeatureConfig:
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {
+        "step_factor": 1.3,
+        "min_transmittance": 1e-3,
         "extra_views": 200,
         "pool_views": 512,
         "train_steps": None,
