@@ -23,6 +23,11 @@ class FeatureConfig:
     coarser step misses thin parts that no feature can bring back)."""
     weight_threshold: float = 1e-3
     """Samples whose volume-rendering weight is below this skip the feature lookup, in [0, 1)."""
+    min_transmittance: float = 0.0
+    """Rays of the low-resolution pass end once their transmittance falls below this (early
+    ray termination: the samples behind are never evaluated), in [0, 1); 0 marches every
+    sample. At or below ``weight_threshold`` the kept samples are the same and only the
+    opacity changes, by less than this."""
     hidden_channels: int = 32
     """Width of the decoder, >= 1."""
     extra_views: int = 3900
@@ -108,6 +113,8 @@ class FeatureConfig:
             raise ValueError(f"grid_scale must be in (0, 1], got {self.grid_scale}")
         if not self.step_factor >= 1:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
+        if not 0 <= self.min_transmittance < 1:
+            raise ValueError(f"min_transmittance must be in [0, 1), got {self.min_transmittance}")
         if not 0 <= self.weight_threshold < 1:
             raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
         for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):
@@ -129,6 +136,8 @@ class FeatureConfig:
 FEATURES_BY_SIZE: dict[int, dict] = {
     0: {},
     150: {
+        "step_factor": 1.5,
+        "min_transmittance": 1e-3,
         "extra_views": 200,
         "pool_views": 512,
         "train_steps": None,
@@ -157,8 +166,9 @@ defaults (:meth:`FeatureConfig.for_resolution`): from 150 px the field baked wit
 density, a few hundred teachers all held at once, and a budget of CPU seconds (under three
 minutes with the baking and the final trims), batches of two views (twice the steps of four
 in the same budget), half of each drawn where the error is, and each sample's colour
-composited as the field composites it; from 300 px the same
-within nine CPU-minutes (each teacher a full render at that size), a third-width pass, a
-feature grid at three quarters of the field's vertices per axis and half the pass cache
-(beside the cache, the grid with its gradient and two Adam moments dominates setup memory at
-these sizes). Measured on lego's test path (docs/renderer.md)."""
+composited as the field composites it, at a finer marching step paid for by ending each ray
+of the low-resolution pass once it is opaque; from 300 px the same, at the default step with
+every sample marched, within nine CPU-minutes (each teacher a full render at that size), a
+third-width pass, a feature grid at three quarters of the field's vertices per axis and half
+the pass cache (beside the cache, the grid with its gradient and two Adam moments dominates
+setup memory at these sizes). Measured on lego's test path (docs/renderer.md)."""

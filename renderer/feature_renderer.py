@@ -32,6 +32,7 @@ from renderer.bake import bake_field
 from renderer.cameras import Intrinsics, camera_rays
 from renderer.feature_config import FeatureConfig
 from renderer.fields import GridField, read_rows, sh_basis, trilinear_corners
+from renderer.march import march_until_opaque
 from renderer.model import RadianceField
 from renderer.sampler import sample_along_rays
 from renderer.volume import packed_sum, packed_weights
@@ -213,12 +214,25 @@ class FeatureRenderer:
         lo = low_res_intrinsics(intrinsics, cfg.downsample)
         o, d = camera_rays(poses, lo)
         o, d = o.reshape(-1, 3), d.reshape(-1, 3)
-        s = sample_along_rays(o, d, m.aabb, m.step_m * cfg.step_factor, m.occupancy)
-        sigma = m.field.density(s.positions) if s.t.numel() else s.t
-        w, _ = packed_weights(sigma, s.deltas, s.ray_indices, o.shape[0])
-        opacity = packed_sum(w, s.ray_indices, o.shape[0])
-        keep = (w > cfg.weight_threshold).nonzero()[:, 0]
-        positions, w, rays = (x.index_select(0, keep) for x in (s.positions, w, s.ray_indices))
+        if cfg.min_transmittance > 0:
+            run = march_until_opaque(
+                o,
+                d,
+                m.aabb,
+                m.step_m * cfg.step_factor,
+                m.occupancy,
+                m.field.density,
+                cfg.min_transmittance,
+                cfg.weight_threshold,
+            )
+            positions, w, rays, opacity = run.positions, run.weights, run.rays, run.opacity
+        else:
+            s = sample_along_rays(o, d, m.aabb, m.step_m * cfg.step_factor, m.occupancy)
+            sigma = m.field.density(s.positions) if s.t.numel() else s.t
+            w, _ = packed_weights(sigma, s.deltas, s.ray_indices, o.shape[0])
+            opacity = packed_sum(w, s.ray_indices, o.shape[0])
+            keep = (w > cfg.weight_threshold).nonzero()[:, 0]
+            positions, w, rays = (x.index_select(0, keep) for x in (s.positions, w, s.ray_indices))
         basis = sh_basis(d, self.sh_degree)
         n = lo.height * lo.width
         # samples come ray by ray, so each view's are one contiguous run
