@@ -131,6 +131,7 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
         "num_subcarriers": int(ch.h.shape[1]),
         "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
         "stats": ch.stats,
+        "ray_solver": ch.solver,
         **_motion_info(cfg, views.meta, ch, idx),
     }
     return RunLinks(links, snrs, outage, info)

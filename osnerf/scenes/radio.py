@@ -9,8 +9,9 @@ each drone its velocity along its ring, for a channel that changes while it flie
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -59,6 +60,8 @@ class DroneChannels:
         subcarrier_frequencies_hz: [num_subcarriers] baseband offsets.
         movers: one ``phy.raytrace.MovingTransmitter`` per position when the drones move,
             else None.
+        solver: the path solver's settings (``phy.raytrace.RayTracingConfig`` as a dict:
+            seed, deterministic, interactions traced, rays shot).
     """
 
     h: np.ndarray
@@ -67,6 +70,7 @@ class DroneChannels:
     stats: dict
     subcarrier_frequencies_hz: np.ndarray
     movers: list | None = None
+    solver: dict = field(default_factory=dict)
 
 
 def radio_scene_path(folder: Path, meta: dict) -> str:
@@ -146,4 +150,5 @@ def drone_channels(
         "outage": st.outage.tolist(),
         "rms_doppler_spread_hz": st.rms_doppler_spread_hz.tolist(),
     }
-    return DroneChannels(h, outage, gain_db, stats, freqs, movers)
+    solver = dataclasses.asdict(tracer.config)
+    return DroneChannels(h, outage, gain_db, stats, freqs, movers, solver)

@@ -73,6 +73,8 @@ def test_at_rest_the_run_links_are_the_static_ones(views):
     links = build_links(_cfg(0.0), views, idx)
     assert links.info["drone_speed_m_s"] == 0.0 and links.info["max_doppler_hz"] == 0.0
     assert set(links.info["rms_doppler_spread_hz"].values()) == {0.0}
+    solver = links.info["ray_solver"]  # what makes the run's tracing repeatable is on record
+    assert solver["deterministic"] is True and solver["seed"] == 42 and solver["max_depth"] == 2
     static = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
     x = torch.ones(1, 500, dtype=torch.complex64)
     for k, i in enumerate(idx):
