@@ -15,6 +15,7 @@ import torch
 from torch import Tensor
 
 SNR_DB_RANGE = (-30.0, 60.0)
+SPEED_OF_LIGHT_M_S = 299_792_458.0
 
 
 def validate_snr_db(

@@ -139,19 +139,19 @@ def select_views(
     if max_views is not None and (isinstance(max_views, bool) or max_views < 1):
         raise ValueError(f"max_views must be an integer >= 1 or None, got {max_views!r}")
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    sim = np.clip(d @ d.T, 0.0, None)  # [candidate, view]: max(0, cos)
     quality = link_quality(snr)
     order = np.argsort(views, kind="stable")  # ties go to the lower view index
     left = [int(k) for k in order]
     n = len(views) if max_views is None else min(int(max_views), len(views))
-    chosen: list[int] = []
+    best = np.zeros(len(views))  # each candidate's best max(0, cos) to a chosen view
     out = []
     for rank in range(n):
-        base = coverage(d, chosen)
-        gain = np.array([coverage(d, [*chosen, k]) - base for k in left])
+        gain = np.maximum(best[:, None], sim[:, left]).mean(axis=0) - best.mean()
         s = np.round(score(gain, quality[left], snr[left]), 9)
         j = int(np.argmax(s))
         k = left.pop(j)
-        chosen.append(k)
+        best = np.maximum(best, sim[:, k])
         out.append(
             ViewChoice(
                 views[k], rank, float(snr[k]), float(gain[j]), float(quality[k]), float(s[j])

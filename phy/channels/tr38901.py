@@ -30,8 +30,8 @@ from torch import Tensor
 from common import Registry
 from phy.channels._common import add_noise, check_symbols, noise_var_per_batch
 from phy.channels.base import Channel, ChannelOutput
+from phy.conventions import SPEED_OF_LIGHT_M_S
 
-SPEED_OF_LIGHT_M_S = 299_792_458.0
 SPEC_VERSIONS = ("16.1", "19.2")
 """TR 38.901 versions whose parameter tables sionna 2.2 ships (its ``spec_version``)."""
 SPEC_VERSION = "19.2"

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from phy.conventions import SPEED_OF_LIGHT_M_S
 from phy.raytrace.tracer import RayTracer, check_positions
 
-SPEED_OF_LIGHT_M_S = 299_792_458.0
 RETRACE_WAVELENGTHS = 4.0
 """A transmission whose flight exceeds this many wavelengths is re-traced along its path."""
 
