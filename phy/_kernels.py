@@ -6,8 +6,31 @@ accumulate in 64 bits.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from numba import njit
+
+
+def njit(**options):
+    """numba's ``njit(**options)``, with numba imported and the kernel compiled (or loaded
+    from its on-disk cache) on the first call: importing ``phy`` loads no numba, so the
+    processes that never receive a frame (training, rendering) never start its runtime."""
+
+    def decorate(python_function):
+        compiled = None
+
+        @functools.wraps(python_function)
+        def kernel(*args):
+            nonlocal compiled
+            if compiled is None:
+                import numba
+
+                compiled = numba.njit(**options)(python_function)
+            return compiled(*args)
+
+        return kernel
+
+    return decorate
 
 
 @njit(cache=True)
