@@ -4,6 +4,7 @@ another world size, agreement with the 1-process run, and bad input."""
 import dataclasses
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -75,8 +76,15 @@ def _final_psnr(out: Path) -> float:
 
 def test_two_processes_agree_with_one_and_write_a_loadable_checkpoint(folders, tmp_path):
     cfg = {**CFG, "max_steps": 8, "save_every_s": 1e9}
-    proc = _torchrun(cfg, folders, tmp_path / "ddp")
-    log = proc.communicate(timeout=300)[0].decode()
+    for _ in range(2):
+        shutil.rmtree(tmp_path / "ddp", ignore_errors=True)
+        proc = _torchrun(cfg, folders, tmp_path / "ddp")
+        log = proc.communicate(timeout=300)[0].decode()
+        # on a loaded host gloo can abort a rank while the process group connects ("terminate
+        # called without an active exception", SIGABRT): launch once more, from scratch, then;
+        # any other failure, or the same one twice, fails the test
+        if proc.returncode == 0 or "without an active exception" not in log:
+            break
     assert proc.returncode == 0, _why(log)
     codec = semcodec.load_codec(tmp_path / "ddp" / "last.safetensors")
     assert codec.card["training"]["world_size"] == 2 and codec.card["training"]["steps"] == 8
