@@ -11,6 +11,7 @@ resumes from the stages cached in RUN_DIR/cache/.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from dataclasses import asdict
@@ -43,11 +44,14 @@ CONFIG_FIELDS = (
     "refine_steps",
     "layer_fusion",
     "drone_speed_m_s",
+    "ground_station_m",
+    "ring_scale",
     "view_selection",
     "max_views",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
+    "ground_station_m": "--ground-station",
     "resolution_px": "--resolution",
     "num_train_views": "--views",
     "num_test_views": "--test-views",
@@ -66,6 +70,26 @@ def _demand(text: str) -> str:
     return text
 
 
+def _ground_station(text: str) -> tuple[float, float, float] | None:
+    """``--ground-station``: ``X,Y,Z`` metres in the scene's frame, each in the allowed
+    range, or ``scene`` for the scene's own (what leaving the flag out gives)."""
+    from osnerf.run.config import GROUND_STATION_RANGE_M
+
+    lo, hi = GROUND_STATION_RANGE_M
+    if str(text).strip().lower() == "scene":
+        return None
+    try:
+        xyz = tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        xyz = ()
+    if len(xyz) != 3 or not all(math.isfinite(v) and lo <= v <= hi for v in xyz):
+        raise argparse.ArgumentTypeError(
+            f"must be X,Y,Z metres, each in [{lo:g}, {hi:g}], or 'scene' (the scene's own), "
+            f"got {text!r}"
+        )
+    return xyz  # type: ignore[return-value]
+
+
 def _schemes(text: str, parse) -> tuple[str, ...]:
     """``--schemes``: known names, each once, no empty item (``jscc,`` is a typo, not jscc)."""
     items = [s.strip() for s in str(text).split(",")]
@@ -78,7 +102,12 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
-    from osnerf.run.config import DRONE_SPEED_RANGE_M_S, RUN_CHANNELS, RunConfig
+    from osnerf.run.config import (
+        DRONE_SPEED_RANGE_M_S,
+        RING_SCALE_RANGE,
+        RUN_CHANNELS,
+        RunConfig,
+    )
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
@@ -104,6 +133,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
             "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
+            "ground_station_m": _ground_station,
+            "ring_scale": checks.number(*RING_SCALE_RANGE),
             "max_views": checks.count(1, 512),
         },
         choices={
@@ -142,6 +173,13 @@ def run_config(args: argparse.Namespace):
     return config_from_args(
         RunConfig, args, CONFIG_FIELDS, flags=FLAGS, allow_untrained=args.allow_untrained
     )
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """What a sweep asks of each point before any runs: the config of parsed arguments is
+    valid (combinations included: ``--drone-speed`` with a channel other than raytraced is
+    refused here, not when its point comes)."""
+    run_config(args)
 
 
 def run(args: argparse.Namespace) -> int:
