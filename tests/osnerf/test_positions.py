@@ -53,7 +53,7 @@ def test_a_sweep_over_position_expands_to_distinct_configs():
     assert [c.render_config().radius_scale for c in cfgs[:2]] == [1.25, 2.0]
 
 
-def test_channel_speed_and_position_sweep_leaves_out_what_only_moving_drones_have():
+def test_channel_speed_and_position_sweep_leaves_out_what_only_moving_drones_have(tmp_path, capsys):
     axes = {
         "channel": ["awgn", "rayleigh", "tdla30-10", "raytraced"],
         "drone_speed": [0, 15],
@@ -63,6 +63,10 @@ def test_channel_speed_and_position_sweep_leaves_out_what_only_moving_drones_hav
     d = {"command": "run", "fixed": {"scene": "tiny", "snr_db": 5}, "axes": axes}
     with pytest.raises(ValueError, match=r"refused by `osnerf run`: --ground-station .*'exclude'"):
         expand(spec_from_dict(d))  # awgn with a ground station: refused before any point
+    path, out = tmp_path / "s.yaml", tmp_path / "r.jsonl"
+    path.write_text(yaml.safe_dump(d))
+    assert main(["sweep", str(path), "--out", str(out), "--no-progress"]) == 2
+    assert "'exclude' entry" in capsys.readouterr().err and not out.exists()
     d["exclude"] = [
         {"channel": others, "drone_speed": 15},
         {"channel": others, "ground_station": ",".join(map(str, FAR))},
