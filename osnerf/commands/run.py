@@ -11,7 +11,6 @@ resumes from the stages cached in RUN_DIR/cache/.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 from dataclasses import asdict
@@ -70,26 +69,6 @@ def _demand(text: str) -> str:
     return text
 
 
-def _ground_station(text: str) -> tuple[float, float, float] | None:
-    """``--ground-station``: ``X,Y,Z`` metres in the scene's frame, each in the allowed
-    range, or ``scene`` for the scene's own (what leaving the flag out gives)."""
-    from osnerf.run.config import GROUND_STATION_RANGE_M
-
-    lo, hi = GROUND_STATION_RANGE_M
-    if str(text).strip().lower() == "scene":
-        return None
-    try:
-        xyz = tuple(float(v) for v in str(text).split(","))
-    except ValueError:
-        xyz = ()
-    if len(xyz) != 3 or not all(math.isfinite(v) and lo <= v <= hi for v in xyz):
-        raise argparse.ArgumentTypeError(
-            f"must be X,Y,Z metres, each in [{lo:g}, {hi:g}], or 'scene' (the scene's own), "
-            f"got {text!r}"
-        )
-    return xyz  # type: ignore[return-value]
-
-
 def _schemes(text: str, parse) -> tuple[str, ...]:
     """``--schemes``: known names, each once, no empty item (``jscc,`` is a typo, not jscc)."""
     items = [s.strip() for s in str(text).split(",")]
@@ -133,7 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
             "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
-            "ground_station_m": _ground_station,
+            "ground_station_m": checks.ground_station,
             "ring_scale": checks.number(*RING_SCALE_RANGE),
             "max_views": checks.count(1, 512),
         },

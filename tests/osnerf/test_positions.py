@@ -181,3 +181,36 @@ def test_a_ground_station_on_a_channel_without_one_is_refused(tmp_path, capsys):
     same = RunConfig(channel="raytraced", ground_station_m=(8, -6, 1.5))
     assert same.ground_station_m == (8.0, -6.0, 1.5)
     assert same.key() == RunConfig(channel="raytraced", ground_station_m=(8.0, -6.0, 1.5)).key()
+
+
+@pytest.mark.raytracing
+def test_radiomap_draws_the_map_of_a_moved_ground_station(tmp_path, views):
+    out = tmp_path / "map"
+    argv = ["radiomap", "--scene", "tiny", "--views", "4", "--samples", "100000"]
+    argv += ["--cell-size-m", "0.5", f"--ground-station={','.join(map(str, FAR))}"]
+    assert main([*argv, "--out", str(out)]) == 0
+    doc = json.loads((out / "radiomap.json").read_text())
+    assert doc["ground_station_m"] == FAR and doc["config"]["ground_station"] == FAR
+    # the candidates are the run's drones; their traced gains are the run's links' gains
+    idx = views.indices("train")
+    cand = np.array([c["position_m"] for c in doc["candidates"]])
+    np.testing.assert_allclose(cand, views.drone_positions_m[idx], atol=1e-6)
+    cfg = RunConfig(scene="tiny", channel="raytraced", ground_station_m=tuple(FAR))
+    run_gain = list(build_links(cfg, views, idx).info["path_gain_db"].values())
+    traced = [c["traced_path_gain_db"] for c in doc["candidates"]]
+    np.testing.assert_allclose(traced, run_gain, atol=0.01)
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--ground-station", "1,2"], "argument --ground-station: must be X,Y,Z metres"),
+        (["--ring-scale", "0.5"], "argument --ring-scale: must be a number in [1, 10]"),
+    ],
+)
+def test_bad_radiomap_positions_are_one_line_errors(tmp_path, capsys, extra, message):
+    out = tmp_path / "map"
+    assert main(["radiomap", "--scene", "tiny", "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert not out.exists()
