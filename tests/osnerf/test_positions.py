@@ -144,6 +144,9 @@ def test_a_sweep_over_position_and_speed_runs_and_each_point_says_where(tmp_path
         assert report["link"]["ground_station_m"] == want
         assert report["scene"]["ground_station_m"] == want
         assert len(report["link"]["drone_positions_m"]) == 2
+        page = (Path(r["output"]) / "report.html").read_text()
+        where = ", ".join(f"{v:g}" for v in want)
+        assert f"ground station at ({where}) m" in page
 
 
 @pytest.mark.parametrize(
