@@ -90,9 +90,9 @@ class RunConfig:
             symbol_rate_hz``); 0: the static channel of each position.
         ground_station_m: for channel "raytraced": the ground station's antenna at (x, y, z)
             metres in the scene's frame, each in [-10000, 10000], in place of the scene's
-            own (None; "scene" on the command line). It moves the radio end only: the drones, their pictures and every
-            other setting stay as they are, so only the channels change (re-traced, no
-            re-render). The report's link records where it was.
+            own (None; "scene" on the command line). It moves the radio end only: the
+            drones, their pictures and every other setting stay as they are, so only the
+            channels change (re-traced, no re-render). The report's link records where it was.
         ring_scale: the drones' ring radius over the radius at which the demanded objects
             just fill a camera's view, in [1, 10] (the ring never comes closer than the
             scene's ``min_radius_m``). It moves every drone, so its pictures and its channel
