@@ -13,6 +13,7 @@ import base64
 import dataclasses
 import html
 import io
+import statistics
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -320,10 +321,23 @@ def motion_summary(link: dict) -> str:
     )
 
 
+def position_summary(link: dict) -> str:
+    """Where a ray-traced run's radio ends were, in words, else ``""``."""
+    if "ground_station_m" not in link:
+        return ""
+    gs = ", ".join(f"{v:g}" for v in link["ground_station_m"])
+    dist = list(link.get("distance_to_ground_station_m", {}).values())
+    return (
+        f"ground station at ({gs}) m ({link['ground_station_from']}), drone ring radius "
+        f"{link['drone_ring']['radius_m']:.2f} m"
+        + (f", median drone distance {statistics.median(dist):.1f} m" if dist else "")
+    )
+
+
 def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     """A self-contained HTML page (pictures as base64 data URIs)."""
     s = {n: asdict(r) for n, r in report.schemes.items()}
-    motion = motion_summary(report.link)
+    motion = "; ".join(t for t in (motion_summary(report.link), position_summary(report.link)) if t)
     keys = [
         "psnr",
         "psnr_object",

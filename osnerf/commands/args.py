@@ -112,6 +112,27 @@ def number(lo: float, hi: float, unit: str = "", *, low_open: bool = False) -> C
     return parse
 
 
+def ground_station(text: str) -> tuple[float, float, float] | None:
+    """``--ground-station``: ``X,Y,Z`` metres in the scene's frame, each in
+    ``osnerf.run.config.GROUND_STATION_RANGE_M``, or ``scene`` for the scene's own (None,
+    what leaving the flag out gives)."""
+    from osnerf.run.config import GROUND_STATION_RANGE_M
+
+    lo, hi = GROUND_STATION_RANGE_M
+    if str(text).strip().lower() == "scene":
+        return None
+    try:
+        xyz = tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        xyz = ()
+    if len(xyz) != 3 or not all(math.isfinite(v) and lo <= v <= hi for v in xyz):
+        raise argparse.ArgumentTypeError(
+            f"must be X,Y,Z metres, each in [{lo:g}, {hi:g}], or 'scene' (the scene's own), "
+            f"got {text!r}"
+        )
+    return xyz[0], xyz[1], xyz[2]
+
+
 def _snr_range() -> tuple[float, float]:
     from phy import SNR_DB_RANGE
 

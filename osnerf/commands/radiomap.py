@@ -2,6 +2,7 @@
 
     osnerf radiomap --scene NAME --out DIR [--demand OBJECT[,...]] [--views N]
                     [--samples N] [--cell-size-m M] [--max-depth D] [--seed S]
+                    [--ground-station X,Y,Z] [--ring-scale S]
 
 The ground station transmits and the map is measured on horizontal planes at the drone
 rings' altitudes: by reciprocity a cell's path gain is that of a drone transmitting from it
@@ -55,6 +56,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=2,
         help="most interactions per path, in [0, 10] (default: 2, as --channel raytraced)",
     )
+    p.add_argument(
+        "--ground-station",
+        type=checks.ground_station,
+        default=None,
+        metavar="X,Y,Z",
+        help="the ground station at X,Y,Z metres in the scene's frame (osnerf run "
+        "--ground-station), or 'scene' (default: the scene's own)",
+    )
+    p.add_argument(
+        "--ring-scale",
+        type=checks.number(1.0, 10.0),
+        default=1.25,
+        help="the drones' ring radius over the radius that just fits the demanded objects in "
+        "view, in [1, 10] (osnerf run --ring-scale) (default: 1.25)",
+    )
     p.add_argument("--seed", type=checks.seed, default=42, help="ray sampler seed (default: 42)")
     p.add_argument("--out", required=True, help="DIR for radiomap.png, .npz and .json")
     checks.add_overwrite(p, "radiomap files in a --out folder that holds files")
@@ -93,6 +109,8 @@ def _result(rm, args: argparse.Namespace) -> dict:
         "cell_size_m": m.cell_size_m,
         "max_depth": args.max_depth,
         "seed": args.seed,
+        "ground_station": None if args.ground_station is None else list(args.ground_station),
+        "ring_scale": args.ring_scale,
     }
     relative = rm.relative_snr_db
     body = {
@@ -139,9 +157,9 @@ def run(args: argparse.Namespace) -> int:
     map_config = prt.RadioMapConfig(
         samples_per_tx=args.samples, max_depth=args.max_depth, seed=args.seed
     )
-    render = RenderConfig(num_train_views=args.views)
+    render = RenderConfig(num_train_views=args.views, radius_scale=args.ring_scale)
     inputs_checked()
-    rm = scene_radio_map(scene, target, render, map_config, args.cell_size_m)
+    rm = scene_radio_map(scene, target, render, map_config, args.cell_size_m, args.ground_station)
     m = rm.map
     body = _result(rm, args)
     npz = io.BytesIO()

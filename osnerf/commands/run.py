@@ -43,11 +43,14 @@ CONFIG_FIELDS = (
     "refine_steps",
     "layer_fusion",
     "drone_speed_m_s",
+    "ground_station_m",
+    "ring_scale",
     "view_selection",
     "max_views",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
+    "ground_station_m": "--ground-station",
     "resolution_px": "--resolution",
     "num_train_views": "--views",
     "num_test_views": "--test-views",
@@ -78,7 +81,12 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
-    from osnerf.run.config import DRONE_SPEED_RANGE_M_S, RUN_CHANNELS, RunConfig
+    from osnerf.run.config import (
+        DRONE_SPEED_RANGE_M_S,
+        RING_SCALE_RANGE,
+        RUN_CHANNELS,
+        RunConfig,
+    )
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
@@ -104,6 +112,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "refine_steps": checks.refine_steps,
             "layer_fusion": checks.number(1.0, 1000.0),
             "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
+            "ground_station_m": checks.ground_station,
+            "ring_scale": checks.number(*RING_SCALE_RANGE),
             "max_views": checks.count(1, 512),
         },
         choices={
@@ -142,6 +152,13 @@ def run_config(args: argparse.Namespace):
     return config_from_args(
         RunConfig, args, CONFIG_FIELDS, flags=FLAGS, allow_untrained=args.allow_untrained
     )
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """What a sweep asks of each point before any runs: the config of parsed arguments is
+    valid (combinations included: ``--drone-speed`` with a channel other than raytraced is
+    refused here, not when its point comes)."""
+    run_config(args)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -19,6 +19,9 @@ RUN_CHANNELS = (*phy.CHANNELS, OTA)
 """``phy.CHANNELS`` (flat ones with perfect CSI, tdl/cdl over OFDM with LS estimates,
 raytraced per drone position) plus the over-the-air link."""
 DRONE_SPEED_RANGE_M_S = (0.0, 100.0)
+GROUND_STATION_RANGE_M = (-10_000.0, 10_000.0)
+"""Each coordinate of ``--ground-station``, metres in the scene's frame."""
+RING_SCALE_RANGE = (1.0, 10.0)
 CACHE_VERSION = 16
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
 whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
@@ -85,6 +88,15 @@ class RunConfig:
             seen from above) while it sends, and its channel changes with every symbol from
             each traced path's Doppler shift (symbol ``i`` of a view at ``i /
             symbol_rate_hz``); 0: the static channel of each position.
+        ground_station_m: for channel "raytraced": the ground station's antenna at (x, y, z)
+            metres in the scene's frame, each in [-10000, 10000], in place of the scene's
+            own (None; "scene" on the command line). It moves the radio end only: the
+            drones, their pictures and every other setting stay as they are, so only the
+            channels change (re-traced, no re-render). The report's link records where it was.
+        ring_scale: the drones' ring radius over the radius at which the demanded objects
+            just fill a camera's view, in [1, 10] (the ring never comes closer than the
+            scene's ``min_radius_m``). It moves every drone, so its pictures and its channel
+            change together (the scene's views are rendered once per ring and cached).
         view_selection: how the SCU picks among the views the collector found (a name of
             ``osnerf.scu.VIEW_SELECTIONS``): "sight" (every visible view; with ``max_views``,
             greedy coverage of the object's viewing directions), "radio" (the highest
@@ -119,6 +131,8 @@ class RunConfig:
     refine_steps: int = 30
     layer_fusion: float = 4.0
     drone_speed_m_s: float = 0.0
+    ground_station_m: tuple[float, float, float] | None = None
+    ring_scale: float = 1.25
     view_selection: str = "sight"
     max_views: int | None = None
 
@@ -163,6 +177,7 @@ class RunConfig:
                 f"got {self.renderer_steps!r}"
             )
         self._check_speed()
+        self._check_positions()
         if self.ota_device not in OTA_DEVICES:
             raise ValueError(
                 f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
@@ -185,6 +200,30 @@ class RunConfig:
                 f"drone_speed_m_s moves the drones of channel raytraced only, got "
                 f"{v!r} with channel {self.channel!r}"
             )
+
+    def _check_positions(self) -> None:
+        gs = self.ground_station_m
+        if gs is not None:
+            lo, hi = GROUND_STATION_RANGE_M
+            try:
+                xyz = tuple(float(v) for v in gs if not isinstance(v, bool))
+            except (TypeError, ValueError):
+                xyz = ()
+            if len(xyz) != 3 or len(gs) != 3 or not all(lo <= v <= hi for v in xyz):
+                raise ValueError(
+                    f"ground_station_m must be (x, y, z) metres, each in [{lo:g}, {hi:g}], "
+                    f"got {gs!r}"
+                )
+            if self.channel != "raytraced":
+                raise ValueError(
+                    f"ground_station_m moves the ground station of channel raytraced only, "
+                    f"got {gs!r} with channel {self.channel!r}"
+                )
+            object.__setattr__(self, "ground_station_m", xyz)  # (8, -6, 1.5): the same run
+        v = self.ring_scale
+        lo, hi = RING_SCALE_RANGE
+        if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+            raise ValueError(f"ring_scale must be in [{lo:g}, {hi:g}], got {v!r}")
 
     def _check_selection(self) -> None:
         from osnerf.scu import VIEW_SELECTIONS
@@ -222,6 +261,7 @@ class RunConfig:
             num_train_views=self.num_train_views,
             num_test_views=self.num_test_views,
             spp=self.render_spp,
+            radius_scale=float(self.ring_scale),
         )
 
     def demand_obj(self) -> Demand:

@@ -106,8 +106,11 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
     from phy.raytrace import PerPositionChannel
 
     pos = views.drone_positions_m[idx]
-    vel = flight_velocities(views.meta, pos, cfg.drone_speed_m_s)
-    ch = drone_channels(views.folder, views.meta, pos, velocities_m_s=vel)
+    meta = views.meta
+    if cfg.ground_station_m is not None:  # the radio end moved; the drones and views stay
+        meta = {**meta, "ground_station_m": list(cfg.ground_station_m)}
+    vel = flight_velocities(meta, pos, cfg.drone_speed_m_s)
+    ch = drone_channels(views.folder, meta, pos, velocities_m_s=vel)
     gain = ch.path_gain_db
     ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
     links, snrs, outage = {}, {}, set()
@@ -132,9 +135,42 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
         "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
         "stats": ch.stats,
         "ray_solver": ch.solver,
-        **_motion_info(cfg, views.meta, ch, idx),
+        **_motion_info(cfg, meta, ch, idx),
+        **_position_info(cfg, meta, pos, idx),
     }
     return RunLinks(links, snrs, outage, info)
+
+
+def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) -> dict:
+    """Where the radio ends were: the ground station (the scene's or ``--ground-station``),
+    the drones' ring and each view's drone; ``channel_params`` repeats the geometry that
+    fixes the ray-traced channel, so each sweep point records it."""
+    gs = np.asarray(meta["ground_station_m"], np.float64)
+    dist = np.linalg.norm(pos - gs, axis=1)  # [num_views] metres
+    ring = {
+        "centre_m": [float(v) for v in meta["trajectory_center_m"]],
+        "radius_m": float(meta["trajectory_radius_m"]),
+        "ring_scale": float(cfg.ring_scale),
+    }
+    params = {
+        "channel": "raytraced",
+        "scene": meta["scene"],
+        "ground_station_m": gs.tolist(),
+        "ground_station_from": "scene" if cfg.ground_station_m is None else "--ground-station",
+        "ring_radius_m": ring["radius_m"],
+        "ring_scale": ring["ring_scale"],
+        "median_distance_m": float(np.median(dist)),
+        "drone_speed_m_s": float(cfg.drone_speed_m_s),
+        "carrier_frequency_hz": float(meta["carrier_frequency_hz"]),
+    }
+    return {
+        "ground_station_m": params["ground_station_m"],
+        "ground_station_from": params["ground_station_from"],
+        "drone_ring": ring,
+        "drone_positions_m": {i: [float(v) for v in p] for i, p in zip(idx, pos)},
+        "distance_to_ground_station_m": {i: float(d) for i, d in zip(idx, dist)},
+        "channel_params": params,
+    }
 
 
 def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:

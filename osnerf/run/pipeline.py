@@ -299,7 +299,7 @@ def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) ->
         "num_test_views": int(len(views.indices("test"))),
         "resolution_px": [views.intrinsics.height, views.intrinsics.width],
         "render_seconds": views.meta.get("render_seconds"),
-        "ground_station_m": views.meta["ground_station_m"],
+        "ground_station_m": list(cfg.ground_station_m or views.meta["ground_station_m"]),
     }
 
 

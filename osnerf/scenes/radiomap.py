@@ -75,6 +75,7 @@ def scene_radio_map(
     render: RenderConfig | None = None,
     map_config=None,
     cell_size_m: float | None = None,
+    ground_station_m=None,
 ) -> SceneRadioMap:
     """The radio map of ``scene`` at its drone rings' altitudes (around ``target``).
 
@@ -85,6 +86,8 @@ def scene_radio_map(
         map_config: :class:`phy.raytrace.RadioMapConfig` (its ``max_depth`` and ``seed``
             also trace the candidates).
         cell_size_m: cell side; None: the larger side over :data:`DEFAULT_CELLS_PER_SIDE`.
+        ground_station_m: (x, y, z) metres in place of the scene's own ground station (as
+            ``osnerf run --ground-station``); None: the scene's.
     """
     import phy.raytrace as prt
     from osnerf.scenes.radio import write_radio_scene
@@ -98,7 +101,9 @@ def scene_radio_map(
     train, _, _, _ = trajectory(
         geometry, target, info.fov_deg, info.elevations_deg, info.min_radius_m, render
     )
-    gs = np.asarray(geometry.ground_station_m, np.float64)
+    gs = np.asarray(
+        geometry.ground_station_m if ground_station_m is None else ground_station_m, np.float64
+    )
     centre, size = map_extent(np.concatenate([train, geometry.bounds_m, gs[None]]))
     cell = cell_size_m if cell_size_m is not None else float(size.max()) / DEFAULT_CELLS_PER_SIDE
     altitudes = np.unique(np.round(train[:, 2], 6))

@@ -7,13 +7,20 @@ A spec is a small YAML or TOML file::
     axes: {modulation: [qpsk, 16qam], snr_db: [0, 5, 10]}
     seeds: [0]
 
+An optional ``exclude`` lists combinations of axis values left out of the product
+(:mod:`osnerf.sweeps.exclude`)::
+
+    axes: {channel: [awgn, raytraced], drone_speed: [0, 15]}
+    exclude: [{channel: awgn, drone_speed: 15}]
+
 Option names are those of the command's command line without the dashes (``snr_db`` or
 ``snr-db`` both name ``--snr-db``). The spec is checked against the command's own argparse
 options (from :func:`osnerf.cli.build_parser`) before anything runs: an unknown option, a
 value outside its choices or of the wrong type, a value that names no entry of its table (a
 codec, a channel, a scheme: :mod:`osnerf.sweeps.values`), a missing required option, an
 empty axis or an empty seed list is a one-line ``ValueError`` naming the field and what is
-allowed.
+allowed; so is a point whose command refuses the combination of its values (the command
+module's ``check_args``, e.g. ``osnerf run``'s config checks).
 """
 
 from __future__ import annotations
@@ -29,9 +36,11 @@ from typing import Any
 
 import yaml
 
+from osnerf.sweeps.exclude import check_exclude, matches
+
 RESERVED = ("out", "seed")  # set by the sweep itself, per point
 OUTPUT_OPTIONS = ("plot", "sigmf_dir", "keep_outputs")  # files every point would write alike
-SPEC_KEYS = ("command", "fixed", "axes", "seeds")
+SPEC_KEYS = ("command", "fixed", "axes", "seeds", "exclude")
 MAX_POINTS = 10_000
 """Points a sweep may have unless ``osnerf sweep --max-points`` raises the bound."""
 
@@ -71,12 +80,16 @@ class SweepSpec:
         axes: option -> non-empty list of values; points are their cartesian product
             (in the spec's order, last axis fastest).
         seeds: seeds each point runs with (``[None]`` for a command without ``--seed``).
+        exclude: combinations left out of the product: each entry maps axis names to a
+            value or a list of values (any matches); a point matching every axis of an
+            entry is dropped. Every entry must drop at least one point.
     """
 
     command: str
     fixed: dict[str, Any] = field(default_factory=dict)
     axes: dict[str, list[Any]] = field(default_factory=dict)
     seeds: tuple[int | None, ...] = (0,)
+    exclude: tuple[dict[str, Any], ...] = ()
 
     def __post_init__(self):
         if not isinstance(self.command, str) or not self.command:
@@ -101,6 +114,7 @@ class SweepSpec:
         for s in self.seeds:
             if s is not None and (isinstance(s, bool) or not isinstance(s, int)):
                 raise ValueError(f"spec field 'seeds' must hold integers, got {s!r}")
+        check_exclude(self.exclude, list(self.axes))
         both = sorted(_norm(k) for k in self.fixed)
         dup = sorted(set(both) & {_norm(k) for k in self.axes})
         if dup:
@@ -114,12 +128,15 @@ class SweepSpec:
         return n
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out = {
             "command": self.command,
             "fixed": dict(self.fixed),
             "axes": {k: list(v) for k, v in self.axes.items()},
             "seeds": list(self.seeds),
         }
+        if self.exclude:  # a spec without one keeps its hash (and its results file)
+            out["exclude"] = [dict(e) for e in self.exclude]
+        return out
 
     @property
     def sha256(self) -> str:
@@ -174,6 +191,7 @@ def spec_from_dict(d: dict[str, Any], max_points: int = MAX_POINTS) -> SweepSpec
                 f"empty sweep: 'seeds' must be a list of integers or a count >= 1, got {seeds}"
             )
         seeds = list(range(seeds))
+    exclude = d.get("exclude") or []
     if not isinstance(seeds, list | tuple):
         raise ValueError(f"spec field 'seeds' must be a list of integers or a count, got {seeds!r}")
     return SweepSpec(
@@ -181,6 +199,7 @@ def spec_from_dict(d: dict[str, Any], max_points: int = MAX_POINTS) -> SweepSpec
         fixed=dict(d.get("fixed") or {}),
         axes=dict(d.get("axes") or {}),
         seeds=tuple(seeds),
+        exclude=tuple(exclude) if isinstance(exclude, list) else exclude,
     )
 
 
@@ -340,22 +359,21 @@ def expand(spec: SweepSpec) -> list[Point]:
     names = list(spec.axes)
     points: list[Point] = []
     seen: dict[str, Point] = {}  # parsed options -> point
+    used = [False] * len(spec.exclude)
+    check_args = _args_check(spec.command)
     for combo in itertools.product(*(spec.axes[n] for n in names)):
+        values = dict(zip(names, combo))
+        hits = [matches(e, values) for e in spec.exclude]
+        used = [u or h for u, h in zip(used, hits)]
+        if any(hits):
+            continue
         argv = list(fixed_argv)
         for name, value in zip(names, combo):
             argv += _args_for(name, value, opts[_norm(name)])
         for seed in seeds:
             full = argv + (["--seed", str(seed)] if seed is not None else [])
-            check = full + (["--out", "__sweep_check__"] if "out" in opts else [])
-            try:
-                parsed = repr(sorted(vars(parser.parse_args(check)).items()))
-            except _ParseError as e:
-                values = dict(zip(names, combo))
-                raise ValueError(
-                    f"point {values} of the spec is not a valid `osnerf {spec.command}` "
-                    f"command line: {e}"
-                ) from None
-            point = Point(values=dict(zip(names, combo)), seed=seed, argv=tuple(full))
+            point = Point(values=values, seed=seed, argv=tuple(full))
+            parsed = _parse_point(spec.command, parser, point, "out" in opts, check_args)
             if parsed in seen:  # e.g. 0 and 0.0 on a float option
                 raise ValueError(
                     f"points {seen[parsed].values} and {point.values} (seed {seed}) parse to the "
@@ -363,6 +381,42 @@ def expand(spec: SweepSpec) -> list[Point]:
                 )
             seen[parsed] = point
             points.append(point)
+    for entry, u in zip(spec.exclude, used):
+        if not u:
+            raise ValueError(f"exclude entry {entry} matches no point of the axes: fix its values")
     if not points:
         raise ValueError("empty sweep: the spec expands to no points")
     return points
+
+
+def _args_check(command: str):
+    """The command's ``check_args(args)`` (its module's: builds and validates the config
+    of parsed arguments, raising ValueError on a combination its parser cannot see), or
+    None."""
+    import importlib
+
+    from osnerf.cli import COMMANDS
+
+    return getattr(importlib.import_module(COMMANDS[command][0]), "check_args", None)
+
+
+def _parse_point(command: str, parser, point: Point, has_out: bool, check_args) -> str:
+    """``point``'s command line parsed by the command's parser and checked by its
+    ``check_args``; returns the parsed options (canonical text). ValueError names the point."""
+    check = list(point.argv) + (["--out", "__sweep_check__"] if has_out else [])
+    try:
+        args = parser.parse_args(check)
+    except _ParseError as e:
+        raise ValueError(
+            f"point {point.values} of the spec is not a valid `osnerf {command}` command line: {e}"
+        ) from None
+    if check_args is not None:
+        try:
+            check_args(args)
+        except (ValueError, KeyError) as e:
+            msg = e.args[0] if isinstance(e, KeyError) and e.args else e
+            raise ValueError(
+                f"point {point.values} of the spec is refused by `osnerf {command}`: {msg}; "
+                "an 'exclude' entry leaves such a combination out"
+            ) from None
+    return repr(sorted(vars(args).items()))
