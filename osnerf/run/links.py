@@ -106,7 +106,7 @@ RAYTRACED_GRID = phy.ResourceGrid(fft_size=64, subcarrier_spacing_hz=30e3)
 """The OFDM grid of the ray-traced link with estimated CSI (``RunConfig.csi`` "ls"/"lmmse"):
 the traced subcarriers (64 at 30 kHz), a 16-sample cyclic prefix (an OFDM symbol lasts
 41.7 us), 14 OFDM symbols per slot with pilots on every used subcarrier of symbols 2 and 11
-(9 symbols, 375 us apart), 6 + 5 guard carriers and a null DC: 636 data symbols per slot of
+(9 symbols, 375 us apart), 6 + 5 guard carriers and a null DC: 624 data symbols per slot of
 583 us."""
 LMMSE_DELAY_SPREAD_S = 100e-9
 """RMS delay spread of the TDL-A frequency covariance the LMMSE receiver assumes."""
