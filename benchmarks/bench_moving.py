@@ -6,8 +6,9 @@ renderer), one seed, with three receivers: perfect CSI of h at each symbol's tim
 default), and ``--csi ls`` / ``--csi lmmse``: the symbols on the run's OFDM grid with pilots
 (``osnerf.run.links.RAYTRACED_GRID``), h estimated from them. Records per speed and
 receiver each scheme's object PSNR, symbols sent and views lost, and the report's drone
-speed, maximum Doppler, median and largest RMS Doppler spread over the views, and how many
-views have a spread (more than one traced path), and the grid's pilot pattern. Each run's
+speed, maximum Doppler, median and largest RMS Doppler spread over the views, how many
+views have a spread (more than one traced path), the grid's pilot pattern, and the median
+SNR the SCU measured through the links with its pilots (what it plans rates and copies on). Each run's
 folder is ``moving_<V>ms`` (perfect CSI) or ``moving_<V>ms_<CSI>``; a report from the same
 clean commit and arguments is reused.
 
@@ -18,6 +19,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+
+import numpy as np
 
 SPEEDS_M_S = (0, 15)
 CSI = ("perfect", "ls", "lmmse")
@@ -59,6 +62,7 @@ def _one(out: Path, speed: float, csi: str) -> dict:
     wall = _run(run_dir, argv)
     report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
     spreads = list(report.link.get("rms_doppler_spread_hz", {}).values())
+    measured = report.views.measured_snr_db  # the SCU's pilot measurement through the link
     return {
         "drone_speed_m_s": speed,
         "csi": csi,
@@ -74,6 +78,7 @@ def _one(out: Path, speed: float, csi: str) -> dict:
         "symbols_sent": {n: s.symbols_sent for n, s in report.schemes.items()},
         "views_lost": {n: s.views_lost for n, s in report.schemes.items()},
         "views_sent": {n: s.views_sent for n, s in report.schemes.items()},
+        "median_measured_snr_db": float(np.median(list(measured.values()))),
     }
 
 

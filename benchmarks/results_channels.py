@@ -94,6 +94,10 @@ def doppler_section(folder: Path = RESULTS) -> list[str]:
 RECEIVERS = {"perfect": "perfect CSI", "ls": "LS pilots", "lmmse": "LMMSE pilots"}
 
 
+def _db(x: float | None) -> str:
+    return "–" if x is None else f"{x:.1f}"
+
+
 def _lost(row: dict, scheme: str) -> str:
     lost = (row.get("views_lost") or {}).get(scheme)
     return "–" if lost is None else str(sum(lost.values()))
@@ -134,13 +138,14 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
                 "–" if spread is None else f"{spread:.2f}",
                 "–" if largest is None else f"{largest:.1f}",
                 spread_views,
+                _db(row.get("median_measured_snr_db")),
                 *(f"{row['psnr_object'][n]:.2f}" for n in schemes),
                 *(f"{row['symbols_sent'][n]:,}" for n in schemes),
                 *(_lost(row, n) for n in schemes if n != "jscc"),
             ]
         )
     header = ["speed (m/s)", "receiver", "max Doppler (Hz)", "median RMS Doppler spread (Hz)"]
-    header += ["largest spread (Hz)", "views with a spread"]
+    header += ["largest spread (Hz)", "views with a spread", "median measured SNR (dB)"]
     header += [f"{n} object PSNR" for n in schemes] + [f"{n} symbols" for n in schemes]
     header += [f"{n} views lost" for n in schemes if n != "jscc"]
     lines += _table(header, rows)
@@ -151,7 +156,11 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         + (f" at {carrier / 1e9:g} GHz" if carrier else "")
         + ". The RMS Doppler spread is per view, over its traced paths: a view with one path "
         "has none (its channel only rotates, and perfect CSI follows the rotation), so the "
-        "median is 0 where most views trace a single path."
+        "median is 0 where most views trace a single path. The measured SNR is the SCU's, "
+        "through each link with its pilots after the receiver's estimation: a noisier "
+        "estimate measures lower, and the SCU plans more symbols per view (a higher CBR, "
+        "copies), so the symbols differ between receivers; within a row jscc and digital "
+        "have the same budget."
     )
     grid = next((row["grid"] for row in r["rows"] if row.get("grid")), None)
     if grid:

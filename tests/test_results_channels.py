@@ -27,6 +27,7 @@ def test_moving_section_shows_speed_doppler_psnr_per_receiver(tmp_path):
         "max_rms_doppler_spread_hz": 82.5,
         "views_with_doppler_spread": 3,
         "views_traced": 32,
+        "median_measured_snr_db": 5.04,
     }
     grid = {
         "fft_size": 64,
@@ -52,11 +53,11 @@ def test_moving_section_shows_speed_doppler_psnr_per_receiver(tmp_path):
     (tmp_path / "moving.json").write_text(json.dumps(_header(doc)))
     text = "\n".join(results_channels.moving_section(tmp_path))
     assert (
-        "| 15 | perfect CSI | 120 | 3.25 | 82.5 | 3 of 32 | 19.27 | 18.50 | 21,924 | 26,000 | – |"
+        "| 15 | perfect CSI | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 19.27 | 18.50 | 21,924 | 26,000 | – |"
         in text
     )
     assert (
-        "| 15 | LS pilots | 120 | 3.25 | 82.5 | 3 of 32 | 18.00 | 12.25 | 21,924 | 26,000 | 4 |"
+        "| 15 | LS pilots | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 18.00 | 12.25 | 21,924 | 26,000 | 4 |"
         in text
     )
     assert "pilots on every used subcarrier of OFDM symbols [2, 11] of 14" in text
