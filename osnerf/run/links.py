@@ -200,7 +200,8 @@ def _csi_info(cfg: RunConfig, moving: bool) -> dict:
     how = {
         "ls": "ls (pilots): LS on each pilot, linear interpolation across the subcarriers of "
         "each pilot symbol, then linear in time between the slot's pilot symbols, held "
-        "before the first and after the last",
+        "before the first and after the last; its error variance counts the pilots' noise, "
+        "not the channel's change between them",
         "lmmse": "lmmse (pilots): sionna's LMMSEChannelEstimator on the LS pilot estimates, "
         f"frequency then time, TDL-A covariance at {LMMSE_DELAY_SPREAD_S * 1e9:g} ns RMS "
         f"delay spread, Jakes time covariance at {cfg.drone_speed_m_s:g} m/s, slot by slot",
