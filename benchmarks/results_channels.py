@@ -91,6 +91,18 @@ def doppler_section(folder: Path = RESULTS) -> list[str]:
     return lines + [""]
 
 
+RECEIVERS = {"perfect": "perfect CSI", "ls": "LS pilots", "lmmse": "LMMSE pilots"}
+
+
+def _db(x: float | None) -> str:
+    return "–" if x is None else f"{x:.1f}"
+
+
+def _lost(row: dict, scheme: str) -> str:
+    lost = (row.get("views_lost") or {}).get(scheme)
+    return "–" if lost is None else str(sum(lost.values()))
+
+
 def moving_section(folder: Path = RESULTS) -> list[str]:
     title = "## Moving drones end to end"
     doc = _doc(folder, "moving")
@@ -101,9 +113,10 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         title,
         "",
         f"`{r['command']}` on the default scene, commit {_commit(doc)}; SNR "
-        f"{r['snr_db_at_median_position']:g} dB at the median drone position. The receiver "
-        "in `osnerf run` keeps perfect CSI of h at each symbol's time: pilots and the "
-        "LS/LMMSE estimators are measured in the BER benchmark above, not here.",
+        f"{r['snr_db_at_median_position']:g} dB at the median drone position. Receivers: "
+        "perfect CSI of h at each symbol's time (the run's default), or `--csi ls` / "
+        "`--csi lmmse`: the same symbols on an OFDM grid with pilots, h estimated from them "
+        "(jscc and digital share the link and its pilots).",
         "",
     ]
     schemes = list(r["rows"][0]["psnr_object"])
@@ -120,17 +133,21 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         rows.append(
             [
                 f"{link['drone_speed_m_s']:g}",
+                RECEIVERS.get(row.get("csi", "perfect"), row.get("csi")),
                 f"{link['max_doppler_hz']:.0f}",
                 "–" if spread is None else f"{spread:.2f}",
                 "–" if largest is None else f"{largest:.1f}",
                 spread_views,
+                _db(row.get("median_measured_snr_db")),
                 *(f"{row['psnr_object'][n]:.2f}" for n in schemes),
                 *(f"{row['symbols_sent'][n]:,}" for n in schemes),
+                *(_lost(row, n) for n in schemes if n != "jscc"),
             ]
         )
-    header = ["speed (m/s)", "max Doppler (Hz)", "median RMS Doppler spread (Hz)"]
-    header += ["largest spread (Hz)", "views with a spread"]
+    header = ["speed (m/s)", "receiver", "max Doppler (Hz)", "median RMS Doppler spread (Hz)"]
+    header += ["largest spread (Hz)", "views with a spread", "median measured SNR (dB)"]
     header += [f"{n} object PSNR" for n in schemes] + [f"{n} symbols" for n in schemes]
+    header += [f"{n} views lost" for n in schemes if n != "jscc"]
     lines += _table(header, rows)
     carrier = r["rows"][0]["link"].get("carrier_frequency_hz")
     lines.append("")
@@ -139,8 +156,27 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         + (f" at {carrier / 1e9:g} GHz" if carrier else "")
         + ". The RMS Doppler spread is per view, over its traced paths: a view with one path "
         "has none (its channel only rotates, and perfect CSI follows the rotation), so the "
-        "median is 0 where most views trace a single path."
+        "median is 0 where most views trace a single path. The measured SNR is the SCU's, "
+        "through each link with its pilots after the receiver's estimation: a noisier "
+        "estimate measures lower, and the SCU plans more symbols per view (a higher CBR, "
+        "copies), so the symbols differ between receivers; within a row jscc and digital "
+        "have the same budget."
     )
+    grid = next((row["grid"] for row in r["rows"] if row.get("grid")), None)
+    if grid:
+        k = grid["pilot_subcarrier_spacing"]
+        lines.append("")
+        lines.append(
+            f"The pilot receivers' grid: {grid['fft_size']} subcarriers at "
+            f"{grid['subcarrier_spacing_hz'] / 1e3:g} kHz (the traced ones), OFDM symbols of "
+            f"{grid['ofdm_symbol_duration_s'] * 1e6:.1f} us with the cyclic prefix, pilots on "
+            + ("every" if k == 1 else f"every {k}th")
+            + " used subcarrier "
+            f"of OFDM symbols {grid['pilot_ofdm_symbols']} of {grid['num_ofdm_symbols_per_slot']}"
+            f" (at most {grid['max_pilot_spacing_s'] * 1e6:.0f} us apart); LS interpolates "
+            "linearly in frequency then time, LMMSE filters with a TDL-A frequency and a Jakes "
+            "time covariance at the drones' speed."
+        )
     return lines + [""]
 
 

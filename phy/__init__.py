@@ -42,7 +42,14 @@ from phy.conventions import (  # noqa: E402
     validate_snr_db,
 )
 from phy.frame import FrameConfig, build_frame  # noqa: E402
-from phy.link import FlatLink, Link, LinkOutput, OFDMLink, combine_repetitions  # noqa: E402
+from phy.link import (  # noqa: E402
+    CSI_OFDM,
+    FlatLink,
+    Link,
+    LinkOutput,
+    OFDMLink,
+    combine_repetitions,
+)
 from phy.measure import CopyFading, measure_copy_fading, measure_snr_db, qpsk_pilots  # noqa: E402
 from phy.models import (  # noqa: E402
     OFDM_CHANNELS,
@@ -103,6 +110,7 @@ __all__ = [
     "AWGN",
     "CDLChannel",
     "CHANNELS",
+    "CSI_OFDM",
     "Channel",
     "ChannelOutput",
     "FlatLink",

@@ -15,7 +15,7 @@ def test_missing_files_name_the_command_that_makes_them(tmp_path):
         assert f"No `{name}.json` in bench-results/ (`python -m benchmarks {name}`)." in text
 
 
-def test_moving_section_shows_speed_doppler_psnr_and_perfect_csi(tmp_path):
+def test_moving_section_shows_speed_doppler_psnr_per_receiver(tmp_path):
     row = {
         "link": {
             "drone_speed_m_s": 15,
@@ -27,12 +27,42 @@ def test_moving_section_shows_speed_doppler_psnr_and_perfect_csi(tmp_path):
         "max_rms_doppler_spread_hz": 82.5,
         "views_with_doppler_spread": 3,
         "views_traced": 32,
+        "median_measured_snr_db": 5.04,
     }
-    doc = {"command": "osnerf run --drone-speed V", "snr_db_at_median_position": 5, "rows": [row]}
+    grid = {
+        "fft_size": 64,
+        "subcarrier_spacing_hz": 30e3,
+        "ofdm_symbol_duration_s": 80 / 1.92e6,
+        "pilot_subcarrier_spacing": 1,
+        "pilot_ofdm_symbols": [2, 11],
+        "num_ofdm_symbols_per_slot": 14,
+        "max_pilot_spacing_s": 0.000375,
+    }
+    ls = {
+        **row,
+        "csi": "ls",
+        "grid": grid,
+        "psnr_object": {"jscc": 18.0, "digital": 12.25},
+        "views_lost": {"jscc": None, "digital": {"budget": 0, "channel": 4}},
+    }
+    doc = {
+        "command": "osnerf run --drone-speed V",
+        "snr_db_at_median_position": 5,
+        "rows": [row, ls],
+    }
     (tmp_path / "moving.json").write_text(json.dumps(_header(doc)))
     text = "\n".join(results_channels.moving_section(tmp_path))
-    assert "| 15 | 120 | 3.25 | 82.5 | 3 of 32 | 19.27 | 18.50 | 21,924 | 26,000 |" in text
-    assert "perfect CSI" in text and "commit 0123456" in text
+    assert (
+        "| 15 | perfect CSI | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 19.27 | 18.50 | 21,924 | 26,000 | – |"
+        in text
+    )
+    assert (
+        "| 15 | LS pilots | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 18.00 | 12.25 | 21,924 | 26,000 | 4 |"
+        in text
+    )
+    assert "pilots on every used subcarrier of OFDM symbols [2, 11] of 14" in text
+    assert "at most 375 us apart" in text and "41.7 us" in text
+    assert "commit 0123456" in text
 
 
 def test_view_selection_section_says_joint_lost_and_links_the_picture(tmp_path):

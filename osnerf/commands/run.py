@@ -47,6 +47,7 @@ CONFIG_FIELDS = (
     "ring_scale",
     "view_selection",
     "max_views",
+    "csi",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -80,6 +81,7 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    import phy
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.run.config import (
         DRONE_SPEED_RANGE_M_S,
@@ -123,6 +125,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "ota_device": OTA_DEVICES,
             "nerf_clock": ("wall", "cpu"),
             "view_selection": tuple(VIEW_SELECTIONS),
+            "csi": phy.CSI_OFDM,
         },
     )
     schemes = next(a for a in p._actions if a.dest == "schemes")

@@ -105,6 +105,16 @@ class RunConfig:
             path gain over the median position's).
         max_views: the most views sent on demand, in [1, 512] ("radio" and "joint" need it);
             None: every view the collector found.
+        csi: what the receiver of channel "raytraced" knows of the channel (``phy.CSI_OFDM``):
+            "perfect" (each symbol's h, symbols on the traced subcarriers one after the
+            other), or "ls"/"lmmse": the symbols ride an OFDM grid on the traced subcarriers
+            (``osnerf.run.links.RAYTRACED_GRID``: pilots on OFDM symbols 2 and 11 of each
+            14, every used subcarrier) and the receiver estimates h from the pilots, by LS
+            with linear interpolation in frequency then time, or by sionna's LMMSE filter
+            (TDL-A covariance in frequency, Jakes in time at ``drone_speed_m_s``); the
+            estimate's error variance joins each symbol's noise variance. None: the
+            channel's own receiver (perfect CSI on flat and ray-traced channels, LS pilots
+            on tdl/cdl).
     """
 
     scene: str = DEFAULT_SCENE
@@ -135,6 +145,7 @@ class RunConfig:
     ring_scale: float = 1.25
     view_selection: str = "sight"
     max_views: int | None = None
+    csi: str | None = None
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -178,6 +189,7 @@ class RunConfig:
             )
         self._check_speed()
         self._check_positions()
+        self._check_csi()
         if self.ota_device not in OTA_DEVICES:
             raise ValueError(
                 f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
@@ -224,6 +236,17 @@ class RunConfig:
         lo, hi = RING_SCALE_RANGE
         if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
             raise ValueError(f"ring_scale must be in [{lo:g}, {hi:g}], got {v!r}")
+
+    def _check_csi(self) -> None:
+        if self.csi is None:
+            return
+        if self.csi not in phy.CSI_OFDM:
+            raise ValueError(f"csi must be one of {', '.join(phy.CSI_OFDM)}, got {self.csi!r}")
+        if self.channel != "raytraced":
+            raise ValueError(
+                f"csi chooses the receiver of channel raytraced only (tdl/cdl estimate with "
+                f"LS pilots, flat channels know h), got {self.csi!r} with channel {self.channel!r}"
+            )
 
     def _check_selection(self) -> None:
         from osnerf.scu import VIEW_SELECTIONS

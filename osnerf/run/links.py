@@ -3,7 +3,8 @@
 Every receiver is unbiased (zero-forcing, sionna's LMMSE convention) and reports the
 effective noise variance per symbol: perfect CSI on flat channels, LS pilot estimates over
 OFDM for ``tdl``/``cdl``, each drone position's ray-traced response for ``raytraced`` (that
-changes over the view's symbols when the drones fly, ``drone_speed_m_s``), and
+changes over the view's symbols when the drones fly, ``drone_speed_m_s``; known exactly, or
+estimated from pilots on an OFDM grid with ``csi``), and
 ``phy`` OFDM frames between two HackRFs for ``ota``.
 """
 
@@ -101,38 +102,90 @@ def _ota_links(cfg: RunConfig, idx: list[int], snr: dict) -> RunLinks:
     return RunLinks({i: link for i in idx}, snr, info=info, ota=link)
 
 
+RAYTRACED_GRID = phy.ResourceGrid(fft_size=64, subcarrier_spacing_hz=30e3)
+"""The OFDM grid of the ray-traced link with estimated CSI (``RunConfig.csi`` "ls"/"lmmse"):
+the traced subcarriers (64 at 30 kHz), a 16-sample cyclic prefix (an OFDM symbol lasts
+41.7 us), 14 OFDM symbols per slot with pilots on every used subcarrier of symbols 2 and 11
+(9 symbols, 375 us apart), 6 + 5 guard carriers and a null DC: 624 data symbols per slot of
+583 us."""
+LMMSE_DELAY_SPREAD_S = 100e-9
+"""RMS delay spread of the TDL-A frequency covariance the LMMSE receiver assumes."""
+
+
+def raytraced_link(cfg: RunConfig, h, mover, estimator=None) -> phy.Link:
+    """One drone position's link: perfect CSI of each symbol's h on the traced subcarriers
+    in turn (``cfg.csi`` None or "perfect"), or the :data:`RAYTRACED_GRID` with pilots and
+    the receiver's LS or LMMSE (``estimator``, a ``phy.ofdm.LMMSEEstimator``) estimates.
+
+    Args:
+        h: [fft_size] complex64 response at t = 0 on the grid's subcarriers.
+        mover: the drone's ``phy.raytrace.MovingTransmitter`` (or None: at rest).
+    """
+    from phy.raytrace import PerPositionChannel
+
+    g = RAYTRACED_GRID
+    channel = PerPositionChannel(
+        h,
+        mover,
+        g.subcarrier_frequencies_hz,
+        1.0 / cfg.symbol_rate_hz,
+        ofdm_symbol_duration_s=g.symbol_length / g.sample_rate_hz,
+    )
+    if cfg.csi in (None, "perfect"):
+        return phy.FlatLink(channel, csi="perfect", equalizer="zf")
+    return phy.OFDMLink(g, channel, csi=cfg.csi, equalizer="zf", estimator=estimator)
+
+
+def raytraced_estimator(cfg: RunConfig, carrier_frequency_hz: float):
+    """The LMMSE estimator of ``cfg.csi == "lmmse"`` (None otherwise): TDL-A at
+    :data:`LMMSE_DELAY_SPREAD_S` in frequency, Jakes at the drones' speed in time."""
+    if cfg.csi != "lmmse":
+        return None
+    from phy.ofdm import LMMSEEstimator
+
+    return LMMSEEstimator(
+        RAYTRACED_GRID, float(cfg.drone_speed_m_s), carrier_frequency_hz, LMMSE_DELAY_SPREAD_S
+    )
+
+
 def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
     from osnerf.scenes import drone_channels, flight_velocities
-    from phy.raytrace import PerPositionChannel
 
     pos = views.drone_positions_m[idx]
     meta = views.meta
     if cfg.ground_station_m is not None:  # the radio end moved; the drones and views stay
         meta = {**meta, "ground_station_m": list(cfg.ground_station_m)}
     vel = flight_velocities(meta, pos, cfg.drone_speed_m_s)
-    ch = drone_channels(views.folder, meta, pos, velocities_m_s=vel)
+    g = RAYTRACED_GRID
+    ch = drone_channels(
+        views.folder,
+        meta,
+        pos,
+        num_subcarriers=g.fft_size,
+        subcarrier_spacing_hz=g.subcarrier_spacing_hz,
+        velocities_m_s=vel,
+    )
     gain = ch.path_gain_db
     ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
+    fc = float(views.meta["carrier_frequency_hz"])
+    estimator = raytraced_estimator(cfg, fc)
     links, snrs, outage = {}, {}, set()
     for k, i in enumerate(idx):
         if ch.outage[k]:
             outage.add(i)
             continue
         mover = None if ch.movers is None else ch.movers[k]
-        channel = PerPositionChannel(
-            ch.h[k], mover, ch.subcarrier_frequencies_hz, 1.0 / cfg.symbol_rate_hz
-        )
-        links[i] = phy.FlatLink(channel, csi="perfect", equalizer="zf")
+        links[i] = raytraced_link(cfg, ch.h[k], mover, estimator)
         snrs[i] = float(cfg.snr_db + gain[k] - ref)
     info = {
         "channel": "raytraced",
-        "csi": "perfect" if ch.movers is None else "perfect (h at each symbol's time)",
+        **_csi_info(cfg, ch.movers is not None),
         "equalizer": "zf (unbiased) + per-symbol noise variance",
         "path_gain_db": {i: float(g) for i, g in zip(idx, gain)},
         "reference_path_gain_db": ref,
         "outage_views": sorted(outage),
         "num_subcarriers": int(ch.h.shape[1]),
-        "carrier_frequency_hz": float(views.meta["carrier_frequency_hz"]),
+        "carrier_frequency_hz": fc,
         "stats": ch.stats,
         "ray_solver": ch.solver,
         **_motion_info(cfg, meta, ch, idx),
@@ -173,10 +226,53 @@ def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) 
     }
 
 
+def _csi_info(cfg: RunConfig, moving: bool) -> dict:
+    """What the report says about the ray-traced link's receiver: its CSI, and with
+    estimates the grid, the pilot pattern and spacing, and the interpolation."""
+    if cfg.csi in (None, "perfect"):
+        return {"csi": "perfect" if not moving else "perfect (h at each symbol's time)"}
+    g = RAYTRACED_GRID
+    t_sym = g.symbol_length / g.sample_rate_hz
+    how = {
+        "ls": "ls (pilots): LS on each pilot, linear interpolation across the subcarriers of "
+        "each pilot symbol, then linear in time between the slot's pilot symbols, held "
+        "before the first and after the last; its error variance counts the pilots' noise, "
+        "not the channel's change between them",
+        "lmmse": "lmmse (pilots): sionna's LMMSEChannelEstimator on the LS pilot estimates, "
+        f"frequency then time, TDL-A covariance at {LMMSE_DELAY_SPREAD_S * 1e9:g} ns RMS "
+        f"delay spread, Jakes time covariance at {cfg.drone_speed_m_s:g} m/s, slot by slot",
+    }[cfg.csi]
+    return {
+        "csi": how,
+        "ofdm": True,
+        "grid": {
+            "fft_size": g.fft_size,
+            "subcarrier_spacing_hz": g.subcarrier_spacing_hz,
+            "cp_length": g.cp_length,
+            "ofdm_symbol_duration_s": t_sym,
+            "num_ofdm_symbols_per_slot": g.num_ofdm_symbols,
+            "pilot_ofdm_symbols": list(g.pilot_ofdm_symbols),
+            "pilot_subcarrier_spacing": g.pilot_subcarrier_spacing,
+            "max_pilot_spacing_s": float(np.diff(g.pilot_ofdm_symbols).max() * t_sym),
+            "data_symbols_per_slot": g.num_data_symbols,
+        },
+        "timing": "OFDM symbol l of a block is sent at l * ofdm_symbol_duration_s, the copies "
+        "of a block one after the other; air time in the report counts data symbols at "
+        "symbol_rate_hz",
+    }
+
+
 def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:
     """What the report says about the drones' motion: speed, Doppler, symbol timing."""
     from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
 
+    when = (
+        "symbol i of a view is sent at i / symbol_rate_hz and rides subcarrier i mod "
+        "num_subcarriers, from the view's position at t = 0"
+        if cfg.csi in (None, "perfect")
+        else "OFDM symbol l of a view's grid is sent at l * ofdm_symbol_duration_s, from the "
+        "view's position at t = 0"
+    )
     spread = np.asarray(ch.stats["rms_doppler_spread_hz"], np.float64)
     live = ~np.asarray(ch.outage, bool)
     return {
@@ -185,9 +281,9 @@ def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:
         "rms_doppler_spread_hz": {i: float(s) for i, s, ok in zip(idx, spread, live) if ok},
         "median_rms_doppler_spread_hz": float(np.median(spread[live])) if live.any() else None,
         "motion": "drones fly level along their ring (counter-clockwise seen from above); "
-        "symbol i of a view is sent at i / symbol_rate_hz and rides subcarrier i mod "
-        "num_subcarriers; each path's Doppler shift (sionna-rt) turns its phase, re-traced "
-        f"every {RETRACE_WAVELENGTHS:g} wavelengths of flight"
+        f"{when}; a view's copies are sent one after the other, so each later copy sees the "
+        "channel further along the flight; each path's Doppler shift (sionna-rt) turns its "
+        f"phase, re-traced every {RETRACE_WAVELENGTHS:g} wavelengths of flight"
         if cfg.drone_speed_m_s > 0
         else "drones at rest: one fixed response per position",
     }

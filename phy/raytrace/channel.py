@@ -243,17 +243,27 @@ class RayTracedChannel(Channel):
 class PerPositionChannel(Channel):
     """A frequency-selective channel fixed by one position (its ray-traced CFR).
 
-    Symbol ``k`` of a block rides subcarrier ``k mod num_subcarriers``; the CFR is normalised
-    to unit mean power at t = 0, so ``snr_db`` is the received SNR of this position. With a
-    ``mover`` the drone flies on during the block: symbol ``k`` is sent at
-    ``k * symbol_duration_s`` and sees the response at that time (the same normalisation).
+    Flat blocks ``[batch, num_symbols]``: symbol ``k`` of a block rides subcarrier
+    ``k mod num_subcarriers``. OFDM grids ``[batch, num_ofdm_symbols, num_subcarriers]``:
+    subcarrier ``k`` sees ``h[k]``. The CFR is normalised to unit mean power at t = 0, so
+    ``snr_db`` is the received SNR of this position.
+
+    With a ``mover`` the drone flies on while it sends, and the rows of a batch (the copies
+    of a block, a receiver's pilot blocks) are sent one after the other from t = 0, so
+    later rows see the channel further along the flight: flat symbol ``k`` of row ``b`` at
+    ``(b * num_symbols + k) * symbol_duration_s``, OFDM symbol ``l`` of row ``b`` at
+    ``(b * num_ofdm_symbols + l) * ofdm_symbol_duration_s``, each at the response of that
+    time (the same normalisation). At rest every row sees the same response.
 
     Args:
         h: [num_subcarriers] complex64 frequency response.
-        mover: the moving drone (:class:`phy.raytrace.MovingTransmitter`), or None (at rest).
+        mover: the moving drone (:class:`phy.raytrace.MovingTransmitter`, or anything with
+            ``speed_m_s`` and its ``response``), or None (at rest).
         subcarrier_frequencies_hz: [num_subcarriers] offsets of ``h``'s subcarriers (with
             ``mover``).
-        symbol_duration_s: time between successive symbols (with ``mover``), > 0.
+        symbol_duration_s: time between successive flat symbols (with ``mover``), > 0.
+        ofdm_symbol_duration_s: time between OFDM symbols, cyclic prefix included (with
+            ``mover``, for grids), > 0; None: grids are refused while moving.
     """
 
     kind = "raytraced"
@@ -265,14 +275,20 @@ class PerPositionChannel(Channel):
         mover: MovingTransmitter | None = None,
         subcarrier_frequencies_hz=None,
         symbol_duration_s: float | None = None,
+        ofdm_symbol_duration_s: float | None = None,
     ):
         super().__init__()
         h = torch.as_tensor(np.asarray(h, np.complex64))
         p = float((h.abs() ** 2).mean())
         self.register_buffer("h", h / math.sqrt(p) if p > 0 else h)
         self.mover = mover if mover is not None and mover.speed_m_s > 0 else None
+        self.ofdm_symbol_duration_s: float | None = None
         if self.mover is not None:
             self.symbol_duration_s = _check_duration(symbol_duration_s, "symbol_duration_s")
+            if ofdm_symbol_duration_s is not None:
+                self.ofdm_symbol_duration_s = _check_duration(
+                    ofdm_symbol_duration_s, "ofdm_symbol_duration_s"
+                )
             self.freqs = check_frequencies(subcarrier_frequencies_hz)
             if self.freqs.size != h.numel():
                 raise ValueError(
@@ -280,19 +296,50 @@ class PerPositionChannel(Channel):
                 )
             self.scale = 1 / math.sqrt(p) if p > 0 else 1.0
 
-    def response(self, num_symbols: int) -> Tensor:
-        """[num_symbols] complex64: the (normalised) channel of each symbol of a block."""
+    def response(self, num_symbols: int, num_blocks: int | None = None) -> Tensor:
+        """The (normalised) channel of each symbol of a flat block: [num_symbols] complex64
+        for one block, or [num_blocks, num_symbols] for ``num_blocks`` blocks sent one
+        after the other."""
         n = self.h.numel()
+        blocks = 1 if num_blocks is None else int(num_blocks)
         if self.mover is None:
-            return self.h[torch.arange(num_symbols) % n]
-        rows, cols = flat_symbol_times(num_symbols, n, self.symbol_duration_s)
-        h = self.mover.response(rows, self.freqs, cols).reshape(-1)[:num_symbols] * self.scale
-        return torch.from_numpy(h.astype(np.complex64))
+            h = self.h[torch.arange(num_symbols) % n]
+            return h if num_blocks is None else h.expand(blocks, num_symbols)
+        total = blocks * int(num_symbols)
+        rows, cols = flat_symbol_times(total, n, self.symbol_duration_s)
+        hn = self.mover.response(rows, self.freqs, cols).reshape(-1)[:total] * self.scale
+        h = torch.from_numpy(hn.astype(np.complex64))
+        return h if num_blocks is None else h.reshape(blocks, num_symbols)
+
+    def grid_response(self, num_ofdm_symbols: int, num_blocks: int = 1) -> Tensor:
+        """[num_blocks, num_ofdm_symbols, num_subcarriers] complex64: the (normalised)
+        channel of each resource element of ``num_blocks`` grids sent one after the other."""
+        if self.mover is None:
+            return self.h.expand(num_blocks, num_ofdm_symbols, -1)
+        if self.ofdm_symbol_duration_s is None:
+            raise ValueError("a moving PerPositionChannel needs ofdm_symbol_duration_s for grids")
+        rows = np.arange(num_blocks * num_ofdm_symbols) * self.ofdm_symbol_duration_s
+        hn = self.mover.response(rows, self.freqs) * self.scale
+        return torch.from_numpy(hn.astype(np.complex64)).reshape(num_blocks, num_ofdm_symbols, -1)
 
     def forward(self, x: Tensor, snr_db, generator: torch.Generator | None = None) -> ChannelOutput:
+        """Args: x [batch, num_symbols] or [batch, num_ofdm_symbols, num_subcarriers]
+        complex64; snr_db float (Es/N0 at unit channel gain, dB).
+
+        Returns: ChannelOutput with y and h like x, noise_var [batch], outage [batch] (False).
+        """
         validate_snr_db(snr_db)
-        n = x.shape[-1]
-        hk = self.response(n).expand(x.shape[0], n)  # [batch, num_symbols]
+        if x.dim() == 3:
+            if x.shape[2] != self.h.numel():
+                raise ValueError(
+                    f"x has {x.shape[2]} subcarriers, the channel has {self.h.numel()}"
+                )
+            hk = self.grid_response(x.shape[1], x.shape[0])
+        elif self.mover is None:
+            n = x.shape[-1]
+            hk = self.response(n).expand(x.shape[0], n)  # [batch, num_symbols]
+        else:
+            hk = self.response(x.shape[-1], x.shape[0])  # [batch, num_symbols]
         nv = float(snr_db_to_noise_var(float(snr_db)))
         noise = torch.complex(
             torch.randn(x.shape, generator=generator), torch.randn(x.shape, generator=generator)
