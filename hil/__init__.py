@@ -9,6 +9,7 @@ May import ``phy`` only. Public names::
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
+    AirPath, PathSegment          the air's time-varying multipath: paths (delay, gain, Doppler)
     open_loopback, loopback_pair  the same driver without USB
     Radio                         what the over-the-air path uses of a front end (a Protocol)
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
@@ -29,6 +30,7 @@ from hil.air import (
     iq_imbalance,
     quantize_ci8,
 )
+from hil.air_paths import MAX_DOPPLER_HZ, MAX_PATH_DELAY_S, AirPath, PathSegment
 from hil.devices import DEVICES, DeviceKind, device_kind
 from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
 from hil.emulator import Emulator, EmulatorBackend, default_serial
@@ -76,6 +78,8 @@ __all__ = [
     "FAULT_NAMES",
     "FREQ_RANGE_HZ",
     "MAX_DELAY_S",
+    "MAX_DOPPLER_HZ",
+    "MAX_PATH_DELAY_S",
     "MAX_MULTIPATH_DELAY",
     "NETWORK_FAULTS",
     "PPM_RANGE",
@@ -92,6 +96,8 @@ __all__ = [
     "find_plutos",
     "TimedOutError",
     "AirChannel",
+    "AirPath",
+    "PathSegment",
     "BurstResult",
     "FrameReport",
     "OtaConfig",
