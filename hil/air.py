@@ -16,15 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.air_paths import KAISER_BETA as _KAISER_BETA
-from hil.air_paths import RESAMPLER_TAPS  # Kaiser(7) sinc: error < -60 dB up to 0.45 fs
 from hil.air_paths import (
+    RESAMPLER_TAPS,  # Kaiser(7) sinc: error < -60 dB up to 0.45 fs
     AirPath,
     PathSegment,
     TimeVaryingFir,
     check_segments,
     segments_from_arrays,
 )
-
 
 AIR_SNR_DB_RANGE = (-30.0, 100.0)  # AirChannel.snr_db, dB
 MAX_DELAY_S = 1.0  # AirChannel.delay_s in [0, MAX_DELAY_S]
@@ -181,7 +180,9 @@ class AirChannel:
                 see :meth:`fir`).
         """
         if self.path_segments:
-            raise ValueError("a channel of path_segments has no fixed taps: use fir(sample_rate_hz)")
+            raise ValueError(
+                "a channel of path_segments has no fixed taps: use fir(sample_rate_hz)"
+            )
         n = 1 + max((int(d) for d, _ in self.multipath), default=0)
         h = np.zeros(n, np.complex128)
         h[0] = complex(self.direct_gain)

@@ -62,7 +62,9 @@ class AirPath:
         try:
             g = complex(self.gain)
         except (TypeError, ValueError):
-            raise ValueError(f"path gain must be a finite complex number, got {self.gain!r}") from None
+            raise ValueError(
+                f"path gain must be a finite complex number, got {self.gain!r}"
+            ) from None
         if not (math.isfinite(g.real) and math.isfinite(g.imag)):
             raise ValueError(f"path gain must be a finite complex number, got {self.gain!r}")
         f = _real("path doppler_hz", self.doppler_hz)
@@ -113,7 +115,9 @@ def check_segments(segments) -> tuple[PathSegment, ...]:
     if len(segs) > MAX_SEGMENTS or not all(isinstance(s, PathSegment) for s in segs):
         raise ValueError(f"path_segments must be at most {MAX_SEGMENTS} PathSegment")
     if segs and segs[0].start_s != 0:
-        raise ValueError(f"path_segments: the first segment must start at 0 s, got {segs[0].start_s!r}")
+        raise ValueError(
+            f"path_segments: the first segment must start at 0 s, got {segs[0].start_s!r}"
+        )
     starts = [s.start_s for s in segs]
     if any(b <= a for a, b in zip(starts, starts[1:])):
         raise ValueError(f"path_segments: start_s must strictly increase, got {starts}")
@@ -207,9 +211,7 @@ class TimeVaryingFir:
         return cls([0.0], [[_Group(0.0, 0, np.asarray(taps, np.complex64))]], sample_rate_hz)
 
     @classmethod
-    def from_segments(
-        cls, segments, sample_rate_hz: float, scale: float = 1.0
-    ) -> TimeVaryingFir:
+    def from_segments(cls, segments, sample_rate_hz: float, scale: float = 1.0) -> TimeVaryingFir:
         """Each segment's paths as band-limited filters at ``sample_rate_hz``, gains times
         ``scale``; paths of equal Doppler summed into one filter."""
         fs = float(sample_rate_hz)

@@ -18,7 +18,12 @@ FS = 4e6
 
 def _radio(index):
     return SimpleNamespace(
-        index=index, ppm=0.0, sample_rate_hz=FS, center_freq_hz=2.4e9, rx_gain_db=40.0, tx_gain_db=30.0
+        index=index,
+        ppm=0.0,
+        sample_rate_hz=FS,
+        center_freq_hz=2.4e9,
+        rx_gain_db=40.0,
+        tx_gain_db=30.0,
     )
 
 
@@ -158,7 +163,8 @@ def test_a_segment_switch_keeps_the_carrier_phase():
     )  # fmt: skip
     assert np.max(np.abs(through_medium(carried, x, n) - whole)) < 1e-6
     broken = dataclasses.replace(
-        carried, path_segments=(carried.path_segments[0], PathSegment(t1, (AirPath(0.5e-6, a, fd),)))
+        carried,
+        path_segments=(carried.path_segments[0], PathSegment(t1, (AirPath(0.5e-6, a, fd),))),
     )
     y = through_medium(broken, x, n)
     step = np.abs(np.angle(y[1:] / y[:-1]))  # phase step per sample
@@ -185,7 +191,9 @@ def test_setting_the_channel_restarts_its_time_at_the_next_burst():
         m.render_iq(rx, 10_000 * burst, 5_000, lambda: True)  # the receiver reads on
     assert m.epoch == 10_000  # the second burst starts where the first ended
     y = m.render_iq(rx, 10_000, 10_000, lambda: True)
-    assert np.angle(y[100] / 0.1) == pytest.approx(np.angle(a) + 2 * np.pi * fd * 100 / FS, abs=1e-4)
+    assert np.angle(y[100] / 0.1) == pytest.approx(
+        np.angle(a) + 2 * np.pi * fd * 100 / FS, abs=1e-4
+    )
 
 
 def test_path_air_round_trips_through_json_and_the_pluto_attribute():
@@ -198,7 +206,7 @@ def test_path_air_round_trips_through_json_and_the_pluto_attribute():
     assert parse_air_setting(air_setting(ch, 1.5, 4)) == (ch, 1.5, 4)
     assert ch.max_doppler_hz == 7.0
     with pytest.raises(ValueError, match="fir"):
-        ch.taps
+        _ = ch.taps
 
 
 @pytest.mark.parametrize(
