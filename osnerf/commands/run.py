@@ -45,6 +45,7 @@ CONFIG_FIELDS = (
     "drone_speed_m_s",
     "view_selection",
     "max_views",
+    "ota_air",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -78,6 +79,7 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
+    from osnerf.ota_link import OTA_AIRS
     from osnerf.run.config import DRONE_SPEED_RANGE_M_S, RUN_CHANNELS, RunConfig
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
@@ -111,6 +113,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "mcs": ("auto", *MCS_TABLE),
             "image_codec": tuple(IMAGE_CODECS),
             "ota_device": OTA_DEVICES,
+            "ota_air": OTA_AIRS,
             "nerf_clock": ("wall", "cpu"),
             "view_selection": tuple(VIEW_SELECTIONS),
         },

@@ -11,6 +11,7 @@ from functools import cached_property
 import phy
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
+from osnerf.ota_link import OTA_AIRS
 from osnerf.scenes import DEFAULT_SCENE, RenderConfig, check_demand, get_scene
 from osnerf.schemes import DEFAULT_SCHEMES
 
@@ -93,6 +94,12 @@ class RunConfig:
             path gain over the median position's).
         max_views: the most views sent on demand, in [1, 512] ("radio" and "joint" need it);
             None: every view the collector found.
+        ota_air: for channel "ota" over emulated radios (``ota_device`` "emulated", or an
+            emulated Pluto), the air between them: "fixed" (a fixed multipath at
+            ``snr_db``) or "raytraced" (each view's drone's ray-traced paths, with their
+            Doppler shifts when ``drone_speed_m_s`` > 0, ``snr_db`` at the median drone
+            position as for channel "raytraced"; :mod:`osnerf.run.ota_air`). Real boards'
+            air is nobody's to set: "raytraced" is refused for them.
     """
 
     scene: str = DEFAULT_SCENE
@@ -121,6 +128,7 @@ class RunConfig:
     drone_speed_m_s: float = 0.0
     view_selection: str = "sight"
     max_views: int | None = None
+    ota_air: str = "fixed"
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -180,10 +188,22 @@ class RunConfig:
         lo, hi = DRONE_SPEED_RANGE_M_S
         if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
             raise ValueError(f"drone_speed_m_s must be in [{lo:g}, {hi:g}] m/s, got {v!r}")
-        if v > 0 and self.channel != "raytraced":
+        if self.ota_air not in OTA_AIRS:
+            raise ValueError(f"ota_air must be one of {', '.join(OTA_AIRS)}, got {self.ota_air!r}")
+        traced_air = self.channel == OTA and self.ota_air == "raytraced"
+        if self.ota_air != "fixed" and self.channel != OTA:
             raise ValueError(
-                f"drone_speed_m_s moves the drones of channel raytraced only, got "
-                f"{v!r} with channel {self.channel!r}"
+                f"ota_air sets the air of channel ota only, got channel {self.channel!r}"
+            )
+        if traced_air and self.ota_device == "hackrf":
+            raise ValueError(
+                "ota_air raytraced: the air between real HackRFs is not the host's to set; use "
+                "ota_device emulated (or an emulated pluto)"
+            )
+        if v > 0 and self.channel != "raytraced" and not traced_air:
+            raise ValueError(
+                f"drone_speed_m_s moves the drones of channel raytraced (or ota with ota_air "
+                f"raytraced) only, got {v!r} with channel {self.channel!r}"
             )
 
     def _check_selection(self) -> None:
@@ -248,6 +268,8 @@ class RunConfig:
         the same path, the shipped default included, makes another key). The list of schemes
         is not part of it: each scheme's stages are cached under its own name."""
         d = {k: v for k, v in asdict(self).items() if k not in ("schemes", "allow_untrained")}
+        if d["ota_air"] == "fixed":  # the air every run had before it was a choice: same key
+            del d["ota_air"]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])
