@@ -85,7 +85,9 @@ class RunConfig:
             [0, 100]) along its ring around the demanded objects (level, counter-clockwise
             seen from above) while it sends, and its channel changes with every symbol from
             each traced path's Doppler shift (symbol ``i`` of a view at ``i /
-            symbol_rate_hz``); 0: the static channel of each position.
+            symbol_rate_hz``); 0: the static channel of each position. Also for channel
+            "ota" with ``ota_air`` "raytraced": the emulated air's paths turn at their
+            Doppler shifts, sample by sample.
         view_selection: how the SCU picks among the views the collector found (a name of
             ``osnerf.scu.VIEW_SELECTIONS``): "sight" (every visible view; with ``max_views``,
             greedy coverage of the object's viewing directions), "radio" (the highest
