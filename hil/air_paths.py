@@ -251,10 +251,18 @@ class TimeVaryingFir:
             for g in self.groups[k]:
                 part = _fir_range(x, g.taps, g.l0, m0, m1)
                 if g.doppler_hz != 0:
-                    rot = np.exp(2j * np.pi * g.doppler_hz * (t[m0:m1] - self.starts_s[k]))
-                    part = part * rot.astype(np.complex64)
+                    part *= _phasor(g.doppler_hz, t[m0] - self.starts_s[k], m1 - m0, self.fs)
                 y[m0:m1] += part
         return y
+
+
+def _phasor(f_hz: float, t0_s: float, n: int, fs: float, block: int = 1024) -> np.ndarray:
+    """[n] complex64 ``exp(2j pi f_hz (t0_s + m / fs))``: a coarse phasor per block of
+    ``block`` samples times one fine table (two small ``exp`` s instead of ``n``)."""
+    fine = np.exp(2j * np.pi * f_hz * np.arange(block) / fs)  # [block]
+    starts = t0_s + np.arange(-(-n // block)) * (block / fs)  # [num_blocks]
+    coarse = np.exp(2j * np.pi * f_hz * starts)
+    return (coarse[:, None] * fine[None, :]).reshape(-1)[:n].astype(np.complex64)
 
 
 def _fir_range(x: np.ndarray, g: np.ndarray, l0: int, m0: int, m1: int) -> np.ndarray:
