@@ -242,18 +242,29 @@ class TimeVaryingFir:
             (g_i * x)[m]`` with ``t_m = t0_s + m / fs`` in segment ``k``.
         """
         n = len(x)
-        t = t0_s + np.arange(n, dtype=np.float64) / self.fs
-        seg = np.clip(np.searchsorted(self.starts_s, t, side="right") - 1, 0, None)
-        edges = np.flatnonzero(np.diff(seg)) + 1
-        y = np.zeros(n, np.complex64)
-        for m0, m1 in zip([0, *edges.tolist()], [*edges.tolist(), n]):
-            k = int(seg[m0])
+        # sample m is in segment k from m >= (start_k - t0) fs on (a start within 1e-6
+        # sample of a sample's time counts as reached)
+        first = np.ceil((self.starts_s - t0_s) * self.fs - 1e-6)
+        edges = np.clip(first, 0, n).astype(np.int64)  # [num_segments]
+        y: np.ndarray | None = None
+        for k in range(len(edges)):
+            m0, m1 = int(edges[k]), int(edges[k + 1]) if k + 1 < len(edges) else n
+            if k == 0:
+                m0 = 0  # before the first start: the first segment, run backwards
+            if m1 <= m0:
+                continue
             for g in self.groups[k]:
                 part = _fir_range(x, g.taps, g.l0, m0, m1)
                 if g.doppler_hz != 0:
-                    part *= _phasor(g.doppler_hz, t[m0] - self.starts_s[k], m1 - m0, self.fs)
+                    t_m0 = t0_s + m0 / self.fs - self.starts_s[k]
+                    part = part * _phasor(g.doppler_hz, t_m0, m1 - m0, self.fs)
+                if y is None and (m0, m1) == (0, n):
+                    y = part  # a fresh array (never a view of x): safe to add into
+                    continue
+                if y is None:
+                    y = np.zeros(n, np.complex64)
                 y[m0:m1] += part
-        return y
+        return np.zeros(n, np.complex64) if y is None else y
 
 
 def _phasor(f_hz: float, t0_s: float, n: int, fs: float, block: int = 1024) -> np.ndarray:
@@ -266,10 +277,19 @@ def _phasor(f_hz: float, t0_s: float, n: int, fs: float, block: int = 1024) -> n
 
 
 def _fir_range(x: np.ndarray, g: np.ndarray, l0: int, m0: int, m1: int) -> np.ndarray:
-    """``y[m] = sum_j g[j] x[m - l0 - j]`` for m in [m0, m1), x zero outside its length."""
-    start, stop = m0 - l0 - (len(g) - 1), m1 - l0  # x indices the outputs read
-    xs = np.zeros(stop - start, np.complex64)
-    a, b = max(start, 0), min(stop, len(x))
-    if b > a:
-        xs[a - start : b - start] = x[a:b]
-    return np.convolve(xs, g, mode="valid").astype(np.complex64, copy=False)
+    """``y[m] = sum_j g[j] x[m - l0 - j]`` for m in [m0, m1), x zero outside its length.
+
+    Returns:
+        [m1 - m0] complex64.
+    """
+    xa, xb = max(0, m0 - l0 - len(g) + 1), min(len(x), m1 - l0)  # the x the outputs read
+    if xb <= xa:
+        return np.zeros(m1 - m0, np.complex64)
+    full = np.convolve(x[xa:xb], g).astype(np.complex64, copy=False)  # full[i] = y[xa + l0 + i]
+    lo = xa + l0 - m0  # where full[0] lands in the output
+    if lo == 0 and len(full) >= m1 - m0:
+        return full[: m1 - m0]
+    out = np.zeros(m1 - m0, np.complex64)
+    a, b = max(0, lo), min(m1 - m0, lo + len(full))
+    out[a:b] = full[a - lo : b - lo]
+    return out
