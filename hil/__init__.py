@@ -9,10 +9,13 @@ May import ``phy`` only. Public names::
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
+    AirPath, PathSegment          the air's time-varying multipath: paths (delay, gain, Doppler)
+    segments_from_arrays          such paths from arrays (e.g. phy.raytrace.MovingCIR's)
     open_loopback, loopback_pair  the same driver without USB
     Radio                         what the over-the-air path uses of a front end (a Protocol)
     write_sigmf, read_sigmf, SigmfReplay, Annotation, Recording
     OtaConfig, send_blocks, save_sigmf, save_partial_capture   over-the-air bursts in phy's frames
+    burst_num_samples             how long such a burst is
     decode_capture                a recorded capture decoded again, offline
     stream_over_the_air, build_views, RingBuffer, StreamReceiver, StreamRun
                                   views streamed one after another, decoded as they arrive
@@ -28,6 +31,13 @@ from hil.air import (
     fractional_resample,
     iq_imbalance,
     quantize_ci8,
+)
+from hil.air_paths import (
+    MAX_DOPPLER_HZ,
+    MAX_PATH_DELAY_S,
+    AirPath,
+    PathSegment,
+    segments_from_arrays,
 )
 from hil.devices import DEVICES, DeviceKind, device_kind
 from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
@@ -49,7 +59,7 @@ from hil.iiod import IIOD_PORT, IiodServer
 from hil.iq import to_int8_iq
 from hil.loopback import DirectTransport, loopback_pair, open_loopback
 from hil.medium import Medium
-from hil.ota import decode_capture, send_blocks
+from hil.ota import burst_num_samples, decode_capture, send_blocks
 from hil.ota_burst import BurstResult, FrameReport, PhyFrames
 from hil.ota_config import OtaConfig
 from hil.ota_sigmf import save_partial_capture, save_sigmf
@@ -76,6 +86,8 @@ __all__ = [
     "FAULT_NAMES",
     "FREQ_RANGE_HZ",
     "MAX_DELAY_S",
+    "MAX_DOPPLER_HZ",
+    "MAX_PATH_DELAY_S",
     "MAX_MULTIPATH_DELAY",
     "NETWORK_FAULTS",
     "PPM_RANGE",
@@ -92,12 +104,15 @@ __all__ = [
     "find_plutos",
     "TimedOutError",
     "AirChannel",
+    "AirPath",
+    "PathSegment",
     "BurstResult",
     "FrameReport",
     "OtaConfig",
     "PhyFrames",
     "save_partial_capture",
     "save_sigmf",
+    "burst_num_samples",
     "decode_capture",
     "RingBuffer",
     "StreamCounts",
@@ -138,6 +153,7 @@ __all__ = [
     "protocol",
     "quantize_ci8",
     "read_sigmf",
+    "segments_from_arrays",
     "to_int8_iq",
     "write_sigmf",
 ]

@@ -15,9 +15,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-RESAMPLER_TAPS = 48  # Kaiser(7)-windowed sinc: interpolation error < -60 dB up to 0.45 fs
-_KAISER_BETA = 7.0
-
+from hil.air_paths import KAISER_BETA as _KAISER_BETA
+from hil.air_paths import (
+    RESAMPLER_TAPS,  # Kaiser(7) sinc: error < -60 dB up to 0.45 fs
+    AirPath,
+    PathSegment,
+    TimeVaryingFir,
+    check_segments,
+    segments_from_arrays,
+)
 
 AIR_SNR_DB_RANGE = (-30.0, 100.0)  # AirChannel.snr_db, dB
 MAX_DELAY_S = 1.0  # AirChannel.delay_s in [0, MAX_DELAY_S]
@@ -41,7 +47,12 @@ class AirChannel:
         multipath: extra echoes as ``(delay_samples, gain)`` pairs at the TX sample rate
             (integer delays >= 1, complex gains) after the direct path.
         direct_gain: complex gain of the direct path (tap 0).
-        normalize_taps: scale the taps to unit energy (a pure multipath profile); False
+        path_segments: instead of ``multipath`` and ``direct_gain``, a time-varying
+            multipath of :class:`hil.PathSegment` s (paths with fractional delays in
+            seconds, complex gains and Doppler shifts; see :mod:`hil.air_paths`), e.g. a
+            ray-traced channel (:meth:`from_paths`). Empty: the fixed taps above.
+        normalize_taps: scale the taps to unit energy (a pure multipath profile; with
+            ``path_segments``: their mean ``sum |a_i|^2`` over segments to 1); False
             keeps the gains as given (a fading realisation, e.g. from a ``phy`` channel).
         dc_offset: complex DC added at the receiver's ADC input, full-scale units.
         iq_gain_imbalance_db: receiver I/Q amplitude imbalance, dB.
@@ -55,6 +66,7 @@ class AirChannel:
     delay_s: float = 0.0
     multipath: tuple[tuple[int, complex], ...] = ()
     direct_gain: complex = 1 + 0j
+    path_segments: tuple[PathSegment, ...] = ()
     normalize_taps: bool = True
     dc_offset: complex = 0j
     iq_gain_imbalance_db: float = 0.0
@@ -76,6 +88,11 @@ class AirChannel:
                     f"multipath delays must be integers in [1, {MAX_MULTIPATH_DELAY}] samples, "
                     f"got {d!r}"
                 )
+        object.__setattr__(self, "path_segments", check_segments(self.path_segments))
+        if self.path_segments and (self.multipath or complex(self.direct_gain) != 1):
+            raise ValueError(
+                "path_segments replace multipath and direct_gain: give one or the other"
+            )
         if abs(self.iq_gain_imbalance_db) > 6 or abs(self.iq_phase_imbalance_deg) > 30:
             raise ValueError(
                 "iq_gain_imbalance_db must be in [-6, 6] and iq_phase_imbalance_deg in [-30, 30]"
@@ -88,6 +105,10 @@ class AirChannel:
         d["multipath"] = [[int(k), complex(g).real, complex(g).imag] for k, g in self.multipath]
         for name in ("direct_gain", "dc_offset"):
             d[name] = [complex(d[name]).real, complex(d[name]).imag]
+        d["path_segments"] = [
+            [s.start_s, [[p.delay_s, p.gain.real, p.gain.imag, p.doppler_hz] for p in s.paths]]
+            for s in self.path_segments
+        ]
         return json.dumps(d, separators=(",", ":"))
 
     @classmethod
@@ -98,6 +119,10 @@ class AirChannel:
             d["multipath"] = tuple((int(k), complex(re, im)) for k, re, im in d["multipath"])
             for name in ("direct_gain", "dc_offset"):
                 d[name] = complex(*d[name])
+            d["path_segments"] = tuple(
+                PathSegment(start, tuple(AirPath(t, complex(re, im), f) for t, re, im, f in ps))
+                for start, ps in d.get("path_segments", ())
+            )
             return cls(**d)
         except (TypeError, KeyError, json.JSONDecodeError) as e:
             raise ValueError(f"not an AirChannel in JSON: {e}") from None
@@ -115,9 +140,49 @@ class AirChannel:
         echoes = tuple((int(d), complex(t[d])) for d in range(1, len(t)) if t[d] != 0)
         return cls(multipath=echoes, direct_gain=complex(t[0]), normalize_taps=normalize, **kwargs)
 
+    @classmethod
+    def from_paths(cls, a, tau_s, doppler_hz=None, start_s=None, **kwargs) -> AirChannel:
+        """A channel of propagation paths, e.g. a ray-traced one (``phy.raytrace.RayCIR`` or
+        ``MovingCIR`` arrays; Doppler None: at rest); ``kwargs`` set the other fields
+        (``normalize_taps`` defaults to False here: the gains are kept as given).
+
+        Args:
+            a: [num_segments, max_paths] (or [max_paths]) complex gains; 0 is padding.
+            tau_s: the same shape, seconds after the first arrival (after ``delay_s``).
+            doppler_hz: the same shape, Hz, or None.
+            start_s: [num_segments] seconds from the channel's epoch, or None (one segment).
+        """
+        kwargs.setdefault("normalize_taps", False)
+        return cls(path_segments=segments_from_arrays(a, tau_s, doppler_hz, start_s), **kwargs)
+
+    @property
+    def max_doppler_hz(self) -> float:
+        """The largest |Doppler shift| of any path (0 for fixed taps)."""
+        return max((abs(p.doppler_hz) for s in self.path_segments for p in s.paths), default=0.0)
+
+    def fir(self, sample_rate_hz: float) -> TimeVaryingFir:
+        """The multipath as a (time-varying) band-limited FIR at ``sample_rate_hz``: the
+        fixed taps, or the paths' fractional-delay filters (see :mod:`hil.air_paths`)."""
+        if not self.path_segments:
+            return TimeVaryingFir.static(self.taps, sample_rate_hz)
+        scale = 1.0
+        if self.normalize_taps:
+            energy = float(np.mean([s.energy for s in self.path_segments]))
+            scale = 1 / math.sqrt(energy)
+        return TimeVaryingFir.from_segments(self.path_segments, sample_rate_hz, scale)
+
     @property
     def taps(self) -> np.ndarray:
-        """[max_delay + 1] complex128 FIR: direct path then echoes (unit energy if normalize_taps)."""
+        """[max_delay + 1] complex128 FIR: direct path then echoes (unit energy if normalize_taps).
+
+        Raises:
+            ValueError: a channel of ``path_segments`` (its FIR depends on the sample rate:
+                see :meth:`fir`).
+        """
+        if self.path_segments:
+            raise ValueError(
+                "a channel of path_segments has no fixed taps: use fir(sample_rate_hz)"
+            )
         n = 1 + max((int(d) for d, _ in self.multipath), default=0)
         h = np.zeros(n, np.complex128)
         h[0] = complex(self.direct_gain)

@@ -7,6 +7,11 @@ at time ``t = k / fs_rx_true`` and sees the transmitter's signal at index
 ``(t - delay) * fs_tx_true`` through the multipath, rotated by the carrier offset, plus
 noise, receiver gain, I/Q imbalance, DC and the int8 ADC.
 
+The multipath is ``AirChannel.fir``: fixed taps, or paths with fractional delays, gains
+and Doppler shifts in segments (:mod:`hil.air_paths`), applied on the transmitter's sample
+grid before the resampling. Its time counts from the channel's epoch: the first sample the
+transmitter sends after the channel was set (at construction or by :meth:`Medium.set_channel`).
+
 Determinism: with ``wait_for_bursts = B``, receivers block until the transmitter has sent
 what they need or has completed ``B`` bursts, so what they receive does not depend on how
 threads interleave. Afterwards an idle transmitter's timeline advances with silence as
@@ -54,7 +59,9 @@ class Medium:
         self.tx_len = 0
         self.tx_streaming = False
         self.bursts_completed = 0
+        self.epoch: int | None = None  # transmitter index of channel time 0 (None: not yet)
         self._rngs: dict[int, np.random.Generator] = {}
+        self._firs: dict[tuple[int, float], tuple] = {}  # (id(channel), fs) -> (channel, fir)
 
     # ------------------------------------------------------------------ transmit side
     def start_tx(self, radio) -> None:
@@ -81,6 +88,8 @@ class Medium:
         scale = 10 ** ((radio.tx_gain_db - self.channel.reference_txvga_db) / 20)
         x = np.asarray(x, np.complex64) * np.float32(scale)
         with self.cond:
+            if self.epoch is None:
+                self.epoch = self.tx_len
             self._ensure(self.tx_len + len(x))
             b = self.tx_base
             self._tx[self.tx_len - b : self.tx_len - b + len(x)] = x
@@ -119,12 +128,24 @@ class Medium:
 
     def set_channel(self, channel: AirChannel, seed: int) -> None:
         """Replace the air and the noise seed (between bursts): every receiver's noise
-        starts again from ``seed``, so the same settings give the same samples."""
+        starts again from ``seed``, so the same settings give the same samples, and the
+        channel's time starts again at the next sample sent (its epoch)."""
         with self.cond:
             self.channel = channel
             self.seed = int(seed)
+            self.epoch = None
             self._rngs.clear()
             self.cond.notify_all()
+
+    def fir(self, sample_rate_hz: float):
+        """The channel's ``hil.air_paths.TimeVaryingFir`` at ``sample_rate_hz`` (cached)."""
+        ch, key = self.channel, (id(self.channel), float(sample_rate_hz))
+        hit = self._firs.get(key)
+        if hit is None or hit[0] is not ch:
+            if len(self._firs) >= 4:
+                self._firs.clear()
+            hit = self._firs[key] = (ch, ch.fir(key[1]))
+        return hit[1]
 
     def notify(self) -> None:
         with self.cond:
@@ -161,7 +182,8 @@ class Medium:
                 if tx is not None:
                     fs_tx = tx.sample_rate_hz * (1 + tx.ppm * 1e-6)
                     u_last = (t[-1] - ch.delay_s) * fs_tx
-                    need = int(math.ceil(u_last)) + RESAMPLER_TAPS // 2 + 1
+                    fir = self.fir(fs_tx)
+                    need = int(math.ceil(u_last)) + RESAMPLER_TAPS // 2 + 1 + fir.lead
                     if self.tx_len >= need:
                         break
                 if not (self.tx_streaming or self.bursts_completed < self.wait_for_bursts):
@@ -180,18 +202,19 @@ class Medium:
                         self._ensure(idle_to)
                         self._tx[self.tx_len - self.tx_base : idle_to - self.tx_base] = 0
                         self.tx_len = idle_to
-                taps = ch.taps
-                lo = max(0, int(math.floor(u[0])) - RESAMPLER_TAPS - len(taps))
-                hi = min(self.tx_len, int(math.ceil(u[-1])) + RESAMPLER_TAPS + 1)
+                fir = self.fir(fs_tx)
+                lo = max(0, int(math.floor(u[0])) - RESAMPLER_TAPS - fir.span)
+                hi = min(self.tx_len, int(math.ceil(u[-1])) + RESAMPLER_TAPS + 1 + fir.lead)
                 lo = max(lo, self.tx_base)  # forgotten samples are never needed again
                 b = self.tx_base
                 seg = self._tx[lo - b : hi - b].copy() if hi > lo else np.zeros(0, np.complex64)
                 tx_freq = tx.center_freq_hz * (1 + tx.ppm * 1e-6)
                 df = tx_freq - radio.center_freq_hz * (1 + radio.ppm * 1e-6)
+                epoch = 0 if self.epoch is None else self.epoch
         # silence (an idle transmitter) stays silence: nothing to filter or resample
         if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx and seg.any():
-            if len(taps) > 1 or taps[0] != 1:
-                seg = np.convolve(seg, taps.astype(np.complex64))[: len(seg)]
+            if not fir.identity:  # channel time of seg[0]: (lo - epoch) / fs_tx
+                seg = fir.apply(seg, (lo - epoch) / fs_tx)
             sig = fractional_resample(seg, u - lo)
             if df != 0:
                 sig = sig * np.exp(2j * np.pi * df * t).astype(np.complex64)

@@ -107,6 +107,16 @@ def _default_frames(cfg: OtaConfig) -> PhyFrames:
     )
 
 
+def burst_num_samples(block_sizes: list, cfg: OtaConfig | None = None, frames=None) -> int:
+    """Samples of the burst that :func:`send_blocks` sends for blocks of ``block_sizes``
+    symbols (frames and gaps; the receiver's lead and margin not counted)."""
+    cfg = cfg or OtaConfig()
+    frames = frames or _default_frames(cfg)
+    num_frames = sum(max(1, -(-int(n) // cfg.symbols_per_frame)) for n in block_sizes)
+    frame = len(frames.build(np.zeros(cfg.header_symbols + cfg.symbols_per_frame, np.complex64)))
+    return cfg.gap_samples + num_frames * (frame + cfg.gap_samples)
+
+
 def decode_capture(capture, block_sizes: list, cfg: OtaConfig | None = None, frames=None):
     """Decode a recorded capture again, offline (e.g. the RX SigMF file of a run): the same
     receiver as :func:`send_blocks`, given only the symbols per block that were sent (the

@@ -265,7 +265,7 @@ class EmulatedPluto(PlutoAttributes):
             return
         m = self.medium
         fs = self.sample_rate_hz
-        need = int((self.rx_cursor + num_samples) + m.channel.delay_s * fs) + 4096 + len(m.channel.taps)  # fmt: skip
+        need = int((self.rx_cursor + num_samples) + m.channel.delay_s * fs) + 4096 + m.fir(fs).span  # fmt: skip
         while m.tx_len < need:
             m.append_tx_iq(self.tx_port, cyc)
 

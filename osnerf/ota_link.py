@@ -34,12 +34,16 @@ DEFAULT_PPM = (0.0, 20.0)
 ONE_BOARD_PPM = (0.0, 0.0)  # a full-duplex board: TX and RX on one crystal
 DEFAULT_MULTIPATH = ((2, 0.4 + 0j), (5, 0.2j))
 DEFAULT_DELAY_S = 5e-6
+OTA_AIRS = ("fixed", "raytraced")
+"""The emulated air of ``osnerf run --channel ota``: "fixed" (:data:`DEFAULT_MULTIPATH` at
+``snr_db``) or "raytraced" (each view's drone's ray-traced paths: ``osnerf.run.ota_air``)."""
 
 
-def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath):
+def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath, path_segments=()):
     """The one air model of every emulated path: a ``hil.AirChannel`` at ``snr_db`` for the
     frames' mean power (``ota_cfg.tx_power_dbfs``) sent and received at ``ota_cfg``'s gains
-    of ``device`` ("emulated" HackRFs, or an emulated "pluto")."""
+    of ``device`` ("emulated" HackRFs, or an emulated "pluto"), with the fixed ``multipath``
+    taps or, given ``path_segments`` (``hil.PathSegment`` s), those paths' gains as they are."""
     from hil import AirChannel
 
     if device == "pluto":
@@ -52,7 +56,9 @@ def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath):
         reference_txvga_db=txvga,
         reference_rx_gain_db=rx_gain,
         delay_s=delay_s,
-        multipath=tuple(multipath),
+        multipath=() if path_segments else tuple(multipath),
+        path_segments=tuple(path_segments),
+        normalize_taps=not path_segments,
     )
 
 
@@ -126,6 +132,8 @@ class OtaLink:
         snr_db: the air's SNR (emulated boards: fixed when they were opened); None for a
             real air, which only the receiver's measurement knows.
         ota_cfg: ``hil.OtaConfig``.
+        emulator: the emulated HackRFs' ``hil.Emulator``, else None.
+        air_ppm: the crystal error an emulated Pluto's air is set with (:meth:`set_air`).
         frames_sent, frames_lost: counted over every call.
         snr_db_measured: the receiver's pilot SNR of each call (None when all were lost).
     """
@@ -135,6 +143,7 @@ class OtaLink:
     snr_db: float | None
     ota_cfg: object
     emulator: object | None = None
+    air_ppm: float = ONE_BOARD_PPM[0]
     frames_sent: int = 0
     frames_lost: int = 0
     snr_db_measured: list = field(default_factory=list)
@@ -159,9 +168,28 @@ class OtaLink:
         self.snr_db_measured.append(result.snr_db_measured())
         return result
 
-    def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
-        from phy import LinkOutput
+    @property
+    def air_settable(self) -> bool:
+        """Whether the air is ours to set: emulated HackRFs, or an emulated Pluto."""
+        return self.emulator is not None or bool(getattr(self.tx, "air_settable", False))
 
+    def set_air(self, channel, seed: int) -> None:
+        """The emulated air from now on: ``channel`` (a ``hil.AirChannel``) and the noise
+        ``seed``; the channel's time starts at the next burst's first sample.
+
+        Raises:
+            ``hil.HilError``: real boards (their air is not the host's to set).
+        """
+        from hil import HilError
+
+        if self.emulator is not None:
+            self.emulator.medium.set_channel(channel, seed)
+        elif self.air_settable:
+            self.tx.set_air(channel, ppm=self.air_ppm, seed=seed)
+        else:
+            raise HilError("the air between real boards is not the host's to set")
+
+    def __call__(self, x: torch.Tensor, snr_db=None, generator: torch.Generator | None = None):
         if (
             snr_db is not None
             and self.snr_db is not None
@@ -170,6 +198,13 @@ class OtaLink:
             raise ValueError(
                 f"this over-the-air link runs at {self.snr_db:g} dB, asked for {float(snr_db):g} dB"
             )
+        return self.transmit(x)
+
+    def transmit(self, x: torch.Tensor):
+        """``x`` [batch, num_symbols] complex64 as one burst -> ``phy.LinkOutput`` (the air
+        as it is set, whatever SNR it has)."""
+        from phy import LinkOutput
+
         x = torch.as_tensor(x)
         if x.dim() != 2:
             raise ValueError(f"x must be [batch, num_symbols] complex64, got {tuple(x.shape)}")

@@ -48,6 +48,7 @@ CONFIG_FIELDS = (
     "view_selection",
     "max_views",
     "csi",
+    "ota_air",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -83,6 +84,7 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     import phy
     from osnerf.ota_link import DEVICES as OTA_DEVICES
+    from osnerf.ota_link import OTA_AIRS
     from osnerf.run.config import (
         DRONE_SPEED_RANGE_M_S,
         RING_SCALE_RANGE,
@@ -123,6 +125,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "mcs": ("auto", *MCS_TABLE),
             "image_codec": tuple(IMAGE_CODECS),
             "ota_device": OTA_DEVICES,
+            "ota_air": OTA_AIRS,
             "nerf_clock": ("wall", "cpu"),
             "view_selection": tuple(VIEW_SELECTIONS),
             "csi": phy.CSI_OFDM,

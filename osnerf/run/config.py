@@ -11,6 +11,7 @@ from functools import cached_property
 import phy
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
+from osnerf.ota_link import OTA_AIRS
 from osnerf.scenes import DEFAULT_SCENE, RenderConfig, check_demand, get_scene
 from osnerf.schemes import DEFAULT_SCHEMES
 
@@ -87,7 +88,9 @@ class RunConfig:
             [0, 100]) along its ring around the demanded objects (level, counter-clockwise
             seen from above) while it sends, and its channel changes with every symbol from
             each traced path's Doppler shift (symbol ``i`` of a view at ``i /
-            symbol_rate_hz``); 0: the static channel of each position.
+            symbol_rate_hz``); 0: the static channel of each position. Also for channel
+            "ota" with ``ota_air`` "raytraced": the emulated air's paths turn at their
+            Doppler shifts, sample by sample.
         ground_station_m: for channel "raytraced": the ground station's antenna at (x, y, z)
             metres in the scene's frame, each in [-10000, 10000], in place of the scene's
             own (None; "scene" on the command line). It moves the radio end only: the
@@ -115,6 +118,12 @@ class RunConfig:
             estimate's error variance joins each symbol's noise variance. None: the
             channel's own receiver (perfect CSI on flat and ray-traced channels, LS pilots
             on tdl/cdl).
+        ota_air: for channel "ota" over emulated radios (``ota_device`` "emulated", or an
+            emulated Pluto), the air between them: "fixed" (a fixed multipath at
+            ``snr_db``) or "raytraced" (each view's drone's ray-traced paths, with their
+            Doppler shifts when ``drone_speed_m_s`` > 0, ``snr_db`` at the median drone
+            position as for channel "raytraced"; :mod:`osnerf.run.ota_air`). Real boards'
+            air is nobody's to set: "raytraced" is refused for them.
     """
 
     scene: str = DEFAULT_SCENE
@@ -146,6 +155,7 @@ class RunConfig:
     view_selection: str = "sight"
     max_views: int | None = None
     csi: str | None = None
+    ota_air: str = "fixed"
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -207,10 +217,22 @@ class RunConfig:
         lo, hi = DRONE_SPEED_RANGE_M_S
         if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
             raise ValueError(f"drone_speed_m_s must be in [{lo:g}, {hi:g}] m/s, got {v!r}")
-        if v > 0 and self.channel != "raytraced":
+        if self.ota_air not in OTA_AIRS:
+            raise ValueError(f"ota_air must be one of {', '.join(OTA_AIRS)}, got {self.ota_air!r}")
+        traced_air = self.channel == OTA and self.ota_air == "raytraced"
+        if self.ota_air != "fixed" and self.channel != OTA:
             raise ValueError(
-                f"drone_speed_m_s moves the drones of channel raytraced only, got "
-                f"{v!r} with channel {self.channel!r}"
+                f"ota_air sets the air of channel ota only, got channel {self.channel!r}"
+            )
+        if traced_air and self.ota_device == "hackrf":
+            raise ValueError(
+                "ota_air raytraced: the air between real HackRFs is not the host's to set; use "
+                "ota_device emulated (or an emulated pluto)"
+            )
+        if v > 0 and self.channel != "raytraced" and not traced_air:
+            raise ValueError(
+                f"drone_speed_m_s moves the drones of channel raytraced (or ota with ota_air "
+                f"raytraced) only, got {v!r} with channel {self.channel!r}"
             )
 
     def _check_positions(self) -> None:
@@ -311,6 +333,8 @@ class RunConfig:
         the same path, the shipped default included, makes another key). The list of schemes
         is not part of it: each scheme's stages are cached under its own name."""
         d = {k: v for k, v in asdict(self).items() if k not in ("schemes", "allow_untrained")}
+        if d["ota_air"] == "fixed":  # the air every run had before it was a choice: same key
+            del d["ota_air"]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])

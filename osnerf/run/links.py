@@ -5,7 +5,8 @@ effective noise variance per symbol: perfect CSI on flat channels, LS pilot esti
 OFDM for ``tdl``/``cdl``, each drone position's ray-traced response for ``raytraced`` (that
 changes over the view's symbols when the drones fly, ``drone_speed_m_s``; known exactly, or
 estimated from pilots on an OFDM grid with ``csi``), and
-``phy`` OFDM frames between two HackRFs for ``ota``.
+``phy`` OFDM frames between two HackRFs for ``ota`` (over an emulated air that is fixed or,
+with ``ota_air`` "raytraced", each view's ray-traced channel: :mod:`osnerf.run.ota_air`).
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
     idx = [int(i) for i in indices]
     snr = {i: float(cfg.snr_db) for i in idx}
     if cfg.channel == OTA:
-        return _ota_links(cfg, idx, snr)
+        return _ota_links(cfg, views, idx, snr)
     if cfg.channel == "raytraced":
         return _raytraced_links(cfg, views, idx)
     link = phy.channel_link(cfg.channel)
@@ -62,7 +63,7 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
     return RunLinks({i: link for i in idx}, snr, info=info)
 
 
-def _ota_links(cfg: RunConfig, idx: list[int], snr: dict) -> RunLinks:
+def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     from hil import OtaConfig
     from osnerf.ota_link import (
         DEFAULT_DELAY_S,
@@ -83,6 +84,17 @@ def _ota_links(cfg: RunConfig, idx: list[int], snr: dict) -> RunLinks:
         "center_freq_hz": ota_cfg.center_freq_hz,
         "symbols_per_frame": ota_cfg.symbols_per_frame,
     }
+    if getattr(cfg, "ota_air", "fixed") == "raytraced":
+        from osnerf.run.ota_air import raytraced_air_links
+
+        try:
+            links, snrs, outage, air = raytraced_air_links(cfg, views, idx, link, cfg.ota_device)
+        except BaseException:
+            link.close()
+            raise
+        if emu is not None:
+            info.update(ppm=list(DEFAULT_PPM), delay_s=DEFAULT_DELAY_S)
+        return RunLinks(links, snrs, outage, {**info, **air, "air_snr_db": float(cfg.snr_db)}, link)
     if emu is not None:
         info.update(
             ppm=list(DEFAULT_PPM),

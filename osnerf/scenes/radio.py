@@ -109,6 +109,7 @@ def drone_channels(
     subcarrier_spacing_hz: float = 30e3,
     max_depth: int = 2,
     velocities_m_s: np.ndarray | None = None,
+    movers_at_rest: bool = False,
 ) -> DroneChannels:
     """Ray-trace each drone position to the ground station (``phy.raytrace.RayTracer``).
 
@@ -118,6 +119,7 @@ def drone_channels(
         positions_m: [num_positions, 3] transmitter (drone) positions, metres.
         velocities_m_s: [num_positions, 3] drone velocities (e.g. :func:`flight_velocities`);
             None or all zero: at rest.
+        movers_at_rest: give ``movers`` for drones at rest too (their paths, no Doppler).
     Returns:
         :class:`DroneChannels` with the absolute (path-loss included) CFR per position at
         t = 0, the Doppler statistics and, for moving drones, their movers.
@@ -140,6 +142,8 @@ def drone_channels(
     moving = velocities_m_s is not None and np.any(velocities_m_s)
     vel = np.asarray(velocities_m_s, np.float64) if moving else None
     st = tracer.stats(pos, vel)
+    if movers_at_rest and not moving:
+        moving, vel = True, np.zeros_like(pos)
     movers = [prt.MovingTransmitter(tracer, p, v) for p, v in zip(pos, vel)] if moving else None
     stats = {
         "path_gain_db": st.path_gain_db.tolist(),
