@@ -279,3 +279,19 @@ def normalised_power(spec, energy, scale):  # pragma: no cover - compiled
             s = spec[i, j]
             q[i, j] = np.float32(s.real * s.real + s.imag * s.imag) / den
     return q
+
+
+@njit(cache=True)
+def above(power, level, block, lo, hi):  # pragma: no cover - compiled
+    """[num_hits] int64 ascending: the i in [lo, hi) with ``power[i] > level[i // block]``."""
+    count = 0
+    for i in range(lo, hi):
+        if power[i] > level[i // block]:
+            count += 1
+    out = np.empty(count, np.int64)
+    j = 0
+    for i in range(lo, hi):
+        if power[i] > level[i // block]:
+            out[j] = i
+            j += 1
+    return out

@@ -62,7 +62,12 @@ def _without_dc(r: np.ndarray) -> np.ndarray:
     """Remove the capture's mean (an SDR's DC offset would make silence look periodic)."""
     if not r.size:
         return r
-    return r - np.complex64(_sum(r) / r.size)
+    return r - _mean(r)
+
+
+def _mean(r: np.ndarray) -> np.complex64:
+    """The capture's mean (its DC offset), accumulated in complex128."""
+    return np.complex64(_sum(r) / r.size) if r.size else np.complex64(0)
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
@@ -71,7 +76,8 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     Args:
         iq: [num_samples] complex64 (numpy or torch).
     """
-    return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
+    raw = _as_complex_1d(iq, "iq")
+    return [d.start for d in find_preambles(raw, cfg, _mean(raw))]
 
 
 def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -> np.ndarray:
@@ -221,7 +227,7 @@ def receive_frame(
     # itself (and skipped) rather than through its sidelobes
     first = max(0, search_from - cfg.sync_length)
     region = raw[first : max(first, raw.size - length + cfg.sync_length)]
-    for det in find_preambles(_without_dc(region), cfg):
+    for det in find_preambles(region, cfg, _mean(region)):
         start, cfo = det.start + first, det.cfo
         if search_from <= start and start + length <= raw.size:
             frame = raw[start : start + length] - _dc_estimate(raw, start, length)
