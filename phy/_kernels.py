@@ -43,7 +43,7 @@ def row_sums(yx, h_used, k_row, k_pos, rows):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cover - compiled
+def refine(yx, rot, k_row, k_pos, counts, p_mats, bands, dofs, rows):  # pragma: no cover
     """One channel update with the common phase ``rot`` [rows] removed.
 
     The observations ``obs = yx rot[k_row]`` of ``h`` are summed per used carrier (``k_pos``);
@@ -53,7 +53,8 @@ def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cov
     estimation error, so a short delay window wins at low SNR and longer models win when
     truncation bias exceeds noise. Cp's noise level comes from the richest model (per-carrier
     means): unbiased whichever model is right, so a low training-difference estimate cannot
-    pick a noisy model.
+    pick a noisy model. Row k of model j has its non-zeros in columns
+    ``bands[j, k, 0] <= q < bands[j, k, 1]`` (the products outside are exact zeros).
 
     Returns:
         (obs [num_known] complex64, h [num_used] complex64 of the least-Cp model, its index,
@@ -80,7 +81,7 @@ def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cov
         cp = 2.0 * cp_noise * dofs[j]
         for k in range(nu):
             v = 0j
-            for q in range(nu):
+            for q in range(bands[j, k, 0], bands[j, k, 1]):
                 v += p_mats[j, k, q] * sums64[q]
             h[k] = v
             d = sums[k] / counts[k] - h[k]
@@ -192,17 +193,22 @@ def phase_line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
     h = rows // 2
     if rows >= 2:
         first, second = 0j, 0j
+        step, z = np.exp(-1j * w), 1.0 + 0j  # z = exp(-j w i) by recurrence
         for i in range(2 * h):
-            v = a[i] * np.exp(-1j * w * i)
+            v = a[i] * z
             if i < h:
                 first += v
             else:
                 second += v
+            z *= step
         w += np.angle(second * np.conj(first)) / h
-    unrotated = np.exp(-1j * w * np.arange(rows))
+    unrotated = np.empty(rows, np.complex128)
+    step, z = np.exp(-1j * w), 1.0 + 0j
     total = 0j
     for i in range(rows):
-        total += a[i] * unrotated[i]
+        unrotated[i] = z
+        total += a[i] * z
+        z *= step
     phi0 = np.angle(total)
     line = phi0 + w * np.arange(rows)
     width = int(np.ceil(window_snr / max(snr_row, 1e-6))) | 1

@@ -245,10 +245,17 @@ def coherent_metric(
         (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex64),
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
-    k = cover.size
-    if lags.size and (lags.min() < 0 or lags.max() + seg * (k - 1) >= c.size):
+    lags = np.asarray(lags, np.int64)
+    if lags.size and (lags.min() < 0 or lags.max() + seg * (cover.size - 1) >= c.size):
         raise IndexError("the lags' segments run past the correlations")
-    v = _kernels.segment_rows(c, np.asarray(lags, np.int64), cover, seg, _OVERSAMPLE * k)
+    return _coherent(c, energy, lags, cover, seg)
+
+
+def _coherent(c, energy, lags, cover, seg):
+    """:func:`coherent_metric` without the bounds check (lags [num_lags] int64 known to be
+    within ``c``; ``energy`` may run on past them)."""
+    k = cover.size
+    v = _kernels.segment_rows(c, lags, cover, seg, _OVERSAMPLE * k)
     spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)  # zero-padded rows
     return _kernels.normalised_power(spec, np.asarray(energy, np.float64), k * seg), spec
 
@@ -294,11 +301,12 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     if hi < max(lo, d1 - _SPAN):
         return None
     energy = _kernels.window_energies(x[lo : hi + n], n)  # [hi - lo + 1] windows from lo
-    lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
-    q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    l0 = max(lo, d1 - _SPAN)  # lags l0 .. hi (within c by construction)
+    lags = np.arange(l0, hi + 1)
+    q, spec = _coherent(c, energy[l0 - lo :], lags, cover, seg)
     # a quick look at the search peak and its neighbours: most noise candidates stop here
     # (a frame's Q there is within a few dB of its peak, noise's far below threshold)
-    if q[np.abs(lags - d1) <= 1].max() < _QUICK * cfg.detection_threshold:
+    if q[max(d1 - 1 - l0, 0) : d1 + 2 - l0].max() < _QUICK * cfg.detection_threshold:
         return None
     # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
     # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
@@ -306,10 +314,10 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     c_at = 0  # c[i] belongs to lag i + c_at
     if q.max() < 2 * cfg.detection_threshold:  # only where the 1.3 dB can matter
         c_half = segment_correlation(x[lo : hi + n], _half_sample_base(cfg))
-        q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
+        q_h, spec_h = _coherent(c_half, energy[l0 - lo :], lags - lo, cover, seg)
         if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
             q, spec, c, c_at = q_h, spec_h, c_half, lo
-    i, j = np.unravel_index(int(np.argmax(q)), q.shape)
+    i, j = divmod(int(np.argmax(q)), q.shape[1])
     q_peak = float(q[i, j])
     if q_peak <= cfg.detection_threshold:
         return None
@@ -325,17 +333,17 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # (on the region with f removed sample by sample: a CFO also rotates within segments and
     # skews the correlation's peak by a sample at the edge of the CFO range, so the
     # strongest path is looked for again there)
-    early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
+    e0, e1 = max(lo, peak - look), min(hi, peak + 2)  # lags e0 .. e1
     # (the whole preamble with f applied against the region: the same sums as correlating
     # the corrected region segment by segment; exp(2j pi f (k L + m)) as segment x sample)
     template = _kernels.cfo_template(_preamble(cfg), f, seg, k)
-    qf = np.abs(np.correlate(x[early[0] : early[-1] + n], template, "valid")) ** 2
-    qf /= n * np.maximum(energy[early - lo], 1e-30)
-    near = np.abs(early - peak) <= 2
-    best = int(np.flatnonzero(near)[np.argmax(qf[near])])
+    qf = np.abs(np.correlate(x[e0 : e1 + n], template, "valid")) ** 2
+    qf /= n * np.maximum(energy[e0 - lo : e1 - lo + 1], 1e-30)
+    near = max(peak - 2 - e0, 0)  # lags within 2 of the peak: near .. near + 4
+    best = near + int(np.argmax(qf[near : peak + 3 - e0]))
     floor = max(_PATH_FRACTION * qf[best], threshold_for_pfa(_PATH_PFA, n))
     ok = np.flatnonzero(qf[: best + 1] >= floor)
-    start = int(early[ok[0]]) if ok.size else int(early[best])
+    start = e0 + int(ok[0] if ok.size else best)
     return start, cfo, q_peak
 
 

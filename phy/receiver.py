@@ -108,6 +108,7 @@ class _Layout:
     smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
     # [num_models, num_used], dofs [num_models]): the candidate channel models, shortest
     # delay window first, per-carrier LS last
+    bands: np.ndarray  # [num_models, num_used, 2] int64: each row's non-zero columns [lo, hi)
     smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
     pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
     d_col: np.ndarray  # [num_symbols] carrier of each payload symbol's data element
@@ -167,6 +168,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
             np.stack([m[1] for m in smoothers]),
             np.array([m[2] for m in smoothers], np.float64),
         ),
+        bands=_bands(np.stack([m[0] for m in smoothers])),
         smoother_training=smoother_training.astype(np.complex64),
         pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
         d_col=d_col,
@@ -181,6 +183,16 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
         num_training_values=2 * used.size,
         fft_size=n,
     )
+
+
+def _bands(p_mats: np.ndarray) -> np.ndarray:
+    """[num_models, num_rows, 2] int64: the first and one past the last non-zero column of
+    each row of each matrix (0, 0 for a zero row)."""
+    nz = p_mats != 0
+    cols = nz.shape[-1]
+    lo = np.where(nz.any(-1), nz.argmax(-1), 0)
+    hi = np.where(nz.any(-1), cols - nz[..., ::-1].argmax(-1), 0)
+    return np.stack([lo, hi], axis=-1).astype(np.int64)
 
 
 def _not_detected(num_symbols: int) -> FrameResult:
@@ -291,7 +303,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             rot = _phasor(-phi)  # [rows]
             # the channel model with the least Mallows' Cp and the noise of its residuals
             obs, h_used, best, noise_var = _kernels.refine(
-                yx, rot, kr, lay.k_pos, lay.counts, p_mats, dofs, lay.rows
+                yx, rot, kr, lay.k_pos, lay.counts, p_mats, lay.bands, dofs, lay.rows
             )
             factor = factors[best]
         h = np.zeros(n, np.complex64)
