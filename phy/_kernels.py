@@ -288,16 +288,23 @@ def normalised_power(spec, energy, scale):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def above(power, level, block, lo, hi):  # pragma: no cover - compiled
-    """[num_hits] int64 ascending: the i in [lo, hi) with ``power[i] > level[i // block]``."""
+def peaks(hit, power, width):  # pragma: no cover - compiled
+    """Non-maximum suppression of the candidates ``hit`` [num_hits] (ascending) with
+    ``power`` [num_hits]: the strongest (the first of equals), then the strongest more than
+    ``width`` away from every one taken, ... Returns the taken hits, ascending."""
+    left = np.ones(hit.size, np.bool_)
+    taken = np.empty(hit.size, np.int64)
     count = 0
-    for i in range(lo, hi):
-        if power[i] > level[i // block]:
-            count += 1
-    out = np.empty(count, np.int64)
-    j = 0
-    for i in range(lo, hi):
-        if power[i] > level[i // block]:
-            out[j] = i
-            j += 1
-    return out
+    while True:
+        best = -1
+        for i in range(hit.size):
+            if left[i] and (best < 0 or power[i] > power[best]):
+                best = i
+        if best < 0:
+            break
+        taken[count] = hit[best]
+        count += 1
+        for i in range(hit.size):
+            if abs(hit[i] - hit[best]) <= width:
+                left[i] = False
+    return np.sort(taken[:count])

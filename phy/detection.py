@@ -352,13 +352,7 @@ def _peaks(hit: np.ndarray, power: np.ndarray, width: int) -> list[int]:
     (a normalised S also peaks where the window holds the first samples of a strong frame
     after silence), then the strongest more than ``width`` away from every one taken, ...
     (no chaining: noise candidates between two frames cannot merge them into one)."""
-    left = np.ones(hit.size, bool)
-    out = []
-    while left.any():
-        i = int(np.flatnonzero(left)[np.argmax(power[left])])
-        out.append(int(hit[i]))
-        left &= np.abs(hit - hit[i]) > width
-    return sorted(out)
+    return _kernels.peaks(np.asarray(hit, np.int64), power, width).tolist()
 
 
 def find_preambles(r: np.ndarray, cfg, offset: complex = 0) -> list[Detection]:
@@ -385,7 +379,8 @@ def find_preambles(r: np.ndarray, cfg, offset: complex = 0) -> list[Detection]:
         lo, hi = a - s0, min(a - s0 + _CHUNK, power.size)
         if hi <= lo:
             continue
-        hit = _kernels.above(power, SEARCH_THRESHOLD * var, _POWER_BLOCK, lo, hi)
+        thr = np.repeat(SEARCH_THRESHOLD * var, _POWER_BLOCK)[lo:hi]
+        hit = np.flatnonzero(power[lo:hi] > thr) + lo
         if hit.size == 0:
             continue
         for d1 in _peaks(hit, power[hit], n):
