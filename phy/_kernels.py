@@ -25,12 +25,25 @@ def njit(**options):
             if compiled is None:
                 import numba
 
+                for name, fn in _HELPERS.items():  # what kernels call: compiled first
+                    if not isinstance(globals()[name], numba.core.registry.CPUDispatcher):
+                        globals()[name] = numba.njit(cache=True)(fn)
                 compiled = numba.njit(**options)(python_function)
             return compiled(*args)
 
         return kernel
 
     return decorate
+
+
+_HELPERS: dict = {}
+
+
+def helper(python_function):
+    """A function that kernels call: compiled by numba with the first kernel compiled (until
+    then, and for Python callers, it stays plain Python)."""
+    _HELPERS[python_function.__name__] = python_function
+    return python_function
 
 
 @njit(cache=True)
@@ -184,11 +197,35 @@ def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def phase_line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
-    """The rest of :func:`phy.estimation.track_phase` once its slope search gave ``w``
-    (radians per row): refined by the phase between the halves, the line through the rows'
-    sums ``a`` [rows], then the residual smoothed over as many rows as it takes to reach
-    ``window_snr``. Returns (phi [rows] float64 radians, slope)."""
+def phase_line(
+    yx, h_used, k_row, k_pos, pilot_in_used, rows, noise_var, w, window_snr, a
+):  # pragma: no cover - compiled
+    """The common phase of every row: :func:`phy.estimation.track_phase` once its slope
+    search gave ``w`` (radians per row), on the rows' sums ``a = sum yx conj(h_used[k_pos])``
+    by row (:func:`row_sums`; computed here when ``a`` is empty): ``w`` refined by the phase
+    between the halves, the line through ``a``, then the residual smoothed over as many rows
+    as it takes to reach ``window_snr`` at one data row's SNR ``|h at the pilots|^2 /
+    noise_var``. Returns (``exp(-j phi)`` [rows] complex64, slope, the row SNR)."""
+    if a.size != rows:
+        acc = np.zeros(rows, np.complex128)
+        for i in range(yx.size):
+            acc[k_row[i]] += yx[i] * np.conj(h_used[k_pos[i]])
+        a = acc.astype(np.complex64)
+    snr_row = 0.0
+    for p in pilot_in_used:
+        snr_row += h_used[p].real ** 2 + h_used[p].imag ** 2
+    snr_row /= noise_var
+    phi, w = _line(a, w, window_snr, snr_row)
+    rot = np.empty(rows, np.complex64)
+    for i in range(rows):
+        angle = np.float32(-phi[i])
+        rot[i] = np.complex64(np.cos(angle) + 1j * np.sin(angle))
+    return rot, w, snr_row
+
+
+@helper
+def _line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
+    """(phi [rows] float64, slope) for :func:`phase_line`."""
     rows = a.size
     h = rows // 2
     if rows >= 2:

@@ -197,6 +197,9 @@ def _bands(p_mats: np.ndarray) -> np.ndarray:
     return np.stack([lo, hi], axis=-1).astype(np.int64)
 
 
+_NO_SUMS = np.zeros(0, np.complex64)
+
+
 def _not_detected(num_symbols: int) -> FrameResult:
     return FrameResult(
         symbols=torch.zeros(num_symbols, dtype=torch.complex64),
@@ -295,14 +298,24 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         h_used = h[used]
         for _ in range(2):
-            a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)  # [rows] yx conj(h)
-            h_pk = h_used[lay.pilot_in_used]
-            snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
-            # estimation.track_phase, its line and smoothing compiled
-            w = estimation.slope_search(a) if slope_hint is None else slope_hint
-            phi, slope = _kernels.phase_line(a, w, estimation.PHASE_WINDOW_SNR, snr_row)
+            a = _NO_SUMS  # the rows' sums yx conj(h), made by phase_line
+            if slope_hint is None:  # the first look's slope: an FFT across the rows' sums
+                a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)
+                slope_hint = estimation.slope_search(a)
+            # estimation.track_phase's line and smoothing, compiled: exp(-j phi) per row
+            rot, slope, snr_row = _kernels.phase_line(
+                yx,
+                h_used,
+                kr,
+                lay.k_pos,
+                lay.pilot_in_used,
+                lay.rows,
+                noise_var,
+                slope_hint,
+                estimation.PHASE_WINDOW_SNR,
+                a,
+            )
             slope_hint = slope
-            rot = _phasor(-phi)  # [rows]
             # the channel model with the least Mallows' Cp and the noise of its residuals
             obs, h_used, best, noise_var = _kernels.refine(
                 yx, rot, kr, lay.k_pos, lay.counts, p_mats, lay.bands, dofs, lay.rows
