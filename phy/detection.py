@@ -355,7 +355,7 @@ def _peaks(hit: np.ndarray, power: np.ndarray, width: int) -> list[int]:
     return _kernels.peaks(np.asarray(hit, np.int64), power, width).tolist()
 
 
-def find_preambles(r: np.ndarray, cfg, offset: complex = 0) -> list[Detection]:
+def find_preambles(r: np.ndarray, cfg, offset: complex | np.complexfloating = 0) -> list[Detection]:
     """Every sync preamble in ``r - offset``, ascending.
 
     Args:
