@@ -219,25 +219,8 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         h_used = h[used]
-        for _ in range(2):
-            a = _NO_SUMS  # the rows' sums yx conj(h), made by phase_line
-            if slope_hint is None:  # the first look's slope: an FFT across the rows' sums
-                a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)
-                slope_hint = estimation.slope_search(a)
-            # estimation.track_phase's line and smoothing, compiled: exp(-j phi) per row
-            rot, slope, snr_row = _kernels.phase_line(
-                yx,
-                h_used,
-                kr,
-                lay.k_pos,
-                lay.pilot_in_used,
-                lay.rows,
-                noise_var,
-                slope_hint,
-                estimation.PHASE_WINDOW_SNR,
-                a,
-            )
-            slope_hint = slope
+        for _ in range(2):  # common phase, then the channel without it
+            rot, slope_hint, snr_row = _common_phase(yx, h_used, noise_var, slope_hint, lay)
             # the channel model with the least Mallows' Cp and the noise of its residuals
             obs, h_used, best, noise_var = _kernels.refine(
                 yx, rot, kr, lay.k_pos, lay.counts, p_mats, lay.bands, dofs, lay.rows
@@ -268,7 +251,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     x_hat, nv = _equalized(y, h, rot, delay, (noise_var + mse), lay, equalizer)
     h_used = h[used]
     signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
-    cfo_total = cfo + slope / (2 * np.pi * s) * n
+    cfo_total = cfo + slope_hint / (2 * np.pi * s) * n
     return FrameResult(
         symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
         noise_var=torch.from_numpy(np.ascontiguousarray(nv, np.float32)),
@@ -279,6 +262,28 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         snr_db_estimate=10 * math.log10(signal / lts_noise_var),
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
+    )
+
+
+def _common_phase(yx, h_used, noise_var, slope, lay: _Layout):
+    """(exp(-j phi) [rows] complex64, slope, one data row's SNR): the rows' common phase
+    (:func:`phy.estimation.track_phase`) from the observations ``yx`` against ``h_used``; the
+    slope search (an FFT across the rows' sums) only when no ``slope`` is known yet."""
+    a = _NO_SUMS  # the rows' sums yx conj(h): made by phase_line
+    if slope is None:
+        a = _kernels.row_sums(yx, h_used, lay.k_row, lay.k_pos, lay.rows)
+        slope = estimation.slope_search(a)
+    return _kernels.phase_line(
+        yx,
+        h_used,
+        lay.k_row,
+        lay.k_pos,
+        lay.pilot_in_used,
+        lay.rows,
+        noise_var,
+        slope,
+        estimation.PHASE_WINDOW_SNR,
+        a,
     )
 
 
