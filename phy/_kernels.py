@@ -181,8 +181,8 @@ def cfo_template(preamble, f, seg, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
-    """[num_windows, n] complex64: ``frame[s : s + n]`` for each start s, times
+def rotated_windows(frame, starts, w, n, dc):  # pragma: no cover - compiled
+    """[num_windows, n] complex64: ``frame[s : s + n] - dc`` for each start s, times
     ``exp(1j w (s + m)) / sqrt(n)`` at its sample m (row phase times sample phase)."""
     col = (np.exp(1j * w * np.arange(n)) / np.sqrt(n)).astype(np.complex64)
     out = np.empty((starts.size, n), np.complex64)
@@ -192,7 +192,7 @@ def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
             raise IndexError("a window runs past the frame")
         a = np.complex64(np.exp(1j * w * s))
         for m in range(n):
-            out[r, m] = frame[s + m] * (a * col[m])
+            out[r, m] = (frame[s + m] - dc) * (a * col[m])
     return out
 
 

@@ -80,16 +80,18 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     return [d.start for d in find_preambles(raw, cfg, _mean(raw))]
 
 
-def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -> np.ndarray:
-    """FFT of the windows ``frame[start : start + fft_size]`` with a CFO of ``cfo`` carriers
-    removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these samples
-    only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
-    start is a delay the caller's model removes."""
+def _windows(
+    frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int, dc: complex = 0j
+) -> np.ndarray:
+    """FFT of the windows ``frame[start : start + fft_size] - dc`` with a CFO of ``cfo``
+    carriers removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these
+    samples only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's
+    early start is a delay the caller's model removes."""
     w = -2 * np.pi * cfo / fft_size
     # the rotation (and the transform's 1 / sqrt(n)) applied while the windows are gathered
     # (torch's batched FFT of short rows is the fastest at hand)
     win = torch.from_numpy(
-        _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size)
+        _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size, np.complex64(dc))
     )
     return torch.fft.fft(win, dim=-1, out=win).numpy()
 
@@ -140,8 +142,8 @@ def receive_frame(
     for det in find_preambles(region, cfg, _mean(region)):
         start, cfo = det.start + first, det.cfo
         if search_from <= start and start + length <= raw.size:
-            frame = raw[start : start + length] - _dc_estimate(raw, start, length)
-            res = _demodulate(frame, cfo, num_symbols, cfg, equalizer)
+            dc = _dc_estimate(raw, start, length)
+            res = _demodulate(raw[start : start + length], cfo, num_symbols, cfg, equalizer, dc)
             res.start_index = int(start)
             return res
     return _not_detected(num_symbols)
@@ -160,8 +162,9 @@ def receive_frames(
     out = []
     for det in find_preambles(region, cfg, _mean(region)):
         if det.start + length <= raw.size:
-            frame = raw[det.start : det.start + length] - _dc_estimate(raw, det.start, length)
-            out.append(_demodulate(frame, det.cfo, num_symbols, cfg, equalizer))
+            dc = _dc_estimate(raw, det.start, length)
+            frame = raw[det.start : det.start + length]
+            out.append(_demodulate(frame, det.cfo, num_symbols, cfg, equalizer, dc))
             out[-1].start_index = int(det.start)
     return out
 
@@ -192,9 +195,10 @@ def _sum(r: np.ndarray) -> complex:
     return complex(r.sum(dtype=np.complex128)) if r.size else 0j
 
 
-def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
-    """Recover the payload of ``frame`` [length] complex64 (DC removed, starting at the
-    sync preamble's first sample) whose CFO is about ``cfo`` subcarriers."""
+def _demodulate(frame, cfo, num_symbols, cfg, equalizer, dc: complex = 0j) -> FrameResult:
+    """Recover the payload of ``frame - dc`` (``frame`` [length] complex64 starting at the
+    sync preamble's first sample, ``dc`` the receiver's DC offset, removed sample by sample
+    as the OFDM windows are gathered) whose CFO is about ``cfo`` subcarriers."""
     lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
     used, pk = lay.used, lay.pilots
@@ -207,7 +211,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         tau = eps * lay.times  # [rows] samples of drift
         shifts = np.minimum(np.maximum(np.round(tau), -(cp - cfg.backoff - 1)), cfg.backoff)
         shifts = shifts.astype(np.int64)
-        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
+        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n, dc).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
         # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
