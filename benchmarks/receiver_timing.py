@@ -69,6 +69,21 @@ def _bits(res) -> np.ndarray:
     return np.stack([s.real > 0, s.imag > 0], axis=-1)
 
 
+def _per_frame(mod, capture: np.ndarray, cfg, n: int) -> list:
+    """The frames of a capture as a stream receiver without a batched call decodes them:
+    the search, then ``receive_frame`` on each frame with the 2000 samples either side."""
+    length = cfg.num_samples(n)
+    out = []
+    for start in mod.find_frames(capture, cfg):
+        lo = max(0, start - 2000)
+        seg = capture[lo : start + length + 2000]
+        if start + length <= capture.size:
+            res = mod.receive_frame(seg, cfg, n, equalizer="zf")
+            res.start_index += lo
+            out.append(res)
+    return out
+
+
 def rate_run(rate: float, rng: np.random.Generator) -> dict:
     """The chain and each stage at one sample rate, new beside reference."""
     cfg = phy.FrameConfig(sample_rate_hz=rate)
@@ -113,6 +128,12 @@ def rate_run(rate: float, rng: np.random.Generator) -> dict:
             capture.size,
             5,
         ),
+        "frames of a capture, one search (receive_frames)": (
+            lambda: phy.receive_frames(capture, cfg, n, equalizer="zf"),
+            lambda: _per_frame(receiver_reference, capture, cfg, n),
+            capture.size,
+            5,
+        ),
         "search statistic alone (_search)": (
             lambda: detection._search(clean, cfg),
             lambda: detection_reference._search(clean, cfg),
@@ -130,6 +151,10 @@ def rate_run(rate: float, rng: np.random.Generator) -> dict:
         capture, cfg
     )
     out["frames_found"] = len(phy.find_frames(capture, cfg))
+    batch, per_frame = phy.receive_frames(capture, cfg, n, "zf"), _per_frame(phy, capture, cfg, n)
+    out["same_frames_batched"] = [b.start_index for b in batch] == [
+        f.start_index for f in per_frame
+    ] and all(np.array_equal(_bits(b), _bits(f)) for b, f in zip(batch, per_frame))
     out["same_start"] = res.start_index == res_ref.start_index
     out["same_bits"] = bool(np.array_equal(_bits(res), _bits(res_ref)))
     return out

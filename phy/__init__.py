@@ -8,7 +8,7 @@ sionna is imported lazily (only by the blocks that need it), so ``import phy`` i
   ``phy.models``: which link each channel runs on and what a transmitter assumes;
   ``phy.measure``: pilot measurements of a link's SNR and of its copies' fading
 * OFDM (``phy.ofdm``): ``ResourceGrid``, (de)modulation, LS estimation, ZF/MMSE equalisation
-* over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``
+* over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``, ``receive_frames``
 * theory (``phy.theory``, ``phy.modulation``): uncoded BER/SER closed forms, Gray constellations
 * ``phy.digital`` (CRC + 5G LDPC + QAM) and ``phy.raytrace`` (sionna-rt channels) are subpackages.
 """
@@ -79,7 +79,7 @@ from phy.ofdm import (  # noqa: E402
     ofdm_modulate,
     post_equalization_snr,
 )
-from phy.receiver import FrameResult, find_frames, receive_frame  # noqa: E402
+from phy.receiver import FrameResult, find_frames, receive_frame, receive_frames  # noqa: E402
 from phy.theory import THEORY_CHANNELS, ber_theory, ser_theory  # noqa: E402
 
 
@@ -153,6 +153,7 @@ __all__ = [
     "post_equalization_snr",
     "power_normalize",
     "receive_frame",
+    "receive_frames",
     "require_llvm",
     "snr_db_to_ebno_db",
     "snr_db_to_noise_var",

@@ -25,12 +25,25 @@ def njit(**options):
             if compiled is None:
                 import numba
 
+                for name, fn in _HELPERS.items():  # what kernels call: compiled first
+                    if not isinstance(globals()[name], numba.core.registry.CPUDispatcher):
+                        globals()[name] = numba.njit(cache=True)(fn)
                 compiled = numba.njit(**options)(python_function)
             return compiled(*args)
 
         return kernel
 
     return decorate
+
+
+_HELPERS: dict = {}
+
+
+def helper(python_function):
+    """A function that kernels call: compiled by numba with the first kernel compiled (until
+    then, and for Python callers, it stays plain Python)."""
+    _HELPERS[python_function.__name__] = python_function
+    return python_function
 
 
 @njit(cache=True)
@@ -43,7 +56,7 @@ def row_sums(yx, h_used, k_row, k_pos, rows):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cover - compiled
+def refine(yx, rot, k_row, k_pos, counts, p_mats, bands, dofs, rows):  # pragma: no cover
     """One channel update with the common phase ``rot`` [rows] removed.
 
     The observations ``obs = yx rot[k_row]`` of ``h`` are summed per used carrier (``k_pos``);
@@ -53,7 +66,8 @@ def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cov
     estimation error, so a short delay window wins at low SNR and longer models win when
     truncation bias exceeds noise. Cp's noise level comes from the richest model (per-carrier
     means): unbiased whichever model is right, so a low training-difference estimate cannot
-    pick a noisy model.
+    pick a noisy model. Row k of model j has its non-zeros in columns
+    ``bands[j, k, 0] <= q < bands[j, k, 1]`` (the products outside are exact zeros).
 
     Returns:
         (obs [num_known] complex64, h [num_used] complex64 of the least-Cp model, its index,
@@ -80,7 +94,7 @@ def refine(yx, rot, k_row, k_pos, counts, p_mats, dofs, rows):  # pragma: no cov
         cp = 2.0 * cp_noise * dofs[j]
         for k in range(nu):
             v = 0j
-            for q in range(nu):
+            for q in range(bands[j, k, 0], bands[j, k, 1]):
                 v += p_mats[j, k, q] * sums64[q]
             h[k] = v
             d = sums[k] / counts[k] - h[k]
@@ -167,8 +181,8 @@ def cfo_template(preamble, f, seg, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
-    """[num_windows, n] complex64: ``frame[s : s + n]`` for each start s, times
+def rotated_windows(frame, starts, w, n, dc):  # pragma: no cover - compiled
+    """[num_windows, n] complex64: ``frame[s : s + n] - dc`` for each start s, times
     ``exp(1j w (s + m)) / sqrt(n)`` at its sample m (row phase times sample phase)."""
     col = (np.exp(1j * w * np.arange(n)) / np.sqrt(n)).astype(np.complex64)
     out = np.empty((starts.size, n), np.complex64)
@@ -178,31 +192,60 @@ def rotated_windows(frame, starts, w, n):  # pragma: no cover - compiled
             raise IndexError("a window runs past the frame")
         a = np.complex64(np.exp(1j * w * s))
         for m in range(n):
-            out[r, m] = frame[s + m] * (a * col[m])
+            out[r, m] = (frame[s + m] - dc) * (a * col[m])
     return out
 
 
 @njit(cache=True)
-def phase_line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
-    """The rest of :func:`phy.estimation.track_phase` once its slope search gave ``w``
-    (radians per row): refined by the phase between the halves, the line through the rows'
-    sums ``a`` [rows], then the residual smoothed over as many rows as it takes to reach
-    ``window_snr``. Returns (phi [rows] float64 radians, slope)."""
+def phase_line(
+    yx, h_used, k_row, k_pos, pilot_in_used, rows, noise_var, w, window_snr, a
+):  # pragma: no cover - compiled
+    """The common phase of every row: :func:`phy.estimation.track_phase` once its slope
+    search gave ``w`` (radians per row), on the rows' sums ``a = sum yx conj(h_used[k_pos])``
+    by row (:func:`row_sums`; computed here when ``a`` is empty): ``w`` refined by the phase
+    between the halves, the line through ``a``, then the residual smoothed over as many rows
+    as it takes to reach ``window_snr`` at one data row's SNR ``|h at the pilots|^2 /
+    noise_var``. Returns (``exp(-j phi)`` [rows] complex64, slope, the row SNR)."""
+    if a.size != rows:
+        acc = np.zeros(rows, np.complex128)
+        for i in range(yx.size):
+            acc[k_row[i]] += yx[i] * np.conj(h_used[k_pos[i]])
+        a = acc.astype(np.complex64)
+    snr_row = 0.0
+    for p in pilot_in_used:
+        snr_row += h_used[p].real ** 2 + h_used[p].imag ** 2
+    snr_row /= noise_var
+    phi, w = _line(a, w, window_snr, snr_row)
+    rot = np.empty(rows, np.complex64)
+    for i in range(rows):
+        angle = np.float32(-phi[i])
+        rot[i] = np.complex64(np.cos(angle) + 1j * np.sin(angle))
+    return rot, w, snr_row
+
+
+@helper
+def _line(a, w, window_snr, snr_row):  # pragma: no cover - compiled
+    """(phi [rows] float64, slope) for :func:`phase_line`."""
     rows = a.size
     h = rows // 2
     if rows >= 2:
         first, second = 0j, 0j
+        step, z = np.exp(-1j * w), 1.0 + 0j  # z = exp(-j w i) by recurrence
         for i in range(2 * h):
-            v = a[i] * np.exp(-1j * w * i)
+            v = a[i] * z
             if i < h:
                 first += v
             else:
                 second += v
+            z *= step
         w += np.angle(second * np.conj(first)) / h
-    unrotated = np.exp(-1j * w * np.arange(rows))
+    unrotated = np.empty(rows, np.complex128)
+    step, z = np.exp(-1j * w), 1.0 + 0j
     total = 0j
     for i in range(rows):
-        total += a[i] * unrotated[i]
+        unrotated[i] = z
+        total += a[i] * z
+        z *= step
     phi0 = np.angle(total)
     line = phi0 + w * np.arange(rows)
     width = int(np.ceil(window_snr / max(snr_row, 1e-6))) | 1
@@ -279,3 +322,26 @@ def normalised_power(spec, energy, scale):  # pragma: no cover - compiled
             s = spec[i, j]
             q[i, j] = np.float32(s.real * s.real + s.imag * s.imag) / den
     return q
+
+
+@njit(cache=True)
+def peaks(hit, power, width):  # pragma: no cover - compiled
+    """Non-maximum suppression of the candidates ``hit`` [num_hits] (ascending) with
+    ``power`` [num_hits]: the strongest (the first of equals), then the strongest more than
+    ``width`` away from every one taken, ... Returns the taken hits, ascending."""
+    left = np.ones(hit.size, np.bool_)
+    taken = np.empty(hit.size, np.int64)
+    count = 0
+    while True:
+        best = -1
+        for i in range(hit.size):
+            if left[i] and (best < 0 or power[i] > power[best]):
+                best = i
+        if best < 0:
+            break
+        taken[count] = hit[best]
+        count += 1
+        for i in range(hit.size):
+            if abs(hit[i] - hit[best]) <= width:
+                left[i] = False
+    return np.sort(taken[:count])

@@ -28,6 +28,7 @@ path) within the prefix before the strongest one whose Q is a fair share of the 
 from __future__ import annotations
 
 import functools
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,22 +87,28 @@ def pd_coherent(threshold: float, num_samples: int, snr: float) -> float:
     return float(stats.ncf.sf(f, 2, 2 * (n - 1), 2 * n * snr))
 
 
-def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
+def segment_correlation(
+    r: np.ndarray, base: np.ndarray, out: np.ndarray | None = None
+) -> np.ndarray:
     """c[d] = sum_m r[d+m] conj(base[m]). [num_samples] -> [num_samples - L + 1] complex64.
 
     Long inputs go through matrix products: with ``r`` as rows of L samples, output
     ``c[q L + p]`` is row q (from column p) and row q + 1 (up to column p) against the
     shifted base, so ``c = rows[:-1] @ M_top + rows[1:] @ M_bottom`` for a fixed [2L, L] M.
+    ``out`` (optional, [num_samples - L + 1] complex64) receives the result.
     """
     seg = base.size
     r = np.asarray(r, np.complex64)
     b64 = np.asarray(base, np.complex64)
     q = r.size // seg
+    if out is None:
+        out = np.empty(max(r.size - seg + 1, 0), np.complex64)
     if q < 64:
-        return np.correlate(r, b64, mode="valid")
+        if r.size >= seg:
+            out[:] = np.correlate(r, b64, mode="valid")
+        return out
     m = _shift_matrix(b64.tobytes())
     rows = r[: q * seg].reshape(q, seg)
-    out = np.empty(r.size - seg + 1, np.complex64)
     head = out[: (q - 1) * seg].reshape(q - 1, seg)
     tmp = np.empty((min(q - 1, _ROWS_PER_PRODUCT), seg), np.complex64)
     for i in range(0, q - 1, _ROWS_PER_PRODUCT):  # cache-sized products
@@ -110,6 +117,22 @@ def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:
         head[i:j] += np.matmul(rows[i + 1 : j + 1], m[seg:], out=tmp[: j - i])
     out[(q - 1) * seg :] = np.correlate(r[(q - 1) * seg :], b64, mode="valid")
     return out
+
+
+def _scratch(name: str, size: int, dtype) -> np.ndarray:
+    """[size] array ``name`` of this thread's search workspace, reused from call to call:
+    the search's capture-sized temporaries (segment correlations, neighbour products, the
+    statistic) stay mapped, so a stream of searches touches no fresh pages."""
+    pool = getattr(_WORKSPACE, "pool", None)
+    if pool is None:
+        pool = _WORKSPACE.pool = {}
+    buf = pool.get(name)
+    if buf is None or buf.size < size or buf.dtype != dtype:
+        buf = pool[name] = np.empty(size, dtype)
+    return buf[:size]
+
+
+_WORKSPACE = threading.local()
 
 
 @functools.lru_cache(maxsize=8)
@@ -140,48 +163,56 @@ def _comb_spectrum(comb_bytes: bytes, block: int) -> np.ndarray:
     return np.conj(scipy.fft.fft(comb, block)).astype(np.complex64)
 
 
-def _comb_correlate(w: np.ndarray, comb: np.ndarray, seg: int) -> np.ndarray:
-    """``out[d] = sum_k comb[k] w[d + k seg]``, valid part: [num_w] -> [num_w - (T - 1) seg]
-    complex64 for T taps.
+def _comb_power(w: np.ndarray, comb: np.ndarray, seg: int, out: np.ndarray) -> np.ndarray:
+    """``|sum_k comb[k] w[d + k seg]|^2`` for every valid d, T = comb.size taps: ``w`` holds
+    the num_w = out.size + (T - 1) seg products and room after them for the blocks' zero
+    padding (overwritten); ``out`` [num_w - (T - 1) seg] float32 receives the result.
 
     The taps sit one segment apart, so with ``w`` as rows of ``seg`` samples each column
     (one phase within the segment) is correlated with T dense taps: overlap-save FFTs of
-    ``_COMB_BLOCK`` rows (fewer for a short ``w``) down the columns, all columns at once.
+    ``_COMB_BLOCK`` rows (fewer for a short ``w``) down the columns, all columns at once,
+    each block squared into ``out`` while it is in cache.
     """
     taps = comb.size
-    nout = w.size - (taps - 1) * seg
+    nout = out.size
+    num_w = nout + (taps - 1) * seg
     q = -(-nout // seg)  # output rows
     block = min(_COMB_BLOCK, scipy.fft.next_fast_len(q + taps - 1))
     hop = block - taps + 1
     nb = -(-q // hop)
     need = (nb - 1) * hop + block  # rows of w the blocks read (zeros past its end)
-    padded = np.empty(need * seg, np.complex64)
-    padded[: w.size] = w
-    padded[w.size :] = 0
-    rows = padded.reshape(need, seg)
+    w[num_w : need * seg] = 0
+    rows = w[: need * seg].reshape(need, seg)
     g = _comb_spectrum(comb.tobytes(), block)[:, None]
-    out = np.empty((nb * hop, seg), np.complex64)
     for i in range(0, nb * hop, hop):  # one block of rows, every column: cache-sized
-        spec = scipy.fft.fft(rows[i : i + block], axis=0)
+        spec = scipy.fft.fft(rows[i : i + block], axis=0, workers=1)
         spec *= g
-        out[i : i + hop] = scipy.fft.ifft(spec, axis=0, overwrite_x=True)[:hop]
-    return out.reshape(-1)[:nout]
+        d = scipy.fft.ifft(spec, axis=0, overwrite_x=True, workers=1)[:hop].reshape(-1)
+        d = d[: min(hop * seg, nout - i * seg)]
+        part = out[i * seg : i * seg + d.size]
+        np.multiply(d.real, d.real, out=part)
+        part += d.imag * d.imag
+    return out
 
 
 def _search(r: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(c [num_samples - L + 1], |D|^2 [num_samples - N + 1], noise-only variance of D per
-    block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)])."""
+    block of ``_POWER_BLOCK`` lags [ceil((num_samples - N + 1) / _POWER_BLOCK)]).
+
+    c and |D|^2 are views of this thread's workspace (:func:`_scratch`): valid until the
+    thread's next search."""
     base, cover, comb = _search_plan(cfg)
     seg, k = base.size, cover.size
     n = seg * k
-    c = segment_correlation(r, base)
+    c = segment_correlation(r, base, _scratch("c", max(r.size - seg + 1, 0), np.complex64))
     if r.size < n:
         return c, np.zeros(0, np.float32), np.ones(0, np.float32)
-    w = np.conj(c[:-seg])
-    w *= c[seg:]  # [num_samples - 2L + 1]: neighbouring segments
-    d = _comb_correlate(w, comb, seg)  # [num_samples - N + 1]
-    power = d.real * d.real
-    power += d.imag * d.imag
+    num_w = c.size - seg  # [num_samples - 2L + 1]: neighbouring segments
+    w = _scratch("w", num_w + (_COMB_BLOCK + 1) * seg, np.complex64)
+    np.conjugate(c[:-seg], out=w[:num_w])
+    w[:num_w] *= c[seg:]
+    power = _comb_power(w, comb, seg, _scratch("power", r.size - n + 1, np.float32))
+    w = w[:num_w]
     nb = -(-power.size // _POWER_BLOCK)
     per = n // _POWER_BLOCK
     # the variance of D is (K - 1) E|w|^2: estimated from w itself, block-wise (for white
@@ -214,10 +245,17 @@ def coherent_metric(
         (Q [num_lags, num_bins] float64, the segment sums' FFT [num_lags, num_bins] complex64),
         bin j at ``j / (num_bins L)`` cycles per sample (wrapped to +-1 / (2 L)).
     """
-    k = cover.size
-    if lags.size and (lags.min() < 0 or lags.max() + seg * (k - 1) >= c.size):
+    lags = np.asarray(lags, np.int64)
+    if lags.size and (lags.min() < 0 or lags.max() + seg * (cover.size - 1) >= c.size):
         raise IndexError("the lags' segments run past the correlations")
-    v = _kernels.segment_rows(c, np.asarray(lags, np.int64), cover, seg, _OVERSAMPLE * k)
+    return _coherent(c, energy, lags, cover, seg)
+
+
+def _coherent(c, energy, lags, cover, seg):
+    """:func:`coherent_metric` without the bounds check (lags [num_lags] int64 known to be
+    within ``c``; ``energy`` may run on past them)."""
+    k = cover.size
+    v = _kernels.segment_rows(c, lags, cover, seg, _OVERSAMPLE * k)
     spec = scipy.fft.fft(v, axis=-1, overwrite_x=True)  # zero-padded rows
     return _kernels.normalised_power(spec, np.asarray(energy, np.float64), k * seg), spec
 
@@ -263,11 +301,12 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     if hi < max(lo, d1 - _SPAN):
         return None
     energy = _kernels.window_energies(x[lo : hi + n], n)  # [hi - lo + 1] windows from lo
-    lags = np.arange(max(lo, d1 - _SPAN), hi + 1)
-    q, spec = coherent_metric(c, energy[lags - lo], lags, cover, seg)
+    l0 = max(lo, d1 - _SPAN)  # lags l0 .. hi (within c by construction)
+    lags = np.arange(l0, hi + 1)
+    q, spec = _coherent(c, energy[l0 - lo :], lags, cover, seg)
     # a quick look at the search peak and its neighbours: most noise candidates stop here
     # (a frame's Q there is within a few dB of its peak, noise's far below threshold)
-    if q[np.abs(lags - d1) <= 1].max() < _QUICK * cfg.detection_threshold:
+    if q[max(d1 - 1 - l0, 0) : d1 + 2 - l0].max() < _QUICK * cfg.detection_threshold:
         return None
     # the same at half-sample lags (a preamble half a sample off loses up to 1.3 dB at the
     # integer lags): the base sequence delayed by half a sample, one more set of hypotheses
@@ -275,10 +314,10 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     c_at = 0  # c[i] belongs to lag i + c_at
     if q.max() < 2 * cfg.detection_threshold:  # only where the 1.3 dB can matter
         c_half = segment_correlation(x[lo : hi + n], _half_sample_base(cfg))
-        q_h, spec_h = coherent_metric(c_half, energy[lags - lo], lags - lo, cover, seg)
+        q_h, spec_h = _coherent(c_half, energy[l0 - lo :], lags - lo, cover, seg)
         if q_h.max() > _HALF_MARGIN * q.max():  # on the grid unless clearly between samples
             q, spec, c, c_at = q_h, spec_h, c_half, lo
-    i, j = np.unravel_index(int(np.argmax(q)), q.shape)
+    i, j = divmod(int(np.argmax(q)), q.shape[1])
     q_peak = float(q[i, j])
     if q_peak <= cfg.detection_threshold:
         return None
@@ -294,17 +333,17 @@ def _confirm(x: np.ndarray, c: np.ndarray, d1: int, cfg, cover: np.ndarray):
     # (on the region with f removed sample by sample: a CFO also rotates within segments and
     # skews the correlation's peak by a sample at the edge of the CFO range, so the
     # strongest path is looked for again there)
-    early = np.arange(max(lo, peak - look), min(hi, peak + 2) + 1)
+    e0, e1 = max(lo, peak - look), min(hi, peak + 2)  # lags e0 .. e1
     # (the whole preamble with f applied against the region: the same sums as correlating
     # the corrected region segment by segment; exp(2j pi f (k L + m)) as segment x sample)
     template = _kernels.cfo_template(_preamble(cfg), f, seg, k)
-    qf = np.abs(np.correlate(x[early[0] : early[-1] + n], template, "valid")) ** 2
-    qf /= n * np.maximum(energy[early - lo], 1e-30)
-    near = np.abs(early - peak) <= 2
-    best = int(np.flatnonzero(near)[np.argmax(qf[near])])
+    qf = np.abs(np.correlate(x[e0 : e1 + n], template, "valid")) ** 2
+    qf /= n * np.maximum(energy[e0 - lo : e1 - lo + 1], 1e-30)
+    near = max(peak - 2 - e0, 0)  # lags within 2 of the peak: near .. near + 4
+    best = near + int(np.argmax(qf[near : peak + 3 - e0]))
     floor = max(_PATH_FRACTION * qf[best], threshold_for_pfa(_PATH_PFA, n))
     ok = np.flatnonzero(qf[: best + 1] >= floor)
-    start = int(early[ok[0]]) if ok.size else int(early[best])
+    start = e0 + int(ok[0] if ok.size else best)
     return start, cfo, q_peak
 
 
@@ -313,21 +352,17 @@ def _peaks(hit: np.ndarray, power: np.ndarray, width: int) -> list[int]:
     (a normalised S also peaks where the window holds the first samples of a strong frame
     after silence), then the strongest more than ``width`` away from every one taken, ...
     (no chaining: noise candidates between two frames cannot merge them into one)."""
-    left = np.ones(hit.size, bool)
-    out = []
-    while left.any():
-        i = int(np.flatnonzero(left)[np.argmax(power[left])])
-        out.append(int(hit[i]))
-        left &= np.abs(hit - hit[i]) > width
-    return sorted(out)
+    return _kernels.peaks(np.asarray(hit, np.int64), power, width).tolist()
 
 
-def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
-    """Every sync preamble in ``r`` (DC already removed), ascending.
+def find_preambles(r: np.ndarray, cfg, offset: complex | np.complexfloating = 0) -> list[Detection]:
+    """Every sync preamble in ``r - offset``, ascending.
 
     Args:
         r: [num_samples] complex64.
         cfg: :class:`phy.FrameConfig`.
+        offset: the capture's DC offset, subtracted chunk by chunk as it is searched
+            (0 when ``r`` has none).
     Returns:
         list of :class:`Detection`; starts at least ``cfg.sync_length`` apart.
     """
@@ -338,6 +373,8 @@ def find_preambles(r: np.ndarray, cfg) -> list[Detection]:
     for a in range(0, max(r.size - n + 1, 0), _CHUNK):
         s0 = max(0, a - margin)  # the chunk searches lags [a, a + _CHUNK)
         x = r[s0 : a + _CHUNK + n - 1 + _SPAN]
+        if offset:
+            x = np.subtract(x, np.complex64(offset), out=_scratch("x", x.size, np.complex64))
         c, power, var = _search(x, cfg)
         lo, hi = a - s0, min(a - s0 + _CHUNK, power.size)
         if hi <= lo:

@@ -3,7 +3,8 @@ benchmark times beside :mod:`phy.detection` and that the equivalence test holds 
 same frames at the same offsets, the same CFOs to rounding).
 
 The statistics are :mod:`phy.detection`'s (see its docstring); only the way they are computed
-differs there.
+differs there. Every function is a copy; only the result type (:class:`phy.detection.Detection`)
+and the frame definition (:mod:`phy.frame`, :mod:`phy.sync`) are shared.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import functools
 import numpy as np
 import scipy.fft
 
-from phy.detection import Detection, threshold_for_pfa
+from phy.detection import Detection
 from phy.sync import correct_cfo
 
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
@@ -29,6 +30,11 @@ _QUICK = 0.25  # the quick look needs this share of the detection threshold
 _HALF_MARGIN = 1.1  # a half-sample lag is taken when its Q is this much above the grid's
 _PATH_FRACTION = 0.4  # a first path needs this share of the strongest path's Q
 _PATH_PFA = 1e-6  # ... and Q above noise at this false-alarm rate
+
+
+def threshold_for_pfa(pfa: float, num_samples: int) -> float:
+    """The t with ``(1 - t)^(N - 1) == pfa`` (Q ~ Beta(1, N - 1) in noise)."""
+    return float(1.0 - pfa ** (1.0 / (num_samples - 1)))
 
 
 def segment_correlation(r: np.ndarray, base: np.ndarray) -> np.ndarray:

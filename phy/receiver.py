@@ -19,13 +19,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft
 import torch
 
 from phy import _kernels, estimation
 from phy.detection import find_preambles
-from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
+from phy.frame import FrameConfig, _as_complex_1d
 from phy.ofdm.equalization import EQUALIZERS
+from phy.receiver_layout import _Layout, _layout
 
 
 @dataclass
@@ -62,7 +62,12 @@ def _without_dc(r: np.ndarray) -> np.ndarray:
     """Remove the capture's mean (an SDR's DC offset would make silence look periodic)."""
     if not r.size:
         return r
-    return r - np.complex64(_sum(r) / r.size)
+    return r - _mean(r)
+
+
+def _mean(r: np.ndarray) -> np.complex64:
+    """The capture's mean (its DC offset), accumulated in complex128."""
+    return np.complex64(_sum(r) / r.size) if r.size else np.complex64(0)
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
@@ -71,110 +76,27 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     Args:
         iq: [num_samples] complex64 (numpy or torch).
     """
-    return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
+    raw = _as_complex_1d(iq, "iq")
+    return [d.start for d in find_preambles(raw, cfg, _mean(raw))]
 
 
-def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -> np.ndarray:
-    """FFT of the windows ``frame[start : start + fft_size]`` with a CFO of ``cfo`` carriers
-    removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these samples
-    only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
-    start is a delay the caller's model removes."""
+def _windows(
+    frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int, dc: complex = 0j
+) -> np.ndarray:
+    """FFT of the windows ``frame[start : start + fft_size] - dc`` with a CFO of ``cfo``
+    carriers removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these
+    samples only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's
+    early start is a delay the caller's model removes."""
     w = -2 * np.pi * cfo / fft_size
     # the rotation (and the transform's 1 / sqrt(n)) applied while the windows are gathered
-    win = _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size)
-    return scipy.fft.fft(win, axis=-1, overwrite_x=True)
-
-
-@dataclass(frozen=True)
-class _Layout:
-    """Index arrays of one frame length (cached): rows are the two training symbols, then
-    the data OFDM symbols; ``known`` entries (training carriers, pilots) row-major."""
-
-    rows: int
-    body: np.ndarray  # [rows] body start of each row, samples from the frame start
-    times: np.ndarray  # [rows] centre of each row's body, samples
-    k_row: np.ndarray  # [num_known] row of each known value
-    k_col: np.ndarray  # [num_known] carrier (centred order)
-    k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
-    k_pos: np.ndarray  # [num_known] position of its carrier among the used ones
-    x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
-    counts: np.ndarray  # [num_used] observations per used carrier
-    smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
-    # [num_models, num_used], dofs [num_models]): the candidate channel models, shortest
-    # delay window first, per-carrier LS last
-    smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
-    pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
-    d_col: np.ndarray  # [num_symbols] carrier of each payload symbol's data element
-    d_row: np.ndarray  # [num_symbols] its row
-    d_bin: np.ndarray  # [num_symbols] its FFT bin (natural order)
-    d_flat: np.ndarray  # [num_symbols] row * fft_size + FFT bin (natural order)
-    used: np.ndarray  # used carriers (centred order)
-    used_nat: np.ndarray  # their FFT bins (natural order)
-    centred: np.ndarray  # [fft_size] carrier (centred order) of each FFT bin
-    pilots: np.ndarray  # pilot carriers (centred order)
-    pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
-    num_training_values: int  # known entries of the two training rows (come first)
-    fft_size: int
-
-
-@functools.lru_cache(maxsize=32)
-def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
-    grid = cfg.data_grid(num_symbols)
-    n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
-    used, pk = grid.used_subcarriers, grid.pilot_subcarriers
-    rows = 2 + grid.num_ofdm_symbols
-    body = cfg.sync_length + cp + s * np.arange(rows)
-    x = np.zeros((rows, n), np.complex64)  # [rows, fft_size]
-    x[:2, used] = _lts(cfg)[used]
-    x[2:, pk] = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
-    k_row, k_col = np.nonzero(x)
-    data = np.zeros((rows, n), bool)
-    data[2:] = grid.data_mask.numpy()
-    d_row, d_col = np.nonzero(data)  # row-major: resource element j
-    # payload symbol i sits on resource element perm^-1[i]
-    order = np.argsort(interleaver(d_row.size)) if cfg.interleave else np.arange(d_row.size)
-    d_row, d_col = d_row[order[:num_symbols]], d_col[order[:num_symbols]]
-    # candidate channel models: taps from backoff samples before the detected first path,
-    # as many as the comb has pilots per symbol (more are ill-determined between pilots at
-    # low SNR), the whole prefix, and per-carrier LS (no smoothing: high SNR, long channels)
-    counts = np.bincount(k_col, minlength=n)[used].astype(np.float64)
-    smoothers = []
-    for num_taps in sorted({min(cp, pk.size), cp}):
-        basis = estimation.delay_basis(used, n, np.arange(num_taps) - cfg.backoff)
-        p_mat, factor = estimation.channel_smoother(counts, basis)
-        smoothers.append((p_mat.astype(np.complex64), factor, num_taps))
-    smoothers.append((np.diag(1.0 / counts).astype(np.complex64), 1.0 / counts, used.size))
-    short = estimation.delay_basis(used, n, np.arange(min(cp, pk.size)) - cfg.backoff)
-    smoother_training, _ = estimation.channel_smoother(np.full(used.size, 2.0), short)
-    return _Layout(
-        rows=rows,
-        body=body,
-        times=(body + n / 2).astype(np.float64),
-        k_row=k_row,
-        k_col=k_col,
-        k_flat=k_row * n + (k_col + n // 2) % n,
-        k_pos=np.searchsorted(used, k_col),
-        x_known=x[k_row, k_col],
-        counts=counts,
-        smoothers=(
-            np.stack([m[0] for m in smoothers]),
-            np.stack([m[1] for m in smoothers]),
-            np.array([m[2] for m in smoothers], np.float64),
-        ),
-        smoother_training=smoother_training.astype(np.complex64),
-        pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
-        d_col=d_col,
-        d_row=d_row,
-        d_bin=(d_col + n // 2) % n,
-        d_flat=d_row * n + (d_col + n // 2) % n,
-        used=used,
-        used_nat=(used + n // 2) % n,
-        centred=(np.arange(n) + n // 2) % n,
-        pilots=pk,
-        pilot_in_used=np.searchsorted(used, pk),
-        num_training_values=2 * used.size,
-        fft_size=n,
+    # (torch's batched FFT of short rows is the fastest at hand)
+    win = torch.from_numpy(
+        _kernels.rotated_windows(frame, np.asarray(starts, np.int64), w, fft_size, np.complex64(dc))
     )
+    return torch.fft.fft(win, dim=-1, out=win).numpy()
+
+
+_NO_SUMS = np.zeros(0, np.complex64)
 
 
 def _not_detected(num_symbols: int) -> FrameResult:
@@ -208,11 +130,7 @@ def receive_frame(
     Returns:
         :class:`FrameResult`; ``detected`` is False when no complete frame was found.
     """
-    raw = _as_complex_1d(iq, "iq")
-    if not isinstance(num_symbols, int) or num_symbols < 1:
-        raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
-    if equalizer not in EQUALIZERS:
-        raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
+    raw = _checked(iq, num_symbols, equalizer)
     if not isinstance(search_from, int) or not 0 <= search_from < max(1, raw.size):
         raise ValueError(f"search_from must be an integer in [0, {raw.size}), got {search_from!r}")
     length = cfg.num_samples(num_symbols)
@@ -221,14 +139,44 @@ def receive_frame(
     # itself (and skipped) rather than through its sidelobes
     first = max(0, search_from - cfg.sync_length)
     region = raw[first : max(first, raw.size - length + cfg.sync_length)]
-    for det in find_preambles(_without_dc(region), cfg):
+    for det in find_preambles(region, cfg, _mean(region)):
         start, cfo = det.start + first, det.cfo
         if search_from <= start and start + length <= raw.size:
-            frame = raw[start : start + length] - _dc_estimate(raw, start, length)
-            res = _demodulate(frame, cfo, num_symbols, cfg, equalizer)
+            dc = _dc_estimate(raw, start, length)
+            res = _demodulate(raw[start : start + length], cfo, num_symbols, cfg, equalizer, dc)
             res.start_index = int(start)
             return res
     return _not_detected(num_symbols)
+
+
+def receive_frames(
+    iq, cfg: FrameConfig = FrameConfig(), num_symbols: int = 1, equalizer: str = "mmse"
+) -> list[FrameResult]:
+    """Every complete frame in a capture, from one search (a stream's block of frames): the
+    frames that :func:`receive_frame` finds called from each found frame onwards, without a
+    search per frame. Arguments as :func:`receive_frame`'s; returns one detected
+    :class:`FrameResult` per frame, ascending (none when there is no complete frame)."""
+    raw = _checked(iq, num_symbols, equalizer)
+    length = cfg.num_samples(num_symbols)
+    region = raw[: max(0, raw.size - length + cfg.sync_length)]
+    out = []
+    for det in find_preambles(region, cfg, _mean(region)):
+        if det.start + length <= raw.size:
+            dc = _dc_estimate(raw, det.start, length)
+            frame = raw[det.start : det.start + length]
+            out.append(_demodulate(frame, det.cfo, num_symbols, cfg, equalizer, dc))
+            out[-1].start_index = int(det.start)
+    return out
+
+
+def _checked(iq, num_symbols, equalizer: str) -> np.ndarray:
+    """The capture as [num_samples] complex64 once the arguments are checked."""
+    raw = _as_complex_1d(iq, "iq")
+    if not isinstance(num_symbols, int) or num_symbols < 1:
+        raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
+    if equalizer not in EQUALIZERS:
+        raise ValueError(f"equalizer must be one of {list(EQUALIZERS)}, got {equalizer!r}")
+    return raw
 
 
 def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
@@ -247,9 +195,10 @@ def _sum(r: np.ndarray) -> complex:
     return complex(r.sum(dtype=np.complex128)) if r.size else 0j
 
 
-def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
-    """Recover the payload of ``frame`` [length] complex64 (DC removed, starting at the
-    sync preamble's first sample) whose CFO is about ``cfo`` subcarriers."""
+def _demodulate(frame, cfo, num_symbols, cfg, equalizer, dc: complex = 0j) -> FrameResult:
+    """Recover the payload of ``frame - dc`` (``frame`` [length] complex64 starting at the
+    sync preamble's first sample, ``dc`` the receiver's DC offset, removed sample by sample
+    as the OFDM windows are gathered) whose CFO is about ``cfo`` subcarriers."""
     lay = _layout(cfg, num_symbols)
     n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
     used, pk = lay.used, lay.pilots
@@ -262,7 +211,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         tau = eps * lay.times  # [rows] samples of drift
         shifts = np.minimum(np.maximum(np.round(tau), -(cp - cfg.backoff - 1)), cfg.backoff)
         shifts = shifts.astype(np.int64)
-        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n).reshape(-1)  # [rows * n]
+        y = _windows(frame, lay.body - cfg.backoff + shifts, cfo, n, dc).reshape(-1)  # [rows * n]
         delay = (tau + cfg.backoff - shifts).astype(np.float32)  # [rows] windows start early
         # y[l, k] = h[k] exp(j phi[l]) ramp[l, k] x[l, k] + noise, ramp the windows' delay
         # (exp(-2 pi j delay[l] k / n)), needed only at the known and the data entries
@@ -274,18 +223,11 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
             diff = y0 - y1 * np.exp(1j * np.angle(np.vdot(y1, y0)))  # common phase aligned
             noise_var = lts_noise_var = max(float(np.vdot(diff, diff).real) / diff.size / 2, 1e-12)
         h_used = h[used]
-        for _ in range(2):
-            a = _kernels.row_sums(yx, h_used, kr, lay.k_pos, lay.rows)  # [rows] yx conj(h)
-            h_pk = h_used[lay.pilot_in_used]
-            snr_row = float(np.vdot(h_pk, h_pk).real) / noise_var  # one data row's sum
-            # estimation.track_phase, its line and smoothing compiled
-            w = estimation.slope_search(a) if slope_hint is None else slope_hint
-            phi, slope = _kernels.phase_line(a, w, estimation.PHASE_WINDOW_SNR, snr_row)
-            slope_hint = slope
-            rot = _phasor(-phi)  # [rows]
+        for _ in range(2):  # common phase, then the channel without it
+            rot, slope_hint, snr_row = _common_phase(yx, h_used, noise_var, slope_hint, lay)
             # the channel model with the least Mallows' Cp and the noise of its residuals
             obs, h_used, best, noise_var = _kernels.refine(
-                yx, rot, kr, lay.k_pos, lay.counts, p_mats, dofs, lay.rows
+                yx, rot, kr, lay.k_pos, lay.counts, p_mats, lay.bands, dofs, lay.rows
             )
             factor = factors[best]
         h = np.zeros(n, np.complex64)
@@ -313,7 +255,7 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
     x_hat, nv = _equalized(y, h, rot, delay, (noise_var + mse), lay, equalizer)
     h_used = h[used]
     signal = max(float(np.vdot(h_used, h_used).real - mse[used].sum()) / used.size, 1e-30)
-    cfo_total = cfo + slope / (2 * np.pi * s) * n
+    cfo_total = cfo + slope_hint / (2 * np.pi * s) * n
     return FrameResult(
         symbols=torch.from_numpy(np.ascontiguousarray(x_hat, np.complex64)),
         noise_var=torch.from_numpy(np.ascontiguousarray(nv, np.float32)),
@@ -324,6 +266,28 @@ def _demodulate(frame, cfo, num_symbols, cfg, equalizer) -> FrameResult:
         snr_db_estimate=10 * math.log10(signal / lts_noise_var),
         detected=True,
         effective_snr_db=10 * math.log10(signal / noise_var),
+    )
+
+
+def _common_phase(yx, h_used, noise_var, slope, lay: _Layout):
+    """(exp(-j phi) [rows] complex64, slope, one data row's SNR): the rows' common phase
+    (:func:`phy.estimation.track_phase`) from the observations ``yx`` against ``h_used``; the
+    slope search (an FFT across the rows' sums) only when no ``slope`` is known yet."""
+    a = _NO_SUMS  # the rows' sums yx conj(h): made by phase_line
+    if slope is None:
+        a = _kernels.row_sums(yx, h_used, lay.k_row, lay.k_pos, lay.rows)
+        slope = estimation.slope_search(a)
+    return _kernels.phase_line(
+        yx,
+        h_used,
+        lay.k_row,
+        lay.k_pos,
+        lay.pilot_in_used,
+        lay.rows,
+        noise_var,
+        slope,
+        estimation.PHASE_WINDOW_SNR,
+        a,
     )
 
 
@@ -408,26 +372,6 @@ def _carrier_sums(obs: np.ndarray, lay: _Layout, training_only: bool = False) ->
     if not training_only:
         sums[lay.pilot_in_used] += obs[nt:].reshape(lay.rows - 2, -1).sum(axis=0)
     return sums
-
-
-def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
-    """The candidate channel model with the least Mallows' Cp, ``sum_k c_k |o_k - h_k|^2 +
-    2 noise_var dof`` (``o_k`` the mean observation of carrier k, ``c_k`` their count): an
-    unbiased estimate of the count-weighted estimation error, so a short delay window wins
-    at low SNR and longer models win when truncation bias exceeds noise (the numpy form of
-    the selection in :func:`phy._kernels.refine`, which the receiver uses).
-
-    Returns:
-        (h [fft_size] complex64 centred order, mse factor [num_used], dof).
-    """
-    mean = sums / lay.counts
-    p_mats, factors, dofs = lay.smoothers
-    h_used = p_mats @ sums.astype(np.complex64)  # [num_models, num_used]
-    cp = np.sum(lay.counts * np.abs(mean[None, :] - h_used) ** 2, axis=1) + 2 * noise_var * dofs
-    i = int(np.argmin(cp))
-    h = np.zeros(lay.fft_size, np.complex64)
-    h[lay.used] = h_used[i]
-    return h, factors[i], int(dofs[i])
 
 
 def _channel(obs: np.ndarray, lay: _Layout, smoother, training_only: bool = False) -> np.ndarray:

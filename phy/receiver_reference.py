@@ -2,34 +2,26 @@
 (:mod:`phy.detection_reference`) and demodulation, kept unchanged for the benchmark's
 side-by-side timing and the equivalence test (the same frames, the same decoded bits).
 
-Only the functions that changed are copied (with the estimators they called); the rest is
-:mod:`phy.receiver`'s and :mod:`phy.estimation`'s.
+Every function of the chain is a copy, so that changes to :mod:`phy.receiver` leave it as it
+was; only the result type (:class:`phy.receiver.FrameResult`), the frame definition
+(:mod:`phy.frame`) and :mod:`phy.estimation`'s constants and bases are shared.
 """
 
 from __future__ import annotations
 
+import functools
 import math
+from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft
 import torch
 
 from phy import estimation
 from phy.detection_reference import find_preambles
-from phy.frame import FrameConfig, _as_complex_1d
+from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
 from phy.ofdm.equalization import EQUALIZERS
-from phy.receiver import (
-    FrameResult,
-    _best_channel,
-    _carrier_sums,
-    _channel,
-    _dc_estimate,
-    _Layout,
-    _layout,
-    _not_detected,
-    _phasor,
-    _windows,
-    _without_dc,
-)
+from phy.receiver import FrameResult
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
@@ -257,3 +249,184 @@ def _track_delay(
     var_slope = float(np.sum(wgt * resid**2)) / sw / sxx / (nb - 2)
     # a drift that the blocks cannot tell from zero is zero (low SNR: no random walk)
     return slope if slope**2 > estimation.DRIFT_SIGNIFICANCE**2 * var_slope else 0.0
+
+
+def _without_dc(r: np.ndarray) -> np.ndarray:
+    """Remove the capture's mean (an SDR's DC offset would make silence look periodic)."""
+    if not r.size:
+        return r
+    return r - np.complex64(_sum(r) / r.size)
+
+
+def _windows(frame: np.ndarray, starts: np.ndarray, cfo: float, fft_size: int) -> np.ndarray:
+    """FFT of the windows ``frame[start : start + fft_size]`` with a CFO of ``cfo`` carriers
+    removed (:func:`phy.sync.correct_cfo` from the frame's first sample, on these samples
+    only): [num_windows, fft_size] complex64 in natural (FFT) order; the window's early
+    start is a delay the caller's model removes."""
+    w = -2 * np.pi * cfo / fft_size
+    win = np.lib.stride_tricks.sliding_window_view(frame, fft_size)[starts]  # a copy
+    win *= np.exp(1j * w * starts).astype(np.complex64)[:, None]
+    win *= np.exp(1j * w * np.arange(fft_size)).astype(np.complex64)
+    return scipy.fft.fft(win, axis=-1, norm="ortho", overwrite_x=True)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Index arrays of one frame length (cached): rows are the two training symbols, then
+    the data OFDM symbols; ``known`` entries (training carriers, pilots) row-major."""
+
+    rows: int
+    body: np.ndarray  # [rows] body start of each row, samples from the frame start
+    times: np.ndarray  # [rows] centre of each row's body, samples
+    k_row: np.ndarray  # [num_known] row of each known value
+    k_col: np.ndarray  # [num_known] carrier (centred order)
+    k_flat: np.ndarray  # [num_known] row * fft_size + FFT bin (natural order) of each
+    x_known: np.ndarray  # [num_known] complex64 known value (|x| = 1)
+    counts: np.ndarray  # [num_used] observations per used carrier
+    smoothers: tuple  # (P [num_models, num_used, num_used] complex64, mse factors
+    # [num_models, num_used], dofs [num_models]): the candidate channel models, shortest
+    # delay window first, per-carrier LS last
+    smoother_training: np.ndarray  # [num_used, num_used] training sums -> smoothed channel
+    pairs: np.ndarray  # pilot indices j whose pilot j + 1 is one comb step above
+    d_col: np.ndarray  # [num_symbols] carrier of each payload symbol's data element
+    d_row: np.ndarray  # [num_symbols] its row
+    d_bin: np.ndarray  # [num_symbols] its FFT bin (natural order)
+    d_flat: np.ndarray  # [num_symbols] row * fft_size + FFT bin (natural order)
+    used: np.ndarray  # used carriers (centred order)
+    used_nat: np.ndarray  # their FFT bins (natural order)
+    pilots: np.ndarray  # pilot carriers (centred order)
+    pilot_in_used: np.ndarray  # position of each pilot carrier among the used ones
+    num_training_values: int  # known entries of the two training rows (come first)
+    fft_size: int
+
+
+@functools.lru_cache(maxsize=32)
+def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
+    grid = cfg.data_grid(num_symbols)
+    n, cp, s = cfg.fft_size, cfg.cp_length, cfg.symbol_length
+    used, pk = grid.used_subcarriers, grid.pilot_subcarriers
+    rows = 2 + grid.num_ofdm_symbols
+    body = cfg.sync_length + cp + s * np.arange(rows)
+    x = np.zeros((rows, n), np.complex64)  # [rows, fft_size]
+    x[:2, used] = _lts(cfg)[used]
+    x[2:, pk] = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
+    k_row, k_col = np.nonzero(x)
+    data = np.zeros((rows, n), bool)
+    data[2:] = grid.data_mask.numpy()
+    d_row, d_col = np.nonzero(data)  # row-major: resource element j
+    # payload symbol i sits on resource element perm^-1[i]
+    order = np.argsort(interleaver(d_row.size)) if cfg.interleave else np.arange(d_row.size)
+    d_row, d_col = d_row[order[:num_symbols]], d_col[order[:num_symbols]]
+    # candidate channel models: taps from backoff samples before the detected first path,
+    # as many as the comb has pilots per symbol (more are ill-determined between pilots at
+    # low SNR), the whole prefix, and per-carrier LS (no smoothing: high SNR, long channels)
+    counts = np.bincount(k_col, minlength=n)[used].astype(np.float64)
+    smoothers = []
+    for num_taps in sorted({min(cp, pk.size), cp}):
+        basis = estimation.delay_basis(used, n, np.arange(num_taps) - cfg.backoff)
+        p_mat, factor = estimation.channel_smoother(counts, basis)
+        smoothers.append((p_mat.astype(np.complex64), factor, num_taps))
+    smoothers.append((np.diag(1.0 / counts).astype(np.complex64), 1.0 / counts, used.size))
+    short = estimation.delay_basis(used, n, np.arange(min(cp, pk.size)) - cfg.backoff)
+    smoother_training, _ = estimation.channel_smoother(np.full(used.size, 2.0), short)
+    return _Layout(
+        rows=rows,
+        body=body,
+        times=(body + n / 2).astype(np.float64),
+        k_row=k_row,
+        k_col=k_col,
+        k_flat=k_row * n + (k_col + n // 2) % n,
+        x_known=x[k_row, k_col],
+        counts=counts,
+        smoothers=(
+            np.stack([m[0] for m in smoothers]),
+            np.stack([m[1] for m in smoothers]),
+            np.array([m[2] for m in smoothers], np.float64),
+        ),
+        smoother_training=smoother_training.astype(np.complex64),
+        pairs=np.flatnonzero(np.diff(pk) == cfg.pilot_subcarrier_spacing),
+        d_col=d_col,
+        d_row=d_row,
+        d_bin=(d_col + n // 2) % n,
+        d_flat=d_row * n + (d_col + n // 2) % n,
+        used=used,
+        used_nat=(used + n // 2) % n,
+        pilots=pk,
+        pilot_in_used=np.searchsorted(used, pk),
+        num_training_values=2 * used.size,
+        fft_size=n,
+    )
+
+
+def _not_detected(num_symbols: int) -> FrameResult:
+    return FrameResult(
+        symbols=torch.zeros(num_symbols, dtype=torch.complex64),
+        noise_var=torch.full((num_symbols,), float("inf")),
+        start_index=-1,
+        cfo_hz=float("nan"),
+        cfo_subcarriers=float("nan"),
+        sco_ppm=float("nan"),
+        snr_db_estimate=float("nan"),
+        detected=False,
+    )
+
+
+def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
+    """The receiver's DC offset: the mean outside the frame when there are enough such
+    samples (the frame's own mean is not zero once a CFO moves carriers onto DC), else
+    the mean of everything."""
+    outside = r.size - length
+    if outside >= 256:
+        total = _sum(r[:start]) + _sum(r[start + length :])
+        return total / outside
+    return _sum(r) / max(r.size, 1)
+
+
+def _sum(r: np.ndarray) -> complex:
+    """Sum of a complex64 array, accumulated in complex128."""
+    return complex(r.sum(dtype=np.complex128)) if r.size else 0j
+
+
+def _phasor(angle: np.ndarray) -> np.ndarray:
+    """exp(1j * angle) as complex64 from float32 sine and cosine (vectorised, fast)."""
+    a = np.asarray(angle, np.float32)
+    out = np.empty(a.shape, np.complex64)
+    out.real, out.imag = np.cos(a), np.sin(a)
+    return out
+
+
+def _carrier_sums(obs: np.ndarray, lay: _Layout, training_only: bool = False) -> np.ndarray:
+    """[num_used] complex sums per used carrier of observations ``obs`` [num_known] (the
+    training rows' alone when ``training_only``)."""
+    nt = lay.num_training_values
+    sums = obs[:nt].reshape(2, -1).sum(axis=0)  # training rows cover every used carrier
+    if not training_only:
+        sums[lay.pilot_in_used] += obs[nt:].reshape(lay.rows - 2, -1).sum(axis=0)
+    return sums
+
+
+def _best_channel(sums: np.ndarray, lay: _Layout, noise_var: float):
+    """The candidate channel model with the least Mallows' Cp, ``sum_k c_k |o_k - h_k|^2 +
+    2 noise_var dof`` (``o_k`` the mean observation of carrier k, ``c_k`` their count): an
+    unbiased estimate of the count-weighted estimation error, so a short delay window wins
+    at low SNR and longer models win when truncation bias exceeds noise.
+
+    Returns:
+        (h [fft_size] complex64 centred order, mse factor [num_used], dof).
+    """
+    mean = sums / lay.counts
+    p_mats, factors, dofs = lay.smoothers
+    h_used = p_mats @ sums.astype(np.complex64)  # [num_models, num_used]
+    cp = np.sum(lay.counts * np.abs(mean[None, :] - h_used) ** 2, axis=1) + 2 * noise_var * dofs
+    i = int(np.argmin(cp))
+    h = np.zeros(lay.fft_size, np.complex64)
+    h[lay.used] = h_used[i]
+    return h, factors[i], int(dofs[i])
+
+
+def _channel(obs: np.ndarray, lay: _Layout, smoother, training_only: bool = False) -> np.ndarray:
+    """Smoothed channel [fft_size] complex64 (centred order) from observations ``obs`` of
+    ``h`` at the known entries (the training rows' alone when ``training_only``)."""
+    h = np.zeros(lay.fft_size, np.complex64)
+    h[lay.used] = smoother @ _carrier_sums(obs, lay, training_only).astype(np.complex64)
+    return h

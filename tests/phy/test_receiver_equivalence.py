@@ -130,3 +130,25 @@ def test_receiver_with_clock_drift_decodes_the_reference_bits(locked):
     assert new.sco_ppm == pytest.approx(ref.sco_ppm, abs=1e-3)
     assert np.array_equal(_bits(new), _bits(ref))
     np.testing.assert_allclose(new.symbols.numpy(), ref.symbols.numpy(), atol=1e-3)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if len(CASES[c][2]) > 1])
+def test_receive_frames_gives_every_frame_the_reference_gives(case):
+    """One search for a block of frames (the stream's path): the frames, offsets and bits
+    that the reference's receive_frame gives when called again after each frame found."""
+    seed, size, starts, snr_db, cfos, cfg = CASES[case]
+    r = _capture(seed, size, starts, snr_db, cfos, cfg)
+    batch = phy.receive_frames(r, cfg, NUM_SYMBOLS, equalizer="mmse")
+    ref, frm = [], 0
+    while frm < r.size:
+        res = receiver_reference.receive_frame(r, cfg, NUM_SYMBOLS, frm, equalizer="mmse")
+        if not res.detected:
+            break
+        ref.append(res)
+        frm = res.start_index + 1
+    assert [b.start_index for b in batch] == [f.start_index for f in ref]
+    assert all(b.detected for b in batch) and len(batch) >= 1
+    for b, f in zip(batch, ref):
+        assert np.array_equal(_bits(b), _bits(f))
+        np.testing.assert_allclose(b.symbols.numpy(), f.symbols.numpy(), atol=1e-3)
+        assert b.cfo_subcarriers == pytest.approx(f.cfo_subcarriers, abs=1e-4)
