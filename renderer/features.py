@@ -150,8 +150,13 @@ def _distil(
                 batch = config.render_batch
             pool.render_next(batch)
         slots = pool.sample(config.batch_size, generator, config.focus)
-        out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
-        per_view = (out - pool.images_of(slots)).square().mean((1, 2, 3))
+        passes = pool.passes_of(slots)
+        out = rend.decode(passes, intr.height, intr.width)
+        sq = (out - pool.images_of(slots)).square()
+        refined = rend.refine_mask(passes, out.detach())
+        if refined is not None:  # the field renders those pixels: nothing to learn there
+            sq = sq * (~refined)[..., None]
+        per_view = sq.mean((1, 2, 3))
         err = per_view.mean()
         pool.record_errors(slots, per_view)
         opt.zero_grad(set_to_none=False)  # the grid's reads add into its .grad in place
