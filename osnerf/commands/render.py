@@ -165,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
     intr, poses = _camera_path(args, model)
 
-    config = _renderer_config(args, intr.width)
+    config = renderer_config(args, intr.width)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     t0, c0 = time.perf_counter(), time.process_time()
     rend, setup_stats = make_renderer(
@@ -302,7 +302,7 @@ def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, heigh
     return video
 
 
-def _renderer_config(args: argparse.Namespace, width_px: int):
+def renderer_config(args: argparse.Namespace, width_px: int):
     """The learned renderer's settings for views ``width_px`` wide, with --renderer-steps
     and --renderer-cpu-seconds (None for the full renderer)."""
     from renderer import FeatureConfig
