@@ -152,11 +152,7 @@ def _distil(
         slots = pool.sample(config.batch_size, generator, config.focus)
         passes = pool.passes_of(slots)
         out = rend.decode(passes, intr.height, intr.width)
-        sq = (out - pool.images_of(slots)).square()
-        refined = rend.refine_mask(passes, out.detach())
-        if refined is not None:  # the field renders those pixels: nothing to learn there
-            sq = sq * (~refined)[..., None]
-        per_view = sq.mean((1, 2, 3))
+        per_view = distillation_errors(rend, passes, out, pool.images_of(slots))
         err = per_view.mean()
         pool.record_errors(slots, per_view)
         opt.zero_grad(set_to_none=False)  # the grid's reads add into its .grad in place
@@ -167,6 +163,20 @@ def _distil(
             trim_heap()
         _show(bar, pool, frac, loss, steps, cpu0)
     return steps, loss, t0
+
+
+def distillation_errors(
+    rend: FeatureRenderer, passes: list, out: torch.Tensor, teachers: torch.Tensor
+) -> torch.Tensor:
+    """Mean squared error [num_views] of the decoded views ``out`` [num_views, height, width,
+    3] against their ``teachers``, over every pixel but those the renderer renders again
+    with the field (:meth:`FeatureRenderer.refine_mask`, counted as zero): nothing is
+    learnt where the decoder's colour is replaced."""
+    sq = (out - teachers).square()
+    refined = rend.refine_mask(passes, out.detach())
+    if refined is not None:
+        sq = sq * (~refined)[..., None]
+    return sq.mean((1, 2, 3))
 
 
 def _progress(config: FeatureConfig, steps: int, seconds: float, cpu0: float) -> float:

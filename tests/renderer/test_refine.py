@@ -68,3 +68,28 @@ def test_refined_pixels_are_the_full_renders_and_the_others_the_decoders(sphere_
 def test_refine_settings_are_checked(field, value):
     with pytest.raises(ValueError, match=field):
         FeatureConfig(**{field: value})
+
+
+def test_distillation_learns_nothing_where_the_field_renders_again(sphere_model):
+    """The loss ignores the teachers' colours at the pixels rendered again and counts every
+    other pixel; with refinement off it is the plain mean squared error."""
+    from renderer.features import distillation_errors
+
+    model, train_set = sphere_model
+    poses, intr = train_set.poses[:2], train_set.intrinsics
+    teachers = render_views(model, poses, intr)["rgb"]
+    plain = FeatureRenderer(model, FeatureConfig(channels=5, progress=False))
+    rend = FeatureRenderer(model, dataclasses.replace(plain.config, refine_contrast=0.3))
+    passes = rend.low_res_passes(poses, intr)
+    out = rend.decode(passes, intr.height, intr.width)
+    mask = rend.refine_mask(passes, out)
+    assert mask.any() and not mask.all()
+    errors = distillation_errors(rend, passes, out, teachers)
+    moved = teachers.clone()
+    moved[mask] = 1.0 - moved[mask]
+    assert torch.equal(distillation_errors(rend, passes, out, moved), errors)
+    moved = teachers.clone()
+    moved[~mask] = 1.0 - moved[~mask]
+    assert (distillation_errors(rend, passes, out, moved) > errors).all()
+    expected = (out - teachers).square().mean((1, 2, 3))
+    assert torch.equal(distillation_errors(plain, passes, out, teachers), expected)
