@@ -26,6 +26,7 @@ each size's field, CPU clock, default 150 s per 100 px of width), OSNERF_BENCH_M
 field saved by `osnerf train-nerf` on lego at that size: used instead of training one),
 OSNERF_FEATURES_STEPS (the feature renderer's distillation steps, as ``--renderer-steps``;
 default its own budget for the size, ``renderer.FeatureConfig.for_resolution``),
+OSNERF_FEATURES_REFINE (as ``--renderer-refine``: pixels rendered again by the field),
 OSNERF_BENCH_THREADS (threads of the field training, default 2; the renderers are always
 timed on one). Each size's results are also written on their own to ``renderer_<px>.json``
 in the output folder.
@@ -221,12 +222,17 @@ def _field(root: Path, px: int, train_set, clock: str) -> tuple[object, dict]:
 
 def _cli_config(name: str, px: int):
     """The renderer's settings as ``osnerf render --renderer NAME --resolution PX`` picks
-    them (``--renderer-steps`` from OSNERF_FEATURES_STEPS), without the progress bar."""
+    them (``--renderer-steps`` from OSNERF_FEATURES_STEPS, ``--renderer-refine`` from
+    OSNERF_FEATURES_REFINE), without the progress bar."""
     from osnerf.commands.render import renderer_config
 
     steps = os.environ.get("OSNERF_FEATURES_STEPS")
+    refine = os.environ.get("OSNERF_FEATURES_REFINE")
     args = argparse.Namespace(
-        renderer=name, renderer_steps=int(steps) if steps else None, renderer_cpu_seconds=None
+        renderer=name,
+        renderer_steps=int(steps) if steps else None,
+        renderer_cpu_seconds=None,
+        renderer_refine=float(refine) if refine else None,
     )
     config = renderer_config(args, px)
     return None if config is None else dataclasses.replace(config, progress=False)
