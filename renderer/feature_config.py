@@ -82,6 +82,14 @@ class FeatureConfig:
     focus: float = 0.0
     """Share of each batch's views drawn in proportion to their teachers' last error
     (the others uniformly), in [0, 1]: distillation spent where the error is."""
+    refine_partial: float = 0.0
+    """Pixels of a low-resolution pixel whose opacity is in (refine_partial, 1 -
+    refine_partial) are rendered again by the field at full resolution after decoding
+    (:mod:`renderer.refine`: silhouettes and thin parts), in [0, 0.5); 0 renders none."""
+    refine_contrast: float = 1.0
+    """Pixels whose decoded 3 x 3 neighbourhood spans more than this in a colour channel are
+    rendered again by the field at full resolution (sharp edges), > 0; 1 or more renders
+    none."""
     render_batch: int = 8
     """Views of a path rendered together (one sampler, density, feature read and decoder
     call), >= 1: the same images, fewer and larger operations."""
@@ -115,6 +123,10 @@ class FeatureConfig:
             raise ValueError(f"step_factor must be >= 1, got {self.step_factor}")
         if not 0 <= self.min_transmittance < 1:
             raise ValueError(f"min_transmittance must be in [0, 1), got {self.min_transmittance}")
+        if not 0 <= self.refine_partial < 0.5:
+            raise ValueError(f"refine_partial must be in [0, 0.5), got {self.refine_partial}")
+        if not self.refine_contrast > 0:
+            raise ValueError(f"refine_contrast must be > 0, got {self.refine_contrast}")
         if not 0 <= self.weight_threshold < 1:
             raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
         for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):

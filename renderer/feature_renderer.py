@@ -34,6 +34,7 @@ from renderer.feature_config import FeatureConfig
 from renderer.fields import GridField, read_rows, sh_basis, trilinear_corners
 from renderer.march import march_until_opaque
 from renderer.model import RadianceField
+from renderer.refine import edge_mask, field_colours, masked_rays
 from renderer.sampler import sample_along_rays
 from renderer.volume import packed_sum, packed_weights
 
@@ -307,18 +308,40 @@ class FeatureRenderer:
         return self.decoder(x)[:, :, :height, :width].permute(0, 2, 3, 1)
 
     @torch.no_grad()
+    def refine_mask(self, passes: list[LowResPass], rgb: Tensor) -> Tensor | None:
+        """The pixels [num_views, height, width] of ``rgb`` (decoded from ``passes``) that
+        :meth:`refine` renders again, or None when refinement is off."""
+        cfg = self.config
+        if not cfg.refine_partial > 0 and not cfg.refine_contrast < 1:
+            return None
+        opacity = torch.stack([p.opacity.reshape(p.size) for p in passes])
+        return edge_mask(opacity, rgb, cfg.downsample, cfg.refine_partial, cfg.refine_contrast)
+
+    @torch.no_grad()
+    def refine(
+        self, passes: list[LowResPass], poses: Tensor, intrinsics: Intrinsics, rgb: Tensor
+    ) -> Tensor:
+        """``rgb`` [num_views, height, width, 3] decoded from ``passes`` with the pixels of
+        :func:`~renderer.refine.edge_mask` (``config.refine_partial``,
+        ``config.refine_contrast``) rendered again by the field itself at full resolution
+        (:func:`~renderer.refine.field_colours`); unchanged when both are off."""
+        mask = self.refine_mask(passes, rgb)
+        if mask is None:
+            return rgb
+        out = rgb.clone()
+        out[mask] = field_colours(self.model, *masked_rays(poses, intrinsics, mask))
+        return out
+
+    @torch.no_grad()
     def render_path(self, poses: Tensor, intrinsics: Intrinsics) -> dict:
         """{"rgb": [num_views, height, width, 3] float32, "seconds_per_view": float}."""
         t0 = time.perf_counter()
         b = self.config.render_batch
-        out = [
-            self.decode(
-                self.low_res_passes(poses[i : i + b], intrinsics),
-                intrinsics.height,
-                intrinsics.width,
-            )
-            for i in range(0, poses.shape[0], b)
-        ]
+        out = []
+        for i in range(0, poses.shape[0], b):
+            passes = self.low_res_passes(poses[i : i + b], intrinsics)
+            rgb = self.decode(passes, intrinsics.height, intrinsics.width)
+            out.append(self.refine(passes, poses[i : i + b], intrinsics, rgb))
         seconds = (time.perf_counter() - t0) / max(poses.shape[0], 1)
         rgb = torch.cat(out) if out else torch.zeros(0, intrinsics.height, intrinsics.width, 3)
         return {"rgb": rgb.clamp(0, 1), "seconds_per_view": seconds}

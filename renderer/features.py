@@ -150,8 +150,9 @@ def _distil(
                 batch = config.render_batch
             pool.render_next(batch)
         slots = pool.sample(config.batch_size, generator, config.focus)
-        out = rend.decode(pool.passes_of(slots), intr.height, intr.width)
-        per_view = (out - pool.images_of(slots)).square().mean((1, 2, 3))
+        passes = pool.passes_of(slots)
+        out = rend.decode(passes, intr.height, intr.width)
+        per_view = distillation_errors(rend, passes, out, pool.images_of(slots))
         err = per_view.mean()
         pool.record_errors(slots, per_view)
         opt.zero_grad(set_to_none=False)  # the grid's reads add into its .grad in place
@@ -162,6 +163,20 @@ def _distil(
             trim_heap()
         _show(bar, pool, frac, loss, steps, cpu0)
     return steps, loss, t0
+
+
+def distillation_errors(
+    rend: FeatureRenderer, passes: list, out: torch.Tensor, teachers: torch.Tensor
+) -> torch.Tensor:
+    """Mean squared error [num_views] of the decoded views ``out`` [num_views, height, width,
+    3] against their ``teachers``, over every pixel but those the renderer renders again
+    with the field (:meth:`FeatureRenderer.refine_mask`, counted as zero): nothing is
+    learnt where the decoder's colour is replaced."""
+    sq = (out - teachers).square()
+    refined = rend.refine_mask(passes, out.detach())
+    if refined is not None:
+        sq = sq * (~refined)[..., None]
+    return sq.mean((1, 2, 3))
 
 
 def _progress(config: FeatureConfig, steps: int, seconds: float, cpu0: float) -> float:

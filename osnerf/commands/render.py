@@ -91,6 +91,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "default: the rendered size's, renderer.FeatureConfig.for_resolution)",
     )
     p.add_argument(
+        "--renderer-refine",
+        type=checks.number(0.0, 1.0, low_open=True),
+        default=None,
+        help="features renderer: render again with the field, at full resolution, the pixels "
+        "whose decoded 3 x 3 neighbourhood spans more than this in a colour channel, (0, 1] "
+        "(renderer.refine: slower, closer to the full render; default: the rendered size's, "
+        "off; 1 renders none again)",
+    )
+    p.add_argument(
         "--seed",
         type=checks.seed,
         default=0,
@@ -145,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
     if args.video not in VIDEOS:
         raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
-    for flag in ("renderer_steps", "renderer_cpu_seconds"):
+    for flag in ("renderer_steps", "renderer_cpu_seconds", "renderer_refine"):
         if not _learned(args.renderer) and getattr(args, flag) is not None:
             raise UsageError(
                 f"--{flag.replace('_', '-')} applies only to a learned renderer (features): "
@@ -165,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
     intr, poses = _camera_path(args, model)
 
-    config = _renderer_config(args, intr.width)
+    config = renderer_config(args, intr.width)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     t0, c0 = time.perf_counter(), time.process_time()
     rend, setup_stats = make_renderer(
@@ -302,9 +311,9 @@ def _write_video(frames, out_dir: Path, kind: str, fps: float, width: int, heigh
     return video
 
 
-def _renderer_config(args: argparse.Namespace, width_px: int):
-    """The learned renderer's settings for views ``width_px`` wide, with --renderer-steps
-    and --renderer-cpu-seconds (None for the full renderer)."""
+def renderer_config(args: argparse.Namespace, width_px: int):
+    """The learned renderer's settings for views ``width_px`` wide, with --renderer-steps,
+    --renderer-cpu-seconds and --renderer-refine (None for the full renderer)."""
     from renderer import FeatureConfig
 
     if not _learned(args.renderer):
@@ -319,6 +328,8 @@ def _renderer_config(args: argparse.Namespace, width_px: int):
     if args.renderer_cpu_seconds is not None:  # a CPU budget (steps, when given, cap it)
         budget["setup_cpu_seconds"] = args.renderer_cpu_seconds
         budget.setdefault("train_steps", None)
+    if getattr(args, "renderer_refine", None) is not None:
+        budget["refine_contrast"] = args.renderer_refine
     return FeatureConfig.for_resolution(width_px, width_px=width_px, progress=True, **budget)
 
 

@@ -220,8 +220,10 @@ def test_train_nerf_checks_its_output_folder_before_training(
 
 def test_render_with_the_feature_renderer(run_dir, tmp_path):
     out = tmp_path / "feat"
-    assert _render(run_dir, out, "--renderer", "features", "--renderer-steps", "4") == 0
+    argv = ["--renderer", "features", "--renderer-steps", "4", "--renderer-refine", "0.3"]
+    assert _render(run_dir, out, *argv) == 0
     r = json.loads((out / "render.json").read_text())
+    assert r["renderer"]["refine_contrast"] == 0.3  # the rendered size's row leaves it off
     assert len(sorted((out / "frames").glob("*.png"))) == 2 == r["num_views"]
     assert r["renderer"]["renderer"] == "features" and r["renderer"]["train_steps"] == 4
     assert r["setup_stats"]["steps"] == 4 and r["setup_cpu_seconds"] > 0
@@ -264,6 +266,9 @@ def test_render_bad_input_is_one_line_and_writes_nothing(run_dir, tmp_path, caps
     fails(["--renderer", "features", "--renderer-steps", "0"], "--renderer-steps")
     fails(["--renderer", "features", "--renderer-cpu-seconds", "0"], "--renderer-cpu-seconds")
     fails(["--renderer-cpu-seconds", "5"], "--renderer-cpu-seconds")
+    fails(["--renderer-refine", "0.45"], "--renderer-refine")
+    fails(["--renderer", "features", "--renderer-refine", "0"], "--renderer-refine")
+    fails(["--renderer", "features", "--renderer-refine", "1.5"], "--renderer-refine")
     no_frames = tmp_path / "no_frames.json"
     no_frames.write_text(json.dumps({"camera_angle_x": 0.7}))
     fails(["--path", str(no_frames)], "frames")
