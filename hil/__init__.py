@@ -8,6 +8,7 @@ May import ``phy`` only. Public names::
     Pluto, find_plutos            the Pluto front end (Pluto.open(uri=None)) on pyadi-iio
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
+    EmulatorProcess               the same boards served from a process of their own
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     open_loopback, loopback_pair  the same driver without USB
     Radio                         what the over-the-air path uses of a front end (a Protocol)
@@ -32,6 +33,7 @@ from hil.air import (
 from hil.devices import DEVICES, DeviceKind, device_kind
 from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
 from hil.emulator import Emulator, EmulatorBackend, default_serial
+from hil.emulator_process import EmulatorProcess
 from hil.errors import (
     DeviceNotFoundError,
     DisconnectedError,
@@ -115,6 +117,7 @@ __all__ = [
     "EmulatedHackRF",
     "Emulator",
     "EmulatorBackend",
+    "EmulatorProcess",
     "Faults",
     "HackRF",
     "HilError",

@@ -20,6 +20,7 @@ written, unless ``--max-overruns`` allows as many overruns.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from dataclasses import replace
@@ -40,6 +41,7 @@ STREAM_FLAGS = Registry[tuple[str, object]](
         "views": ("--views", None),  # None: one view per image
         "view_interval_s": ("--view-interval-s", 0.1),
         "ring_s": ("--ring-s", 1.0),
+        "emulator_cpus": ("--emulator-cpus", None),  # None: the CPUs of this process
     },
 )
 
@@ -71,6 +73,31 @@ def add_stream_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="--stream: the receiver's ring buffer, seconds of samples, 0.01..60 (default 1)",
     )
+    p.add_argument(
+        "--emulator-cpus",
+        type=cpu_list,
+        default=None,
+        help="--stream with --tx/--rx emulated: CPUs the emulated boards' own process runs on, "
+        "e.g. 0 (default: those of this process)",
+    )
+
+
+def cpu_list(text: str) -> tuple[int, ...]:
+    """argparse type of ``--emulator-cpus``: CPU numbers ``0,1`` or a range ``0-1``, each one
+    this process may run on."""
+    allowed = sorted(os.sched_getaffinity(0))
+    try:
+        cpus = set()
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            cpus.update(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        cpus = set()
+    if not cpus or not cpus <= set(allowed):
+        raise argparse.ArgumentTypeError(
+            f"must be CPU numbers such as 0 or 0,1 or 0-1, each one of {allowed}, got {text!r}"
+        )
+    return tuple(sorted(cpus))
 
 
 def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
@@ -91,15 +118,19 @@ def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
         )
     if getattr(args, "fault", None):
         raise usage_error("--fault rehearses a burst's faults: leave it out with --stream")
+    if args.emulator_cpus is not None and kind != "emulated":
+        raise usage_error("--emulator-cpus places emulated boards: it needs --tx/--rx emulated")
     for dest, (_, default) in STREAM_FLAGS.items():
         if getattr(args, dest) is None:
             setattr(args, dest, default)
 
 
 def _open_radios(args, cfg):
-    """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, or
-    the --tx/--rx boards (an emulated Pluto's air set from the air flags, as for a burst)."""
-    from hil import Emulator, HackRF
+    """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, in a
+    process of their own (``hil.EmulatorProcess``: rendering the air does not compete with
+    the decoder for the interpreter), or the --tx/--rx boards (an emulated Pluto's air set
+    from the air flags, as for a burst)."""
+    from hil import EmulatorProcess, HackRF
     from osnerf.commands.ota import device_kinds, open_pair
     from osnerf.commands.ota_args import parse_multipath, parse_ppm
     from osnerf.ota_link import air_channel
@@ -110,12 +141,18 @@ def _open_radios(args, cfg):
     channel = air_channel(
         "emulated", args.snr_db, cfg, args.delay_us * 1e-6, parse_multipath(args.multipath)
     )
-    emu = Emulator(channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True)
-    tx = HackRF.open(emu.serials[0], backend=emu.backend)
+    emu = EmulatorProcess(
+        channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True, cpus=args.emulator_cpus
+    )
     try:
-        return tx, HackRF.open(emu.serials[1], backend=emu.backend), emu
+        tx = HackRF.open(emu.serials[0], backend=emu.backend)
+        try:
+            return tx, HackRF.open(emu.serials[1], backend=emu.backend), emu
+        except BaseException:
+            tx.close()
+            raise
     except BaseException:
-        tx.close()
+        emu.close()
         raise
 
 
@@ -180,6 +217,8 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     finally:
         tx.close()
         rx.close()
+        if hasattr(emu, "close"):  # the emulated boards' process
+            emu.close()
     record = _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0)
     record["sigmf"][:0] = [str(p) for p in probe]
     write_json_atomic(out, record)
