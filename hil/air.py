@@ -187,6 +187,12 @@ def _resample_kernel(x, positions, table, phases, out):  # pragma: no cover - co
         out[k] = complex(acc_re, acc_im)
 
 
+def prepare_resampler() -> None:
+    """Compile the resampler now (numba's import and its on-disk cache take a while the
+    first time): a paced board's first receive is then as quick as the rest."""
+    fractional_resample(np.zeros(64, np.complex64), np.arange(8) + 0.5)
+
+
 def fractional_resample(x: np.ndarray, positions: np.ndarray) -> np.ndarray:
     """Band-limited interpolation of ``x`` at fractional indices (polyphase Kaiser-windowed sinc).
 

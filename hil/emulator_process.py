@@ -25,10 +25,9 @@ import threading
 from multiprocessing.connection import Client, Connection, Listener
 from pathlib import Path
 
-import numpy as np
 import usb.core
 
-from hil.air import AirChannel, fractional_resample
+from hil.air import AirChannel
 from hil.emulated_hackrf import RadioSpec
 from hil.emulator import Emulator, EmulatorBackend
 
@@ -45,6 +44,7 @@ def _serve_connection(conn: Connection, emu: Emulator) -> None:
             except (EOFError, OSError):
                 return
             radio = emu.radios[index]
+            reply: tuple
             try:
                 if method == "get":
                     reply = ("ok", getattr(radio, args[0]))
@@ -61,7 +61,6 @@ def _serve(options: dict) -> None:
     """The child: make the boards, answer connections until the parent closes stdin."""
     if options["cpus"]:
         os.sched_setaffinity(0, options["cpus"])
-    fractional_resample(np.zeros(64, np.complex64), np.arange(8) + 0.5)  # compiled once, now
     channel = AirChannel.from_json(options["channel"])
     emu = Emulator(channel, ppm=options["ppm"], seed=options["seed"], paced=options["paced"])
     with Listener(family="AF_UNIX", authkey=bytes.fromhex(options["key"])) as listener:
@@ -144,7 +143,7 @@ class EmulatorProcess:
         root = str(Path(__file__).resolve().parent.parent)  # this hil, whatever the cwd
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}  # fmt: skip
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "hil.emulator_process"],
+            [sys.executable, "-c", "from hil.emulator_process import main; main()"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             env=env,
@@ -167,7 +166,7 @@ class EmulatorProcess:
             _RemoteRadio(self, RadioSpec(s, ppm=float(x)), i)
             for i, (s, x) in enumerate(zip(serials, ppm))
         ]
-        self.backend = EmulatorBackend(self.radios)
+        self.backend = EmulatorBackend(self.radios)  # type: ignore[arg-type]  # the same face
 
     @property
     def serials(self) -> list[str]:
@@ -216,5 +215,6 @@ class EmulatorProcess:
         self.close()
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """The child's entry point: its options as one line of JSON on stdin."""
     _serve(json.loads(sys.stdin.readline()))

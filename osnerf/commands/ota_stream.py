@@ -237,12 +237,22 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
         print(
             f"ota: the stream lost {run.dropped_samples} samples in {run.overruns} overrun(s) "
             f"(ring {run.ring_dropped_samples}, driver {run.driver_dropped_samples}, board "
-            f"{run.device_overruns} overrun(s)), allowed {allowed}: see "
-            f"'stream' in {out}",
+            f"{_board_overruns(run)}), allowed {allowed}: see 'stream' in {out}",
             file=sys.stderr,
         )
         return 1
     return 0
+
+
+def _board_overruns(run) -> str:
+    """What the board lost, as the run counted it: its overruns, and an emulated Pluto's
+    lost buffers (libiio 0.x reports none of a real one)."""
+    if run.emulator_lost_buffers is not None:
+        return (
+            f"{run.emulator_overruns} overrun(s), {run.emulator_lost_buffers} buffer(s) of "
+            f"{run.emulator_overrun_samples} samples lost"
+        )
+    return f"{run.device_overruns} overrun(s)"
 
 
 def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0) -> dict:
