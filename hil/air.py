@@ -151,8 +151,8 @@ _TABLE = _window_table()
 
 
 def _compiled(python_function):
-    """``python_function`` compiled by numba (cached on disk) on its first call, so importing
-    ``hil`` loads no numba."""
+    """``python_function`` compiled by numba (float32 sums in any order, cached on disk) on
+    its first call, so importing ``hil`` loads no numba."""
     compiled = None
 
     def kernel(*args):
@@ -160,7 +160,8 @@ def _compiled(python_function):
         if compiled is None:
             import numba
 
-            compiled = numba.njit(cache=True, nogil=True)(python_function)
+            fast = {"reassoc", "contract", "nsz"}  # sums in SIMD lanes
+            compiled = numba.njit(cache=True, nogil=True, fastmath=fast)(python_function)
         return compiled(*args)
 
     return kernel
@@ -169,21 +170,25 @@ def _compiled(python_function):
 @_compiled
 def _resample_kernel(x, positions, table, phases, out):  # pragma: no cover - compiled
     """``out[k]``: the ``table`` row of ``positions[k]``'s fractional part (rounded to
-    ``1 / phases``) over ``x`` around its integer part, zeros outside ``x``; the taps are
-    summed in order, as ``numpy.einsum`` sums them."""
+    ``1 / phases``) over ``x`` around its integer part, zeros outside ``x``."""
     num_taps = table.shape[1]
     first = 1 - num_taps // 2
+    n = x.size
     for k in range(positions.size):
         base = np.floor(positions[k])
         w = table[int(np.rint((positions[k] - base) * phases))]
         lo = int(base) + first
         acc_re = np.float32(0.0)
         acc_im = np.float32(0.0)
-        for j in range(num_taps):
-            i = lo + j
-            if 0 <= i < x.size:
-                acc_re += x[i].real * w[j]
-                acc_im += x[i].imag * w[j]
+        if 0 <= lo and lo + num_taps <= n:
+            for j in range(num_taps):
+                acc_re += x[lo + j].real * w[j]
+                acc_im += x[lo + j].imag * w[j]
+        else:
+            for j in range(num_taps):
+                if 0 <= lo + j < n:
+                    acc_re += x[lo + j].real * w[j]
+                    acc_im += x[lo + j].imag * w[j]
         out[k] = complex(acc_re, acc_im)
 
 
@@ -212,6 +217,18 @@ def fractional_resample(x: np.ndarray, positions: np.ndarray) -> np.ndarray:
         return out
     _resample_kernel(np.ascontiguousarray(x, np.complex64), positions, _TABLE, _PHASES, out)
     return out
+
+
+def multipath(x: np.ndarray, taps: np.ndarray) -> np.ndarray:
+    """``x`` [num_samples] complex64 through the FIR ``taps`` (tap l delays l samples), the
+    first ``num_samples`` outputs: complex64. A few echoes are summed as shifted copies."""
+    if np.count_nonzero(taps) > 8:
+        return np.convolve(x, taps.astype(np.complex64))[: len(x)]
+    y = x * np.complex64(taps[0])
+    for d in np.flatnonzero(taps[1:]) + 1:
+        if d < len(x):
+            y[d:] += x[: len(x) - d] * np.complex64(taps[d])
+    return y
 
 
 def iq_imbalance(y: np.ndarray, gain_db: float, phase_deg: float) -> np.ndarray:

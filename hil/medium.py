@@ -21,7 +21,14 @@ import time
 
 import numpy as np
 
-from hil.air import RESAMPLER_TAPS, AirChannel, fractional_resample, iq_imbalance, quantize_ci8
+from hil.air import (
+    RESAMPLER_TAPS,
+    AirChannel,
+    fractional_resample,
+    iq_imbalance,
+    multipath,
+    quantize_ci8,
+)
 
 AMP_GAIN_DB = 14.0
 
@@ -203,7 +210,7 @@ class Medium:
         # silence (an idle transmitter) stays silence: nothing to filter or resample
         if tx is not None and len(seg) and abs(df) < 0.5 * fs_rx and seg.any():
             if len(taps) > 1 or taps[0] != 1:
-                seg = np.convolve(seg, taps.astype(np.complex64))[: len(seg)]
+                seg = multipath(seg, taps)
             sig = fractional_resample(seg, u - lo)
             if df != 0:
                 sig = sig * carrier(df, k0, n, fs_rx)
