@@ -84,8 +84,8 @@ def add_stream_arguments(p: argparse.ArgumentParser) -> None:
 
 def cpu_list(text: str) -> tuple[int, ...]:
     """argparse type of ``--emulator-cpus``: CPU numbers ``0,1`` or a range ``0-1``, each one
-    this process may run on."""
-    allowed = sorted(os.sched_getaffinity(0))
+    of the machine's (this process may be pinned to others)."""
+    allowed = list(range(os.cpu_count() or 1))
     try:
         cpus = set()
         for part in text.split(","):
