@@ -19,12 +19,24 @@ import numpy as np
 
 from hil import AirChannel, Emulator
 from hil import medium as medium_module
-from hil.air import _PHASES, _TABLE, RESAMPLER_TAPS, prepare_resampler
+from hil.air import RESAMPLER_TAPS, prepare_resampler
 
 SAMPLE_RATE_HZ = 20e6
 TRANSFER = 131072  # samples of one 256 KiB USB transfer
 CPU_SECONDS = 2.0  # per measurement
 ROUNDS = 3  # alternating, the best of each kept
+
+
+def _previous_table(phases: int = 1024, beta: float = 7.0) -> np.ndarray:
+    """The resampler's taps: [phases + 1, RESAMPLER_TAPS] Kaiser-windowed sinc, float32."""
+    half = RESAMPLER_TAPS // 2
+    d = np.arange(-half + 1, half + 1)[None, :] - (np.arange(phases + 1) / phases)[:, None]
+    r = np.clip(d / (half + 1.0), -1, 1)
+    return (np.sinc(d) * np.i0(beta * np.sqrt(1 - r * r)) / np.i0(beta)).astype(np.float32)
+
+
+_PHASES = 1024
+_TABLE = _previous_table(_PHASES)
 
 
 def _previous_resample(x: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -74,8 +74,11 @@ def _ota(work: Path, name: str, rate: float, seconds: float, radio: list[str]) -
 
 
 def _env() -> dict:
+    """This checkout's code, one thread per numeric library (their idle threads spin)."""
     root = str(Path(__file__).resolve().parent.parent)
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}  # fmt: skip
+    path = os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])
+    one = {k: "1" for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    return {**os.environ, **one, "PYTHONPATH": path}
 
 
 def _pluto(work: Path, seconds: float) -> dict:

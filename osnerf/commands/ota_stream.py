@@ -8,8 +8,10 @@ receiver that streams without pause and decodes each frame as it arrives
 ``--views`` views go out (the images in turn), one every ``--view-interval-s`` seconds;
 the receiver's ring buffer holds ``--ring-s`` seconds of samples. HackRFs and a Pluto
 stream (real or emulated). Emulated HackRFs stream
-at the configured rate against the wall clock (``hil.Emulator(paced=True)``), so a
-receiver that falls behind loses samples as a real one would. The result file has the
+at the configured rate against the wall clock (``hil.Emulator(paced=True)``, served from a
+process of their own, ``hil.EmulatorProcess``, on ``--emulator-cpus``), and an emulated
+Pluto's receive buffers are DMA blocks, so a receiver that falls behind loses samples as a
+real one would. The result file has the
 usual per-view rows (PSNR, frames, SNR) and a ``stream`` section: samples received and
 dropped (by the board, the driver, the ring), frames found, decoded and lost, and each
 view's end-to-end latency, from the moment its transmission started to its image out of
