@@ -132,6 +132,9 @@ class EmulatorProcess:
     ):
         ppm = tuple(float(x) for x in ppm)
         self._key = secrets.token_bytes(32)
+        self._local = threading.local()
+        self._conns: list[Connection] = []
+        self._lock = threading.Lock()
         options = {
             "channel": (channel or AirChannel()).to_json(),
             "ppm": ppm,
@@ -159,9 +162,6 @@ class EmulatorProcess:
             raise RuntimeError("the emulator process did not start")
         started = json.loads(line)
         self._address, serials = started["address"], started["serials"]
-        self._local = threading.local()
-        self._conns: list[Connection] = []
-        self._lock = threading.Lock()
         self.radios = [
             _RemoteRadio(self, RadioSpec(s, ppm=float(x)), i)
             for i, (s, x) in enumerate(zip(serials, ppm))
