@@ -152,6 +152,10 @@ class BlockQueue:
         elapsed = (self.clock() - self.started_at) * self.sample_rate_hz
         return int(elapsed / self.block_samples + 1e-9)  # float dust
 
+    def waiting(self) -> int:
+        """Complete blocks the reader has not taken (kept or about to be: it is late)."""
+        return len(self.ready) + max(self.filled() - self.next_slot, 0)
+
     def take(self) -> int:
         """A refill: the reader hands back its block and takes the oldest kept one; returns
         that block's index (blocks since the buffer opened; its samples start at

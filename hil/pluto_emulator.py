@@ -274,8 +274,10 @@ class EmulatedPluto(PlutoAttributes):
         self._extend_cyclic(num_samples)
         if self.tx_starved and self.medium.tx_streaming:  # still dry: silence, no waiting
             self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
+        asked = time.monotonic()
         y = self.medium.render_iq(self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open)
         if y is None and self.rx_open and self.medium.tx_streaming:
+            self._pause_clock(time.monotonic() - asked)  # the board's wait, not the host's
             self.tx_starved = True
             # the host did not feed the open TX buffer in time: the DAC underruns (sends
             # silence) and what it writes later goes out later, as on a board
@@ -292,16 +294,23 @@ class EmulatedPluto(PlutoAttributes):
         inter = y.view(np.float32) * np.float32(RX_FULL_SCALE)
         return np.clip(np.rint(inter), -RX_FULL_SCALE, RX_FULL_SCALE - 1).astype(np.int16)
 
+    def _pause_clock(self, seconds: float) -> None:
+        """The receive clock stands still for ``seconds``: the emulation waited for the
+        virtual transmitter, which a board's ADC never does, so the reader is no later."""
+        t0, k0 = self.rx_opened_at
+        self.rx_opened_at = (t0 + seconds, k0)
+        if self.rx_blocks is not None:
+            self.rx_blocks.started_at += seconds
+
     def _adc_present(self) -> int:
         """Where a transmission starting now starts on the receive clock: the reader's
-        position while it keeps up (within a block of the ADC), else what the ADC of a
-        sized buffer has taken by now (the blocks queued for a late reader are older)."""
+        position while it keeps up, else (a whole block of a sized buffer waits for the
+        reader) what the ADC has taken by now, after the blocks queued for it."""
         q = self.rx_blocks
-        if q is None or not self.rx_open:
+        if q is None or not self.rx_open or not q.waiting():
             return self.rx_frontier
         t0, k0 = self.rx_opened_at
-        present = k0 + int((time.monotonic() - t0) * self.sample_rate_hz)
-        return present if present - self.rx_frontier > q.block_samples else self.rx_frontier
+        return max(self.rx_frontier, k0 + int((time.monotonic() - t0) * self.sample_rate_hz))
 
     def _next_block(self, num_samples: int, k0: int) -> int:
         """At a block boundary, the reader's next block (skipping, and counting, the samples
