@@ -330,7 +330,10 @@ def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
         (["--stream", "--schemes", "digital,jscc"], "--stream sends one scheme"),
         (["--stream", "--ring-s", "0"], "--ring-s: must be a number in [0.01, 60] s"),
         (["--stream", "--emulator-cpus", "4096"], "--emulator-cpus: must be CPU numbers"),
-        (["--stream", "--emulator-cpus", "0", "--tx", "pluto", "--rx", "pluto"], "needs --tx/--rx emulated"),  # fmt: skip
+        (
+            ["--stream", "--emulator-cpus", "0", "--tx", "pluto", "--rx", "pluto"],
+            "needs --tx/--rx emulated",
+        ),
     ],
 )
 def test_bad_stream_flags_exit_2_and_create_nothing(tmp_path, images, capsys, extra, message):
