@@ -8,6 +8,7 @@ May import ``phy`` only. Public names::
     Pluto, find_plutos            the Pluto front end (Pluto.open(uri=None)) on pyadi-iio
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
+    EmulatorProcess               the same boards served from a process of their own
     EmulatedHackRF, RadioSpec, Faults, Medium, AirChannel
     AirPath, PathSegment          the air's time-varying multipath: paths (delay, gain, Doppler)
     segments_from_arrays          such paths from arrays (e.g. phy.raytrace.MovingCIR's)
@@ -42,6 +43,7 @@ from hil.air_paths import (
 from hil.devices import DEVICES, DeviceKind, device_kind
 from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
 from hil.emulator import Emulator, EmulatorBackend, default_serial
+from hil.emulator_process import EmulatorProcess
 from hil.errors import (
     DeviceNotFoundError,
     DisconnectedError,
@@ -130,6 +132,7 @@ __all__ = [
     "EmulatedHackRF",
     "Emulator",
     "EmulatorBackend",
+    "EmulatorProcess",
     "Faults",
     "HackRF",
     "HilError",

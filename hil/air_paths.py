@@ -276,6 +276,19 @@ def _phasor(f_hz: float, t0_s: float, n: int, fs: float, block: int = 1024) -> n
     return (coarse[:, None] * fine[None, :]).reshape(-1)[:n].astype(np.complex64)
 
 
+def fir_full(x: np.ndarray, taps: np.ndarray) -> np.ndarray:
+    """The full convolution of ``x`` [num_samples] complex64 with the FIR ``taps`` (tap ``l``
+    delays ``l`` samples): [num_samples + num_taps - 1] complex64. A few non-zero taps (fixed
+    echoes) are summed as shifted copies, which is cheaper than ``np.convolve``."""
+    nz = np.flatnonzero(taps)
+    if len(nz) > 8:
+        return np.convolve(x, taps.astype(np.complex64)).astype(np.complex64, copy=False)
+    y = np.zeros(len(x) + len(taps) - 1, np.complex64)
+    for d in nz:
+        y[d : d + len(x)] += x * np.complex64(taps[d])
+    return y
+
+
 def _fir_range(x: np.ndarray, g: np.ndarray, l0: int, m0: int, m1: int) -> np.ndarray:
     """``y[m] = sum_j g[j] x[m - l0 - j]`` for m in [m0, m1), x zero outside its length.
 
@@ -285,7 +298,7 @@ def _fir_range(x: np.ndarray, g: np.ndarray, l0: int, m0: int, m1: int) -> np.nd
     xa, xb = max(0, m0 - l0 - len(g) + 1), min(len(x), m1 - l0)  # the x the outputs read
     if xb <= xa:
         return np.zeros(m1 - m0, np.complex64)
-    full = np.convolve(x[xa:xb], g).astype(np.complex64, copy=False)  # full[i] = y[xa + l0 + i]
+    full = fir_full(x[xa:xb], g)  # full[i] = y[xa + l0 + i]
     lo = xa + l0 - m0  # where full[0] lands in the output
     if lo == 0 and len(full) >= m1 - m0:
         return full[: m1 - m0]

@@ -104,3 +104,75 @@ class StreamPacer:
         if wait > 0:
             time.sleep(wait)
         return max(gap, 0)
+
+
+KERNEL_BUFFERS = 4  # DMA blocks an IIO device keeps by default (libiio 0.x)
+
+
+class BlockQueue:
+    """The DMA blocks of an IIO receive buffer (an emulated Pluto's), and the blocks a late
+    reader loses.
+
+    The ADC takes blocks of ``block_samples`` one after another from the moment the buffer
+    opened; the device has ``num_blocks`` of them. A block it fills waits for the reader;
+    the block the reader took last stays the reader's until it asks for the next one
+    (libiio hands the memory back at the next refill). A block of samples the ADC completes
+    while every block is full or the reader's has nowhere to go: it is lost whole. Each run
+    of lost blocks found at one refill is one overrun; the blocks lost are counted exactly.
+
+    Args:
+        sample_rate_hz: the ADC's rate.
+        block_samples: samples per block (the host's buffer size).
+        num_blocks: blocks of the device (``SET dev BUFFERS_COUNT``).
+        clock: a monotonic clock in seconds (tests pass a fake one).
+    """
+
+    def __init__(
+        self,
+        sample_rate_hz: float,
+        block_samples: int,
+        num_blocks: int = KERNEL_BUFFERS,
+        clock=time.monotonic,
+    ):
+        if block_samples <= 0 or num_blocks <= 0:
+            raise ValueError(f"need block_samples > 0 and num_blocks > 0, got {block_samples}, {num_blocks}")  # fmt: skip
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.block_samples = int(block_samples)
+        self.num_blocks = int(num_blocks)
+        self.clock = clock
+        self.started_at = clock()
+        self.next_slot = 0  # the first block of ADC samples not yet kept or lost
+        self.ready: list[int] = []  # kept blocks the reader has not taken, oldest first
+        self.held = 0  # blocks the reader holds (0 before its first refill)
+        self.lost_blocks = 0
+        self.overruns = 0
+
+    def filled(self) -> int:
+        """Blocks of samples the ADC has taken since the buffer opened."""
+        elapsed = (self.clock() - self.started_at) * self.sample_rate_hz
+        return int(elapsed / self.block_samples + 1e-9)  # float dust
+
+    def waiting(self) -> int:
+        """Complete blocks the reader has not taken (kept or about to be: it is late)."""
+        return len(self.ready) + max(self.filled() - self.next_slot, 0)
+
+    def take(self) -> int:
+        """A refill: the reader hands back its block and takes the oldest kept one; returns
+        that block's index (blocks since the buffer opened; its samples start at
+        ``index * block_samples``). A block still being filled is the reader's next one
+        (it waits for its samples)."""
+        done = self.filled()
+        if done > self.next_slot:  # completed while the reader held its block
+            room = max(self.num_blocks - self.held - len(self.ready), 0)
+            kept = min(room, done - self.next_slot)
+            self.ready.extend(range(self.next_slot, self.next_slot + kept))
+            lost = done - self.next_slot - kept
+            if lost:
+                self.lost_blocks += lost
+                self.overruns += 1
+            self.next_slot = done
+        self.held = 1
+        if self.ready:
+            return self.ready.pop(0)
+        self.next_slot += 1
+        return self.next_slot - 1

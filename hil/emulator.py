@@ -18,7 +18,7 @@ import usb.backend
 import usb.core
 
 from hil import protocol as p
-from hil.air import AirChannel
+from hil.air import AirChannel, prepare_resampler
 from hil.emulated_hackrf import EmulatedHackRF, RadioSpec, gone_error, stall_error
 from hil.medium import Medium
 
@@ -241,6 +241,8 @@ class Emulator:
         ]
         for radio in self.radios:
             radio.paced = bool(paced)
+        if paced:  # no first receive late for the compiler
+            prepare_resampler()
         self.backend = EmulatorBackend(self.radios)
 
     @property

@@ -55,6 +55,22 @@ def air_attribute(sdr):
         return None
 
 
+def rx_overrun_counts(sdr) -> tuple[int, int, int] | None:
+    """``(overruns, lost_blocks, lost_samples)`` of an emulated board's last receive buffer
+    (``hil.pluto_context.OVERRUN_ATTR`` of its ``cf-ad9361-lpc``), or None on a real board
+    (libiio 0.x reports no overruns)."""
+    from hil.pluto_context import DEVICE_NAMES, OVERRUN_ATTR, RX_DEV
+
+    try:
+        attr = sdr.ctx.find_device(DEVICE_NAMES[RX_DEV]).debug_attrs.get(OVERRUN_ATTR)
+        if attr is None:
+            return None
+        overruns, blocks, samples = (int(x) for x in attr.value.split())
+    except Exception:  # noqa: BLE001 - no such device or attribute: not our emulator
+        return None
+    return overruns, blocks, samples
+
+
 def find_plutos() -> list[tuple[str, str]]:
     """``(uri, description)`` of every Pluto libiio finds: its USB (and DNS-SD) scan, and
     ``ip:$IIOD_REMOTE`` when that variable (libiio's default network host) is set.

@@ -28,6 +28,8 @@ import threading
 
 import numpy as np
 
+from hil.air import prepare_resampler
+from hil.emulated_pacing import KERNEL_BUFFERS
 from hil.pluto_context import RX_DEV, TX_DEV
 from hil.pluto_emulator import EmulatedPluto
 
@@ -43,6 +45,7 @@ class _Handler(socketserver.StreamRequestHandler):
         self.request.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # no 40 ms stalls
         super().setup()
         self.opened: dict[str, dict] = {}
+        self.buffers_count: dict[str, int] = {}  # SET dev BUFFERS_COUNT n (libiio's default: 4)
         self.server.track(self.connection, True)
 
     def finish(self):
@@ -116,8 +119,8 @@ class _Handler(socketserver.StreamRequestHandler):
             enabled = int(mask, 16) & 0x3
             if enabled == 0:
                 raise OSError(errno.EINVAL, "no channel enabled")
-            if dev == RX_DEV:
-                board.open_rx()
+            if dev == RX_DEV:  # the DMA blocks of this buffer's size
+                board.open_rx(samples, self.buffers_count.get(dev, KERNEL_BUFFERS))
             else:
                 board.open_tx(cyclic)
             self.opened[dev] = {"mask": mask, "enabled": enabled}
@@ -131,6 +134,12 @@ class _Handler(socketserver.StreamRequestHandler):
             return self._writebuf(args[0], int(args[1]))
         elif cmd == "GETTRIG":
             self._int(-errno.ENOENT)
+        elif cmd == "SET" and len(args) == 3 and args[1].upper() == "BUFFERS_COUNT":
+            count = int(args[2])
+            if count <= 0:
+                raise OSError(errno.EINVAL, "BUFFERS_COUNT must be > 0")
+            self.buffers_count[args[0]] = count
+            self._int(0)
         elif cmd in ("SETTRIG", "SET"):
             self._int(0)
         else:
@@ -223,6 +232,7 @@ class IiodServer(socketserver.ThreadingTCPServer):
             raise ValueError(f"address must be in 127.0.0.0/8 (loopback), got {address!r}")
         if not 0 <= int(port) <= 65535:
             raise ValueError(f"port must be in [0, 65535], got {port!r}")
+        prepare_resampler()  # the board's first receive is as quick as the rest
         self.board = board
         self.xml = board.context_xml().encode()
         self.stopping = threading.Event()

@@ -26,9 +26,27 @@ import time
 
 import numpy as np
 
-from hil.air import RESAMPLER_TAPS, AirChannel, fractional_resample, iq_imbalance, quantize_ci8
+from hil.air import (
+    RESAMPLER_TAPS,
+    AirChannel,
+    fractional_resample,
+    iq_imbalance,
+    quantize_ci8,
+)
 
 AMP_GAIN_DB = 14.0
+
+
+_CARRIER_BLOCK = 1024
+
+
+def carrier(df: float, k0: int, n: int, fs: float) -> np.ndarray:
+    """``exp(2j pi df t)`` at ``t = (k0 + i) / fs``, i < n: [n] complex64, from one block of
+    phasors and one rotation per block (float64 phases: within 1e-7 of the direct formula)."""
+    w = 2 * np.pi * df / fs
+    steps = np.exp(1j * w * np.arange(_CARRIER_BLOCK))
+    starts = np.exp(1j * w * (k0 + np.arange(0, n, _CARRIER_BLOCK, dtype=np.float64)))
+    return (starts[:, None] * steps[None, :]).astype(np.complex64).reshape(-1)[:n]
 
 
 class Medium:
@@ -217,7 +235,7 @@ class Medium:
                 seg = fir.apply(seg, (lo - epoch) / fs_tx)
             sig = fractional_resample(seg, u - lo)
             if df != 0:
-                sig = sig * np.exp(2j * np.pi * df * t).astype(np.complex64)
+                sig = sig * carrier(df, k0, n, fs_rx)
         rng = self._rng(radio)
         noise = rng.standard_normal(2 * n, dtype=np.float32).view(np.complex64) * np.float32(
             math.sqrt(ch.noise_var / 2)

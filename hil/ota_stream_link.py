@@ -22,7 +22,7 @@ from hil.errors import HilError
 from hil.ota import _configure, _default_frames
 from hil.ota_config import OtaConfig
 from hil.ota_stream import RingBuffer, StreamCounts, StreamReceiver, StreamView
-from hil.radio_stream import rx_blocks
+from hil.radio_stream import rx_blocks, transfer_samples
 
 BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
 
@@ -43,6 +43,9 @@ class StreamRun:
             real board, which does not say).
         emulator_underrun_samples: silence an emulated transmitter sent when the host wrote
             late (None: a real board).
+        emulator_overruns, emulator_lost_buffers: an emulated Pluto's overruns and the
+            receive buffers (DMA blocks) it lost to them (None: a real board, or a HackRF,
+            whose overruns are ``device_overruns``).
         counts: frames found, decoded, ... (:class:`hil.ota_stream.StreamCounts`).
         warnings: the driver's warnings, one line each.
     """
@@ -56,6 +59,8 @@ class StreamRun:
     device_longest_overrun_bytes: int = 0
     emulator_overrun_samples: int | None = None
     emulator_underrun_samples: int | None = None
+    emulator_overruns: int | None = None
+    emulator_lost_buffers: int | None = None
     counts: StreamCounts = field(default_factory=StreamCounts)
     warnings: list = field(default_factory=list)
 
@@ -70,10 +75,10 @@ class StreamRun:
 
     @property
     def overruns(self) -> int:
-        """Events in which samples were lost: the ring's drops, the driver's, the board's."""
-        return (
-            self.ring_drop_events + (self.driver_dropped_samples > 0) + max(self.device_overruns, 0)
-        )
+        """Events in which samples were lost: the ring's drops, the driver's, the board's
+        (an emulated Pluto's own count where libiio reports none)."""
+        board = max(self.device_overruns, 0) + (self.emulator_overruns or 0)
+        return self.ring_drop_events + (self.driver_dropped_samples > 0) + board
 
     def as_dict(self) -> dict:
         out = {k: v for k, v in vars(self).items() if k != "counts"}
@@ -171,7 +176,7 @@ def stream_over_the_air(
         sender.join()
         # the last frame, then what the board and the driver still hold, reach the ring
         tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
-        transfer = getattr(rx, "rx_chunk_bytes", 0) // 2
+        transfer = transfer_samples(rx, block)
         deadline = time.monotonic() + (tail + transfer + 4 * block) / fs + 0.05
         while time.monotonic() < deadline and receiver.next_view < len(views):
             time.sleep(0.005)  # ends early once the last view is decoded
@@ -209,4 +214,7 @@ def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: li
     if emulator is not None:
         run.emulator_overrun_samples = int(emulator.radios[1].overrun_samples)
         run.emulator_underrun_samples = int(emulator.radios[0].underrun_samples)
+    loss = getattr(rx, "emulated_rx_loss", None)  # an emulated Pluto's late-reader losses
+    if loss is not None:
+        run.emulator_overruns, run.emulator_lost_buffers, run.emulator_overrun_samples = loss
     return run

@@ -60,6 +60,10 @@ CHANNELS = {
 DEVICE_ATTRS = {PHY: _PHY_DEV, RX_DEV: (), TX_DEV: ()}
 DEBUG_ATTRS = {PHY: ("loopback", "digital_tune"), RX_DEV: ("pseudorandom_err_check",), TX_DEV: ()}
 BUFFER_ATTRS = ("data_available", "length_align_bytes", "watermark")
+OVERRUN_ATTR = "osnerf_rx_overruns"
+"""The emulated board's own debug attribute of ``cf-ad9361-lpc`` (a real Pluto has none, and
+libiio 0.x reports no overruns): what its last receive buffer lost to a late reader
+(``hil.emulated_pacing.BlockQueue``), as ``overruns lost_blocks lost_samples``."""
 AIR_ATTR = "osnerf_air"
 """The emulated board's own debug attribute of ``ad9361-phy`` (a real Pluto has none): its
 air as :func:`air_setting` text, written by the host before a burst (``osnerf ota``)."""

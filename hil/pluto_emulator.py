@@ -10,7 +10,10 @@ LOs come from one crystal, so TX and RX at the same LO have no carrier offset; a
 the RX LO shifts what is received by ``df``.
 
 The receive clock cannot run ahead of the wall clock (samples are delivered at most at the
-sample rate since the buffer was opened); transmit is virtual: the medium places what is
+sample rate since the buffer was opened), and a buffer opened with its size has the DMA
+blocks of an IIO device (:class:`hil.emulated_pacing.BlockQueue`): a reader later than
+they last loses whole blocks, counted in the debug attribute
+``hil.pluto_context.OVERRUN_ATTR``. Transmit is virtual: the medium places what is
 written at the receiver's current position and receivers wait for it while a TX buffer is
 open. :class:`hil.IiodServer` serves a board over iiod's network protocol.
 """
@@ -27,9 +30,18 @@ import numpy as np
 from hil import ad9361
 from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.air import RESAMPLER_TAPS, AirChannel
+from hil.emulated_pacing import KERNEL_BUFFERS, BlockQueue
 from hil.medium import Medium
 from hil.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB, PlutoAttributes, iio_errno
-from hil.pluto_context import AIR_ATTR, PHY, air_setting, context_xml, parse_air_setting
+from hil.pluto_context import (
+    AIR_ATTR,
+    OVERRUN_ATTR,
+    PHY,
+    RX_DEV,
+    air_setting,
+    context_xml,
+    parse_air_setting,
+)
 
 NETWORK_FAULTS = ("drop", "slow")
 """Faults of a served board (``osnerf hil emulate pluto --fault``), both ``after_samples``
@@ -98,6 +110,7 @@ class EmulatedPluto(PlutoAttributes):
         super().__init__()  # the AD9361 settings and the lock
         if air_settable:
             self.debug_attrs[PHY] = (*self.debug_attrs[PHY], AIR_ATTR)
+        self.debug_attrs[RX_DEV] = (*self.debug_attrs[RX_DEV], OVERRUN_ATTR)
         self.medium = Medium(channel, seed=seed, wait_timeout_s=TX_UNDERRUN_S)
         self.ppm = float(ppm)
         self.serial = serial
@@ -115,6 +128,8 @@ class EmulatedPluto(PlutoAttributes):
         self.tx_is_cyclic = False
         self.tx_cyclic: np.ndarray | None = None
         self.samples_received = 0
+        self.rx_blocks: BlockQueue | None = None  # the open buffer's DMA blocks, if sized
+        self.rx_block_left = 0  # samples of the block the reader has not had yet
         self.tx_underruns = 0  # times the open TX buffer ran dry while receiving
         self.tx_starved = False  # the open TX buffer is dry: the DAC sends silence
         self.dropped = threading.Event()  # set when a drop fault closed every connection
@@ -180,6 +195,11 @@ class EmulatedPluto(PlutoAttributes):
     def _read(self, dev, chan_id, output, kind, attr) -> str:
         if (dev, kind, attr) == (PHY, "DEBUG", AIR_ATTR):
             return air_setting(self.medium.channel, self.ppm, self.medium.seed)
+        if (dev, kind, attr) == (RX_DEV, "DEBUG", OVERRUN_ATTR):
+            q = self.rx_blocks
+            if q is None:
+                return "0 0 0"
+            return f"{q.overruns} {q.lost_blocks} {q.lost_blocks * q.block_samples}"
         return super()._read(dev, chan_id, output, kind, attr)
 
     def _write(self, dev, chan_id, output, kind, attr, value) -> None:
@@ -197,8 +217,14 @@ class EmulatedPluto(PlutoAttributes):
         self.ppm = ppm
 
     # ------------------------------------------------------------------ buffers
-    def open_rx(self) -> None:
-        """Start receiving "now": the RX clock jumps to the medium's present."""
+    def open_rx(self, block_samples: int | None = None, num_blocks: int = KERNEL_BUFFERS) -> None:
+        """Start receiving "now": the RX clock jumps to the medium's present.
+
+        Args:
+            block_samples: the host's buffer size: the device keeps ``num_blocks`` DMA
+                blocks of it, and a late reader loses whole blocks (None: no block model;
+                samples wait for the reader however late).
+        """
         with self.lock:
             if self.rx_open:
                 raise iio_errno(errno.EBUSY, "the RX buffer is already open")
@@ -209,6 +235,12 @@ class EmulatedPluto(PlutoAttributes):
             self.rx_frontier = self.rx_cursor
             self.rx_open = True
             self.rx_opened_at = (time.monotonic(), self.rx_cursor)
+            self.rx_block_left = 0
+            self.rx_blocks = None
+            if block_samples is not None:
+                q = BlockQueue(self.sample_rate_hz, block_samples, num_blocks)
+                q.started_at = self.rx_opened_at[0]
+                self.rx_blocks = q
 
     def close_rx(self) -> None:
         with self.lock:
@@ -232,6 +264,7 @@ class EmulatedPluto(PlutoAttributes):
             else:
                 num_samples = min(num_samples, left)
         t0, k0 = self.rx_opened_at
+        num_samples = self._next_block(num_samples, k0)
         due = t0 + (self.rx_cursor + num_samples - k0) / self.sample_rate_hz
         wait = due - time.monotonic()
         if wait > 0:
@@ -241,8 +274,10 @@ class EmulatedPluto(PlutoAttributes):
         self._extend_cyclic(num_samples)
         if self.tx_starved and self.medium.tx_streaming:  # still dry: silence, no waiting
             self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
+        asked = time.monotonic()
         y = self.medium.render_iq(self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open)
         if y is None and self.rx_open and self.medium.tx_streaming:
+            self._pause_clock(time.monotonic() - asked)  # the board's wait, not the host's
             self.tx_starved = True
             # the host did not feed the open TX buffer in time: the DAC underruns (sends
             # silence) and what it writes later goes out later, as on a board
@@ -252,11 +287,42 @@ class EmulatedPluto(PlutoAttributes):
         if y is None:
             raise iio_errno(errno.ETIMEDOUT, "no samples: the receive wait timed out")
         self.rx_cursor += num_samples
+        self.rx_block_left -= num_samples
         self.samples_received += num_samples
         keep = int(self.medium.channel.delay_s * self.sample_rate_hz) + 8192  # delay + filters
         self.medium.forget_before(self.rx_cursor - keep)
         inter = y.view(np.float32) * np.float32(RX_FULL_SCALE)
         return np.clip(np.rint(inter), -RX_FULL_SCALE, RX_FULL_SCALE - 1).astype(np.int16)
+
+    def _pause_clock(self, seconds: float) -> None:
+        """The receive clock stands still for ``seconds``: the emulation waited for the
+        virtual transmitter, which a board's ADC never does, so the reader is no later."""
+        t0, k0 = self.rx_opened_at
+        self.rx_opened_at = (t0 + seconds, k0)
+        if self.rx_blocks is not None:
+            self.rx_blocks.started_at += seconds
+
+    def _adc_present(self) -> int:
+        """Where a transmission starting now starts on the receive clock: the reader's
+        position while it keeps up, else (a whole block of a sized buffer waits for the
+        reader) what the ADC has taken by now, after the blocks queued for it."""
+        q = self.rx_blocks
+        if q is None or not self.rx_open or not q.waiting():
+            return self.rx_frontier
+        t0, k0 = self.rx_opened_at
+        return max(self.rx_frontier, k0 + int((time.monotonic() - t0) * self.sample_rate_hz))
+
+    def _next_block(self, num_samples: int, k0: int) -> int:
+        """At a block boundary, the reader's next block (skipping, and counting, the samples
+        of blocks lost meanwhile); the samples of this read, within its block."""
+        q = self.rx_blocks
+        if q is None:
+            return num_samples
+        if self.rx_block_left <= 0:
+            # past whole blocks lost, the reader's clock jumps
+            self.rx_cursor = max(self.rx_cursor, k0 + q.take() * q.block_samples)
+            self.rx_block_left = q.block_samples
+        return min(num_samples, self.rx_block_left)
 
     def _extend_cyclic(self, num_samples: int) -> None:
         """A cyclic TX buffer repeats: append copies until the receiver's next read is covered."""
@@ -276,12 +342,15 @@ class EmulatedPluto(PlutoAttributes):
             self.tx_open = True
             self.tx_cyclic = None
             self.tx_is_cyclic = bool(cyclic)
-            # what is sent starts at the receiver's now: after the read in flight, if any
-            self.medium.idle_until(self.rx_frontier)
+            # what is sent starts at the receiver's now: after the read in flight, if any,
+            # and after what the ADC has taken and not yet delivered
+            self.medium.idle_until(max(self.rx_frontier, self._adc_present()))
             self.medium.start_tx(self.tx_port)
 
     def write_tx(self, raw: np.ndarray) -> None:
         """[2 * num_samples] int16 I, Q from the host; the DAC keeps the 12 MSBs."""
+        if self.tx_starved:  # the DAC ran dry: what comes now goes out now
+            self.medium.idle_until(self._adc_present(), underrun=True)
         self.tx_starved = False
         x = ((raw.astype(np.int32) >> 4) << 4).astype(np.float32) / np.float32(TX_FULL_SCALE)
         iq = x.view(np.complex64)

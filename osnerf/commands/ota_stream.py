@@ -8,8 +8,10 @@ receiver that streams without pause and decodes each frame as it arrives
 ``--views`` views go out (the images in turn), one every ``--view-interval-s`` seconds;
 the receiver's ring buffer holds ``--ring-s`` seconds of samples. HackRFs and a Pluto
 stream (real or emulated). Emulated HackRFs stream
-at the configured rate against the wall clock (``hil.Emulator(paced=True)``), so a
-receiver that falls behind loses samples as a real one would. The result file has the
+at the configured rate against the wall clock (``hil.Emulator(paced=True)``, served from a
+process of their own, ``hil.EmulatorProcess``, on ``--emulator-cpus``), and an emulated
+Pluto's receive buffers are DMA blocks, so a receiver that falls behind loses samples as a
+real one would. The result file has the
 usual per-view rows (PSNR, frames, SNR) and a ``stream`` section: samples received and
 dropped (by the board, the driver, the ring), frames found, decoded and lost, and each
 view's end-to-end latency, from the moment its transmission started to its image out of
@@ -20,6 +22,7 @@ written, unless ``--max-overruns`` allows as many overruns.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from dataclasses import replace
@@ -40,6 +43,7 @@ STREAM_FLAGS = Registry[tuple[str, object]](
         "views": ("--views", None),  # None: one view per image
         "view_interval_s": ("--view-interval-s", 0.1),
         "ring_s": ("--ring-s", 1.0),
+        "emulator_cpus": ("--emulator-cpus", None),  # None: the CPUs of this process
     },
 )
 
@@ -71,6 +75,31 @@ def add_stream_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="--stream: the receiver's ring buffer, seconds of samples, 0.01..60 (default 1)",
     )
+    p.add_argument(
+        "--emulator-cpus",
+        type=cpu_list,
+        default=None,
+        help="--stream with --tx/--rx emulated: CPUs the emulated boards' own process runs on, "
+        "e.g. 0 (default: those of this process)",
+    )
+
+
+def cpu_list(text: str) -> tuple[int, ...]:
+    """argparse type of ``--emulator-cpus``: CPU numbers ``0,1`` or a range ``0-1``, each one
+    of the machine's (this process may be pinned to others)."""
+    allowed = list(range(os.cpu_count() or 1))
+    try:
+        cpus = set()
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            cpus.update(range(int(lo), int(hi or lo) + 1))
+    except ValueError:
+        cpus = set()
+    if not cpus or not cpus <= set(allowed):
+        raise argparse.ArgumentTypeError(
+            f"must be CPU numbers such as 0 or 0,1 or 0-1, each one of {allowed}, got {text!r}"
+        )
+    return tuple(sorted(cpus))
 
 
 def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
@@ -91,15 +120,19 @@ def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
         )
     if getattr(args, "fault", None):
         raise usage_error("--fault rehearses a burst's faults: leave it out with --stream")
+    if args.emulator_cpus is not None and kind != "emulated":
+        raise usage_error("--emulator-cpus places emulated boards: it needs --tx/--rx emulated")
     for dest, (_, default) in STREAM_FLAGS.items():
         if getattr(args, dest) is None:
             setattr(args, dest, default)
 
 
 def _open_radios(args, cfg):
-    """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, or
-    the --tx/--rx boards (an emulated Pluto's air set from the air flags, as for a burst)."""
-    from hil import Emulator, HackRF
+    """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, in a
+    process of their own (``hil.EmulatorProcess``: rendering the air does not compete with
+    the decoder for the interpreter), or the --tx/--rx boards (an emulated Pluto's air set
+    from the air flags, as for a burst)."""
+    from hil import EmulatorProcess, HackRF
     from osnerf.commands.ota import device_kinds, open_pair
     from osnerf.commands.ota_args import parse_multipath, parse_ppm
     from osnerf.ota_link import air_channel
@@ -110,12 +143,18 @@ def _open_radios(args, cfg):
     channel = air_channel(
         "emulated", args.snr_db, cfg, args.delay_us * 1e-6, parse_multipath(args.multipath)
     )
-    emu = Emulator(channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True)
-    tx = HackRF.open(emu.serials[0], backend=emu.backend)
+    emu = EmulatorProcess(
+        channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True, cpus=args.emulator_cpus
+    )
     try:
-        return tx, HackRF.open(emu.serials[1], backend=emu.backend), emu
+        tx = HackRF.open(emu.serials[0], backend=emu.backend)
+        try:
+            return tx, HackRF.open(emu.serials[1], backend=emu.backend), emu
+        except BaseException:
+            tx.close()
+            raise
     except BaseException:
-        tx.close()
+        emu.close()
         raise
 
 
@@ -180,6 +219,8 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     finally:
         tx.close()
         rx.close()
+        if hasattr(emu, "close"):  # the emulated boards' process
+            emu.close()
     record = _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0)
     record["sigmf"][:0] = [str(p) for p in probe]
     write_json_atomic(out, record)
@@ -198,12 +239,22 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
         print(
             f"ota: the stream lost {run.dropped_samples} samples in {run.overruns} overrun(s) "
             f"(ring {run.ring_dropped_samples}, driver {run.driver_dropped_samples}, board "
-            f"{run.device_overruns} overrun(s)), allowed {allowed}: see "
-            f"'stream' in {out}",
+            f"{_board_overruns(run)}), allowed {allowed}: see 'stream' in {out}",
             file=sys.stderr,
         )
         return 1
     return 0
+
+
+def _board_overruns(run) -> str:
+    """What the board lost, as the run counted it: its overruns, and an emulated Pluto's
+    lost buffers (libiio 0.x reports none of a real one)."""
+    if run.emulator_lost_buffers is not None:
+        return (
+            f"{run.emulator_overruns} overrun(s), {run.emulator_lost_buffers} buffer(s) of "
+            f"{run.emulator_overrun_samples} samples lost"
+        )
+    return f"{run.device_overruns} overrun(s)"
 
 
 def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0) -> dict:

@@ -4,13 +4,18 @@ once, whatever the block boundaries), and `osnerf ota --stream` end to end at 2 
 with a decoder that keeps up and one that does not."""
 
 import json
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import phy
 from hil import (
+    EmulatedPluto,
     Emulator,
     HackRF,
     OtaConfig,
@@ -82,6 +87,70 @@ def test_pacer_counts_an_underrun_when_the_host_writes_too_late(monkeypatch):
     clock.now += 0.01
     assert pacer.before_write(3600, 100, silent=True) == 0  # a late flush is silence anyway
     assert pacer.shortfalls == 1
+
+
+def test_pluto_dma_blocks_lose_whole_blocks_to_a_late_reader_counted_exactly():
+    from hil.emulated_pacing import BlockQueue
+
+    clock = FakeClock()
+    q = BlockQueue(1e6, block_samples=1000, num_blocks=4, clock=clock)
+    assert q.take() == 0  # the first block is still being filled: the reader waits for it
+    clock.now += 0.0025  # blocks 0 and 1 are full: 1 waits for the reader
+    assert q.take() == 1 and (q.lost_blocks, q.overruns) == (0, 0)
+    clock.now = 100.0205  # 20 blocks taken; the reader holds 1, so blocks 2..4 fill the rest
+    assert q.take() == 2
+    assert (q.lost_blocks, q.overruns) == (20 - 5, 1)  # 5..19 had nowhere to go: lost whole
+    assert [q.take(), q.take()] == [3, 4]  # the late reader gets the old ones first
+    assert q.take() == 20 and q.lost_blocks == 15  # then the block being filled now
+
+
+def test_a_late_reader_of_an_emulated_pluto_skips_the_lost_blocks_and_the_board_says_so():
+    from hil.pluto_context import OVERRUN_ATTR, PHY, RX_DEV
+
+    board = EmulatedPluto.for_link(30.0, seed=0)
+    board.write_attr(PHY, "voltage0", False, "", "sampling_frequency", "2500000")
+    board.open_rx(block_samples=2500, num_blocks=4)  # 1 ms blocks, as libiio opens a buffer
+    start = board.rx_cursor
+    assert len(board.read_rx(4000)) == 2 * 2500  # one block per refill, no more
+    time.sleep(0.03)  # the reader is late by about 30 blocks: 4 fit (one of them its own)
+    for _ in range(4):  # the three kept behind the reader's, then one after the lost ones
+        assert len(board.read_rx(2500)) == 2 * 2500
+    q = board.rx_blocks
+    lost = q.lost_blocks * 2500
+    assert q.overruns == 1 and q.lost_blocks >= 20  # whole blocks, at 1 ms each
+    assert board.rx_cursor == start + 5 * 2500 + lost  # the lost blocks were skipped
+    text = board.read_attr(RX_DEV, None, False, "DEBUG", OVERRUN_ATTR)
+    assert text == f"{q.overruns} {q.lost_blocks} {lost}"
+
+
+def test_emulated_hackrfs_in_their_own_process_pace_and_count_a_late_reader(monkeypatch):
+    """The boards' process paces them and counts the samples a stalled host lost, and the
+    host's driver reads the M0's overrun count across the process boundary."""
+    from hil import EmulatorProcess
+    from hil.usb_transport import UsbTransport
+
+    read, calls = UsbTransport.read, []
+
+    def stalling_read(self, num_bytes, timeout_ms):  # the 12th read comes 0.5 s late
+        calls.append(num_bytes)
+        if len(calls) == 12:
+            time.sleep(0.5)  # longer than the board's buffer lasts at 2 MS/s (0.27 s)
+        return read(self, num_bytes, timeout_ms)
+
+    with EmulatorProcess(ppm=(0.0, 0.0), paced=True) as emu:
+        assert emu.process.pid != os.getpid()
+        with HackRF.open(emu.serials[1], backend=emu.backend) as rx:
+            rx.sample_rate_hz = 2e6
+            t = time.monotonic()
+            rx.rx(400_000)  # 0.2 s of air, in 2 transfers and the stale one
+            assert time.monotonic() - t >= 0.2 and emu.radios[1].overrun_samples == 0
+            monkeypatch.setattr(UsbTransport, "read", stalling_read)
+            with pytest.warns(UserWarning, match="receive overruns"):
+                rx.rx(3_000_000)
+            stats = rx.last_stats
+        lost = emu.radios[1].overrun_samples
+    assert stats.device_shortfalls == 1 and 0.2 * 2e6 <= lost <= 0.5 * 2e6
+    assert stats.longest_shortfall_bytes == 2 * lost  # one overrun, counted exactly
 
 
 def test_paced_emulated_hackrf_streams_at_its_rate_and_reports_overruns():
@@ -260,6 +329,11 @@ def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
         (["--stream", "--tx", "loopback", "--rx", "loopback"], "--stream needs radios that stream"),
         (["--stream", "--schemes", "digital,jscc"], "--stream sends one scheme"),
         (["--stream", "--ring-s", "0"], "--ring-s: must be a number in [0.01, 60] s"),
+        (["--stream", "--emulator-cpus", "4096"], "--emulator-cpus: must be CPU numbers"),
+        (
+            ["--stream", "--emulator-cpus", "0", "--tx", "pluto", "--rx", "pluto"],
+            "needs --tx/--rx emulated",
+        ),
     ],
 )
 def test_bad_stream_flags_exit_2_and_create_nothing(tmp_path, images, capsys, extra, message):
@@ -296,26 +370,67 @@ def test_a_stalled_usb_reader_overruns_the_board_and_the_run_says_so(
     assert "receive overruns" in err and "the stream lost" in err
 
 
-@needs_phy
-def test_stream_over_an_emulated_pluto_at_4_msps(tmp_path, images):
+def pluto_process(port: int) -> subprocess.Popen:
+    """``osnerf hil emulate pluto`` in its own process (this checkout's code), as a board
+    is: its rendering does not compete with the decoder."""
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}  # fmt: skip
+    code = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
+    argv = ["hil", "emulate", "pluto", "--address", "127.0.0.9", "--port", str(port)]
+    emu = subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True, env=env)  # fmt: skip
+    assert "osnerf hil emulate: pluto at" in emu.stderr.readline()
+    return emu
+
+
+def pluto_stream(tmp_path, images, *extra):
     pytest.importorskip("adi", reason="pyadi-iio (and libiio0) are not installed")
     import socket
-
-    from hil import EmulatedPluto, IiodServer
 
     with socket.socket() as s:
         s.bind(("127.0.0.9", 0))
         port = s.getsockname()[1]
-    board = EmulatedPluto.for_link(10.0, seed=0)
-    with IiodServer(board, "127.0.0.9", port).serve_in_background() as srv:
+    emu = pluto_process(port)
+    try:
         out = tmp_path / "pluto.json"
-        argv = ["ota", "--stream", "--tx", "pluto", "--rx", "pluto", "--uri", srv.uri]
+        argv = ["ota", "--stream", "--tx", "pluto", "--rx", "pluto", "--uri", f"ip:127.0.0.9:{port}"]  # fmt: skip
         argv += ["--schemes", "jscc", "--snr-db", "10", "--images", str(images), "--out"]
         argv += [str(out), "--size", "48", "--max-images", "1", "--symbols-per-frame", "1024"]
-        argv += ["--sample-rate-hz", "4e6", "--views", "4", "--view-interval-s", "0.2"]
-        assert main(argv) == 0
-    s = json.loads(out.read_text())["stream"]
+        argv += ["--sample-rate-hz", "4e6", *extra]
+        rc = main(argv)
+    finally:
+        emu.terminate()
+        emu.wait(10)
+    return rc, json.loads(out.read_text())["stream"]
+
+
+@needs_phy
+def test_stream_over_an_emulated_pluto_at_4_msps(tmp_path, images):
+    rc, s = pluto_stream(tmp_path, images, "--views", "4", "--view-interval-s", "0.2")
+    assert rc == 0
     assert s["dropped_samples"] == 0 and s["device_overruns"] == -1  # libiio 0.x: unknown
+    assert (s["emulator_overruns"], s["emulator_lost_buffers"]) == (0, 0)  # the board's own
     assert s["frames_found"] == s["frames_decoded"] == s["frames_sent"] == 4
-    assert board.tx_underruns == 0 and s["samples_received"] == s["driver_samples"]
+    assert s["samples_received"] == s["driver_samples"]
     assert all(r["air_s"] < r["latency_s"] < 5.0 for r in s["views"])
+
+
+@needs_phy
+def test_a_late_pluto_reader_loses_whole_buffers_and_the_run_says_so(
+    tmp_path, images, monkeypatch, capsys
+):
+    push, calls = RingBuffer.push, []
+
+    def stalling_push(self, x):  # the host's reader stalls once, longer than 4 buffers last
+        calls.append(len(x))
+        if len(calls) == 3:
+            time.sleep(0.5)
+        return push(self, x)
+
+    monkeypatch.setattr(RingBuffer, "push", stalling_push)
+    rc, s = pluto_stream(tmp_path, images, "--views", "6", "--view-interval-s", "0.2")
+    assert rc == 1 and s["device_overruns"] == -1  # libiio says nothing; the board does
+    assert s["emulator_overruns"] >= 1 and s["emulator_lost_buffers"] >= 1
+    assert s["emulator_overrun_samples"] == s["emulator_lost_buffers"] * calls[0]  # whole
+    assert s["dropped_samples"] == s["emulator_overrun_samples"] and s["overruns"] >= 1
+    err = capsys.readouterr().err
+    assert "the stream lost" in err and f"{s['emulator_lost_buffers']} buffer(s)" in err
