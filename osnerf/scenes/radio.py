@@ -2,9 +2,11 @@
 
 ``write_radio_scene`` turns a :class:`SceneGeometry` into a sionna-rt XML scene whose
 shapes are the very PLY files the optical renders use, so a drone's position fixes both
-its camera view and its channel to the ground station. ``drone_channels`` asks
-``phy.raytrace`` for the channel of every drone position; ``flight_velocities`` gives
-each drone its velocity along its ring, for a channel that changes while it flies.
+its camera view and its channel to the ground station; it adds the terrain around the
+plot, which the cameras do not render, so the radio world's ground reaches past the ground
+station. ``drone_channels`` asks ``phy.raytrace`` for the channel of every drone position;
+``flight_velocities`` gives each drone its velocity along its ring, for a channel that
+changes while it flies.
 """
 
 from __future__ import annotations
@@ -18,29 +20,41 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from common import write_text
-from osnerf.scenes.spec import SceneGeometry
+from osnerf.scenes.geometry import write_ply
+from osnerf.scenes.spec import TERRAIN_MATERIAL, SceneGeometry
+
+_TERRAIN_ID = "radio_terrain"
 
 
 def write_radio_scene(geometry: SceneGeometry, mesh_paths: dict[str, Path], folder: Path) -> Path:
-    """Write ``folder/scene.xml`` (sionna-rt format, ITU radio materials); returns its path."""
+    """Write ``folder/scene.xml`` (sionna-rt format, ITU radio materials); returns its path.
+
+    Its shapes are the parts' PLY files (``mesh_paths``) and, when the geometry has one, the
+    terrain, written as ``folder/terrain.ply`` (:data:`TERRAIN_MATERIAL`).
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    materials = sorted({p.radio_material for p in geometry.parts})
+    shapes = [
+        (p.name, os.path.relpath(mesh_paths[p.name], folder), p.radio_material)
+        for p in geometry.parts
+    ]
+    if geometry.terrain is not None:
+        write_ply(geometry.terrain, folder / "terrain.ply")
+        shapes.append((_TERRAIN_ID, "terrain.ply", TERRAIN_MATERIAL))
     lines = ['<scene version="2.1.0">']
-    for m in materials:
+    for m in sorted({s[2] for s in shapes}):
         lines += [
             f'  <bsdf type="itu-radio-material" id="itu_{m}">',
             f'    <string name="type" value="{m}"/>',
             '    <float name="thickness" value="0.1"/>',
             "  </bsdf>",
         ]
-    for p in geometry.parts:
-        rel = os.path.relpath(mesh_paths[p.name], folder)
+    for name, rel, material in shapes:
         lines += [
-            f'  <shape type="ply" id={quoteattr(p.name)}>',
+            f'  <shape type="ply" id={quoteattr(name)}>',
             f'    <string name="filename" value={quoteattr(rel)}/>',
             '    <boolean name="face_normals" value="true"/>',
-            f'    <ref id="itu_{p.radio_material}" name="bsdf"/>',
+            f'    <ref id="itu_{material}" name="bsdf"/>',
             "  </shape>",
         ]
     lines.append("</scene>")
