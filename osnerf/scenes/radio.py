@@ -24,6 +24,10 @@ from osnerf.scenes.geometry import write_ply
 from osnerf.scenes.spec import TERRAIN_MATERIAL, SceneGeometry
 
 _TERRAIN_ID = "radio_terrain"
+NUM_SUBCARRIERS = 64
+SUBCARRIER_SPACING_HZ = 30e3
+"""The subcarriers :func:`drone_channels` traces by default (those of ``osnerf run``'s
+ray-traced link): a drone's gain is its mean ``|h|^2`` over them."""
 
 
 def write_radio_scene(geometry: SceneGeometry, mesh_paths: dict[str, Path], folder: Path) -> Path:
@@ -87,6 +91,14 @@ class DroneChannels:
     solver: dict = field(default_factory=dict)
 
 
+def band_gain_db(h: np.ndarray) -> np.ndarray:
+    """[num_positions] mean ``|h|^2`` over the subcarriers of [num_positions, num_subcarriers]
+    responses, in dB (``-inf`` where h is 0): the paths add with their phases, so a drone in
+    a fade of its line of sight and ground reflection receives less than their sum of powers."""
+    with np.errstate(divide="ignore"):
+        return 10 * np.log10(np.mean(np.abs(np.asarray(h)) ** 2, axis=1))
+
+
 def radio_scene_path(folder: Path, meta: dict) -> str:
     """The sionna-rt scene of a dataset: a built-in scene name or the folder's XML."""
     rs = meta.get("radio_scene", "radio/scene.xml")
@@ -119,8 +131,8 @@ def drone_channels(
     folder: Path,
     meta: dict,
     positions_m: np.ndarray,
-    num_subcarriers: int = 64,
-    subcarrier_spacing_hz: float = 30e3,
+    num_subcarriers: int = NUM_SUBCARRIERS,
+    subcarrier_spacing_hz: float = SUBCARRIER_SPACING_HZ,
     max_depth: int = 2,
     velocities_m_s: np.ndarray | None = None,
     movers_at_rest: bool = False,
@@ -151,8 +163,7 @@ def drone_channels(
     h, outage = tracer.cfr(pos, freqs)
     h = np.asarray(h.detach().cpu()).astype(np.complex64)
     outage = np.asarray(outage.detach().cpu()).astype(bool)
-    with np.errstate(divide="ignore"):
-        gain_db = 10 * np.log10(np.mean(np.abs(h) ** 2, axis=1))
+    gain_db = band_gain_db(h)
     moving = velocities_m_s is not None and np.any(velocities_m_s)
     vel = np.asarray(velocities_m_s, np.float64) if moving else None
     st = tracer.stats(pos, vel)
