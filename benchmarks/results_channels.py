@@ -155,8 +155,9 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         "Max Doppler is `v f_c / c`"
         + (f" at {carrier / 1e9:g} GHz" if carrier else "")
         + ". The RMS Doppler spread is per view, over its traced paths: a view with one path "
-        "has none (its channel only rotates, and perfect CSI follows the rotation), so the "
-        "median is 0 where most views trace a single path. The measured SNR is the SCU's, "
+        "has none (its channel only rotates, and perfect CSI follows the rotation); a drone's "
+        "line of sight and its ground reflection leave it in nearly the same direction, so "
+        "their spread is small next to the maximum Doppler. The measured SNR is the SCU's, "
         "through each link with its pilots after the receiver's estimation: a noisier "
         "estimate measures lower, and the SCU plans more symbols per view (a higher CBR, "
         "copies), so the symbols differ between receivers; within a row jscc and digital "

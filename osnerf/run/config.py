@@ -23,10 +23,11 @@ DRONE_SPEED_RANGE_M_S = (0.0, 100.0)
 GROUND_STATION_RANGE_M = (-10_000.0, 10_000.0)
 """Each coordinate of ``--ground-station``, metres in the scene's frame."""
 RING_SCALE_RANGE = (1.0, 10.0)
-CACHE_VERSION = 16
+CACHE_VERSION = 17
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
 whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
-with its codec, ``codec_use``), so an older cache is recomputed, never misread."""
+with its codec, ``codec_use``) or what it was computed from (17: the radio scenes' terrain
+and munich's ground station), so an older cache is recomputed, never misread."""
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,8 @@ The optical world takes the Frauenkirche's meshes and every building within
 keeps buildings apart), gives them planar texture coordinates (the meshes have none) and
 brick / facade / metal textures, and stands them on a paved disk. The radio world is the
 full built-in ``munich`` scene itself, so each drone position's channel sees the real city.
+The ground station stands on a mast of :data:`MAST_M` on the roof of the building at its
+place (the roof's height is traced from the scene), in the open air above the city.
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ LANDMARK = "Frauenkirche"
 NEIGHBOUR_RADIUS_M = 90.0
 GROUND_RADIUS_M = 160.0
 TILE_M = 6.0
+GROUND_STATION_OFFSET_M = (140.0, -60.0)
+"""Where the ground station stands, from the Frauenkirche's centre (x, y)."""
+MAST_M = 4.0
 
 
 def _mesh_of(obj) -> Mesh:
@@ -29,6 +34,15 @@ def _mesh_of(obj) -> Mesh:
     v = np.asarray(params["vertex_positions"], np.float32).reshape(-1, 3)
     f = np.asarray(params["faces"], np.int64).reshape(-1, 3).astype(np.int32)
     return Mesh(v, f, planar_uv(v, TILE_M))
+
+
+def _surface_height_m(scene, x: float, y: float) -> float:
+    """Height of the highest surface of a sionna-rt scene at (x, y): a ray cast straight down."""
+    import mitsuba as mi
+
+    top = 1000.0
+    si = scene.mi_scene.ray_intersect(mi.Ray3f(mi.Point3f(x, y, top), mi.Vector3f(0.0, 0.0, -1.0)))
+    return top - float(si.t.numpy()[0]) if bool(si.is_valid().numpy()[0]) else 0.0
 
 
 def build_munich() -> SceneGeometry:
@@ -78,10 +92,11 @@ def build_munich() -> SceneGeometry:
             "concrete",
         )
     )
+    gx, gy = (float(c + o) for c, o in zip(centre[:2], GROUND_STATION_OFFSET_M))
     return SceneGeometry(
         name="munich",
         parts=tuple(parts),
-        ground_station_m=(float(centre[0] + 140.0), float(centre[1] - 60.0), 25.0),
+        ground_station_m=(gx, gy, _surface_height_m(scene, gx, gy) + MAST_M),
         radio_scene="munich",
         scorable_objects=("frauenkirche", "neighbours"),
     )

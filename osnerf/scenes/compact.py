@@ -2,7 +2,9 @@
 
 The paper's firefighter example, built from primitives (boxes, cylinders, cones, a disk)
 so that it renders in tens of milliseconds per view on a CPU. A tree adds clutter. The
-same meshes, with ITU materials, are the radio scene.
+same meshes, with ITU materials, are the radio scene, standing on a flat terrain of
+:data:`TERRAIN_RADIUS_M` that only the radio sees: the ground stations stand outside the
+plot, and a drone's ground reflection toward them lands beyond it.
 """
 
 from __future__ import annotations
@@ -10,10 +12,14 @@ from __future__ import annotations
 import dataclasses
 
 from osnerf.scenes import textures as tx
-from osnerf.scenes.geometry import box, cylinder, disk, merge
+from osnerf.scenes.geometry import annulus, box, cylinder, disk, merge
 from osnerf.scenes.spec import Part, SceneGeometry
 
 HYDRANT_XY_M = (0.8, 0.0)
+PLOT_RADIUS_M = 2.6
+TINY_PLOT_RADIUS_M = 1.6
+TERRAIN_RADIUS_M = 200.0
+"""How far the radio world's ground reaches from the plot's centre."""
 
 
 def build_firefighter() -> SceneGeometry:
@@ -24,6 +30,7 @@ def build_firefighter() -> SceneGeometry:
         ground_station_m=(8.0, -6.0, 1.5),
         sky_radiance=(1.0, 1.0, 1.0),
         scorable_objects=("hydrant", "building", "tree"),
+        terrain=annulus((0.0, 0.0, 0.0), PLOT_RADIUS_M, TERRAIN_RADIUS_M),
     )
 
 
@@ -131,7 +138,7 @@ def _ground() -> list[Part]:
         Part(
             "ground",
             "ground_paving",
-            disk((0.0, 0.0, 0.0), 2.6, tile_m=1.0),
+            disk((0.0, 0.0, 0.0), PLOT_RADIUS_M, tile_m=1.0),
             tx.pavement(),
             "concrete",
         ),
@@ -187,11 +194,12 @@ def build_tiny() -> SceneGeometry:
             Part(
                 "ground",
                 "ground",
-                disk((0.0, 0.0, 0.0), 1.6, tile_m=0.8),
+                disk((0.0, 0.0, 0.0), TINY_PLOT_RADIUS_M, tile_m=0.8),
                 tx.pavement(),
                 "concrete",
             ),
         ),
         ground_station_m=(5.0, 3.0, 1.5),
         scorable_objects=("crate", "post", "cable"),
+        terrain=annulus((0.0, 0.0, 0.0), TINY_PLOT_RADIUS_M, TERRAIN_RADIUS_M),
     )

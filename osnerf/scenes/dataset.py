@@ -9,6 +9,7 @@ Folder layout (``cache_dir/scenes/<scene>-<key>/``)::
     masks/<object>/v_000.png visible object mask (anti-aliased), 8 bit
     meshes/<part>.ply        the geometry both worlds share
     radio/scene.xml          the sionna-rt version of the same meshes (ITU materials)
+    radio/terrain.ply        the ground around the plot that only the radio world has
 
 Besides nerfstudio's fields (``fl_x, fl_y, cx, cy, w, h, camera_angle_x``, frames with
 ``file_path`` and ``transform_matrix``), the file carries ``aabb`` (scene bounds),
@@ -35,7 +36,9 @@ from osnerf.scenes.cameras import Intrinsics, intrinsics_from_fov, look_at, ring
 from osnerf.scenes.registry import get_scene
 from osnerf.scenes.spec import SceneGeometry
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""Part of the cache key: bumped whenever what a folder holds changes (2: the radio scene's
+terrain, and munich's ground station on a rooftop mast), so an older folder is rebuilt."""
 
 
 @dataclass(frozen=True)

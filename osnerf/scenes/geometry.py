@@ -160,6 +160,29 @@ def disk(center_m, radius_m: float, segments: int = 64, tile_m: float = 1.0) -> 
     return Mesh(v.astype(np.float32), f.astype(np.int32), (v[:, :2] / tile_m).astype(np.float32))
 
 
+def annulus(
+    center_m, inner_radius_m: float, outer_radius_m: float, segments: int = 64, tile_m: float = 1.0
+) -> Mesh:
+    """A horizontal ring facing +z around a :func:`disk` of ``inner_radius_m``.
+
+    Its inner edge has the disk's vertices (same ``segments``, same angles), so the two
+    together are one flat surface without gap or overlap.
+    """
+    if not 0 < inner_radius_m < outer_radius_m:
+        raise ValueError(
+            f"annulus radii must satisfy 0 < inner < outer, got {inner_radius_m}, {outer_radius_m}"
+        )
+    n = int(segments)
+    a = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    ring = np.c_[np.cos(a), np.sin(a), np.zeros(n)]
+    v = np.concatenate([ring * inner_radius_m, ring * outer_radius_m])
+    v = v + np.asarray(center_m, np.float64)
+    j = np.arange(n)
+    k = (j + 1) % n
+    f = np.concatenate([np.c_[j, n + j, n + k], np.c_[j, n + k, k]])
+    return Mesh(v.astype(np.float32), f.astype(np.int32), (v[:, :2] / tile_m).astype(np.float32))
+
+
 def planar_uv(vertices_m: np.ndarray, tile_m: float) -> np.ndarray:
     """Planar texture coordinates for meshes without UVs: u along x+y, v along z (walls).
 

@@ -2,9 +2,11 @@
 
 ``write_radio_scene`` turns a :class:`SceneGeometry` into a sionna-rt XML scene whose
 shapes are the very PLY files the optical renders use, so a drone's position fixes both
-its camera view and its channel to the ground station. ``drone_channels`` asks
-``phy.raytrace`` for the channel of every drone position; ``flight_velocities`` gives
-each drone its velocity along its ring, for a channel that changes while it flies.
+its camera view and its channel to the ground station; it adds the terrain around the
+plot, which the cameras do not render, so the radio world's ground reaches past the ground
+station. ``drone_channels`` asks ``phy.raytrace`` for the channel of every drone position;
+``flight_velocities`` gives each drone its velocity along its ring, for a channel that
+changes while it flies.
 """
 
 from __future__ import annotations
@@ -18,29 +20,45 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from common import write_text
-from osnerf.scenes.spec import SceneGeometry
+from osnerf.scenes.geometry import write_ply
+from osnerf.scenes.spec import TERRAIN_MATERIAL, SceneGeometry
+
+_TERRAIN_ID = "radio_terrain"
+NUM_SUBCARRIERS = 64
+SUBCARRIER_SPACING_HZ = 30e3
+"""The subcarriers :func:`drone_channels` traces by default (those of ``osnerf run``'s
+ray-traced link): a drone's gain is its mean ``|h|^2`` over them."""
 
 
 def write_radio_scene(geometry: SceneGeometry, mesh_paths: dict[str, Path], folder: Path) -> Path:
-    """Write ``folder/scene.xml`` (sionna-rt format, ITU radio materials); returns its path."""
+    """Write ``folder/scene.xml`` (sionna-rt format, ITU radio materials); returns its path.
+
+    Its shapes are the parts' PLY files (``mesh_paths``) and, when the geometry has one, the
+    terrain, written as ``folder/terrain.ply`` (:data:`TERRAIN_MATERIAL`).
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    materials = sorted({p.radio_material for p in geometry.parts})
+    shapes = [
+        (p.name, os.path.relpath(mesh_paths[p.name], folder), p.radio_material)
+        for p in geometry.parts
+    ]
+    if geometry.terrain is not None:
+        write_ply(geometry.terrain, folder / "terrain.ply")
+        shapes.append((_TERRAIN_ID, "terrain.ply", TERRAIN_MATERIAL))
     lines = ['<scene version="2.1.0">']
-    for m in materials:
+    for m in sorted({s[2] for s in shapes}):
         lines += [
             f'  <bsdf type="itu-radio-material" id="itu_{m}">',
             f'    <string name="type" value="{m}"/>',
             '    <float name="thickness" value="0.1"/>',
             "  </bsdf>",
         ]
-    for p in geometry.parts:
-        rel = os.path.relpath(mesh_paths[p.name], folder)
+    for name, rel, material in shapes:
         lines += [
-            f'  <shape type="ply" id={quoteattr(p.name)}>',
+            f'  <shape type="ply" id={quoteattr(name)}>',
             f'    <string name="filename" value={quoteattr(rel)}/>',
             '    <boolean name="face_normals" value="true"/>',
-            f'    <ref id="itu_{p.radio_material}" name="bsdf"/>',
+            f'    <ref id="itu_{material}" name="bsdf"/>',
             "  </shape>",
         ]
     lines.append("</scene>")
@@ -71,6 +89,14 @@ class DroneChannels:
     subcarrier_frequencies_hz: np.ndarray
     movers: list | None = None
     solver: dict = field(default_factory=dict)
+
+
+def band_gain_db(h: np.ndarray) -> np.ndarray:
+    """[num_positions] mean ``|h|^2`` over the subcarriers of [num_positions, num_subcarriers]
+    responses, in dB (``-inf`` where h is 0): the paths add with their phases, so a drone in
+    a fade of its line of sight and ground reflection receives less than their sum of powers."""
+    with np.errstate(divide="ignore"):
+        return 10 * np.log10(np.mean(np.abs(np.asarray(h)) ** 2, axis=1))
 
 
 def radio_scene_path(folder: Path, meta: dict) -> str:
@@ -105,8 +131,8 @@ def drone_channels(
     folder: Path,
     meta: dict,
     positions_m: np.ndarray,
-    num_subcarriers: int = 64,
-    subcarrier_spacing_hz: float = 30e3,
+    num_subcarriers: int = NUM_SUBCARRIERS,
+    subcarrier_spacing_hz: float = SUBCARRIER_SPACING_HZ,
     max_depth: int = 2,
     velocities_m_s: np.ndarray | None = None,
     movers_at_rest: bool = False,
@@ -137,8 +163,7 @@ def drone_channels(
     h, outage = tracer.cfr(pos, freqs)
     h = np.asarray(h.detach().cpu()).astype(np.complex64)
     outage = np.asarray(outage.detach().cpu()).astype(bool)
-    with np.errstate(divide="ignore"):
-        gain_db = 10 * np.log10(np.mean(np.abs(h) ** 2, axis=1))
+    gain_db = band_gain_db(h)
     moving = velocities_m_s is not None and np.any(velocities_m_s)
     vel = np.asarray(velocities_m_s, np.float64) if moving else None
     st = tracer.stats(pos, vel)

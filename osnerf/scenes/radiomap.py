@@ -5,7 +5,10 @@ transmitter, so the map puts the *ground station* in that role and measures hori
 planes at the altitudes of the drone rings: by reciprocity (isotropic antennas, one
 polarisation) a cell's path gain is that of a drone transmitting from it to the ground
 station (:func:`phy.raytrace.radio_map`). Beside the map, each candidate position is traced
-with the path solver that ``--channel raytraced`` uses, so the picture shows both.
+with the path solver that ``--channel raytraced`` uses, so the picture shows both. The map's
+cells add their paths' powers (sionna-rt's radio maps); a candidate's traced gain is the
+run's, its paths added with their phases over the run's subcarriers, so it shows the fading
+of, say, a line of sight and its ground reflection that the map averages out.
 """
 
 from __future__ import annotations
@@ -37,8 +40,8 @@ class SceneRadioMap:
         map: :class:`phy.raytrace.RadioMap` (the ground station transmits, by reciprocity).
         candidates_m: [num_views, 3] candidate (train) drone positions.
         map_path_gain_db: [num_views] the map's cell at each candidate.
-        traced_path_gain_db: [num_views] each candidate traced with the path solver
-            (``-inf`` in outage).
+        traced_path_gain_db: [num_views] each candidate traced with the path solver: its
+            mean ``|h|^2`` over the run's subcarriers (``-inf`` in outage).
         los: [num_views] bool, a line-of-sight path exists.
         carrier_frequency_hz: the scene's carrier.
     """
@@ -90,7 +93,13 @@ def scene_radio_map(
             ``osnerf run --ground-station``); None: the scene's.
     """
     import phy.raytrace as prt
-    from osnerf.scenes.radio import write_radio_scene
+    from osnerf.scenes.radio import (
+        NUM_SUBCARRIERS,
+        SUBCARRIER_SPACING_HZ,
+        band_gain_db,
+        subcarrier_frequencies,
+        write_radio_scene,
+    )
     from osnerf.scenes.render import write_meshes
 
     info = get_scene(scene)
@@ -122,7 +131,8 @@ def scene_radio_map(
             config=prt.RayTracingConfig(max_depth=map_config.max_depth, seed=map_config.seed),
         )
         st = tracer.stats(train)
-    traced = np.where(st.outage, -np.inf, st.path_gain_db)
+        h, _ = tracer.cfr(train, subcarrier_frequencies(NUM_SUBCARRIERS, SUBCARRIER_SPACING_HZ))
+    traced = np.where(st.outage, -np.inf, band_gain_db(h.numpy()))
     return SceneRadioMap(
         scene,
         target,

@@ -12,6 +12,9 @@ from osnerf.scenes.geometry import Mesh
 #: ITU radio materials sionna-rt knows (``itu-radio-material`` types) that our parts use.
 RADIO_MATERIALS = ("concrete", "brick", "metal", "wood", "marble", "glass", "medium_dry_ground")
 
+#: ITU material of a scene's terrain (:attr:`SceneGeometry.terrain`).
+TERRAIN_MATERIAL = "medium_dry_ground"
+
 
 @dataclass(frozen=True, eq=False)
 class Part:
@@ -53,8 +56,13 @@ class SceneGeometry:
         ground_station_m: (x, y, z) of the ground station's antenna, metres.
         sky_radiance: uniform environment radiance (linear RGB); the render's background.
         radio_scene: a sionna-rt scene (built-in name or file) for the radio world, or None
-            to build one from ``parts`` with their ITU materials (same geometry exactly).
+            to build one from ``parts`` with their ITU materials (the same meshes) and
+            ``terrain``.
         scorable_objects: objects a user may demand (the ground is not one).
+        terrain: flat ground around the rendered plot that only the radio world has
+            (:data:`TERRAIN_MATERIAL`), or None. The cameras see the plot against the sky;
+            the radio sees the ground beyond it, where a drone's ground reflection toward
+            a ground station outside the plot lands.
     """
 
     name: str
@@ -63,6 +71,7 @@ class SceneGeometry:
     sky_radiance: tuple[float, float, float] = (1.0, 1.0, 1.0)
     radio_scene: str | None = None
     scorable_objects: tuple[str, ...] = ()
+    terrain: Mesh | None = None
 
     @property
     def objects(self) -> tuple[str, ...]:

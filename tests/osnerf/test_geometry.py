@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from osnerf.scenes import intrinsics_from_fov, look_at, pixel_rays, project, ring_positions
-from osnerf.scenes.geometry import box, cylinder, disk, read_ply, write_ply
+from osnerf.scenes.geometry import annulus, box, cylinder, disk, read_ply, write_ply
 
 
 def signed_volume(mesh) -> float:
@@ -32,6 +32,23 @@ def test_cylinder_volume_and_axis(axis):
 def test_cone_volume():
     m = cylinder((0.0, 0.0, 0.0), 1.0, 3.0, segments=512, radius_top_m=0.0)
     assert signed_volume(m) == pytest.approx(np.pi * 1.0 * 3.0 / 3, rel=1e-3)
+
+
+def test_annulus_continues_the_disk_facing_up():
+    """The terrain ring around a plot: its inner edge is the disk's rim, every face faces +z,
+    and disk plus ring cover the outer polygon exactly once."""
+    n = 64
+    plot, ring = disk((1.0, 2.0, 0.0), 2.6, segments=n), annulus((1.0, 2.0, 0.0), 2.6, 40.0, n)
+    np.testing.assert_array_equal(ring.vertices_m[:n], plot.vertices_m[1:])
+    area = 0.0
+    for m in (plot, ring):
+        v = m.vertices_m.astype(np.float64)[m.faces]
+        normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        assert np.all(normal[:, 2] > 0) and np.allclose(normal[:, :2], 0, atol=1e-3)
+        area += normal[:, 2].sum() / 2
+    assert area == pytest.approx(0.5 * n * 40.0**2 * np.sin(2 * np.pi / n), rel=1e-5)
+    with pytest.raises(ValueError, match="0 < inner < outer"):
+        annulus((0.0, 0.0, 0.0), 2.0, 1.0)
 
 
 def test_ply_round_trip(tmp_path):

@@ -99,12 +99,16 @@ def test_two_ground_stations_give_different_channels_and_the_link_says_where(vie
         params = info["channel_params"]
         assert params["ground_station_m"] == gs and params["median_distance_m"] == np.median(dist)
     # the same drones, pictures untouched, the station moved: the tiny plot's drones see it
-    # in line of sight alone, so each view's path gain is Friis's at its new distance
+    # in line of sight (most also by the ground's reflection), so each view's direct path, the
+    # strongest (power G K / (1 + K) of the traced paths), has Friis's gain at its new distance
     lam = C / float(views.meta["carrier_frequency_hz"])
     for links in (own, far):
-        gain = np.array(list(links.info["path_gain_db"].values()))
+        st = links.info["stats"]
+        k = 10 ** (np.array(st["k_factor_db"]) / 10)
+        assert all(st["los"]) and max(st["num_paths"]) >= 2
+        direct_db = np.array(st["path_gain_db"]) - 10 * np.log10(1 + 1 / k)
         dist = np.array(list(links.info["distance_to_ground_station_m"].values()))
-        np.testing.assert_allclose(gain, 20 * np.log10(lam / (4 * np.pi * dist)), atol=0.05)
+        np.testing.assert_allclose(direct_db, 20 * np.log10(lam / (4 * np.pi * dist)), atol=0.05)
     gains = [np.array(list(x.info["path_gain_db"].values())) for x in (own, far)]
     assert np.abs(gains[0] - gains[1]).min() > 0.5  # every view's link moved
     for links, gain in zip((own, far), gains):  # each view's SNR follows its own gain

@@ -60,8 +60,9 @@ def _crosses(p, q, lo, hi) -> bool:
 def test_the_shed_shadows_the_drones_whose_line_to_the_station_crosses_it():
     """The same drone ring on firefighter and firefighter_shadow: the drones whose straight
     line to the ground station crosses the shed (3 m tall, above every drone and the
-    station) have no line of sight and lose more than 10 dB; the others keep their gain
-    within 1 dB."""
+    station) have no line of sight and lose more than 10 dB; the others keep their line of
+    sight (or its absence behind the building) and their gain within 3 dB (the shed may block
+    their ground reflection, or add one off its wall, each well below the direct path)."""
     from osnerf.scenes.compact import SHED_CENTER_M, SHED_SIZE_M
     from osnerf.scenes.radiomap import scene_radio_map
     from phy.raytrace import RadioMapConfig
@@ -79,7 +80,7 @@ def test_the_shed_shadows_the_drones_whose_line_to_the_station_crosses_it():
     clear = ~behind & np.isfinite(open_.traced_path_gain_db)
     assert (drop[behind] > 10.0).all(), drop
     assert not shadow.los[behind].any()
-    assert (np.abs(drop[clear]) < 1.0).all(), drop
+    assert (shadow.los[clear] == open_.los[clear]).all() and (np.abs(drop[clear]) < 3.0).all()
 
 
 @pytest.mark.parametrize(
