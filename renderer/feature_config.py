@@ -90,6 +90,10 @@ class FeatureConfig:
     """Pixels whose decoded 3 x 3 neighbourhood spans more than this in a colour channel are
     rendered again by the field at full resolution (sharp edges), > 0; 1 or more renders
     none."""
+    refine_min_transmittance: float = 1e-2
+    """The rays rendered again end once their transmittance falls below this, and drop the
+    samples whose weight is below a tenth of it, in (0, 1): each pixel rendered again is
+    then the full render's to within about this."""
     render_batch: int = 8
     """Views of a path rendered together (one sampler, density, feature read and decoder
     call), >= 1: the same images, fewer and larger operations."""
@@ -127,6 +131,10 @@ class FeatureConfig:
             raise ValueError(f"refine_partial must be in [0, 0.5), got {self.refine_partial}")
         if not self.refine_contrast > 0:
             raise ValueError(f"refine_contrast must be > 0, got {self.refine_contrast}")
+        if not 0 < self.refine_min_transmittance < 1:
+            raise ValueError(
+                f"refine_min_transmittance must be in (0, 1), got {self.refine_min_transmittance}"
+            )
         if not 0 <= self.weight_threshold < 1:
             raise ValueError(f"weight_threshold must be in [0, 1), got {self.weight_threshold}")
         for name in ("jitter_deg", "train_seconds", "grid_lr", "decoder_lr"):

@@ -324,12 +324,15 @@ class FeatureRenderer:
         """``rgb`` [num_views, height, width, 3] decoded from ``passes`` with the pixels of
         :func:`~renderer.refine.edge_mask` (``config.refine_partial``,
         ``config.refine_contrast``) rendered again by the field itself at full resolution
-        (:func:`~renderer.refine.field_colours`); unchanged when both are off."""
+        (:func:`~renderer.refine.field_colours`, each ray ended at
+        ``config.refine_min_transmittance``); unchanged when both are off."""
         mask = self.refine_mask(passes, rgb)
         if mask is None:
             return rgb
+        mt = self.config.refine_min_transmittance
         out = rgb.clone()
-        out[mask] = field_colours(self.model, *masked_rays(poses, intrinsics, mask))
+        rays = masked_rays(poses, intrinsics, mask)
+        out[mask] = field_colours(self.model, *rays, min_transmittance=mt, weight_threshold=mt / 10)
         return out
 
     @torch.no_grad()

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from renderer import FeatureConfig, FeatureRenderer, camera_rays, render_views
-from renderer.refine import edge_mask, field_colours
+from renderer.refine import edge_mask, field_colours, masked_rays
 
 
 def test_edge_mask_flags_partial_blocks_and_both_sides_of_a_sharp_edge():
@@ -45,8 +45,9 @@ def test_field_colours_are_the_full_render(sphere_model):
 
 def test_refined_pixels_are_the_full_renders_and_the_others_the_decoders(sphere_model):
     """With refinement on, the flagged pixels (the sphere's silhouette, partly transparent
-    at a coarse pass) equal the full render's and every other pixel is the decoded one;
-    with it off (the default) nothing is rendered again."""
+    at a coarse pass) equal the full render's (to within the refinement's transmittance) and
+    every other pixel is the decoded one; with it off (the default) nothing is rendered
+    again."""
     model, train_set = sphere_model
     poses, intr = train_set.poses[:3], train_set.intrinsics
     full = render_views(model, poses, intr)["rgb"]
@@ -59,12 +60,48 @@ def test_refined_pixels_are_the_full_renders_and_the_others_the_decoders(sphere_
     opacity = torch.stack([p.opacity.reshape(p.size) for p in passes])
     mask = edge_mask(opacity, base, cfg.downsample, 0.05, 0.3)
     assert 0.02 < float(mask.float().mean()) < 0.6
-    assert float((out[mask] - full[mask]).abs().max()) < 2e-3
+    assert float((out[mask] - full[mask]).abs().max()) < cfg.refine_min_transmittance
     assert torch.equal(out[~mask], base[~mask])
     assert float((out - full).square().mean()) < float((base - full).square().mean())
 
 
-@pytest.mark.parametrize("field, value", [("refine_partial", 0.5), ("refine_contrast", 0.0)])
+def test_refined_rays_end_at_the_configured_transmittance(sphere_model):
+    """``refine_min_transmittance`` sets where the rays rendered again end: their colours
+    are the field's marched to that transmittance, with fewer density evaluations at a
+    higher one (the default) than at 1e-4, and within it of each other."""
+    model, train_set = sphere_model
+    poses, intr = train_set.poses[:2], train_set.intrinsics
+    cfg = FeatureConfig(channels=5, progress=False, refine_contrast=0.3, refine_partial=0.05)
+    assert cfg.refine_min_transmittance == 1e-2
+    runs = {}
+    for mt in (1e-4, 0.2):
+        rend = FeatureRenderer(model, dataclasses.replace(cfg, refine_min_transmittance=mt))
+        passes = rend.low_res_passes(poses, intr)
+        rgb = rend.decode(passes, intr.height, intr.width)
+        mask = rend.refine_mask(passes, rgb)
+        density, calls = model.field.density, []
+        model.field.density = lambda p, calls=calls, f=density: calls.append(len(p)) or f(p)
+        try:
+            out = rend.refine(passes, poses, intr, rgb)
+        finally:
+            del model.field.density
+        o, d = masked_rays(poses, intr, mask)
+        expected = field_colours(model, o, d, min_transmittance=mt, weight_threshold=mt / 10)
+        assert torch.equal(out[mask], expected)
+        runs[mt] = (out, sum(calls))
+    (fine, n_fine), (coarse, n_coarse) = runs[1e-4], runs[0.2]
+    assert n_coarse < n_fine
+    assert 0 < float((fine - coarse).abs().max()) < 0.2
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("refine_partial", 0.5),
+        ("refine_contrast", 0.0),
+        ("refine_min_transmittance", 0.0),
+    ],
+)
 def test_refine_settings_are_checked(field, value):
     with pytest.raises(ValueError, match=field):
         FeatureConfig(**{field: value})
