@@ -270,16 +270,17 @@ class StreamReceiver:
         """Find and decode the frames that start in ``[own_from, own_to)`` in samples
         ``lo .. hi-1``: every complete frame from one search (``receive_all``); the frames
         cut off by dropped samples or the end (only when ``own_to`` comes that near ``hi``)
-        are counted from ``find``."""
+        are counted from ``find`` on the block's last frame length."""
         iq = self.ring.read(lo, hi)
         for res in self.frames.receive_all(iq, self.cfg.header_symbols + self.cfg.symbols_per_frame):  # fmt: skip
             start = lo + int(res.start_index)
             if own_from <= start < own_to and start + self.frame_len <= hi:
                 self.counts.frames_found += 1
                 self._decode(res, start)
-        if own_to + self.frame_len > hi:
-            for k in self.frames.find(iq):
-                start = lo + int(k)
+        if own_to + self.frame_len > hi:  # the tail where a frame can start and not fit
+            tail = max(own_from - self.pre, hi - self.frame_len - self.need) - lo
+            for k in self.frames.find(iq[max(0, tail) :]):
+                start = lo + max(0, tail) + int(k)
                 if own_from <= start < own_to and start + self.frame_len > hi:
                     self.counts.frames_found += 1
                     self.counts.not_received += 1
