@@ -23,7 +23,8 @@ def as_numpy(x) -> np.ndarray:
 
 
 class PhyFrames:
-    """``phy``'s over-the-air frame (FrameConfig, build_frame, find_frames, receive_frame).
+    """``phy``'s over-the-air frame (FrameConfig, build_frame, find_frames, receive_frame,
+    receive_frames).
 
     The receiver equalises by zero-forcing: unbiased symbols with each symbol's effective
     noise variance, the codec's convention (``semcodec.model.lmmse_input``).
@@ -38,7 +39,13 @@ class PhyFrames:
 
         missing = [
             n
-            for n in ("FrameConfig", "build_frame", "find_frames", "receive_frame")
+            for n in (
+                "FrameConfig",
+                "build_frame",
+                "find_frames",
+                "receive_frame",
+                "receive_frames",
+            )
             if not hasattr(phy, n)
         ]
         if missing:
@@ -67,6 +74,15 @@ class PhyFrames:
         import torch
 
         return self.phy.receive_frame(
+            torch.as_tensor(iq, dtype=torch.complex64), self.cfg, num_symbols, equalizer="zf"
+        )
+
+    def receive_all(self, iq: np.ndarray, num_symbols: int) -> list:
+        """Every complete frame of ``iq`` from one search (``phy.receive_frames``), ascending;
+        each result's ``start_index`` is its first sample in ``iq``."""
+        import torch
+
+        return self.phy.receive_frames(
             torch.as_tensor(iq, dtype=torch.complex64), self.cfg, num_symbols, equalizer="zf"
         )
 

@@ -212,7 +212,7 @@ class StreamReceiver:
         ring: the samples, as the driver delivers them.
         views: the stream's views (:func:`build_views`), in sending order.
         cfg: ``hil.OtaConfig``.
-        frames: the frame layer (``hil.PhyFrames``): ``find(iq)`` and ``receive(iq, n)``.
+        frames: the frame layer (``hil.PhyFrames``): ``find(iq)`` and ``receive_all(iq, n)``.
         on_view: called with each :class:`StreamView` once it is complete, or once a
             frame of a later view (or the end of the stream) shows it never will be.
         block_samples: new samples per search (at least one frame's worth is sensible).
@@ -240,7 +240,7 @@ class StreamReceiver:
         if self.views:
             burst = np.concatenate([self.views[0].burst, np.zeros(self.pre, np.complex64)])
             self.frames.find(burst)
-            self.frames.receive(burst, self.cfg.header_symbols + self.cfg.symbols_per_frame)
+            self.frames.receive_all(burst, self.cfg.header_symbols + self.cfg.symbols_per_frame)
 
     def run(self) -> StreamCounts:
         """Search and decode until the ring is closed and every sample was searched."""
@@ -267,22 +267,27 @@ class StreamReceiver:
         return self.counts
 
     def _search(self, lo: int, own_from: int, own_to: int, hi: int) -> None:
-        """Find the frames that start in ``[own_from, own_to)`` in samples ``lo .. hi-1``."""
+        """Find and decode the frames that start in ``[own_from, own_to)`` in samples
+        ``lo .. hi-1``: every complete frame from one search (``receive_all``); the frames
+        cut off by dropped samples or the end (only when ``own_to`` comes that near ``hi``)
+        are counted from ``find`` on the block's last frame length."""
         iq = self.ring.read(lo, hi)
-        for k in self.frames.find(iq):
-            start = lo + int(k)
-            if not own_from <= start < own_to:
-                continue
-            self.counts.frames_found += 1
-            if start + self.frame_len > hi:  # cut off by dropped samples or the end
-                self.counts.not_received += 1
-                continue
-            seg_lo = max(0, start - lo - self.pre)
-            self._decode(iq[seg_lo : start - lo + self.need], lo + seg_lo, start)
+        for res in self.frames.receive_all(iq, self.cfg.header_symbols + self.cfg.symbols_per_frame):  # fmt: skip
+            start = lo + int(res.start_index)
+            if own_from <= start < own_to and start + self.frame_len <= hi:
+                self.counts.frames_found += 1
+                self._decode(res, start)
+        if own_to + self.frame_len > hi:  # the tail where a frame can start and not fit
+            tail = max(own_from - self.pre, hi - self.frame_len - self.need) - lo
+            for k in self.frames.find(iq[max(0, tail) :]):
+                start = lo + max(0, tail) + int(k)
+                if own_from <= start < own_to and start + self.frame_len > hi:
+                    self.counts.frames_found += 1
+                    self.counts.not_received += 1
 
-    def _decode(self, seg: np.ndarray, seg_start: int, start: int) -> None:
+    def _decode(self, res, start: int) -> None:
+        """Place the frame received at ``start`` (``res``, a ``phy.FrameResult``) by its header."""
         cfg = self.cfg
-        res = self.frames.receive(seg, cfg.header_symbols + cfg.symbols_per_frame)
         if not bool(getattr(res, "detected", True)):
             self.counts.not_received += 1
             return
@@ -310,7 +315,7 @@ class StreamReceiver:
         self.counts.frames_decoded += 1
         self.last_number = max(self.last_number, number)
         rep.detected = True
-        rep.start_index = seg_start + int(getattr(res, "start_index", start - seg_start))
+        rep.start_index = start
         snr, cfo = getattr(res, "snr_db_estimate", None), getattr(res, "cfo_hz", None)
         rep.snr_db = None if snr is None else float(as_numpy(snr))
         rep.cfo_hz = None if cfo is None else float(as_numpy(cfo))

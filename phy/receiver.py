@@ -159,10 +159,10 @@ def receive_frames(
     raw = _checked(iq, num_symbols, equalizer)
     length = cfg.num_samples(num_symbols)
     region = raw[: max(0, raw.size - length + cfg.sync_length)]
-    out = []
+    out, total = [], _sum(raw)  # the capture's sum once, not a pass over it per frame
     for det in find_preambles(region, cfg, _mean(region)):
         if det.start + length <= raw.size:
-            dc = _dc_estimate(raw, det.start, length)
+            dc = _dc_estimate(raw, det.start, length, total)
             frame = raw[det.start : det.start + length]
             out.append(_demodulate(frame, det.cfo, num_symbols, cfg, equalizer, dc))
             out[-1].start_index = int(det.start)
@@ -179,11 +179,13 @@ def _checked(iq, num_symbols, equalizer: str) -> np.ndarray:
     return raw
 
 
-def _dc_estimate(r: np.ndarray, start: int, length: int) -> complex:
+def _dc_estimate(r: np.ndarray, start: int, length: int, total: complex | None = None) -> complex:
     """The receiver's DC offset: the mean outside the frame when there are enough such
     samples (the frame's own mean is not zero once a CFO moves carriers onto DC), else
-    the mean of everything."""
+    the mean of everything; ``total``, the sum of ``r`` when given, spares a pass over it."""
     outside = r.size - length
+    if outside >= 256 and total is not None:
+        return (total - _sum(r[start : start + length])) / outside
     if outside >= 256:
         total = _sum(r[:start]) + _sum(r[start + length :])
         return total / outside

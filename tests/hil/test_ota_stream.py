@@ -238,6 +238,37 @@ def test_frame_numbers_carry_on_across_the_headers_12_bit_wrap():
         assert np.mean(np.abs(v.x_hat - x) ** 2) < 0.05
 
 
+def test_a_block_of_frames_is_decoded_by_one_receive_frames_call_with_the_per_frame_bits(
+    monkeypatch,
+):
+    rng = np.random.default_rng(11)
+    sent = [np.exp(2j * np.pi * (rng.integers(0, 4, 4 * 256) + 0.5) / 4).astype(np.complex64)]
+    frames = PhyFrames(sample_rate_hz=2e6)
+    views = build_views(sent, CFG, frames)
+    air = _air(views, rng)
+    n, pre = CFG.header_symbols + CFG.symbols_per_frame, CFG.gap_samples // 2
+    want = []  # the per-frame path: a search, then each frame on its own segment
+    for k in frames.find(air):
+        res = frames.receive(air[max(0, k - pre) : k + views[0].reports[0].num_samples + pre], n)
+        want.append(np.asarray(res.symbols).reshape(-1)[CFG.header_symbols :])
+    calls = {"receive_frames": 0, "receive_frame": 0}
+    for name in calls:
+        real = getattr(phy, name)
+        monkeypatch.setattr(phy, name, lambda *a, _f=real, _n=name, **k: calls.update({_n: calls[_n] + 1}) or _f(*a, **k))  # fmt: skip
+    ring, handed = RingBuffer(len(air)), []
+    ring.push(air)
+    ring.close()
+    counts = StreamReceiver(ring, views, CFG, frames, handed.append, len(air)).run()
+    assert calls == {"receive_frames": 1, "receive_frame": 0}
+    assert (len(want), counts.frames_found, counts.frames_decoded) == (4, 4, 4)
+    (view,) = handed
+    for (_, offset, length), w in zip(view.layout, want):
+        got = view.x_hat[offset : offset + length]
+        assert np.array_equal(got.real > 0, w[:length].real > 0)
+        assert np.array_equal(got.imag > 0, w[:length].imag > 0)
+    assert np.array_equal(view.x_hat.real > 0, sent[0].real > 0)
+
+
 def test_dropped_samples_lose_their_frames_and_nothing_joins_across_them():
     rng = np.random.default_rng(7)
     sent = [np.exp(2j * np.pi * rng.integers(0, 4, 256) / 4).astype(np.complex64) for _ in range(6)]  # fmt: skip
@@ -305,13 +336,13 @@ def test_stream_at_10_db_drops_nothing_and_reports_latency_per_view(tmp_path, im
 def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
     tmp_path, images, monkeypatch, capsys
 ):
-    receive = PhyFrames.receive
+    receive_all = PhyFrames.receive_all
 
-    def slow_receive(self, iq, num_symbols):  # a decoder far slower than the air
+    def slow_receive_all(self, iq, num_symbols):  # a decoder far slower than the air
         time.sleep(0.4)
-        return receive(self, iq, num_symbols)
+        return receive_all(self, iq, num_symbols)
 
-    monkeypatch.setattr(PhyFrames, "receive", slow_receive)
+    monkeypatch.setattr(PhyFrames, "receive_all", slow_receive_all)
     rc, d = stream(tmp_path, images, "--views", "6", "--view-interval-s", "0.05", "--ring-s", "0.1")  # fmt: skip
     assert rc == 1  # the result is written, and the run fails
     s = d["stream"]
