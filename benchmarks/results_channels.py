@@ -120,6 +120,8 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
         "",
     ]
     schemes = list(r["rows"][0]["psnr_object"])
+    # schemes that can lose a view (the report's views_lost is None for the others)
+    lossy = [n for n in schemes if any((w.get("views_lost") or {}).get(n) for w in r["rows"])]
     rows = []
     for row in r["rows"]:
         link = row["link"]
@@ -141,13 +143,13 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
                 _db(row.get("median_measured_snr_db")),
                 *(f"{row['psnr_object'][n]:.2f}" for n in schemes),
                 *(f"{row['symbols_sent'][n]:,}" for n in schemes),
-                *(_lost(row, n) for n in schemes if n != "jscc"),
+                *(_lost(row, n) for n in lossy),
             ]
         )
     header = ["speed (m/s)", "receiver", "max Doppler (Hz)", "median RMS Doppler spread (Hz)"]
     header += ["largest spread (Hz)", "views with a spread", "median measured SNR (dB)"]
     header += [f"{n} object PSNR" for n in schemes] + [f"{n} symbols" for n in schemes]
-    header += [f"{n} views lost" for n in schemes if n != "jscc"]
+    header += [f"{n} views lost" for n in lossy]
     lines += _table(header, rows)
     carrier = r["rows"][0]["link"].get("carrier_frequency_hz")
     lines.append("")
