@@ -1,6 +1,6 @@
 """Shared fixtures of the ``osnerf`` tests: a codec (the shipped default if present, else an
 untrained registered architecture), a second codec for knowledge-base refusals, a scene cache,
-and Kodak crops for ``--images``."""
+a small rendering of the tiny scene, and Kodak crops for ``--images``."""
 
 from pathlib import Path
 
@@ -24,6 +24,18 @@ def env(tmp_path_factory):
     codec = str(default) if default.exists() else _checkpoint(root / "a.safetensors", 0)
     other = _checkpoint(root / "b.safetensors", 1)
     return {"root": root, "codec": codec, "other": other, "cache": str(root / "cache")}
+
+
+@pytest.fixture(scope="session")
+def tiny_views(tmp_path_factory):
+    """The tiny scene's post, 4 training views of 16 px: enough for its drones' channels."""
+    from osnerf.scenes import RenderConfig, build_scene_dataset, load_scene_views
+
+    config = RenderConfig(resolution_px=16, num_train_views=4, num_test_views=1, spp=4, mask_spp=1)
+    folder = build_scene_dataset(
+        "tiny", ("post",), config, cache_dir=tmp_path_factory.mktemp("scenes"), progress=False
+    )
+    return load_scene_views(folder)
 
 
 @pytest.fixture
@@ -59,4 +71,3 @@ def kodak_crop(tmp_path, shared_data):
 def kodak1(kodak_crop):
     """Kodak's first image, cropped to 96 x 64 px."""
     return kodak_crop((0, 0, 96, 64))
-

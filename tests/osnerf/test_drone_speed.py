@@ -10,18 +10,9 @@ import torch
 from osnerf.cli import main
 from osnerf.run import RunConfig
 from osnerf.run.links import build_links
-from osnerf.scenes import RenderConfig, build_scene_dataset, flight_velocities, load_scene_views
+from osnerf.scenes import flight_velocities
 
-TINY = RenderConfig(resolution_px=16, num_train_views=4, num_test_views=1, spp=4, mask_spp=1)
 C = 299_792_458.0
-
-
-@pytest.fixture(scope="module")
-def views(tmp_path_factory):
-    folder = build_scene_dataset(
-        "tiny", ("post",), TINY, cache_dir=tmp_path_factory.mktemp("scenes"), progress=False
-    )
-    return load_scene_views(folder)
 
 
 def _cfg(speed: float) -> RunConfig:
@@ -36,10 +27,10 @@ def test_flight_is_level_along_the_ring():
 
 
 @pytest.mark.raytracing
-def test_moving_drones_change_the_link_and_the_report_says_so(views):
-    idx = views.indices("train")
-    fc = float(views.meta["carrier_frequency_hz"])
-    links = build_links(_cfg(15.0), views, idx)
+def test_moving_drones_change_the_link_and_the_report_says_so(tiny_views):
+    idx = tiny_views.indices("train")
+    fc = float(tiny_views.meta["carrier_frequency_hz"])
+    links = build_links(_cfg(15.0), tiny_views, idx)
     info = links.info
     fd = 15.0 * fc / C
     assert info["drone_speed_m_s"] == 15.0 and info["max_doppler_hz"] == pytest.approx(fd)
@@ -52,12 +43,15 @@ def test_moving_drones_change_the_link_and_the_report_says_so(views):
     import phy.raytrace as prt
     from osnerf.scenes.radio import radio_scene_path
 
-    pos = views.drone_positions_m[idx]
-    vel = flight_velocities(views.meta, pos, 15.0)
+    pos = tiny_views.drone_positions_m[idx]
+    vel = flight_velocities(tiny_views.meta, pos, 15.0)
     ts = 1.0 / _cfg(15.0).symbol_rate_hz
-    gs = np.asarray(views.meta["ground_station_m"])
+    gs = np.asarray(tiny_views.meta["ground_station_m"])
     tracer = prt.RayTracer(
-        radio_scene_path(views.folder, views.meta), tuple(gs), fc, prt.RayTracingConfig(max_depth=2)
+        radio_scene_path(tiny_views.folder, tiny_views.meta),
+        tuple(gs),
+        fc,
+        prt.RayTracingConfig(max_depth=2),
     )
     n = np.arange(64 * 40)
     for k, i in enumerate(idx):
@@ -79,18 +73,18 @@ def test_moving_drones_change_the_link_and_the_report_says_so(views):
 
 
 @pytest.mark.raytracing
-def test_at_rest_the_run_links_are_the_static_ones(views):
+def test_at_rest_the_run_links_are_the_static_ones(tiny_views):
     from osnerf.scenes import drone_channels
     from phy import FlatLink
     from phy.raytrace import PerPositionChannel
 
-    idx = views.indices("train")
-    links = build_links(_cfg(0.0), views, idx)
+    idx = tiny_views.indices("train")
+    links = build_links(_cfg(0.0), tiny_views, idx)
     assert links.info["drone_speed_m_s"] == 0.0 and links.info["max_doppler_hz"] == 0.0
     assert set(links.info["rms_doppler_spread_hz"].values()) == {0.0}
     solver = links.info["ray_solver"]  # what makes the run's tracing repeatable is on record
     assert solver["deterministic"] is True and solver["seed"] == 42 and solver["max_depth"] == 2
-    static = drone_channels(views.folder, views.meta, views.drone_positions_m[idx])
+    static = drone_channels(tiny_views.folder, tiny_views.meta, tiny_views.drone_positions_m[idx])
     x = torch.ones(1, 500, dtype=torch.complex64)
     for k, i in enumerate(idx):
         old = FlatLink(PerPositionChannel(static.h[k]), csi="perfect", equalizer="zf")

@@ -16,21 +16,11 @@ from osnerf.cli import main
 from osnerf.commands.run import run_config
 from osnerf.run import RunConfig
 from osnerf.run.links import build_links
-from osnerf.scenes import RenderConfig, build_scene_dataset, load_scene_views
 from osnerf.sweeps import read_results
 from osnerf.sweeps.spec import command_parser, expand, spec_from_dict
 
-TINY = RenderConfig(resolution_px=16, num_train_views=4, num_test_views=1, spp=4, mask_spp=1)
 FAR = [-6.0, 1.0, 1.5]  # the tiny plot's station is at (5, 3, 1.5)
 C = 299_792_458.0
-
-
-@pytest.fixture(scope="module")
-def views(tmp_path_factory):
-    folder = build_scene_dataset(
-        "tiny", ("post",), TINY, cache_dir=tmp_path_factory.mktemp("scenes"), progress=False
-    )
-    return load_scene_views(folder)
 
 
 def _configs(spec: dict) -> list[RunConfig]:
@@ -83,25 +73,27 @@ def test_channel_speed_and_position_sweep_leaves_out_what_only_moving_drones_hav
 
 
 @pytest.mark.raytracing
-def test_two_ground_stations_give_different_channels_and_the_link_says_where(views):
-    idx = views.indices("train")
-    pos = views.drone_positions_m[idx]
-    own = build_links(RunConfig(scene="tiny", channel="raytraced"), views, idx)
+def test_two_ground_stations_give_different_channels_and_the_link_says_where(tiny_views):
+    idx = tiny_views.indices("train")
+    pos = tiny_views.drone_positions_m[idx]
+    own = build_links(RunConfig(scene="tiny", channel="raytraced"), tiny_views, idx)
     cfg = RunConfig(scene="tiny", channel="raytraced", ground_station_m=tuple(FAR))
-    far = build_links(cfg, views, idx)
+    far = build_links(cfg, tiny_views, idx)
     for links, gs, source in ((own, [5.0, 3.0, 1.5], "scene"), (far, FAR, "--ground-station")):
         info = links.info
         assert info["ground_station_m"] == gs and info["ground_station_from"] == source
         dist = np.linalg.norm(pos - np.asarray(gs), axis=1)
         np.testing.assert_allclose(list(info["distance_to_ground_station_m"].values()), dist)
         assert info["drone_positions_m"] == {int(i): list(p) for i, p in zip(idx, pos)}
-        assert info["drone_ring"]["radius_m"] == pytest.approx(views.meta["trajectory_radius_m"])
+        assert info["drone_ring"]["radius_m"] == pytest.approx(
+            tiny_views.meta["trajectory_radius_m"]
+        )
         params = info["channel_params"]
         assert params["ground_station_m"] == gs and params["median_distance_m"] == np.median(dist)
     # the same drones, pictures untouched, the station moved: the tiny plot's drones see it
     # in line of sight (most also by the ground's reflection), so each view's direct path, the
     # strongest (power G K / (1 + K) of the traced paths), has Friis's gain at its new distance
-    lam = C / float(views.meta["carrier_frequency_hz"])
+    lam = C / float(tiny_views.meta["carrier_frequency_hz"])
     for links in (own, far):
         st = links.info["stats"]
         k = 10 ** (np.array(st["k_factor_db"]) / 10)
@@ -191,7 +183,7 @@ def test_a_ground_station_on_a_channel_without_one_is_refused(tmp_path, capsys):
 
 
 @pytest.mark.raytracing
-def test_radiomap_draws_the_map_of_a_moved_ground_station(tmp_path, views):
+def test_radiomap_draws_the_map_of_a_moved_ground_station(tmp_path, tiny_views):
     out = tmp_path / "map"
     argv = ["radiomap", "--scene", "tiny", "--views", "4", "--samples", "100000"]
     argv += ["--cell-size-m", "0.5", f"--ground-station={','.join(map(str, FAR))}"]
@@ -199,11 +191,11 @@ def test_radiomap_draws_the_map_of_a_moved_ground_station(tmp_path, views):
     doc = json.loads((out / "radiomap.json").read_text())
     assert doc["ground_station_m"] == FAR and doc["config"]["ground_station"] == FAR
     # the candidates are the run's drones; their traced gains are the run's links' gains
-    idx = views.indices("train")
+    idx = tiny_views.indices("train")
     cand = np.array([c["position_m"] for c in doc["candidates"]])
-    np.testing.assert_allclose(cand, views.drone_positions_m[idx], atol=1e-6)
+    np.testing.assert_allclose(cand, tiny_views.drone_positions_m[idx], atol=1e-6)
     cfg = RunConfig(scene="tiny", channel="raytraced", ground_station_m=tuple(FAR))
-    run_gain = list(build_links(cfg, views, idx).info["path_gain_db"].values())
+    run_gain = list(build_links(cfg, tiny_views, idx).info["path_gain_db"].values())
     traced = [c["traced_path_gain_db"] for c in doc["candidates"]]
     np.testing.assert_allclose(traced, run_gain, atol=0.01)
 

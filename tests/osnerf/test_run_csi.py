@@ -17,10 +17,8 @@ from osnerf.run.links import (
     raytraced_estimator,
     raytraced_link,
 )
-from osnerf.scenes import RenderConfig, build_scene_dataset, load_scene_views
 from phy.raytrace import MovingCIR, PerPositionChannel
 
-TINY = RenderConfig(resolution_px=16, num_train_views=4, num_test_views=1, spp=4, mask_spp=1)
 C = 299_792_458.0
 FC = 3.5e9
 GRID_F = RAYTRACED_GRID.subcarrier_frequencies_hz
@@ -50,18 +48,10 @@ def _cfg(csi, speed: float = 0.0) -> RunConfig:
     return RunConfig(scene="tiny", channel="raytraced", csi=csi, drone_speed_m_s=speed, snr_db=10.0)
 
 
-@pytest.fixture(scope="module")
-def views(tmp_path_factory):
-    folder = build_scene_dataset(
-        "tiny", ("post",), TINY, cache_dir=tmp_path_factory.mktemp("scenes"), progress=False
-    )
-    return load_scene_views(folder)
-
-
 @pytest.mark.raytracing
-def test_ls_at_rest_matches_perfect_csi_within_the_estimation_noise(views):
-    idx = views.indices("train")
-    links = build_links(_cfg("ls"), views, idx)
+def test_ls_at_rest_matches_perfect_csi_within_the_estimation_noise(tiny_views):
+    idx = tiny_views.indices("train")
+    links = build_links(_cfg("ls"), tiny_views, idx)
     grid = links.info["grid"]  # the pilot pattern and its spacing in time are on record
     t_sym = 80 / (64 * 30e3)
     assert grid["pilot_ofdm_symbols"] == [2, 11] and grid["pilot_subcarrier_spacing"] == 1
@@ -87,12 +77,12 @@ def test_ls_at_rest_matches_perfect_csi_within_the_estimation_noise(views):
 
 
 @pytest.mark.raytracing
-def test_copies_of_a_view_fly_on_when_moving_and_repeat_at_rest(views):
-    idx = [int(i) for i in views.indices("train")]
+def test_copies_of_a_view_fly_on_when_moving_and_repeat_at_rest(tiny_views):
+    idx = [int(i) for i in tiny_views.indices("train")]
     x = torch.ones(2, 640, dtype=torch.complex64)
     for speed in (0.0, 15.0):
         for csi in (None, "ls"):
-            links = build_links(_cfg(csi, speed), views, idx)
+            links = build_links(_cfg(csi, speed), tiny_views, idx)
             ch = links.links[idx[0]].channel
             xx = (
                 x
