@@ -139,7 +139,10 @@ class EmulatedHackRF:
 
     ``paced``: stream at the sample rate against the wall clock, with the board's overrun
     and underrun model (:mod:`hil.emulated_pacing`); ``overrun_samples`` and
-    ``underrun_samples`` count the samples lost that way over the board's life.
+    ``underrun_samples`` count the samples lost that way over the board's life, and
+    ``rx_late_max_s`` is the most a receive transfer came out later than a real board's
+    would have (the emulator's own delay, not charged to the host). A paced board logs
+    the length of each write, not its bytes: a stream would keep every sample it sent.
     """
 
     def __init__(
@@ -170,6 +173,7 @@ class EmulatedHackRF:
         self.tx_written = 0  # samples of the current transmit stream, silence included
         self.overrun_samples = 0
         self.underrun_samples = 0
+        self.rx_late_max_s = 0.0  # the most a transfer came out later than a real board's
         self.bytes_read = 0
         self._stale_pending = False
         self.m0 = dict(
@@ -370,6 +374,9 @@ class EmulatedHackRF:
                 raise timeout_error()
             self.rx_cursor += n
             out = raw.tobytes()
+            if pacer is not None:
+                pacer.after_read()
+                self.rx_late_max_s = max(self.rx_late_max_s, pacer.longest_late_s)
         self.bytes_read += len(out)
         self.m0["m0_count"] += len(out)
         self.m0["m4_count"] += len(out)
@@ -384,7 +391,7 @@ class EmulatedHackRF:
             raise timeout_error()
         if len(data) % 2:
             raise stall_error("odd number of bytes")
-        self.events.append(("write", bytes(data)))
+        self.events.append(("write", len(data) if self.paced else bytes(data)))
         pacer = self.pacer
         if pacer is not None:
             n = len(data) // 2

@@ -11,6 +11,15 @@ last bytes are in the M0's :data:`TX_BUFFER_BYTES`, so the writer runs at most t
 ahead of the DAC; a host that writes later than the buffer lasts lets the DAC run dry (an
 underrun: silence goes out). Each is counted as one shortfall of the M0 state, with its length in bytes, as
 the firmware counts them; the samples lost are counted exactly.
+
+An emulated board delivers a transfer later than a real one would: it renders the air only
+once the samples are due, in Python, on a host it may share. That delay is the emulator's,
+not the host's, so it is not charged to the host: a read's request is taken to arrive as
+much earlier as the previous transfer came out later than a real board's would have
+(:attr:`StreamPacer.late_s`; while the host runs behind, the delays add up, as the real
+board's transfers would have followed each other that much sooner). Only a host that
+turns a transfer around too slowly loses samples; the largest delay the board itself added
+is kept (:attr:`StreamPacer.longest_late_s`) and reported with the stream.
 """
 
 from __future__ import annotations
@@ -48,6 +57,9 @@ class StreamPacer:
         self.shortfalls = 0
         self.longest_shortfall_bytes = 0
         self.lost_samples = 0  # overrun: never delivered; underrun: silence sent
+        self.late_s = 0.0  # how much later than a real board the last transfer came out
+        self.longest_late_s = 0.0
+        self._ready: float | None = None  # when a real board's transfer would have been out
 
     def start(self) -> None:
         """The converter starts now (receive: at the mode change; transmit: at the first
@@ -55,11 +67,13 @@ class StreamPacer:
         if self.started_at is None:
             self.started_at = self.clock()
 
-    def converted(self) -> int:
-        """Samples the converter has taken (or sent) since the stream started."""
+    def converted(self, at: float | None = None) -> int:
+        """Samples the converter has taken (or sent) since the stream started, by ``at``
+        (default: now)."""
         if self.started_at is None:
             return 0
-        return int((self.clock() - self.started_at) * self.sample_rate_hz + 1e-6)  # float dust
+        at = self.clock() if at is None else at
+        return max(int((at - self.started_at) * self.sample_rate_hz + 1e-6), 0)  # float dust
 
     def _shortfall(self, samples: int) -> None:
         self.shortfalls += 1
@@ -73,17 +87,29 @@ class StreamPacer:
         return where the read starts: ``cursor``, or later when the host fell more than the
         buffer behind (the samples that did not fit are lost: one overrun)."""
         self.start()
-        backlog = self.converted() - (cursor - self.start_sample)
+        now = self.clock()
+        asked = now - self.late_s  # when a real board would have had this request
+        backlog = self.converted(asked) - (cursor - self.start_sample)
         if backlog > self.buffer_samples:
             lost = backlog - self.buffer_samples
             self._shortfall(lost)
             cursor += lost
         assert self.started_at is not None
         due = self.started_at + (cursor + num_samples - self.start_sample) / self.sample_rate_hz
-        wait = due - self.clock()
+        wait = due - now
         if wait > 0:
             time.sleep(wait)
+        self._ready = max(asked, due)
         return cursor
+
+    def after_read(self) -> None:
+        """Receive: the transfer started by :meth:`before_read` is out (rendered and on
+        its way to the host); how much later than a real board's it is carries over to the
+        next request."""
+        if self._ready is not None:
+            self.late_s = max(self.clock() - self._ready, 0.0)
+            self.longest_late_s = max(self.longest_late_s, self.late_s)
+            self._ready = None
 
     def before_write(self, written: int, num_samples: int, silent: bool = False) -> int:
         """Transmit: wait until the buffer has room for ``num_samples`` more after

@@ -78,6 +78,7 @@ class Medium:
         self.tx_streaming = False
         self.bursts_completed = 0
         self.epoch: int | None = None  # transmitter index of channel time 0 (None: not yet)
+        self._heard_until_s = -math.inf  # receivers heard silence up to here, no transmitter yet
         self._rngs: dict[int, np.random.Generator] = {}
         self._firs: dict[tuple[int, float], tuple] = {}  # (id(channel), fs) -> (channel, fir)
 
@@ -106,6 +107,15 @@ class Medium:
         scale = 10 ** ((radio.tx_gain_db - self.channel.reference_txvga_db) / 20)
         x = np.asarray(x, np.complex64) * np.float32(scale)
         with self.cond:
+            if self.tx_len == 0 and self._heard_until_s > -math.inf:
+                # a receiver streamed before there was a transmitter: what it sends starts
+                # after the silence already heard, not in the receiver's past
+                fs_tx = radio.sample_rate_hz * (1 + radio.ppm * 1e-6)
+                heard = int(math.floor((self._heard_until_s - self.channel.delay_s) * fs_tx)) + 1
+                if heard > 0:
+                    self._ensure(heard)
+                    self._tx[:heard] = 0
+                    self.tx_len = heard
             if self.epoch is None:
                 self.epoch = self.tx_len
             self._ensure(self.tx_len + len(x))
@@ -196,6 +206,7 @@ class Medium:
             while True:
                 tx = self.transmitter
                 if tx is None and self.wait_for_bursts == 0:
+                    self._heard_until_s = max(self._heard_until_s, float(t[-1]))
                     break
                 if tx is not None:
                     fs_tx = tx.sample_rate_hz * (1 + tx.ppm * 1e-6)

@@ -11,6 +11,7 @@ the samples lost) and the ring, and the frames found, decoded and lost.
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
 import warnings
@@ -46,6 +47,9 @@ class StreamRun:
         emulator_overruns, emulator_lost_buffers: an emulated Pluto's overruns and the
             receive buffers (DMA blocks) it lost to them (None: a real board, or a HackRF,
             whose overruns are ``device_overruns``).
+        emulator_late_max_s: the most an emulated HackRF delivered a transfer later than a
+            real board would have (its own delay rendering the air, not charged to the
+            host; None: a real board or a Pluto).
         counts: frames found, decoded, ... (:class:`hil.ota_stream.StreamCounts`).
         warnings: the driver's warnings, one line each.
     """
@@ -61,6 +65,7 @@ class StreamRun:
     emulator_underrun_samples: int | None = None
     emulator_overruns: int | None = None
     emulator_lost_buffers: int | None = None
+    emulator_late_max_s: float | None = None
     counts: StreamCounts = field(default_factory=StreamCounts)
     warnings: list = field(default_factory=list)
 
@@ -154,6 +159,10 @@ def stream_over_the_air(
     block = max(int(BLOCK_SECONDS * fs), 512)
     receiver = StreamReceiver(ring, views, cfg, frames, on_view, block_samples=block)
     receiver.warm_up()  # the first frame costs no more than the others
+    # the collector's full passes over everything imported hold the interpreter for tens
+    # of ms, longer than a board's buffer lasts; what the stream allocates stays collected
+    gc.collect()
+    gc.freeze()
     stop = threading.Event()
     rx_out: dict = {}
     tx_out: dict = {}
@@ -190,6 +199,7 @@ def stream_over_the_air(
         stop.set()
         producer.join(timeout=30)
         sender.join(timeout=30)
+        gc.unfreeze()
     for out in (rx_out, tx_out):
         if "error" in out:
             raise out["error"]
@@ -214,6 +224,7 @@ def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: li
     if emulator is not None:
         run.emulator_overrun_samples = int(emulator.radios[1].overrun_samples)
         run.emulator_underrun_samples = int(emulator.radios[0].underrun_samples)
+        run.emulator_late_max_s = float(emulator.radios[1].rx_late_max_s)
     loss = getattr(rx, "emulated_rx_loss", None)  # an emulated Pluto's late-reader losses
     if loss is not None:
         run.emulator_overruns, run.emulator_lost_buffers, run.emulator_overrun_samples = loss

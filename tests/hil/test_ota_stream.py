@@ -76,6 +76,26 @@ def test_pacer_counts_an_overrun_exactly_when_the_host_reads_too_late(monkeypatc
     assert (pacer.shortfalls, pacer.lost_samples, pacer.longest_shortfall_bytes) == (1, 2000, 4000)
 
 
+def test_pacer_charges_the_host_only_for_its_own_lateness_not_the_emulators(monkeypatch):
+    """A transfer the emulator renders late moves the host's next request as late; a real
+    board would have had it out at its due time, so the request counts from there."""
+    clock = FakeClock()
+    monkeypatch.setattr(time, "sleep", lambda s: setattr(clock, "now", clock.now + s))
+    pacer = StreamPacer(1e6, start_sample=0, buffer_samples=1000, clock=clock)
+    assert pacer.before_read(0, 500) == 0  # due at 100.0005
+    clock.now += 0.003  # the emulator took 3 ms to render it
+    pacer.after_read()
+    assert pacer.late_s == pytest.approx(0.003)
+    clock.now += 0.0001  # the host asks again at once: 2600 behind by the wall clock
+    assert pacer.before_read(500, 500) == 500 and pacer.shortfalls == 0
+    pacer.after_read()  # a real board: out at 100.001 (due); here at 100.0036
+    assert pacer.late_s == pytest.approx(0.0026)
+    clock.now += 0.004  # the host itself stalls 4 ms: charged from 100.005, not 100.0076
+    assert pacer.before_read(1000, 500) == 1000 + 3000
+    assert (pacer.shortfalls, pacer.lost_samples) == (1, 3000)
+    assert pacer.longest_late_s == pytest.approx(0.003)
+
+
 def test_pacer_counts_an_underrun_when_the_host_writes_too_late(monkeypatch):
     clock = FakeClock()
     monkeypatch.setattr(time, "sleep", lambda s: setattr(clock, "now", clock.now + s))
@@ -151,6 +171,29 @@ def test_emulated_hackrfs_in_their_own_process_pace_and_count_a_late_reader(monk
         lost = emu.radios[1].overrun_samples
     assert stats.device_shortfalls == 1 and 0.2 * 2e6 <= lost <= 0.5 * 2e6
     assert stats.longest_shortfall_bytes == 2 * lost  # one overrun, counted exactly
+
+
+def test_a_transmitter_that_starts_while_the_receiver_streams_is_heard_after_the_silence():
+    """A streaming receiver hears silence while there is no transmitter; a burst sent then
+    goes on the air after what was heard, not at the start of the transmitter's timeline,
+    which the receiver has already passed."""
+    from types import SimpleNamespace
+
+    from hil import AirChannel, Medium
+
+    def radio(index):
+        return SimpleNamespace(index=index, ppm=0.0, sample_rate_hz=4e6, center_freq_hz=2.4e9, rx_gain_db=40.0, tx_gain_db=30.0)  # fmt: skip
+
+    medium, tx, rx = Medium(AirChannel(snr_db=100), seed=0), radio(0), radio(1)
+    silence = medium.render_iq(rx, 0, 40_000, lambda: True)  # no transmitter yet
+    medium.start_tx(tx)
+    medium.append_tx_iq(tx, np.full(1000, 0.5, np.complex64))
+    medium.end_tx(tx)
+    y = medium.render_iq(rx, 40_000, 40_000, lambda: True)
+    power = np.abs(y) ** 2
+    floor = np.mean(np.abs(silence) ** 2)
+    assert np.mean(power[:1000]) > 1e6 * floor  # the burst, right after the silence
+    assert np.mean(power[2000:]) < 10 * floor
 
 
 def test_paced_emulated_hackrf_streams_at_its_rate_and_reports_overruns():
