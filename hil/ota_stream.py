@@ -196,6 +196,9 @@ class StreamCounts:
         header_errors: found frames whose header failed its check.
         not_received: found frames the receiver could not synchronise.
         duplicates: detections of a frame already decoded.
+        receiver_cpu_s: CPU seconds of the decoder's thread in the frame layer (searching
+            the ring and receiving frames; not the scheme's decoding of the views).
+        samples_searched: samples the searches covered (each once).
     """
 
     frames_found: int = 0
@@ -203,6 +206,8 @@ class StreamCounts:
     header_errors: int = 0
     not_received: int = 0
     duplicates: int = 0
+    receiver_cpu_s: float = 0.0
+    samples_searched: int = 0
 
 
 class StreamReceiver:
@@ -233,6 +238,7 @@ class StreamReceiver:
         # stream-wide number of the last frame decoded (before any: the one before the first)
         self.last_number = views[0].first_number - 1 if views else -1
         self.next_view = 0  # views before this one were handed on
+        self._view_cpu_s = 0.0  # CPU of on_view within the current search
 
     def warm_up(self) -> None:
         """Search and receive the first view's burst as sent, once, counting nothing: the
@@ -256,7 +262,10 @@ class StreamReceiver:
                 continue
             own_to = hi if (at_gap or ended) else hi - self.need
             if own_to > own_from:
+                cpu, self._view_cpu_s = time.thread_time(), 0.0
                 self._search(max(seg_lo, own_from - self.pre), own_from, own_to, hi)
+                self.counts.receiver_cpu_s += time.thread_time() - cpu - self._view_cpu_s
+                self.counts.samples_searched += own_to - own_from
             own_from = own_to
             if at_gap and gap is not None:  # nothing joins across dropped samples
                 own_from = seg_lo = gap[1]
@@ -331,4 +340,6 @@ class StreamReceiver:
             view = self.views[self.next_view]
             self.next_view += 1
             view.done_at = time.monotonic()
+            cpu = time.thread_time()
             self.on_view(view)
+            self._view_cpu_s += time.thread_time() - cpu

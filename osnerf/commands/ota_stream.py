@@ -294,6 +294,12 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
         "views_complete": sum(v.complete for v in views),
         "view_interval_s": args.view_interval_s,
         "ring_s": args.ring_s,
+        # the frame layer's real-time factor on this stream: air time searched per CPU second
+        "receiver_realtime_factor": (
+            run.counts.samples_searched / cfg.sample_rate_hz / run.counts.receiver_cpu_s
+            if run.counts.receiver_cpu_s > 0
+            else None
+        ),
         "latency_s": {
             "mean": float(np.mean(known)) if known else None,
             "max": float(np.max(known)) if known else None,

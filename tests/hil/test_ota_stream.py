@@ -367,6 +367,9 @@ def test_stream_at_10_db_drops_nothing_and_reports_latency_per_view(tmp_path, im
     assert s["dropped_samples"] == 0 and s["overruns"] == 0 and s["device_overruns"] == 0
     assert s["emulator_overrun_samples"] == 0 and s["samples_received"] >= 0.4 * 2e6  # 4 intervals
     assert s["samples_received"] == s["driver_samples"]
+    assert s["samples_received"] - 2 * 2e6 * 0.01 <= s["samples_searched"] <= s["samples_received"]
+    assert s["receiver_realtime_factor"] > 1 and s["receiver_cpu_s"] > 0  # 2 MS/s: far ahead
+    assert s["emulator_late_max_s"] >= 0
     assert s["frames_found"] == s["frames_decoded"] == s["frames_sent"] == 5
     assert s["frames_lost"] == 0 and s["views_complete"] == 5
     for row in s["views"]:  # a view is out no sooner than its air time after it went in
