@@ -28,16 +28,18 @@ import tempfile
 import time
 from pathlib import Path
 
+from osnerf.paths import shared_data_dir
+
 SECONDS = 60.0
 BURNER_SECONDS = 10.0
 VIEW_INTERVAL_S = 0.1
-IMAGES = Path("/work/shared/data/kodak")
 CODE = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
 SUMMARY = (
     "samples_received", "dropped_samples", "overruns", "device_overruns",
     "emulator_overrun_samples", "emulator_lost_buffers", "ring_dropped_samples",
     "frames_sent", "frames_found", "frames_decoded", "frames_lost", "views_sent",
-    "views_complete", "latency_s",
+    "views_complete", "header_errors", "latency_s", "receiver_realtime_factor",
+    "emulator_late_max_s",
 )  # fmt: skip
 
 
@@ -55,7 +57,8 @@ def _ota(work: Path, name: str, rate: float, seconds: float, radio: list[str]) -
     out = work / f"{name}.json"
     views = str(int(round(seconds / VIEW_INTERVAL_S)))
     argv = ["ota", "--stream", *radio, "--schemes", "jscc", "--snr-db", "10"]
-    argv += ["--images", str(IMAGES), "--max-images", "4", "--size", "64", "--out", str(out)]
+    kodak = str(shared_data_dir() / "kodak")
+    argv += ["--images", kodak, "--max-images", "4", "--size", "64", "--out", str(out)]
     argv += ["--symbols-per-frame", "1024", "--sample-rate-hz", f"{rate:g}"]
     argv += ["--views", views, "--view-interval-s", str(VIEW_INTERVAL_S), "--overwrite"]
     if radio[1] == "emulated":
