@@ -35,6 +35,7 @@ from osnerf.commands.ota_args import usage_error
 
 STREAM_KINDS = ("emulated", "hackrf", "pluto")  # radios whose driver streams
 MAX_VIEWS = 10_000  # every view is framed before the stream starts
+LAG_WARN_RING_SHARE = 0.1  # emulated boards later than this share of the ring: a warning
 
 # dest -> (flag, its default under --stream)
 STREAM_FLAGS = Registry[tuple[str, object]](
@@ -234,6 +235,9 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     for line in run.warnings:
         print(f"ota: warning: {line}", file=sys.stderr)
     print(f"ota: wrote {out}", file=sys.stderr)
+    lag = emulator_lag_warning(run.emulator_late_max_s, args.ring_s)
+    if lag:
+        print(f"ota: warning: {lag}", file=sys.stderr)
     allowed = args.max_rx_overruns or 0  # None with a Pluto: libiio 0.x counts none
     if run.overruns > allowed:  # every lost sample is part of an overrun
         print(
@@ -244,6 +248,21 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
         )
         return 1
     return 0
+
+
+def emulator_lag_warning(late_s: float | None, ring_s: float) -> str | None:
+    """The warning for emulated boards that fell behind real time (None: they kept up).
+
+    Their own delay is not charged to the host as overruns, but it is slack a real radio
+    would not give: the decoder received the samples that much later than their air time.
+    Up to ``LAG_WARN_RING_SHARE`` of the ring buffer it changes nothing that matters."""
+    if late_s is None or late_s <= LAG_WARN_RING_SHARE * ring_s:
+        return None
+    return (
+        f"the emulated boards delivered samples up to {late_s:.3f} s later than real boards "
+        "would have (rendering the air on this host): the stream ran that much behind its air "
+        "time, slack that a real radio does not give the decoder"
+    )
 
 
 def _board_overruns(run) -> str:

@@ -96,6 +96,16 @@ def test_pacer_charges_the_host_only_for_its_own_lateness_not_the_emulators(monk
     assert pacer.longest_late_s == pytest.approx(0.003)
 
 
+def test_a_stream_says_so_when_its_emulated_boards_fell_behind_real_time():
+    from osnerf.commands.ota_stream import emulator_lag_warning
+
+    assert emulator_lag_warning(None, 1.0) is None  # a real board, or a Pluto
+    assert emulator_lag_warning(0.041, 1.0) is None  # a stall the ring absorbs
+    warning = emulator_lag_warning(1.157, 1.0)
+    assert warning is not None and "1.157 s later" in warning
+    assert emulator_lag_warning(0.041, 0.2) is not None  # a fifth of a small ring
+
+
 def test_pacer_counts_an_underrun_when_the_host_writes_too_late(monkeypatch):
     clock = FakeClock()
     monkeypatch.setattr(time, "sleep", lambda s: setattr(clock, "now", clock.now + s))
