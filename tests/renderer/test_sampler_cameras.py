@@ -248,6 +248,10 @@ def test_inference_reads_of_vertex_rows_equal_the_training_reads_and_follow_upda
         dens0 = field.density(p)
     assert torch.allclose(sigma0, sigma, rtol=1e-5) and torch.allclose(rgb0, rgb, atol=1e-6)
     assert torch.allclose(dens0, sigma, rtol=1e-5)
+    outside = torch.cat([p * 1.7, AABB.float()])  # the border beyond the box, its corners
+    with torch.no_grad():  # the fused read of the inference path
+        fused = field.density(outside)
+    assert torch.allclose(fused, field.density(outside), rtol=1e-5)  # the gathers
 
     # a fused optimiser step does not move the grid's version counter: the copy made in
     # eval mode must not survive the switch to training and back
