@@ -249,9 +249,11 @@ def test_inference_reads_of_vertex_rows_equal_the_training_reads_and_follow_upda
     assert torch.allclose(sigma0, sigma, rtol=1e-5) and torch.allclose(rgb0, rgb, atol=1e-6)
     assert torch.allclose(dens0, sigma, rtol=1e-5)
     outside = torch.cat([p * 1.7, AABB.float()])  # the border beyond the box, its corners
-    with torch.no_grad():  # the fused read of the inference path
+    field.eval()
+    with torch.no_grad():  # in eval mode without gradients: the fused read
         fused = field.density(outside)
-    assert torch.allclose(fused, field.density(outside), rtol=1e-5)  # the gathers
+    assert torch.allclose(fused, field.density(outside), rtol=1e-5)  # with them: the gathers
+    field.train()
 
     # a fused optimiser step does not move the grid's version counter: the copy made in
     # eval mode must not survive the switch to training and back
