@@ -17,7 +17,7 @@ import numpy as np
 
 from hil.air_paths import KAISER_BETA as _KAISER_BETA
 from hil.air_paths import (
-    RESAMPLER_TAPS,  # Kaiser(7) sinc: error < -60 dB up to 0.45 fs
+    RESAMPLER_TAPS,
     AirPath,
     PathSegment,
     TimeVaryingFir,
