@@ -9,8 +9,11 @@ least ``min_transmittance`` (early ray termination). The steps are those of
 what it returns is the same as marching every sample, except on the samples behind a
 ray's end: each of those had a weight below the transmittance at the end, so none of them
 is above a ``weight_threshold`` at least ``min_transmittance``, and the opacity differs by
-less than ``min_transmittance``. No Python loop over rays: one over the segments of the
-longest ray.
+less than ``min_transmittance``. Before each segment a ray in an empty cell jumps ahead
+over the steps that lie within the empty cells around it (``hops`` times; the distance to
+the nearest occupied cell, :meth:`~renderer.sampler.OccupancyGrid.empty_distance`): the
+same samples are evaluated, from fewer occupancy lookups. No Python loop over rays: one
+over the segments of the longest ray.
 """
 
 from __future__ import annotations
@@ -49,12 +52,14 @@ def march_until_opaque(
     min_transmittance: float,
     weight_threshold: float,
     chunk: int = 16,
+    hops: int = 2,
 ) -> Marched:
     """March rays [num_rays, 3] (unit directions) through ``aabb`` at ``step_m`` (the
     steps of :func:`~renderer.sampler.sample_along_rays` without perturbation), evaluating
     ``density(points [n, 3]) -> sigma [n]`` only at steps in occupied cells, inside the
     occupied cells' box, on rays whose transmittance is at least ``min_transmittance``
-    (in (0, 1)); samples whose weight is at most ``weight_threshold`` are dropped."""
+    (in (0, 1)); samples whose weight is at most ``weight_threshold`` are dropped. ``hops``:
+    jumps over empty cells before each segment (0: none)."""
     if not 0 < min_transmittance < 1:
         raise ValueError(f"min_transmittance must be in (0, 1), got {min_transmittance}")
     num_rays = origins.shape[0]
@@ -69,7 +74,15 @@ def march_until_opaque(
     live = (t_far > t_near).nonzero()[:, 0]
     offsets = torch.arange(chunk, dtype=torch.float32) * step_m
     kept: list[tuple[Tensor, Tensor, Tensor]] = []
+    skip = _Skipper(origins, directions, occupancy, step_m) if hops else None
     while live.numel():
+        if skip is not None:
+            for _ in range(hops):
+                start.index_add_(0, live, skip.steps(live, start.index_select(0, live)))
+            inside = start.index_select(0, live) < t_far.index_select(0, live).double()
+            live = live.index_select(0, inside.nonzero()[:, 0])
+            if not live.numel():
+                break
         t = (start.index_select(0, live).float()[:, None] + offsets).reshape(-1)
         rays = live.repeat_interleave(chunk)
         # steps past the box are dropped with the empty cells (outside: none occupied)
@@ -100,6 +113,37 @@ def march_until_opaque(
         (-torch.expm1(-depth)).float(),
         evaluated,
     )
+
+
+class _Skipper:
+    """How far each ray can jump ahead through empty cells: from a point in a cell at
+    distance k (:meth:`OccupancyGrid.empty_distance`), every point within k - 1 cells along
+    each axis is in an empty cell, so the ray may pass the steps within that reach."""
+
+    def __init__(
+        self, origins: Tensor, directions: Tensor, occupancy: OccupancyGrid, step_m: float
+    ):
+        nx, ny, nz = occupancy.cells
+        self.size = torch.tensor([nx, ny, nz], dtype=torch.float32)
+        scale = self.size / (occupancy.aabb[1] - occupancy.aabb[0])
+        self.oc = ((origins - occupancy.aabb[0]) * scale).double()  # [num_rays, 3] in cells
+        self.dc = (directions * scale).double()
+        # steps along the ray per cell of travel in its fastest axis
+        self.reach = 1.0 / self.dc.abs().amax(1) / step_m  # [num_rays]
+        self.dist = occupancy.empty_distance().reshape(-1).double()
+        self.strides = torch.tensor([1, nx, nx * ny], dtype=torch.float64)
+        self.step_m = step_m
+
+    def steps(self, live: Tensor, t: Tensor) -> Tensor:
+        """Metres [n] float64 each ray of ``live`` can advance from ``t`` [n] float64 (a step
+        of its lattice) to a later step, every step passed lying in an empty cell. A point
+        outside the grid is taken at its nearest cell: it can reach no cell that one could
+        not."""
+        c = self.oc.index_select(0, live) + t[:, None] * self.dc.index_select(0, live)
+        c = torch.minimum(c.floor_().clamp_min_(0.0), (self.size - 1).double())
+        k = self.dist.index_select(0, (c @ self.strides).long())
+        n = torch.where(k > 0, torch.floor((k - 1) * self.reach.index_select(0, live)) + 1, 0.0)
+        return n * self.step_m
 
 
 def _empty() -> tuple[Tensor, Tensor, Tensor]:

@@ -1,5 +1,6 @@
-"""Full-resolution rays of the field itself where the feature renderer's low-resolution pass
-is unsure: :func:`edge_mask` picks the pixels, :func:`field_colours` renders them.
+"""The field's own render of rays, each ended once opaque (:func:`field_colours`): whole views
+for the full renderer and the teachers (:func:`field_views`), and full-resolution rays where
+the feature renderer's low-resolution pass is unsure (:func:`edge_mask` picks the pixels).
 
 The feature renderer decodes a view from a pass at a fraction of its resolution. Away from
 edges that is close to the full render; on a silhouette or a thin part (a pixel the pass
@@ -15,10 +16,39 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from renderer.cameras import Intrinsics
+from renderer.cameras import Intrinsics, camera_rays
 from renderer.march import march_until_opaque
 from renderer.model import RadianceField
 from renderer.volume import packed_sum
+
+FULL_MIN_TRANSMITTANCE = 1e-3
+"""Whole views (:func:`field_views`) end a ray once its transmittance is below this and read
+the colour only at samples whose weight is above a tenth of it (early ray termination and
+DVGO's ``fast_color_thres``, as deployed volume renderers do): the image of
+:func:`~renderer.model.render_views`, which evaluates every sample, to within about this."""
+
+FULL_RAYS_PER_CALL = 1 << 16
+"""Rays :func:`field_views` marches together (at least one view): few calls for small views,
+bounded memory for large ones."""
+
+
+def field_views(
+    model: RadianceField,
+    poses: Tensor,
+    intrinsics: Intrinsics,
+    min_transmittance: float = FULL_MIN_TRANSMITTANCE,
+) -> Tensor:
+    """Whole views [num_views, height, width, 3] of poses [num_views, 4, 4] rendered by
+    :func:`field_colours`, a few views per call (:data:`FULL_RAYS_PER_CALL`)."""
+    h, w = intrinsics.height, intrinsics.width
+    per_call = max(1, FULL_RAYS_PER_CALL // (h * w))
+    out = [torch.zeros(0, h, w, 3)]
+    for i in range(0, poses.shape[0], per_call):
+        o, d = camera_rays(poses[i : i + per_call], intrinsics)
+        mt = min_transmittance
+        rgb = field_colours(model, o.reshape(-1, 3), d.reshape(-1, 3), mt, mt / 10)
+        out.append(rgb.reshape(-1, h, w, 3))
+    return torch.cat(out)
 
 
 def edge_mask(

@@ -23,11 +23,13 @@ from renderer.dataset import Dataset
 from renderer.feature_config import FeatureConfig
 from renderer.features import train_features
 from renderer.metrics import image_metrics
-from renderer.model import RadianceField, render_views
+from renderer.model import RadianceField
+from renderer.refine import FULL_MIN_TRANSMITTANCE, field_views
 
 
 class FullRenderer:
-    """Volume rendering of every pixel at the field's own marching step (eq. 4)."""
+    """Volume rendering of every pixel at the field's own marching step (eq. 4), each ray
+    ended once opaque (:func:`~renderer.refine.field_views`)."""
 
     name = "full"
 
@@ -35,13 +37,17 @@ class FullRenderer:
         self.model = model
 
     def settings(self) -> dict:
-        return {"renderer": self.name, "step_m": self.model.step_m}
+        return {
+            "renderer": self.name,
+            "step_m": self.model.step_m,
+            "min_transmittance": FULL_MIN_TRANSMITTANCE,
+        }
 
     @torch.no_grad()
     def render_path(self, poses: Tensor, intrinsics: Intrinsics) -> dict:
         """{"rgb": [num_views, height, width, 3] float32, "seconds_per_view": float}."""
         t0 = time.perf_counter()
-        rgb = render_views(self.model, poses, intrinsics)["rgb"]
+        rgb = field_views(self.model, poses, intrinsics)
         seconds = (time.perf_counter() - t0) / max(poses.shape[0], 1)
         return {"rgb": rgb, "seconds_per_view": seconds}
 

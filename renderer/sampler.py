@@ -207,6 +207,25 @@ class OccupancyGrid(nn.Module):
         box = torch.stack([self.aabb[0] + lo * size, self.aabb[0] + hi * size])
         return torch.stack([box[0].maximum(self.aabb[0]), box[1].minimum(self.aabb[1])])
 
+    @torch.no_grad()
+    def empty_distance(self, cap: int = 16) -> Tensor:
+        """Chebyshev distance in cells from each cell to the nearest occupied one, at most
+        ``cap`` (>= 1): [z, y, x] float32, 0 in occupied cells. Every cell within ``k - 1``
+        cells (in each axis) of a cell at distance ``k`` is empty. Cached until
+        :attr:`occupied` changes."""
+        key = (self.occupied.data_ptr(), self.occupied._version, cap)
+        cached = getattr(self, "_distance", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        dist = torch.full(self.occupied.shape, float(cap))
+        reached = self.occupied.float()[None, None]
+        dist[self.occupied] = 0.0
+        for k in range(1, cap):
+            reached = F.max_pool3d(reached, kernel_size=3, stride=1, padding=1)
+            dist[(reached[0, 0] > 0) & (dist == cap)] = float(k)
+        self._distance = (key, dist)
+        return dist
+
     def query(self, points: Tensor) -> Tensor:
         """Whether each point lies in an occupied cell: points [n, 3] -> [n] bool
         (False outside the box). The same lookup as :meth:`query_along`, with each point

@@ -8,7 +8,8 @@ from torch import Tensor
 
 from renderer.cameras import Intrinsics
 from renderer.feature_renderer import LowResPass
-from renderer.model import RadianceField, render_views
+from renderer.model import RadianceField
+from renderer.refine import field_views
 
 PASS_BATCH_VIEWS = 8
 """Views whose low-resolution passes :class:`TeacherPool` computes in one call."""
@@ -58,7 +59,7 @@ class TeacherPool:
         if count <= 0:
             return
         cams = torch.arange(self.rendered, self.rendered + count)
-        rgb = render_views(self.model, self.poses[cams], self.intrinsics)["rgb"]
+        rgb = field_views(self.model, self.poses[cams], self.intrinsics)
         slots = cams % self.capacity
         self.images[slots] = (rgb.clamp(0, 1) * 255).round().to(torch.uint8)
         self.index[slots] = cams
