@@ -27,9 +27,9 @@ the colour only at samples whose weight is above a tenth of it (early ray termin
 DVGO's ``fast_color_thres``, as deployed volume renderers do): the image of
 :func:`~renderer.model.render_views`, which evaluates every sample, to within about this."""
 
-FULL_RAYS_PER_CALL = 1 << 16
-"""Rays :func:`field_views` marches together (at least one view): few calls for small views,
-bounded memory for large ones."""
+FULL_RAYS_PER_CALL = 1 << 15
+"""Rays :func:`field_views` marches together: few calls for small views, and bounded
+memory for large ones (a 400 px view is split; one march of all its rays is slower)."""
 
 
 def field_views(
@@ -39,16 +39,18 @@ def field_views(
     min_transmittance: float = FULL_MIN_TRANSMITTANCE,
 ) -> Tensor:
     """Whole views [num_views, height, width, 3] of poses [num_views, 4, 4] rendered by
-    :func:`field_colours`, a few views per call (:data:`FULL_RAYS_PER_CALL`)."""
+    :func:`field_colours`, :data:`FULL_RAYS_PER_CALL` rays at a time."""
     h, w = intrinsics.height, intrinsics.width
-    per_call = max(1, FULL_RAYS_PER_CALL // (h * w))
-    out = [torch.zeros(0, h, w, 3)]
-    for i in range(0, poses.shape[0], per_call):
-        o, d = camera_rays(poses[i : i + per_call], intrinsics)
-        mt = min_transmittance
-        rgb = field_colours(model, o.reshape(-1, 3), d.reshape(-1, 3), mt, mt / 10)
-        out.append(rgb.reshape(-1, h, w, 3))
-    return torch.cat(out)
+    views = max(1, FULL_RAYS_PER_CALL // (h * w))
+    out = [torch.zeros(0, 3)]
+    mt = min_transmittance
+    for i in range(0, poses.shape[0], views):
+        o, d = camera_rays(poses[i : i + views], intrinsics)
+        o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+        for j in range(0, o.shape[0], FULL_RAYS_PER_CALL):
+            part = slice(j, j + FULL_RAYS_PER_CALL)
+            out.append(field_colours(model, o[part], d[part], mt, mt / 10))
+    return torch.cat(out).reshape(-1, h, w, 3)
 
 
 def edge_mask(
