@@ -37,9 +37,11 @@ def field_views(
     poses: Tensor,
     intrinsics: Intrinsics,
     min_transmittance: float = FULL_MIN_TRANSMITTANCE,
+    step_m: float | None = None,
 ) -> Tensor:
     """Whole views [num_views, height, width, 3] of poses [num_views, 4, 4] rendered by
-    :func:`field_colours`, :data:`FULL_RAYS_PER_CALL` rays at a time."""
+    :func:`field_colours` (at ``step_m``, default the field's own), :data:`FULL_RAYS_PER_CALL`
+    rays at a time."""
     h, w = intrinsics.height, intrinsics.width
     views = max(1, FULL_RAYS_PER_CALL // (h * w))
     out = [torch.zeros(0, 3)]
@@ -49,7 +51,7 @@ def field_views(
         o, d = o.reshape(-1, 3), d.reshape(-1, 3)
         for j in range(0, o.shape[0], FULL_RAYS_PER_CALL):
             part = slice(j, j + FULL_RAYS_PER_CALL)
-            out.append(field_colours(model, o[part], d[part], mt, mt / 10))
+            out.append(field_colours(model, o[part], d[part], mt, mt / 10, step_m))
     return torch.cat(out).reshape(-1, h, w, 3)
 
 
@@ -113,15 +115,16 @@ def field_colours(
     directions: Tensor,
     min_transmittance: float = 1e-4,
     weight_threshold: float = 1e-5,
+    step_m: float | None = None,
 ) -> Tensor:
-    """The field's colour [num_rays, 3] along rays [num_rays, 3] (unit directions) at its
-    own marching step, as :func:`~renderer.model.render_views` renders it to within about
+    """The field's colour [num_rays, 3] along rays [num_rays, 3] (unit directions) at
+    ``step_m`` (default its own marching step), as :func:`~renderer.model.render_views` renders it to within about
     ``min_transmittance`` plus the weights dropped below ``weight_threshold``."""
     run = march_until_opaque(
         origins,
         directions,
         model.aabb,
-        model.step_m,
+        step_m or model.step_m,
         model.occupancy,
         model.field.density,
         min_transmittance,
