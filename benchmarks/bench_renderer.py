@@ -54,11 +54,11 @@ from renderer import (
     TrainConfig,
     break_even_views,
     evaluate,
-    field_views,
     image_metrics,
     load_dataset,
     load_model,
     make_renderer,
+    render_views,
     train,
 )
 
@@ -160,17 +160,18 @@ def _timed(fn, poses: torch.Tensor) -> tuple[torch.Tensor, float]:
 
 
 def _alternatives(model, path, intr, truth) -> dict:
-    """The cheap alternatives' (seconds per view, PSNR) curves along the path, rendered as
-    the full render renders (rays ended once opaque, :func:`renderer.field_views`)."""
+    """The cheap alternatives' (seconds per view, PSNR) curves along the path."""
     coarse, half = [], []
     for f in COARSE_STEPS:
-        rgb, spv = _timed(lambda p, f=f: field_views(model, p, intr, step_m=model.step_m * f), path)
+        rgb, spv = _timed(
+            lambda p, f=f: render_views(model, p, intr, step_m=model.step_m * f)["rgb"], path
+        )
         coarse.append({"step_factor": f, "seconds_per_view": spv, "psnr": _psnr(rgb, truth)})
     lo_h, lo_w = -(-intr.height // 2), -(-intr.width // 2)
     for f in HALF_RES_STEPS:
 
         def half_res(p, f=f):
-            low = field_views(model, p, intr.resized(lo_h, lo_w), step_m=model.step_m * f)
+            low = render_views(model, p, intr, lo_h, lo_w, step_m=model.step_m * f)["rgb"]
             up = F.interpolate(
                 low.permute(0, 3, 1, 2),
                 size=(intr.height, intr.width),

@@ -76,7 +76,6 @@ from renderer.lpips_weights import lpips_weights_path
 from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
 from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
-from renderer.refine import FULL_MIN_TRANSMITTANCE, field_views
 from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.teacher_cameras import stored_cameras
@@ -99,7 +98,6 @@ __all__ = [
     "break_even_views",
     "pose_problem",
     "FIELDS",
-    "FULL_MIN_TRANSMITTANCE",
     "LPIPS_MIN_SIDE_PX",
     "RENDERERS",
     "Dataset",
@@ -122,7 +120,6 @@ __all__ = [
     "default_aabb",
     "evaluate",
     "expected_depth",
-    "field_views",
     "image_metrics",
     "intersect_aabb",
     "load_dataset",

@@ -16,9 +16,10 @@ from renderer.fields import GridField, MLPField
 from renderer.sampler import OccupancyGrid, RaySamples, sample_along_rays
 from renderer.volume import normalized_depth, packed_render, packed_sum, packed_weights
 
-TRAIN_COLOR_WEIGHT_MIN = 1e-4
-"""In training mode a grid field's colour is read only at samples whose eq. 4 weight is
-above this (see :meth:`RadianceField.render_rays`)."""
+COLOR_WEIGHT_MIN = 1e-4
+"""A grid field's colour is read only at samples whose eq. 4 weight is above this (DVGO's
+``fast_color_thres``; see :meth:`RadianceField.render_rays`): behind an opaque surface and in
+thin fog a sample moves its pixel by less than that."""
 
 
 class RadianceField(nn.Module):
@@ -60,8 +61,8 @@ class RadianceField(nn.Module):
         Returns:
             dict: ``rgb`` [num_rays, 3], ``opacity`` [num_rays], ``depth`` [num_rays]
             (expected depth sum w t, m), ``num_samples`` (int, samples evaluated).
-            In training mode a grid field's colour counts only at samples with weight
-            above ``TRAIN_COLOR_WEIGHT_MIN``; in eval mode every sample counts.
+            A grid field's colour counts only at samples with weight above
+            ``COLOR_WEIGHT_MIN`` (the density at every sample).
         """
         outs = []
         total = 0
@@ -70,7 +71,7 @@ class RadianceField(nn.Module):
             s = sample_along_rays(
                 o, d, self.aabb, step_m or self.step_m, self.occupancy, perturb, generator
             )
-            if self.training and isinstance(self.field, GridField):
+            if isinstance(self.field, GridField):
                 outs.append(self._render_skipping_color(s, o.shape[0]))
             else:
                 sigma, rgb = self.field(s.positions, s.directions)
@@ -86,14 +87,14 @@ class RadianceField(nn.Module):
 
     def _render_skipping_color(self, s: RaySamples, num_rays: int) -> dict[str, Tensor]:
         """:func:`packed_render` of a grid field's samples with the colour read only where
-        the eq. 4 weight exceeds ``TRAIN_COLOR_WEIGHT_MIN`` (DVGO's ``fast_color_thres``):
+        the eq. 4 weight exceeds ``COLOR_WEIGHT_MIN`` (DVGO's ``fast_color_thres``):
         behind a surface or in thin fog a sample's colour moves the pixel by less than
-        that, and skipping its read and backward makes a training step cheaper. Opacity
-        and depth use every sample."""
+        that, and skipping its read (and in training its backward) makes a render and a
+        training step cheaper. Opacity and depth use every sample."""
         c = self.field.corners(s.positions)
         sigma = self.field.sigma_at(c)
         w, _ = packed_weights(sigma, s.deltas, s.ray_indices, num_rays)
-        keep = (w.detach() > TRAIN_COLOR_WEIGHT_MIN).nonzero()[:, 0]
+        keep = (w.detach() > COLOR_WEIGHT_MIN).nonzero()[:, 0]
         index, tri = c
         kept = (index.view(-1, 8).index_select(0, keep).reshape(-1), tri.index_select(0, keep))
         rgb = self.field.color_at(kept, s.directions.index_select(0, keep))

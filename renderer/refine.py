@@ -1,6 +1,5 @@
-"""The field's own render of rays, each ended once opaque (:func:`field_colours`): whole views
-for the full renderer and the teachers (:func:`field_views`), and full-resolution rays where
-the feature renderer's low-resolution pass is unsure (:func:`edge_mask` picks the pixels).
+"""Full-resolution rays of the field itself where the feature renderer's low-resolution pass
+is unsure: :func:`edge_mask` picks the pixels, :func:`field_colours` renders them.
 
 The feature renderer decodes a view from a pass at a fraction of its resolution. Away from
 edges that is close to the full render; on a silhouette or a thin part (a pixel the pass
@@ -16,43 +15,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from renderer.cameras import Intrinsics, camera_rays
+from renderer.cameras import Intrinsics
 from renderer.march import march_until_opaque
 from renderer.model import RadianceField
 from renderer.volume import packed_sum
-
-FULL_MIN_TRANSMITTANCE = 1e-3
-"""Whole views (:func:`field_views`) end a ray once its transmittance is below this and read
-the colour only at samples whose weight is above a tenth of it (early ray termination and
-DVGO's ``fast_color_thres``, as deployed volume renderers do): the image of
-:func:`~renderer.model.render_views`, which evaluates every sample, to within about this."""
-
-FULL_RAYS_PER_CALL = 1 << 15
-"""Rays :func:`field_views` marches together: few calls for small views, and bounded
-memory for large ones (a 400 px view is split; one march of all its rays is slower)."""
-
-
-def field_views(
-    model: RadianceField,
-    poses: Tensor,
-    intrinsics: Intrinsics,
-    min_transmittance: float = FULL_MIN_TRANSMITTANCE,
-    step_m: float | None = None,
-) -> Tensor:
-    """Whole views [num_views, height, width, 3] of poses [num_views, 4, 4] rendered by
-    :func:`field_colours` (at ``step_m``, default the field's own), :data:`FULL_RAYS_PER_CALL`
-    rays at a time."""
-    h, w = intrinsics.height, intrinsics.width
-    views = max(1, FULL_RAYS_PER_CALL // (h * w))
-    out = [torch.zeros(0, 3)]
-    mt = min_transmittance
-    for i in range(0, poses.shape[0], views):
-        o, d = camera_rays(poses[i : i + views], intrinsics)
-        o, d = o.reshape(-1, 3), d.reshape(-1, 3)
-        for j in range(0, o.shape[0], FULL_RAYS_PER_CALL):
-            part = slice(j, j + FULL_RAYS_PER_CALL)
-            out.append(field_colours(model, o[part], d[part], mt, mt / 10, step_m))
-    return torch.cat(out).reshape(-1, h, w, 3)
 
 
 def edge_mask(
@@ -115,16 +81,15 @@ def field_colours(
     directions: Tensor,
     min_transmittance: float = 1e-4,
     weight_threshold: float = 1e-5,
-    step_m: float | None = None,
 ) -> Tensor:
-    """The field's colour [num_rays, 3] along rays [num_rays, 3] (unit directions) at
-    ``step_m`` (default its own marching step), as :func:`~renderer.model.render_views` renders it to within about
+    """The field's colour [num_rays, 3] along rays [num_rays, 3] (unit directions) at its
+    own marching step, as :func:`~renderer.model.render_views` renders it to within about
     ``min_transmittance`` plus the weights dropped below ``weight_threshold``."""
     run = march_until_opaque(
         origins,
         directions,
         model.aabb,
-        step_m or model.step_m,
+        model.step_m,
         model.occupancy,
         model.field.density,
         min_transmittance,

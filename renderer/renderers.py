@@ -23,13 +23,12 @@ from renderer.dataset import Dataset
 from renderer.feature_config import FeatureConfig
 from renderer.features import train_features
 from renderer.metrics import image_metrics
-from renderer.model import RadianceField
-from renderer.refine import FULL_MIN_TRANSMITTANCE, field_views
+from renderer.model import RadianceField, render_views
 
 
 class FullRenderer:
-    """Volume rendering of every pixel at the field's own marching step (eq. 4), each ray
-    ended once opaque (:func:`~renderer.refine.field_views`)."""
+    """Volume rendering of every pixel at the field's own marching step (eq. 4), a grid
+    field's colour read only where it counts (:func:`~renderer.model.render_views`)."""
 
     name = "full"
 
@@ -37,17 +36,13 @@ class FullRenderer:
         self.model = model
 
     def settings(self) -> dict:
-        return {
-            "renderer": self.name,
-            "step_m": self.model.step_m,
-            "min_transmittance": FULL_MIN_TRANSMITTANCE,
-        }
+        return {"renderer": self.name, "step_m": self.model.step_m}
 
     @torch.no_grad()
     def render_path(self, poses: Tensor, intrinsics: Intrinsics) -> dict:
         """{"rgb": [num_views, height, width, 3] float32, "seconds_per_view": float}."""
         t0 = time.perf_counter()
-        rgb = field_views(self.model, poses, intrinsics)
+        rgb = render_views(self.model, poses, intrinsics)["rgb"]
         seconds = (time.perf_counter() - t0) / max(poses.shape[0], 1)
         return {"rgb": rgb, "seconds_per_view": seconds}
 

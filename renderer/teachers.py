@@ -8,8 +8,7 @@ from torch import Tensor
 
 from renderer.cameras import Intrinsics
 from renderer.feature_renderer import LowResPass
-from renderer.model import RadianceField
-from renderer.refine import field_views
+from renderer.model import RadianceField, render_views
 
 PASS_BATCH_VIEWS = 8
 """Views whose low-resolution passes :class:`TeacherPool` computes in one call."""
@@ -59,7 +58,7 @@ class TeacherPool:
         if count <= 0:
             return
         cams = torch.arange(self.rendered, self.rendered + count)
-        rgb = field_views(self.model, self.poses[cams], self.intrinsics)
+        rgb = render_views(self.model, self.poses[cams], self.intrinsics)["rgb"]
         slots = cams % self.capacity
         self.images[slots] = (rgb.clamp(0, 1) * 255).round().to(torch.uint8)
         self.index[slots] = cams

@@ -89,11 +89,11 @@ def test_empty_field_renders_the_background():
     assert torch.equal(out2["rgb"], torch.tensor(bg).expand(1, 16, 16, 3))
 
 
-def test_training_renders_skip_only_the_colour_of_negligible_samples():
-    """In training mode a grid field's colour is read only where the weight exceeds
-    TRAIN_COLOR_WEIGHT_MIN: the same as eq. 4 with those samples' colours set to zero
-    (their weights still count in opacity and depth); eval mode uses every sample."""
-    from renderer.model import TRAIN_COLOR_WEIGHT_MIN
+def test_renders_skip_only_the_colour_of_negligible_samples():
+    """In training and eval mode a grid field's colour is read only where the weight
+    exceeds COLOR_WEIGHT_MIN: the same as eq. 4 with those samples' colours set to zero
+    (their weights still count in opacity and depth)."""
+    from renderer.model import COLOR_WEIGHT_MIN
     from renderer.sampler import sample_along_rays
 
     g = torch.Generator().manual_seed(3)
@@ -113,13 +113,14 @@ def test_training_renders_skip_only_the_colour_of_negligible_samples():
     s = sample_along_rays(origins, dirs, aabb, 0.1, occ)
     sigma, rgb = field(s.positions, s.directions)
     full = packed_render(sigma, rgb, s.t, s.deltas, s.ray_indices, 16, bg)
-    small = full["weights"] <= TRAIN_COLOR_WEIGHT_MIN
+    small = full["weights"] <= COLOR_WEIGHT_MIN
     assert 0 < int(small.sum()) < small.numel()  # the case is exercised
     expected = packed_render(sigma, rgb * ~small[:, None], s.t, s.deltas, s.ray_indices, 16, bg)
-    model.train()
-    out = model.render_rays(origins, dirs)
-    assert torch.allclose(out["rgb"], expected["rgb"], atol=1e-6)
-    assert torch.allclose(out["opacity"], full["opacity"], atol=1e-6)
-    assert torch.allclose(out["depth"], full["depth"], atol=1e-6)
-    model.eval()
-    assert torch.allclose(model.render_rays(origins, dirs)["rgb"], full["rgb"], atol=1e-6)
+    for mode in (True, False):
+        model.train(mode)
+        with torch.set_grad_enabled(mode):
+            out = model.render_rays(origins, dirs)
+        assert torch.allclose(out["rgb"], expected["rgb"], atol=1e-6)
+        assert torch.allclose(out["opacity"], full["opacity"], atol=1e-6)
+        assert torch.allclose(out["depth"], full["depth"], atol=1e-6)
+    assert not torch.allclose(out["rgb"], full["rgb"], atol=1e-6)  # skipping changed it
