@@ -188,8 +188,8 @@ density, a few hundred teachers all held at once, and a budget of CPU seconds (u
 minutes with the baking and the final trims), batches of two views (twice the steps of four
 in the same budget), half of each drawn where the error is, and each sample's colour
 composited as the field composites it, at a finer marching step paid for by ending each ray
-of the low-resolution pass once it is opaque; from 300 px the same, at the default step
-(rays still ended once opaque), within nine CPU-minutes (each teacher a full render at that size), a
-third-width pass, a feature grid at three quarters of the field's vertices per axis and half
-the pass cache (beside the cache, the grid with its gradient and two Adam moments dominates
+of the low-resolution pass once it is opaque; from 300 px the same (rays still ended once
+opaque), at the default step, within nine CPU-minutes (each teacher a full render at that
+size), a third-width pass, a feature grid at three quarters of the field's vertices per axis
+and half the pass cache (beside the cache, the grid with its gradient and two Adam moments dominates
 setup memory at these sizes). Measured on lego's test path (docs/renderer.md)."""
