@@ -123,25 +123,20 @@ class _Skipper:
     def __init__(
         self, origins: Tensor, directions: Tensor, occupancy: OccupancyGrid, step_m: float
     ):
-        nx, ny, nz = occupancy.cells
-        self.size = torch.tensor([nx, ny, nz], dtype=torch.float32)
-        scale = self.size / (occupancy.aabb[1] - occupancy.aabb[0])
-        self.oc = ((origins - occupancy.aabb[0]) * scale).double()  # [num_rays, 3] in cells
-        self.dc = (directions * scale).double()
-        # steps along the ray per cell of travel in its fastest axis
-        self.reach = 1.0 / self.dc.abs().amax(1) / step_m  # [num_rays]
+        self.occupancy = occupancy
+        self.rays = occupancy.rays_in_cells(origins, directions)
+        # steps along the ray per cell of travel in its fastest axis: [num_rays]
+        self.reach = 1.0 / (self.rays[1].abs().amax(0).double() * step_m)
         self.dist = occupancy.empty_distance().reshape(-1).double()
-        self.strides = torch.tensor([1, nx, nx * ny], dtype=torch.float64)
         self.step_m = step_m
 
     def steps(self, live: Tensor, t: Tensor) -> Tensor:
         """Metres [n] float64 each ray of ``live`` can advance from ``t`` [n] float64 (a step
-        of its lattice) to a later step, every step passed lying in an empty cell. A point
-        outside the grid is taken at its nearest cell: it can reach no cell that one could
-        not."""
-        c = self.oc.index_select(0, live) + t[:, None] * self.dc.index_select(0, live)
-        c = torch.minimum(c.floor_().clamp_min_(0.0), (self.size - 1).double())
-        k = self.dist.index_select(0, (c @ self.strides).long())
+        of its lattice, looked up in the cell its segment's first sample falls in) to a
+        later step, every step passed lying in an empty cell. A point outside the grid is
+        taken at its nearest cell: it can reach no cell that one could not."""
+        cell, _ = self.occupancy.cells_along(self.rays, live, t.float(), inside_only=True)
+        k = self.dist.index_select(0, cell)
         n = torch.where(k > 0, torch.floor((k - 1) * self.reach.index_select(0, live)) + 1, 0.0)
         return n * self.step_m
 

@@ -236,28 +236,43 @@ class OccupancyGrid(nn.Module):
         )
         return torch.zeros(n, dtype=torch.bool).index_fill_(0, keep, True)
 
+    def rays_in_cells(self, origins: Tensor, directions: Tensor) -> tuple[Tensor, Tensor]:
+        """Rays [num_rays, 3] moved into cell units, for :meth:`cells_along`: (origins,
+        directions), [3, num_rays] each."""
+        nx, ny, nz = self.cells
+        scale = torch.tensor([nx, ny, nz], dtype=torch.float32) / (self.aabb[1] - self.aabb[0])
+        oc = ((origins - self.aabb[0]) * scale).t().contiguous()
+        return oc, (directions * scale).t().contiguous()
+
+    def cells_along(
+        self, rays: tuple[Tensor, Tensor], ray_idx: Tensor, t: Tensor, inside_only: bool
+    ) -> tuple[Tensor, Tensor | None]:
+        """The cells of the points at ``t`` along ``rays[ray_idx]`` (:meth:`rays_in_cells`;
+        the points are never formed in world units): (flat (z, y, x) indices [n] int64,
+        clamped into the grid; whether each point lies in the box [n] bool, or None with
+        ``inside_only``: the caller guarantees every point lies in the box, up to rounding,
+        which the clamp absorbs)."""
+        nx, ny, nz = self.cells
+        oc, dc = rays
+        flat, inside = None, None
+        for a, (n, stride) in enumerate(((nx, 1.0), (ny, float(nx)), (nz, float(nx * ny)))):
+            c = torch.addcmul(oc[a].index_select(0, ray_idx), t, dc[a].index_select(0, ray_idx))
+            if not inside_only:
+                ok = (c >= 0) & (c <= n)
+                inside = ok if inside is None else inside & ok
+            c = c.floor_().clamp_(0.0, float(n - 1))
+            flat = c.mul_(stride) if flat is None else flat.add_(c, alpha=stride)
+        assert flat is not None
+        return flat.long(), inside  # exact below 2^24 cells
+
     def query_along(
         self, origins: Tensor, directions: Tensor, ray_idx: Tensor, t: Tensor, inside_only: bool
     ) -> Tensor:
         """Indices of the points ``origins[ray_idx] + t * directions[ray_idx]`` that lie in
-        occupied cells: [k] int64. The points are never formed in world units: each ray is
-        moved into cell units once. ``inside_only``: the caller guarantees every point lies
-        in the box (up to rounding, which the clamp absorbs), so the box test is skipped.
-        """
-        nx, ny, nz = self.cells
-        size = torch.tensor([nx, ny, nz], dtype=torch.float32)
-        scale = size / (self.aabb[1] - self.aabb[0])
-        oc = ((origins - self.aabb[0]) * scale).t().contiguous()  # [3, num_rays] in cells
-        dc = (directions * scale).t().contiguous()
-        flat, inside = None, None
-        for a, stride in enumerate((1.0, float(nx), float(nx * ny))):
-            c = torch.addcmul(oc[a].index_select(0, ray_idx), t, dc[a].index_select(0, ray_idx))
-            if not inside_only:
-                ok = (c >= 0) & (c <= size[a])
-                inside = ok if inside is None else inside & ok
-            c = c.floor_().clamp_(0.0, float(size[a] - 1))
-            flat = c.mul_(stride) if flat is None else flat.add_(c, alpha=stride)
-        occ = self.occupied.reshape(-1).index_select(0, flat.long())  # exact below 2^24 cells
+        occupied cells: [k] int64 (:meth:`cells_along`; ``inside_only`` as there)."""
+        rays = self.rays_in_cells(origins, directions)
+        flat, inside = self.cells_along(rays, ray_idx, t, inside_only)
+        occ = self.occupied.reshape(-1).index_select(0, flat)
         if inside is not None:
             occ &= inside
         return occ.nonzero()[:, 0]
