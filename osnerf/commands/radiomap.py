@@ -25,6 +25,8 @@ from osnerf.commands import args as checks
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from osnerf.scenes import RADIUS_SCALE_RANGE, RenderConfig
+
     p.add_argument("--scene", default=None, help="built-in scene (default: the default scene)")
     p.add_argument(
         "--demand",
@@ -66,10 +68,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--ring-scale",
-        type=checks.number(1.0, 10.0),
-        default=1.25,
+        type=checks.number(*RADIUS_SCALE_RANGE),
+        default=RenderConfig.radius_scale,
         help="the drones' ring radius over the radius that just fits the demanded objects in "
-        "view, in [1, 10] (osnerf run --ring-scale) (default: 1.25)",
+        "view, in [{:g}, {:g}] (osnerf run --ring-scale) (default: {:g})".format(
+            *RADIUS_SCALE_RANGE, RenderConfig.radius_scale
+        ),
     )
     p.add_argument("--seed", type=checks.seed, default=42, help="ray sampler seed (default: 42)")
     p.add_argument("--out", required=True, help="DIR for radiomap.png, .npz and .json")

@@ -87,10 +87,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import OTA_AIRS
     from osnerf.run.config import (
         DRONE_SPEED_RANGE_M_S,
-        RING_SCALE_RANGE,
         RUN_CHANNELS,
         RunConfig,
     )
+    from osnerf.scenes import RADIUS_SCALE_RANGE
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
@@ -117,7 +117,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "layer_fusion": checks.number(1.0, 1000.0),
             "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
             "ground_station_m": checks.ground_station,
-            "ring_scale": checks.number(*RING_SCALE_RANGE),
+            "ring_scale": checks.number(*RADIUS_SCALE_RANGE),
             "max_views": checks.count(1, 512),
         },
         choices={

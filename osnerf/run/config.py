@@ -12,7 +12,13 @@ import phy
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
 from osnerf.ota_link import OTA_AIRS
-from osnerf.scenes import DEFAULT_SCENE, RenderConfig, check_demand, get_scene
+from osnerf.scenes import (
+    DEFAULT_SCENE,
+    RADIUS_SCALE_RANGE,
+    RenderConfig,
+    check_demand,
+    get_scene,
+)
 from osnerf.schemes import DEFAULT_SCHEMES
 
 OTA = "ota"
@@ -22,7 +28,6 @@ raytraced per drone position) plus the over-the-air link."""
 DRONE_SPEED_RANGE_M_S = (0.0, 100.0)
 GROUND_STATION_RANGE_M = (-10_000.0, 10_000.0)
 """Each coordinate of ``--ground-station``, metres in the scene's frame."""
-RING_SCALE_RANGE = (1.0, 10.0)
 CACHE_VERSION = 17
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
 whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
@@ -152,7 +157,7 @@ class RunConfig:
     layer_fusion: float = 4.0
     drone_speed_m_s: float = 0.0
     ground_station_m: tuple[float, float, float] | None = None
-    ring_scale: float = 1.25
+    ring_scale: float = RenderConfig.radius_scale
     view_selection: str = "sight"
     max_views: int | None = None
     csi: str | None = None
@@ -256,7 +261,7 @@ class RunConfig:
                 )
             object.__setattr__(self, "ground_station_m", xyz)  # (8, -6, 1.5): the same run
         v = self.ring_scale
-        lo, hi = RING_SCALE_RANGE
+        lo, hi = RADIUS_SCALE_RANGE
         if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
             raise ValueError(f"ring_scale must be in [{lo:g}, {hi:g}], got {v!r}")
 

@@ -2,7 +2,7 @@
 
 Public API:
     SCENES, get_scene(name) -> SceneInfo, DEFAULT_SCENE
-    RenderConfig, build_scene_dataset(scene, target, config, cache_dir) -> Path,
+    RenderConfig, RADIUS_SCALE_RANGE, build_scene_dataset(scene, target, config, cache_dir) -> Path,
     load_scene_views(folder) -> SceneViews, check_demand(scene, demand)
     drone_channels(folder, meta, positions_m, ...) -> DroneChannels (via phy.raytrace)
 """
@@ -16,6 +16,7 @@ from osnerf.scenes.cameras import (
     ring_positions,
 )
 from osnerf.scenes.dataset import (
+    RADIUS_SCALE_RANGE,
     RenderConfig,
     SceneViews,
     build_scene_dataset,
@@ -34,6 +35,7 @@ from osnerf.scenes.spec import Part, SceneGeometry, SceneInfo
 
 __all__ = [
     "DEFAULT_SCENE",
+    "RADIUS_SCALE_RANGE",
     "SCENES",
     "DroneChannels",
     "Intrinsics",

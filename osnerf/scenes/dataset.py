@@ -41,6 +41,11 @@ FORMAT_VERSION = 2
 terrain, and munich's ground station on a rooftop mast), so an older folder is rebuilt."""
 
 
+RADIUS_SCALE_RANGE = (1.0, 10.0)
+"""Allowed :attr:`RenderConfig.radius_scale` (``osnerf run --ring-scale``, ``osnerf radiomap
+--ring-scale``)."""
+
+
 @dataclass(frozen=True)
 class RenderConfig:
     """How a scene is photographed.
@@ -51,7 +56,8 @@ class RenderConfig:
         num_test_views: held-out views for scoring (never sent), 1..256.
         spp: Mitsuba samples per pixel for RGB (1..1024).
         mask_spp: rays per pixel for the exact masks (1..64).
-        radius_scale: drone ring radius / the radius that just fits the target in view (>= 1).
+        radius_scale: drone ring radius / the radius that just fits the target in view
+            (:data:`RADIUS_SCALE_RANGE`).
     """
 
     resolution_px: int = 80
@@ -72,8 +78,9 @@ class RenderConfig:
             v = getattr(self, name)
             if not isinstance(v, int) or not lo <= v <= hi:
                 raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
-        if not 1.0 <= self.radius_scale <= 10.0:
-            raise ValueError(f"radius_scale must be in [1, 10], got {self.radius_scale!r}")
+        lo, hi = RADIUS_SCALE_RANGE
+        if not lo <= self.radius_scale <= hi:
+            raise ValueError(f"radius_scale must be in [{lo:g}, {hi:g}], got {self.radius_scale!r}")
 
 
 @dataclass

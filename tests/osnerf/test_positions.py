@@ -16,6 +16,7 @@ from osnerf.cli import main
 from osnerf.commands.run import run_config
 from osnerf.run import RunConfig
 from osnerf.run.links import build_links
+from osnerf.scenes import RenderConfig
 from osnerf.sweeps import read_results
 from osnerf.sweeps.spec import command_parser, expand, spec_from_dict
 
@@ -177,6 +178,9 @@ def test_a_ground_station_on_a_channel_without_one_is_refused(tmp_path, capsys):
         RunConfig(channel="raytraced", ground_station_m=(0.0, 0.0))
     with pytest.raises(ValueError, match=r"ring_scale must be in \[1, 10\]"):
         RunConfig(ring_scale=0.9)
+    with pytest.raises(ValueError, match=r"radius_scale must be in \[1, 10\]"):
+        RenderConfig(radius_scale=10.5)
+    assert RunConfig().render_config().radius_scale == RenderConfig().radius_scale
     same = RunConfig(channel="raytraced", ground_station_m=(8, -6, 1.5))
     assert same.ground_station_m == (8.0, -6.0, 1.5)
     assert same.key() == RunConfig(channel="raytraced", ground_station_m=(8.0, -6.0, 1.5)).key()
