@@ -231,15 +231,15 @@ class GridField(nn.Module):
         """sigma (1/m) at points [num_points, 3] -> [num_points].
 
         Without gradients, one fused ``F.grid_sample`` of the single-channel grid (the
-        same trilinear read to float rounding; about 3x faster than the gathers for one
-        channel, while the gathers win from a few channels up and in the backward pass)."""
+        same trilinear read to float rounding, and faster than the gathers for one channel;
+        the gathers win from a few channels up and in the backward pass)."""
         if self.training or torch.is_grad_enabled():
             corners = trilinear_corners(self.aabb, self.density_grid.shape[2:], points)
             return self._sigma(self._read(self.density_grid, corners))
         n = points.shape[0]
         where = _normalize(points, self.aabb).view(1, n, 1, 1, 3)
         raw = F.grid_sample(self.density_grid, where, align_corners=True, padding_mode="border")
-        return F.softplus(raw.view(n) + self.density_bias)
+        return self._sigma(raw.view(n, 1))
 
     def _read(self, grid: Tensor, corners: tuple[Tensor, Tensor]) -> Tensor:
         """``grid`` at the points of ``corners``: the channel-major gathers while training or
