@@ -19,7 +19,7 @@ import numpy as np
 
 from hil import AirChannel, Emulator, air_paths
 from hil import medium as medium_module
-from hil.air import RESAMPLER_TAPS, prepare_resampler
+from hil.emulation.air import RESAMPLER_TAPS, prepare_resampler
 
 SAMPLE_RATE_HZ = 20e6
 TRANSFER = 131072  # samples of one 256 KiB USB transfer

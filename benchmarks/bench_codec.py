@@ -55,8 +55,8 @@ def _speed(codec) -> dict:
             enc = codec.encode(x, 10.0, cbr)
             codec.decode(enc.symbols, enc.meta, 10.0)
         out[f"encode_decode_images_per_s_{name}"] = shape[0] * reps / (time.perf_counter() - t)
-    from semcodec.model import make_model
-    from semcodec.training import forward_train
+    from semcodec.jscc.model import make_model
+    from semcodec.training.loop import forward_train
 
     model = make_model(codec.model.cfg.name)
     opt = torch.optim.Adam(model.parameters(), 1e-4)
@@ -280,7 +280,7 @@ def _focus(codec) -> dict:
 
     import phy
     from osnerf.paths import shared_data_dir
-    from semcodec.focus_eval import focus_gain
+    from semcodec.jscc.focus_eval import focus_gain
 
     link = phy.FlatLink(phy.make_channel("awgn"))
     recs = []

@@ -1,7 +1,7 @@
 """Codec training throughput: crops per second, 1 process x 2 threads against 2 processes x
 1 thread (``torchrun --standalone``, DDP over gloo), and 1 CUDA process where a GPU is present.
 
-Every configuration runs ``semcodec.training.train`` under torchrun in a fresh process with
+Every configuration runs ``semcodec.training.loop.train`` under torchrun in a fresh process with
 the same global batch and seed, for a fixed number of steps; throughput is
 ``steps * batch_size / training seconds``, where training seconds are the trainer's own
 step clock (the slowest rank's step time, summed; start-up, data loading and validation are
@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 DRIVER = """
 import json, sys
 from pathlib import Path
-from semcodec.training import TrainConfig, train
+from semcodec.training.loop import TrainConfig, train
 cfg, data, out = json.loads(sys.argv[1]), sys.argv[2], sys.argv[3]
 summary = train(TrainConfig(**cfg), [Path(data)], Path(out), resume=False)
 import torch.distributed as dist

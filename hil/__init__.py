@@ -23,8 +23,8 @@ May import ``phy`` only. Public names::
     HilError and subclasses
 """
 
-from hil import protocol
-from hil.air import (
+from hil.devices import DEVICES, DeviceKind, device_kind
+from hil.emulation.air import (
     AIR_SNR_DB_RANGE,
     MAX_DELAY_S,
     MAX_MULTIPATH_DELAY,
@@ -33,17 +33,19 @@ from hil.air import (
     iq_imbalance,
     quantize_ci8,
 )
-from hil.air_paths import (
+from hil.emulation.hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
+from hil.emulation.iiod import IIOD_PORT, IiodServer
+from hil.emulation.medium import Medium
+from hil.emulation.paths import (
     MAX_DOPPLER_HZ,
     MAX_PATH_DELAY_S,
     AirPath,
     PathSegment,
     segments_from_arrays,
 )
-from hil.devices import DEVICES, DeviceKind, device_kind
-from hil.emulated_hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
-from hil.emulator import Emulator, EmulatorBackend, default_serial
-from hil.emulator_process import EmulatorProcess
+from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
+from hil.emulation.process import EmulatorProcess
+from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
     DeviceNotFoundError,
     DisconnectedError,
@@ -55,21 +57,11 @@ from hil.errors import (
     TimedOutError,
     UsbTimeoutError,
 )
-from hil.hackrf import HackRF
-from hil.iio_access import find_plutos
-from hil.iiod import IIOD_PORT, IiodServer
-from hil.iq import to_int8_iq
-from hil.loopback import DirectTransport, loopback_pair, open_loopback
-from hil.medium import Medium
-from hil.ota import burst_num_samples, decode_capture, send_blocks
-from hil.ota_burst import BurstResult, FrameReport, PhyFrames
-from hil.ota_config import OtaConfig
-from hil.ota_sigmf import save_partial_capture, save_sigmf
-from hil.ota_stream import RingBuffer, StreamCounts, StreamReceiver, StreamView, build_views
-from hil.ota_stream_link import StreamRun, stream_over_the_air
-from hil.pluto import Pluto
-from hil.pluto_emulator import NETWORK_FAULTS, EmulatedPluto
-from hil.protocol import (
+from hil.hackrf import protocol
+from hil.hackrf.driver import HackRF
+from hil.hackrf.iq import to_int8_iq
+from hil.hackrf.loopback import DirectTransport, loopback_pair, open_loopback
+from hil.hackrf.protocol import (
     BOARD_IDS,
     FREQ_RANGE_HZ,
     SAMPLE_RATE_RANGE_HZ,
@@ -77,10 +69,18 @@ from hil.protocol import (
     M0State,
     usb_api_version_string,
 )
+from hil.hackrf.stream import StreamStats
+from hil.hackrf.usb_transport import find_hackrfs
+from hil.ota.burst import BurstResult, FrameReport, PhyFrames
+from hil.ota.capture import save_partial_capture, save_sigmf
+from hil.ota.config import OtaConfig
+from hil.ota.link import burst_num_samples, decode_capture, send_blocks
+from hil.ota.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
+from hil.ota.stream import RingBuffer, StreamCounts, StreamReceiver, StreamView, build_views
+from hil.ota.stream_link import StreamRun, stream_over_the_air
+from hil.pluto.driver import Pluto
+from hil.pluto.iio_access import find_plutos
 from hil.radio import Radio
-from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
-from hil.stream import StreamStats
-from hil.usb_transport import find_hackrfs
 
 __all__ = [
     "AIR_SNR_DB_RANGE",

@@ -10,7 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common import Registry
-from hil import ad9361, protocol
+from hil.hackrf import protocol
+from hil.pluto import ad9361
 
 
 @dataclass(frozen=True)
@@ -72,31 +73,31 @@ class DeviceKind:
 
 
 def _find_hackrfs() -> list:
-    from hil.usb_transport import find_hackrfs
+    from hil.hackrf.usb_transport import find_hackrfs
 
     return [d.serial_number for d in find_hackrfs()]
 
 
 def _open_hackrf(serial=None):
-    from hil.hackrf import HackRF
+    from hil.hackrf.driver import HackRF
 
     return HackRF.open(serial)
 
 
 def _emulated_pluto(snr_db: float, **kwargs):
-    from hil.pluto_emulator import EmulatedPluto
+    from hil.emulation.pluto import EmulatedPluto
 
     return EmulatedPluto.for_link(snr_db, **kwargs)
 
 
 def _find_plutos() -> list:
-    from hil.iio_access import find_plutos
+    from hil.pluto.iio_access import find_plutos
 
     return [uri for uri, _ in find_plutos()]
 
 
 def _open_pluto(uri=None):
-    from hil.pluto import Pluto
+    from hil.pluto.driver import Pluto
 
     return Pluto.open(uri)
 

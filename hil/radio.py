@@ -5,7 +5,7 @@ transmitter and a receiver, whatever the board: :class:`hil.HackRF` (over USB, o
 :class:`hil.EmulatorBackend`, or looped back without USB) and :class:`hil.Pluto` (a real
 board, or :class:`hil.EmulatedPluto` behind :class:`hil.IiodServer`). Settings are not part
 of it: each front end has its own knobs (a Pluto's ``apply_ota_config``, a HackRF's gain
-properties), which :mod:`hil.ota` sets from :class:`hil.OtaConfig`.
+properties), which :mod:`hil.ota.link` sets from :class:`hil.OtaConfig`.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
-from hil.stream import StreamStats
+from hil.hackrf.stream import StreamStats
 
 if TYPE_CHECKING:
-    from hil.hackrf import HackRF
-    from hil.pluto import Pluto
+    from hil.hackrf.driver import HackRF
+    from hil.pluto.driver import Pluto
 
 
 @runtime_checkable

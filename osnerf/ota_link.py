@@ -5,7 +5,7 @@ phy.LinkOutput``), so every scheme of ``osnerf run`` can cross the air: each cal
 the batch's blocks as one burst of ``phy`` OFDM frames through ``hil.send_blocks`` and
 returns zero-forced (unbiased) symbols with the receiver's own per-symbol effective noise
 variance, the codec's convention (lost frames come back erased: zero symbols with noise
-variance ``hil.ota_receiver.ERASED_NOISE_VAR``). A decoder should get that variance
+variance ``hil.ota.receiver.ERASED_NOISE_VAR``). A decoder should get that variance
 (``codec.decode(x_hat, meta, snr_db, noise_var=out.noise_var)``) and, as its SNR, the
 receiver's measured one (``snr_db_measured``) rather than ``1 / mean(noise_var)``, which
 one erased frame dominates.

@@ -1,7 +1,7 @@
 """semcodec: the semantic codec (SNR- and rate-adaptive JSCC with on-demand object focus)
 and the baselines it is judged against (digital, ideal, analog).
 
-The codec contract (:mod:`semcodec.contract`), which every codec on osnerf's links meets:
+The codec contract (:mod:`semcodec.contract.protocol`), which every codec on osnerf's links meets:
 
 * ``encode(images, snr_db, cbr, mask=None, demand_weights=None) -> Encoded``: images
   ``[batch, 3, height, width]`` float32 in [0, 1], SNR (Es/N0, dB; float or ``[batch]``),
@@ -30,12 +30,12 @@ without ``supports_focus`` sends the objects' box at the same symbol budget,
 ``focus_by_box`` / ``decode_box``).
 ``LINK_SCHEMES`` is the one table of link-level schemes; those that cross a framed link
 (two radios) carry their transmitter and receiver apart (``LinkScheme.framed``,
-:mod:`semcodec.framed`).
+:mod:`semcodec.contract.framed`).
 
 Imports only ``phy`` of osnerf.
 """
 
-from semcodec.box_focus import (
+from semcodec.contract.box_focus import (
     BoxMeta,
     decode_box,
     decode_received,
@@ -43,16 +43,22 @@ from semcodec.box_focus import (
     focus_by_box,
     mask_box,
 )
-from semcodec.channel_layers import TRAIN_CHANNELS, train_channel
-from semcodec.checkpoint import (
+from semcodec.contract.checkpoint import (
     KnowledgeBaseMismatch,
     load_checkpoint,
     read_card,
     save_checkpoint,
     weights_sha256,
 )
-from semcodec.codec import DEFAULT_CHECKPOINT, Codec, for_fusion, learned_only, load_codec
-from semcodec.contract import (
+from semcodec.contract.fitting import TiledMeta, fit_decode, fit_encode
+from semcodec.contract.framed import (
+    FramedReception,
+    FramedScheme,
+    FramedSettings,
+    ReceivedBlock,
+    frame_payload_bytes,
+)
+from semcodec.contract.protocol import (
     CapabilityError,
     CodecLimits,
     CodecMeta,
@@ -72,8 +78,26 @@ from semcodec.contract import (
     snr_per_image,
     symbol_budget,
 )
-from semcodec.digital_link import transmit_digital, transmit_ideal
-from semcodec.encoded_meta import EncodedMeta, receiver_mask
+from semcodec.contract.registry import (
+    CODECS,
+    CodecPluginError,
+    UntrainedCodecError,
+    codec_names,
+    make_codec,
+    open_codec,
+    parse_codec_spec,
+    plugin_origin,
+    resolve_codec_spec,
+)
+from semcodec.contract.transmit import LOST_IMAGE_VALUE, TransmitResult
+from semcodec.digital.image_codecs import (
+    IMAGE_CODECS,
+    SCALES,
+    decode_image,
+    encode_image,
+    encode_to_budget,
+)
+from semcodec.digital.link import transmit_digital, transmit_ideal
 from semcodec.evaluation import (
     ANALOG,
     DEFAULT_FIXED_MCS,
@@ -89,32 +113,19 @@ from semcodec.evaluation import (
     schemes_help,
     ssim,
 )
-from semcodec.fitting import TiledMeta, fit_decode, fit_encode
-from semcodec.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
-from semcodec.focus_eval import focus_gain
-from semcodec.framed import (
-    FramedReception,
-    FramedScheme,
-    FramedSettings,
-    ReceivedBlock,
-    frame_payload_bytes,
-)
-from semcodec.grid import (
+from semcodec.jscc.codec import DEFAULT_CHECKPOINT, Codec, for_fusion, learned_only, load_codec
+from semcodec.jscc.encoded_meta import EncodedMeta, receiver_mask
+from semcodec.jscc.focus import attribution_box, demand_heatmap, demand_weight_map, densest_box
+from semcodec.jscc.focus_eval import focus_gain
+from semcodec.jscc.grid import (
     BLOCK_PX,
     focus_blocks,
     focus_coverage,
     focus_pixel_masks,
     full_rate_symbols,
 )
-from semcodec.image_codecs import (
-    IMAGE_CODECS,
-    SCALES,
-    decode_image,
-    encode_image,
-    encode_to_budget,
-)
-from semcodec.jscc_link import REFINE_STEPS, refine_symbols, transmit_jscc
-from semcodec.model import (
+from semcodec.jscc.link import REFINE_STEPS, refine_symbols, transmit_jscc
+from semcodec.jscc.model import (
     JSCC_ARCHITECTURES,
     JSCCConfig,
     JSCCModel,
@@ -122,27 +133,16 @@ from semcodec.model import (
     make_model,
     symbols_to_features,
 )
-from semcodec.registry import (
-    CODECS,
-    CodecPluginError,
-    UntrainedCodecError,
-    codec_names,
-    make_codec,
-    open_codec,
-    parse_codec_spec,
-    plugin_origin,
-    resolve_codec_spec,
-)
-from semcodec.train_config import TrainConfig
-from semcodec.train_state import (
+from semcodec.training.channels import TRAIN_CHANNELS, train_channel
+from semcodec.training.config import TrainConfig
+from semcodec.training.loop import build_codec, train, train_inputs, validate, with_architecture
+from semcodec.training.state import (
     RESUMABLE_FIELDS,
     ResumeRefused,
     check_resume,
     describe_changes,
     load_train_state,
 )
-from semcodec.training import build_codec, train, train_inputs, validate, with_architecture
-from semcodec.transmit import LOST_IMAGE_VALUE, TransmitResult
 from semcodec.uncoded import transmit_analog
 
 __all__ = [

@@ -15,13 +15,13 @@ import torch
 
 from common import Registry, list_images, read_image
 from phy import num_symbols_for_cbr
-from semcodec.box_focus import encode_with_focus
-from semcodec.codec import Codec, learned_only
-from semcodec.contract import MIN_SIDE_PX
-from semcodec.digital_link import AUTO, GENIE, transmit_digital, transmit_ideal
-from semcodec.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
-from semcodec.jscc_link import REFINE_STEPS, refine_symbols, transmit_jscc
-from semcodec.transmit import TransmitResult
+from semcodec.contract.box_focus import encode_with_focus
+from semcodec.contract.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
+from semcodec.contract.protocol import MIN_SIDE_PX
+from semcodec.contract.transmit import TransmitResult
+from semcodec.digital.link import AUTO, GENIE, transmit_digital, transmit_ideal
+from semcodec.jscc.codec import Codec, learned_only
+from semcodec.jscc.link import REFINE_STEPS, refine_symbols, transmit_jscc
 from semcodec.uncoded import transmit_analog
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
@@ -49,7 +49,7 @@ class EvalContext:
     links: dict = field(default_factory=dict)
     encodings: dict = field(default_factory=dict)  # (id, snr, cbr) -> (image, Encoded), latest
     refine_steps: int = REFINE_STEPS
-    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc_link.refine_symbols`)."""
+    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc.link.refine_symbols`)."""
     refine_seed: int = 0
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
 
@@ -136,7 +136,7 @@ class LinkScheme:
         kind: one of :data:`SCHEME_KINDS`.
         bound: what it bounds when it is not a real system (shown as such), else None.
         framed: its transmitter and receiver apart around a framed link
-            (:mod:`semcodec.framed`: what ``osnerf ota`` sends between two radios), or None
+            (:mod:`semcodec.contract.framed`: what ``osnerf ota`` sends between two radios), or None
             when it cannot cross one.
         mcs: how a digital scheme picks its modulation and code rate: ``"auto"`` (from the
             average SNR), ``"genie"`` (from the draw: a bound) or ``"fixed"`` (``--mcs``);

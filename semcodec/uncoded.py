@@ -9,8 +9,8 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from semcodec.contract import check_images
-from semcodec.transmit import TransmitResult, check_num_symbols, run_link
+from semcodec.contract.protocol import check_images
+from semcodec.contract.transmit import TransmitResult, check_num_symbols, run_link
 
 
 def transmit_analog(

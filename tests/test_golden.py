@@ -30,7 +30,7 @@ def _check(name: str, got: dict, compare) -> None:
 def test_digital_mcs_choice_per_channel_and_snr():
     """The honest digital link's MCS from the average SNR (shipped calibration), exactly:
     a Kodak-sized view at CBR 1/16 on the channels a transmitter plans with."""
-    from semcodec.digital_calibration import load_calibration
+    from semcodec.digital.calibration import load_calibration
 
     cal = load_calibration()
     n_px = 512 * 768

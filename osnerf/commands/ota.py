@@ -3,7 +3,7 @@
     osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 --images DIR --out ota.json
 
 Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
-receiver (``LinkScheme.framed``, :mod:`semcodec.framed`): ``digital`` (image codec bytes ->
+receiver (``LinkScheme.framed``, :mod:`semcodec.contract.framed`): ``digital`` (image codec bytes ->
 per-frame CRC + 5G LDPC + QAM from ``phy.digital``) and ``jscc`` (the semantic codec's
 symbols). Either way the symbols cross an :class:`osnerf.ota_link.OtaLink`: ``phy``'s OFDM
 frames (preamble, pilots), ``hil``'s PAPR control and int8 scaling, out of the TX HackRF

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hil import AirChannel, AirPath, EmulatedPluto, Medium, PathSegment, loopback_pair
-from hil.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE, clock_chain
-from hil.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
-from hil.pluto_context import air_setting, parse_air_setting
+from hil.emulation.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
+from hil.pluto.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE, clock_chain
+from hil.pluto.context import air_setting, parse_air_setting
 
 FS = 4e6
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from hil import AirChannel, Emulator, HackRF, OtaConfig, read_sigmf, save_sigmf, send_blocks
-from hil.ota_burst import build_burst
-from hil.ota_header import decode_header, header_mismatch, header_symbols
-from hil.ota_receiver import ERASED_NOISE_VAR, assign_frames, receive_burst
+from hil.ota.burst import build_burst
+from hil.ota.header import decode_header, header_mismatch, header_symbols
+from hil.ota.receiver import ERASED_NOISE_VAR, assign_frames, receive_burst
 
 PRE = np.exp(2j * np.pi * np.random.default_rng(99).integers(0, 4, 64) / 4).astype(np.complex64)
 
@@ -249,7 +249,7 @@ def test_a_board_gone_on_both_sides_raises_the_receive_error_with_its_capture():
     """When the transmitter and the receiver both fail (the board is gone), the receive
     error, which holds what arrived, is the one raised; alone, a transmit error is raised."""
     from hil.errors import DisconnectedError
-    from hil.ota import transmit_and_capture
+    from hil.ota.link import transmit_and_capture
 
     class Rx:
         receiving = True

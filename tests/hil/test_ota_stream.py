@@ -26,9 +26,9 @@ from hil import (
     build_views,
     protocol,
 )
-from hil.emulated_pacing import StreamPacer
-from hil.ota_burst import build_burst
-from hil.ota_header import MAX_FRAMES, decode_header
+from hil.emulation.pacing import StreamPacer
+from hil.ota.burst import build_burst
+from hil.ota.header import MAX_FRAMES, decode_header
 from osnerf.cli import main
 
 CFG = OtaConfig(sample_rate_hz=2e6, symbols_per_frame=256, gap_samples=400)
@@ -120,7 +120,7 @@ def test_pacer_counts_an_underrun_when_the_host_writes_too_late(monkeypatch):
 
 
 def test_pluto_dma_blocks_lose_whole_blocks_to_a_late_reader_counted_exactly():
-    from hil.emulated_pacing import BlockQueue
+    from hil.emulation.pacing import BlockQueue
 
     clock = FakeClock()
     q = BlockQueue(1e6, block_samples=1000, num_blocks=4, clock=clock)
@@ -135,7 +135,7 @@ def test_pluto_dma_blocks_lose_whole_blocks_to_a_late_reader_counted_exactly():
 
 
 def test_a_late_reader_of_an_emulated_pluto_skips_the_lost_blocks_and_the_board_says_so():
-    from hil.pluto_context import OVERRUN_ATTR, PHY, RX_DEV
+    from hil.pluto.context import OVERRUN_ATTR, PHY, RX_DEV
 
     board = EmulatedPluto.for_link(30.0, seed=0)
     board.write_attr(PHY, "voltage0", False, "", "sampling_frequency", "2500000")
@@ -157,7 +157,7 @@ def test_emulated_hackrfs_in_their_own_process_pace_and_count_a_late_reader(monk
     """The boards' process paces them and counts the samples a stalled host lost, and the
     host's driver reads the M0's overrun count across the process boundary."""
     from hil import EmulatorProcess
-    from hil.usb_transport import UsbTransport
+    from hil.hackrf.usb_transport import UsbTransport
 
     read, calls = UsbTransport.read, []
 
@@ -435,7 +435,7 @@ def test_bad_stream_flags_exit_2_and_create_nothing(tmp_path, images, capsys, ex
 def test_a_stalled_usb_reader_overruns_the_board_and_the_run_says_so(
     tmp_path, images, monkeypatch, capsys
 ):
-    from hil.usb_transport import UsbTransport
+    from hil.hackrf.usb_transport import UsbTransport
 
     read, calls = UsbTransport.read, []
 

@@ -19,7 +19,7 @@ from hil import (
     open_loopback,
     send_blocks,
 )
-from hil.ota import transmit_and_capture
+from hil.ota.link import transmit_and_capture
 
 RADIO_MEMBERS = {"receiving", "rx", "tx", "close"}
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-import semcodec.training
+import semcodec.training.loop
 from osnerf.cli import build_parser, main
 
-REAL_TRAIN = semcodec.training.train
+REAL_TRAIN = semcodec.training.loop.train
 
 
 def _one_line(capsys) -> str:
@@ -23,14 +23,14 @@ def no_heavy_work(monkeypatch):
     (exit 1) instead of running a pipeline, a training or a 14 GB allocation."""
     import osnerf.commands.ber
     import osnerf.run
-    import semcodec.training
+    import semcodec.training.loop
 
     def refuse(*a, **k):
         raise AssertionError("the work started before the input was checked")
 
     monkeypatch.setattr(osnerf.commands.ber, "simulate", refuse)
     monkeypatch.setattr(osnerf.run, "run_pipeline", refuse)
-    monkeypatch.setattr(semcodec.training, "train", refuse)
+    monkeypatch.setattr(semcodec.training.loop, "train", refuse)
 
 
 def _ber(*extra) -> int:
@@ -132,10 +132,10 @@ def test_train_codec_names_a_corrupt_resume_state_and_no_resume(tmp_path, capsys
 
 def test_train_codec_corrupt_image_is_bad_input(tmp_path, capsys, monkeypatch):
     """A corrupt image exits 2 in train-codec as in eval-codec."""
-    import semcodec.training
+    import semcodec.training.loop
 
-    monkeypatch.setattr(semcodec.training, "train", REAL_TRAIN)  # it reads the images
-    monkeypatch.setattr(semcodec.training, "make_model", None)  # but never gets further
+    monkeypatch.setattr(semcodec.training.loop, "train", REAL_TRAIN)  # it reads the images
+    monkeypatch.setattr(semcodec.training.loop, "make_model", None)  # but never gets further
     data = tmp_path / "data"
     data.mkdir()
     (data / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")

@@ -186,7 +186,7 @@ def test_specs_train_codec_defaults_to_the_plugins_architecture_and_logs_as_it_g
     """Without --model a plugin trains its own first architecture; a 3-step training leaves
     one log.jsonl record per step when records are due every step (a record every 30 s or 50
     steps otherwise, and one at the end)."""
-    import semcodec.training as training
+    import semcodec.training.loop as training
 
     monkeypatch.setattr(training, "LOG_EVERY_S", 0.0)
     out = tmp_path / "run"

@@ -10,7 +10,7 @@ from osnerf.scenes import SceneViews, intrinsics_from_fov
 from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit
 from phy import CopyFading
 from semcodec import box_side_symbols
-from semcodec.grid import focus_coverage, focus_pixel_masks
+from semcodec.jscc.grid import focus_coverage, focus_pixel_masks
 
 
 def synthetic_views(visible_hydrant, visible_tree, n_test=2, size=8):

@@ -34,7 +34,7 @@ def test_ota_reads_16_bit_grayscale_as_it_is_not_white(gray16):
 
 
 def test_train_codec_reads_16_bit_grayscale_as_it_is(gray16):
-    from semcodec.training_data import load_uint8_images
+    from semcodec.training.data import load_uint8_images
 
     path, a = gray16
     (img,) = load_uint8_images([path])
@@ -131,7 +131,7 @@ def test_train_codec_with_images_smaller_than_the_crop_writes_nothing(one_line, 
 def test_train_codec_resumed_with_another_model_is_one_line(one_line, tmp_path, capsys):
     import semcodec
     from common.files import write_torch
-    from semcodec.training import TrainConfig
+    from semcodec.training.loop import TrainConfig
 
     names = sorted(semcodec.JSCC_ARCHITECTURES)
     trained, other = names[0], names[1]

@@ -109,7 +109,7 @@ def _threshold_db(mcs, coded_bits, seed) -> float:
     """50 % codeword-error Es/N0 of ``mcs`` at ``coded_bits`` on AWGN: probit fit to 5 points
     of 200 codewords each around a bisected start."""
     from phy.digital import codeword_errors
-    from semcodec.digital_calibration import fit_probit
+    from semcodec.digital.calibration import fit_probit
 
     link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
     g = torch.Generator().manual_seed(seed)

@@ -1,4 +1,4 @@
-"""The analog refinement layer (semcodec.analog) and the codec's split between learned
+"""The analog refinement layer (semcodec.jscc.analog) and the codec's split between learned
 channels and the layer."""
 
 import math
@@ -9,7 +9,7 @@ from smooth_images import smooth_image
 
 import phy
 from semcodec import for_fusion, learned_only, load_codec, transmit_jscc
-from semcodec.analog import (
+from semcodec.jscc.analog import (
     FORMAT_BITS,
     POWER_SCALE_BITS,
     REFERENCE_BITS,

@@ -64,8 +64,8 @@ def test_digital_lost_image_is_grey_and_good_link_is_codec_quality():
     )
     assert good.stats["lost_images"] == 0 and good.stats["failed_codewords"] == 0
     from phy.digital import payload_capacity_bits
-    from semcodec.digital_link import decode_or_grey
-    from semcodec.image_codecs import encode_scaled_to_budget
+    from semcodec.digital.image_codecs import encode_scaled_to_budget
+    from semcodec.digital.link import decode_or_grey
 
     budget = payload_capacity_bits(n, "16qam-1/2") // 8
     data, _, scale = encode_scaled_to_budget(x[0], budget, "avif")

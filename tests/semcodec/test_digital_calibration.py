@@ -13,7 +13,7 @@ import phy
 from common import psnr
 from phy.digital import MCS_TABLE, codeword_layout
 from semcodec import IMAGE_CODECS, transmit_digital
-from semcodec.digital_calibration import (
+from semcodec.digital.calibration import (
     MEASURED,
     fade_grid,
     fit_probit,

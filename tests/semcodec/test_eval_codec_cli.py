@@ -157,13 +157,13 @@ def test_draws_give_mean_and_interval_and_the_genie_is_a_bound(image_dir, tmp_pa
 
 
 def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeypatch):
-    import semcodec.codec
     import semcodec.evaluation
+    import semcodec.jscc.codec
 
     def boom(*a, **k):
         raise AssertionError("work started")
 
-    monkeypatch.setattr(semcodec.codec, "load_codec", boom)
+    monkeypatch.setattr(semcodec.jscc.codec, "load_codec", boom)
     monkeypatch.setattr(semcodec.evaluation, "load_image_folder", boom)
     for n in ("0", "-2"):
         _bad(tmp_path, "--draws", n, images=image_dir)

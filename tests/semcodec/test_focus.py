@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from semcodec import box_side_symbols, demand_weight_map, densest_box, learned_only
-from semcodec.focus import attribution_box, demand_positions
+from semcodec.jscc.focus import attribution_box, demand_positions
 
 
 def test_demand_weight_map_is_lambda_weighted_mean():
@@ -113,7 +113,7 @@ def test_focus_below_one_channel_sends_the_densest_part_of_the_box(tiny_codec):
 
 
 def test_centre_first_orders_a_box_from_its_centre_out():
-    from semcodec.encoded_meta import centre_first
+    from semcodec.jscc.encoded_meta import centre_first
 
     # 3 x 4 box, centre (1, 1.5): the two middle cells, then the four beside them
     # vertically, then the row ends, then the corners (ties row-major)
@@ -125,8 +125,8 @@ def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
     rest of that channel looks erased to it), so the focus budget is spent to the symbol:
     the box's side information and the symbols fill it."""
     from semcodec import Codec, box_side_symbols, make_model
-    from semcodec.encoded_meta import centre_first
-    from semcodec.model import features_to_symbols, side_info, symbols_to_features
+    from semcodec.jscc.encoded_meta import centre_first
+    from semcodec.jscc.model import features_to_symbols, side_info, symbols_to_features
 
     torch.manual_seed(1)
     model = make_model("adjscc_s4_w96_rel")

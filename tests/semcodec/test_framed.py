@@ -35,7 +35,7 @@ def _clean(block: np.ndarray, detected: list[bool]) -> ReceivedBlock:
 
 
 def decode_image_as_sent(data: bytes) -> np.ndarray:
-    from semcodec.image_codecs import decode_wire
+    from semcodec.digital.image_codecs import decode_wire
 
     return decode_wire(data, "avif", 32, 32).astype(np.float32).transpose(2, 0, 1) / 255.0
 

@@ -7,7 +7,7 @@ from smooth_images import smooth_image
 
 from common import psnr
 from semcodec import IMAGE_CODECS
-from semcodec.image_codecs import (
+from semcodec.digital.image_codecs import (
     decode_image,
     decode_scaled,
     decode_wire,

@@ -11,7 +11,7 @@ from semcodec import (
     make_model,
     symbols_to_features,
 )
-from semcodec.model import side_info
+from semcodec.jscc.model import side_info
 
 
 @pytest.mark.parametrize("name", sorted(JSCC_ARCHITECTURES))
@@ -97,8 +97,8 @@ def test_widened_model_decodes_as_its_init_at_the_init_rates(m):
     """A 16-channel model started from an 8-channel one reconstructs bit for bit the same
     at every rate the 8-channel one serves (noise-free link: the AF rate input is rescaled,
     the extra encoder outputs are dropped, the extra decoder planes are zero)."""
-    from semcodec.model import reliability_to_features
-    from semcodec.training import load_compatible
+    from semcodec.jscc.model import reliability_to_features
+    from semcodec.training.loop import load_compatible
 
     torch.manual_seed(0)
     old = make_model("adjscc_s4_w96_rel").eval()
@@ -121,7 +121,7 @@ def test_widened_model_decodes_as_its_init_at_the_init_rates(m):
 
 
 def test_narrowing_init_is_refused():
-    from semcodec.training import load_compatible
+    from semcodec.training.loop import load_compatible
 
     with pytest.raises(ValueError, match="does not fit"):
         load_compatible(make_model("adjscc_s4_w96_rel"), make_model("adjscc_s4_w96_rel_c16"))

@@ -7,7 +7,7 @@ import torch
 
 import phy
 from semcodec import features_to_symbols, learned_only
-from semcodec.channel_layers import channel_mask, masked_transmit
+from semcodec.training.channels import channel_mask, masked_transmit
 
 
 def test_encoded_power_is_one_per_image(tiny_codec):

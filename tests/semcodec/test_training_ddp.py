@@ -16,7 +16,7 @@ import torch
 from PIL import Image
 
 import semcodec
-from semcodec.training import TrainConfig, train
+from semcodec.training.loop import TrainConfig, train
 
 ROOT = Path(__file__).resolve().parents[2]
 CFG = {"codec": "jscc", "model": "adjscc_s4_w64", "crop_px": 32, "batch_size": 4}
@@ -24,7 +24,7 @@ CFG |= {"num_threads": 1, "eval_every_s": 1e9, "lr": 3e-3}
 DRIVER = """
 import json, sys
 from pathlib import Path
-from semcodec.training import TrainConfig, train
+from semcodec.training.loop import TrainConfig, train
 cfg, data, val, out = json.loads(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
 train(TrainConfig(**cfg), [Path(data)], Path(out), val_dir=Path(val))
 """
@@ -106,12 +106,12 @@ def test_killed_mid_way_it_resumes_at_world_size_one(folders, tmp_path):
     state = out / "last_state.pt"
     deadline = time.monotonic() + 240
     while time.monotonic() < deadline and proc.poll() is None:
-        if state.exists() and semcodec.training.load_train_state(state)["step"] >= 3:
+        if state.exists() and semcodec.training.loop.load_train_state(state)["step"] >= 3:
             break
         time.sleep(0.5)
     proc.send_signal(signal.SIGTERM)  # torchrun passes it on to both workers and exits
     proc.communicate(timeout=120)
-    st = semcodec.training.load_train_state(state)
+    st = semcodec.training.loop.load_train_state(state)
     assert st["world_size"] == 2 and st["step"] >= 3
     steps = st["step"] + 2
     cfg = TrainConfig(**{**CFG, "max_steps": steps, "save_every_s": 1e9})
@@ -129,7 +129,7 @@ def test_device_and_backend_are_checked_in_one_line():
         TrainConfig(device="tpu")
     with pytest.raises(ValueError, match="ddp_backend must be"):
         TrainConfig(ddp_backend="mpi")
-    from semcodec.distributed import check_backend
+    from semcodec.training.distributed import check_backend
 
     with pytest.raises(ValueError, match="ddp backend nccl needs device cuda"):
         check_backend("nccl", "cpu")

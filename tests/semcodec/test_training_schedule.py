@@ -5,8 +5,8 @@ import math
 import pytest
 import torch
 
-from semcodec.channel_layers import channel_mask
-from semcodec.training import TrainConfig, lr_at
+from semcodec.training.channels import channel_mask
+from semcodec.training.loop import TrainConfig, lr_at
 
 
 def test_warmup_is_linear_then_constant_then_cosine_to_a_twentieth():

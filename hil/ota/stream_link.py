@@ -1,0 +1,231 @@
+"""A streaming over-the-air link: the transmitter sends views one after another, as a
+flying drone would, while the receiver streams without pause and decodes as frames arrive.
+
+Three threads: the transmitter (one burst per view, a view every ``interval_s``), the
+receiver's producer (the driver's blocks into a :class:`hil.ota.stream.RingBuffer`) and the
+decoder (:class:`hil.ota.stream.StreamReceiver`, on the calling thread). What the run did
+is in a :class:`StreamRun`: the samples received, dropped and overrun, counted by the
+driver (the host's queue), the board (its M0 overruns; an emulated board's own count of
+the samples lost) and the ring, and the frames found, decoded and lost.
+"""
+
+from __future__ import annotations
+
+import gc
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hil.errors import HilError
+from hil.ota.config import OtaConfig
+from hil.ota.link import _configure, _default_frames
+from hil.ota.radio_stream import rx_blocks, transfer_samples
+from hil.ota.stream import RingBuffer, StreamCounts, StreamReceiver, StreamView
+
+BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
+
+
+@dataclass
+class StreamRun:
+    """What one streaming run did; every count is exact.
+
+    Attributes:
+        samples_received: samples the driver handed to the ring.
+        driver_samples: samples the driver delivered by its own count (the same, unless
+            the producer failed between the two).
+        ring_dropped_samples, ring_drop_events: samples (blocks) the ring had no room for.
+        driver_dropped_samples: samples the driver's reader thread dropped (its queue full).
+        device_overruns: overruns the board's M0 counted (-1: the firmware cannot tell).
+        device_longest_overrun_bytes: the longest of them.
+        emulator_overrun_samples: samples an emulated receiver lost to overruns (None: a
+            real board, which does not say).
+        emulator_underrun_samples: silence an emulated transmitter sent when the host wrote
+            late (None: a real board).
+        emulator_overruns, emulator_lost_buffers: an emulated Pluto's overruns and the
+            receive buffers (DMA blocks) it lost to them (None: a real board, or a HackRF,
+            whose overruns are ``device_overruns``).
+        emulator_late_max_s: the most an emulated HackRF delivered a transfer later than a
+            real board would have (its own delay rendering the air, not charged to the
+            host; None: a real board or a Pluto).
+        counts: frames found, decoded, ... (:class:`hil.ota.stream.StreamCounts`).
+        warnings: the driver's warnings, one line each.
+    """
+
+    samples_received: int = 0
+    driver_samples: int = 0
+    ring_dropped_samples: int = 0
+    ring_drop_events: int = 0
+    driver_dropped_samples: int = 0
+    device_overruns: int = -1
+    device_longest_overrun_bytes: int = 0
+    emulator_overrun_samples: int | None = None
+    emulator_underrun_samples: int | None = None
+    emulator_overruns: int | None = None
+    emulator_lost_buffers: int | None = None
+    emulator_late_max_s: float | None = None
+    counts: StreamCounts = field(default_factory=StreamCounts)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def dropped_samples(self) -> int:
+        """Samples lost anywhere between the air and the decoder."""
+        return (
+            self.ring_dropped_samples
+            + self.driver_dropped_samples
+            + (self.emulator_overrun_samples or 0)
+        )
+
+    @property
+    def overruns(self) -> int:
+        """Events in which samples were lost: the ring's drops, the driver's, the board's
+        (an emulated Pluto's own count where libiio reports none)."""
+        board = max(self.device_overruns, 0) + (self.emulator_overruns or 0)
+        return self.ring_drop_events + (self.driver_dropped_samples > 0) + board
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in vars(self).items() if k != "counts"}
+        out.update(vars(self.counts), dropped_samples=self.dropped_samples, overruns=self.overruns)
+        return out
+
+
+def _produce(rx, ring: RingBuffer, block_samples: int, stop: threading.Event, out: dict) -> None:
+    """The receiver's producer thread: the driver's blocks into the ring until ``stop``."""
+    blocks = rx_blocks(rx, block_samples)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                for block in blocks:
+                    ring.push(np.asarray(block).reshape(-1))
+                    if stop.is_set():
+                        break
+            finally:
+                blocks.close()  # the driver stops the stream and reads the M0 counters
+        out["warnings"] = [str(w.message) for w in caught]
+    except BaseException as e:  # noqa: BLE001 - re-raised on the decoder's thread
+        out["error"] = e
+    finally:
+        ring.close()
+
+
+def _transmit(tx, views: list, interval_s: float, start: float, out: dict) -> None:
+    """The transmitter's thread: view ``v`` at ``start + v * interval_s`` (or as soon as
+    the previous one is out)."""
+    try:
+        for view in views:
+            wait = start + view.index * interval_s - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            view.sent_at = time.monotonic()
+            tx.tx(view.burst)
+    except BaseException as e:  # noqa: BLE001 - re-raised on the decoder's thread
+        out["error"] = e
+
+
+def stream_over_the_air(
+    tx,
+    rx,
+    views: list[StreamView],
+    cfg: OtaConfig,
+    on_view,
+    *,
+    interval_s: float,
+    ring_s: float,
+    emulator=None,
+    frames=None,
+) -> StreamRun:
+    """Send ``views`` from ``tx`` while ``rx`` streams; decode on this thread.
+
+    Args:
+        tx, rx: open front ends (HackRFs, real or emulated, or one Pluto as both;
+            configured here from ``cfg``).
+        views: :func:`hil.ota.stream.build_views` of the blocks to send.
+        on_view: called on this thread with each view as the receiver hands it on.
+        interval_s: a view every this many seconds (0: back to back).
+        ring_s: the ring buffer holds this much air time.
+        emulator: the ``hil.Emulator`` of emulated boards, for their own loss counts.
+    Returns:
+        :class:`StreamRun`. A failure of either radio raises its ``hil.HilError`` after
+        both threads ended.
+    """
+    frames = frames or _default_frames(cfg)
+    for dev in (tx, rx) if rx is not tx else (tx,):
+        _configure(dev, cfg)
+    fs = cfg.sample_rate_hz
+    ring = RingBuffer(max(int(ring_s * fs), 1))
+    block = max(int(BLOCK_SECONDS * fs), 512)
+    receiver = StreamReceiver(ring, views, cfg, frames, on_view, block_samples=block)
+    receiver.warm_up()  # the first frame costs no more than the others
+    # the collector's full passes over everything imported hold the interpreter for tens
+    # of ms, longer than a board's buffer lasts; what the stream allocates stays collected
+    gc.collect()
+    gc.freeze()
+    stop = threading.Event()
+    rx_out: dict = {}
+    tx_out: dict = {}
+    producer = threading.Thread(
+        target=_produce, args=(rx, ring, block, stop, rx_out), name="ota-stream-rx", daemon=True
+    )
+    producer.start()
+    deadline = time.monotonic() + 5.0  # the receiver streams before the first view goes out
+    while not rx.receiving and producer.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.001)
+    sender = threading.Thread(
+        target=_transmit,
+        args=(tx, views, interval_s, time.monotonic() + cfg.rx_lead_s, tx_out),
+        name="ota-stream-tx",
+        daemon=True,
+    )
+    sender.start()
+
+    def stop_after_last_view():
+        sender.join()
+        # the last frame, then what the board and the driver still hold, reach the ring
+        tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
+        transfer = transfer_samples(rx, block)
+        deadline = time.monotonic() + (tail + transfer + 4 * block) / fs + 0.05
+        while time.monotonic() < deadline and receiver.next_view < len(views):
+            time.sleep(0.005)  # ends early once the last view is decoded
+        stop.set()
+
+    stopper = threading.Thread(target=stop_after_last_view, name="ota-stream-stop", daemon=True)
+    stopper.start()
+    try:
+        counts = receiver.run()
+    finally:
+        stop.set()
+        producer.join(timeout=30)
+        sender.join(timeout=30)
+        gc.unfreeze()
+    for out in (rx_out, tx_out):
+        if "error" in out:
+            raise out["error"]
+    return _run_record(rx, ring, counts, emulator, rx_out.get("warnings", []))
+
+
+def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: list) -> StreamRun:
+    stats = getattr(rx, "last_stats", None)
+    if stats is None:
+        raise HilError("the receive stream ended without the driver's counters")
+    run = StreamRun(
+        samples_received=ring.received_samples,
+        driver_samples=stats.num_samples,
+        ring_dropped_samples=ring.dropped_samples,
+        ring_drop_events=ring.drop_events,
+        driver_dropped_samples=stats.host_dropped_bytes // 2,
+        device_overruns=stats.device_shortfalls,
+        device_longest_overrun_bytes=stats.longest_shortfall_bytes,
+        counts=counts,
+        warnings=list(caught),
+    )
+    if emulator is not None:
+        run.emulator_overrun_samples = int(emulator.radios[1].overrun_samples)
+        run.emulator_underrun_samples = int(emulator.radios[0].underrun_samples)
+        run.emulator_late_max_s = float(emulator.radios[1].rx_late_max_s)
+    loss = getattr(rx, "emulated_rx_loss", None)  # an emulated Pluto's late-reader losses
+    if loss is not None:
+        run.emulator_overruns, run.emulator_lost_buffers, run.emulator_overrun_samples = loss
+    return run
