@@ -17,8 +17,9 @@ from unittest import mock
 
 import numpy as np
 
-from hil import AirChannel, Emulator, air_paths
-from hil import medium as medium_module
+from hil import AirChannel, Emulator
+from hil.emulation import medium as medium_module
+from hil.emulation import paths as air_paths
 from hil.emulation.air import RESAMPLER_TAPS, prepare_resampler
 
 SAMPLE_RATE_HZ = 20e6

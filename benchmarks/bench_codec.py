@@ -37,7 +37,7 @@ import torch
 
 from common import write_text
 from osnerf.anchors import KODAK, KODAK_CBR, at_own_snr, capacity_anchor
-from semcodec.evaluation import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
+from semcodec.links.schemes import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
 
 
 def _speed(codec) -> dict:
@@ -84,7 +84,7 @@ the honest digital link must be beaten on more than one image set. Read for eval
 only (BSDS500 is the codec's training source: its test split was never trained on)."""
 REFINED_CHANNELS = ("rayleigh",)
 """Channels where the table also has ``jscc_refined`` (the transmitter refines each image's
-symbols, :func:`semcodec.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
+symbols, :func:`semcodec.jscc.refine_symbols`; about 20 CPU s per Kodak image and SNR): block
 fading, where jscc meets the honest digital link."""
 TABLE_SNRS = (-10.0, -5.0, -2.0, 0.0, 1.0, 4.0, 10.0)
 """The table's SNRs: the HIWE range from -10 to 10 dB."""

@@ -171,12 +171,12 @@ def _check_channels(*mixtures: str) -> None:
     to a GPU machine)."""
     import importlib.util
 
-    from semcodec import TRAIN_CHANNELS
+    from semcodec.jscc import TRAIN_CHANNELS
 
     for mix in mixtures:
         for ch in mix.split(","):
             if ch not in TRAIN_CHANNELS:
-                raise InputError(f"campaign channel {ch!r} is not in semcodec.TRAIN_CHANNELS")
+                raise InputError(f"campaign channel {ch!r} is not in semcodec.jscc.TRAIN_CHANNELS")
             if "tdl" in ch and importlib.util.find_spec("sionna") is None:
                 raise InputError(
                     f"channel {ch} needs sionna, not importable here: run python -m campaign "

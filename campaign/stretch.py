@@ -89,7 +89,8 @@ def load_validation(folder: Path, count: int, side_px: int):
 def score(path: Path, validation: dict, images, device: str) -> tuple[dict, float]:
     """(per channel and SNR PSNR, their mean: the campaign's score) of a JSCC checkpoint on
     the held-out ``images`` ([batch, 3, height, width] float32), noise from a fixed seed."""
-    from semcodec import make_codec, validate
+    from semcodec import make_codec
+    from semcodec.training import validate
 
     codec = make_codec(f"jscc:{path}")
     codec.module.to(device)

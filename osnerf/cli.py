@@ -89,7 +89,7 @@ def available_commands() -> dict[str, tuple[str, str]]:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    from osnerf import __version__
+    from osnerf.version import __version__
 
     parser = _Parser(prog="osnerf", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"osnerf {__version__}")

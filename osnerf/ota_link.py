@@ -11,9 +11,9 @@ receiver's measured one (``snr_db_measured``) rather than ``1 / mean(noise_var)`
 one erased frame dominates.
 
 :meth:`OtaLink.send_blocks` is the same burst for blocks of any length (one per image,
-what ``semcodec``'s framed schemes send): it returns ``hil``'s :class:`hil.BurstResult`
+what ``semcodec``'s framed schemes send): it returns ``hil``'s :class:`hil.ota.BurstResult`
 (one report per frame, the burst and the capture), and :func:`received_blocks` turns that
-into ``semcodec.ReceivedBlock`` s for a framed scheme's receiver.
+into ``semcodec.links.ReceivedBlock`` s for a framed scheme's receiver.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath, 
     """The one air model of every emulated path: a ``hil.AirChannel`` at ``snr_db`` for the
     frames' mean power (``ota_cfg.tx_power_dbfs``) sent and received at ``ota_cfg``'s gains
     of ``device`` ("emulated" HackRFs, or an emulated "pluto"), with the fixed ``multipath``
-    taps or, given ``path_segments`` (``hil.PathSegment`` s), those paths' gains as they are."""
+    taps or, given ``path_segments`` (``hil.emulation.PathSegment`` s), those paths' gains as they are."""
     from hil import AirChannel
 
     if device == "pluto":
@@ -154,7 +154,7 @@ class OtaLink:
         Args:
             blocks: one [num_symbols] complex64 array per image, unit mean power each.
         Returns:
-            ``hil.BurstResult``: per block ``(x_hat, noise_var)`` and one ``hil.FrameReport``
+            ``hil.ota.BurstResult``: per block ``(x_hat, noise_var)`` and one ``hil.ota.FrameReport``
             per frame (``hil.HilError`` and subclasses propagate, with what was captured).
         """
         from hil import send_blocks
@@ -224,9 +224,9 @@ class OtaLink:
 
 
 def received_blocks(result) -> list:
-    """``hil.BurstResult`` -> one ``semcodec.ReceivedBlock`` per block sent: its symbols,
+    """``hil.ota.BurstResult`` -> one ``semcodec.links.ReceivedBlock`` per block sent: its symbols,
     noise variance, which of its frames were detected and its measured SNR."""
-    from semcodec import ReceivedBlock
+    from semcodec.links import ReceivedBlock
 
     return [
         ReceivedBlock(

@@ -22,7 +22,7 @@ from common import write_figure
 from osnerf.anchors import KODAK, KODAK_AWGN_10DB_VS_CBR, KODAK_CBR, capacity_anchor
 from osnerf.report import QUALITY_METRICS
 from osnerf.results import result_rows, scheme_entry
-from semcodec import DIGITAL
+from semcodec.links import DIGITAL
 
 CLIFF_SLOPE = 3.0  # dB of PSNR per dB of SNR: steeper than any graceful (JSCC-like) curve
 

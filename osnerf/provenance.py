@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from common import write_json
+from osnerf.version import __version__
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -41,8 +42,6 @@ def git_commit() -> str:
 def versions() -> dict[str, str]:
     """Versions of the libraries results depend on."""
     from importlib import metadata
-
-    from osnerf import __version__
 
     out = {"python": platform.python_version(), "osnerf": __version__}
     for name in ("torch", "sionna", "numpy"):

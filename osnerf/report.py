@@ -46,7 +46,7 @@ class SchemeReport:
         bound: None, or what this scheme bounds (not a real system).
         training_bounds: "demanded objects" or "whole scene".
         codec_use: semantic schemes: the codec's declared limits, refinement on or off (and
-            why), symbols sent against the plan's budget (``osnerf.run.jscc.codec_use``).
+            why), symbols sent against the plan's budget (``osnerf.semantic_send.codec_use``).
         renderers: None (skipped), or for the full render and the learned renderer
             ("full", "features" of ``renderer.RENDERERS``) on the held-out views in order:
             psnr_object (as above), seconds_per_view (one thread), setup_seconds and setup_cpu_seconds

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
-from semcodec import DIGITAL
+from semcodec.links import DIGITAL
 
 
 def result_rows(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -3,7 +3,7 @@
 :func:`scheme_seed`.
 
 Both the scheme table (:mod:`osnerf.schemes`) and the senders it calls
-(:mod:`osnerf.run.jscc`) import these types from here; this module imports neither, so
+(:mod:`osnerf.semantic_send`) import these types from here; this module imports neither, so
 neither imports the other to share them.
 """
 
@@ -116,7 +116,7 @@ class Scheme:
             bounds are labelled as such in help and reports.
         help: one line for ``--help`` and reports.
         headline: the scheme the report's comparisons are about (the others are its baselines).
-        kind: one of ``semcodec.evaluation.SCHEME_KINDS`` (as the link-level schemes):
+        kind: one of ``semcodec.links.schemes.SCHEME_KINDS`` (as the link-level schemes):
             what plots and benchmarks group by.
     """
 

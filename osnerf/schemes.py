@@ -35,7 +35,8 @@ import torch
 
 from common import Registry
 from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
-from semcodec import ANALOG, DIGITAL, IDEAL, JSCC
+from osnerf.semantic_send import send_views
+from semcodec.links import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
 
@@ -122,15 +123,13 @@ class OnDemandJSCC(Scheme):
     help = "on-demand semantic JSCC (focus mode on the demanded objects)"
 
     def transmit(self, ctx, plans, images):
-        from osnerf.run.jscc import send_views
-
         return send_views(ctx, plans, images, on_demand=self.object_routed)
 
 
 @register("digital")
 class Digital(Scheme):
     """The same views and the same symbol budget per view as the on-demand plan, through an
-    image codec (container stripped) + CRC + 5G LDPC + QAM (``semcodec.transmit_digital``).
+    image codec (container stripped) + CRC + 5G LDPC + QAM (``semcodec.digital.transmit_digital``).
     No CSI at the transmitter: the MCS comes from the average SNR alone (the calibration
     table's best expected PSNR over the channel's fading), so deep fades cost outages."""
 
@@ -151,7 +150,7 @@ class Digital(Scheme):
         lost = {"budget": 0, "channel": 0}
         t = time.perf_counter()
         for k, p in enumerate(plans):
-            res = semcodec.transmit_digital(
+            res = semcodec.digital.transmit_digital(
                 images[k : k + 1],
                 ctx.links[p.view],
                 p.snr_db,
@@ -209,7 +208,7 @@ class Analog(Scheme):
         t = time.perf_counter()
         for k, p in enumerate(plans):
             n = max(1, int(p.part.symbols) // max(p.part.repetitions, 1))
-            res = semcodec.transmit_analog(
+            res = semcodec.links.transmit_analog(
                 images[k : k + 1],
                 ctx.links[p.view],
                 p.snr_db,
@@ -245,7 +244,7 @@ class GroundTruth(Scheme):
     help = "bound: the on-demand views undistorted (ceiling)"
 
     def transmit(self, ctx, plans, images):
-        from semcodec import focus_pixel_masks
+        from semcodec.jscc import focus_pixel_masks
 
         masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None
         rx = None

@@ -107,3 +107,141 @@ def test_checker_catches_a_forbidden_edge(tmp_path):
     f.write_text("import numpy\nfrom osnerf.cli import main\nimport semcodec.jscc.model as m\n")
     names = [n for _, n in _imports(f)]
     assert "osnerf.cli" in names and "semcodec.jscc.model" in names
+
+
+CYCLE_ROOTS = tuple(sorted(OURS)) + ("campaign", "benchmarks")
+
+
+def _module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node of a module that runs, at import or in a function: ``if TYPE_CHECKING:``
+    blocks are left out (they never import at run time)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        yield node
+        for child in ast.iter_child_nodes(node):
+            if (
+                isinstance(child, ast.If)
+                and isinstance(child.test, ast.Name | ast.Attribute)
+                and ast.unparse(child.test).endswith("TYPE_CHECKING")
+            ):
+                stack.extend(child.orelse)
+                continue
+            stack.append(child)
+
+
+def import_graph(root: Path, tops=CYCLE_ROOTS) -> dict[str, set[str]]:
+    """Module -> the modules of ours it imports, at module level and inside functions.
+
+    ``from a.b import c`` is an edge to ``a.b.c`` when that is a module, else to ``a.b``, and to
+    the packages above it whose ``__init__`` the import runs (all but the importer's own).
+    """
+    paths = {_module_name(p, root): p for top in tops for p in (root / top).rglob("*.py")}
+    graph: dict[str, set[str]] = {m: set() for m in paths}
+    for mod, path in paths.items():
+        package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+        for node in _runtime_nodes(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(up + ([base] if base else []))
+                targets = [
+                    f"{base}.{a.name}" if f"{base}.{a.name}" in paths else base for a in node.names
+                ]
+            else:
+                continue
+            for target in targets:
+                # importing a.b.c runs a's and a.b's __init__ first, unless they are the
+                # importer's own ancestors (already running)
+                parts = target.split(".")
+                for k in range(1, len(parts) + 1):
+                    name = ".".join(parts[:k])
+                    if name in paths and name != mod and not mod.startswith(name + "."):
+                        graph[mod].add(name)
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_no_import_circles_also_through_imports_inside_functions():
+    """No circle between our modules, counting imports inside functions (a deferred import
+    hides a circle from Python, not from a reader)."""
+    cycles = import_cycles(import_graph(ROOT))
+    assert not cycles, "import circles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_cycle_walker_sees_a_circle_hidden_in_a_function(tmp_path):
+    pkg = tmp_path / "osnerf"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from osnerf.b import g\n")
+    (pkg / "b.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from osnerf import c\n"
+        "def g():\n    from osnerf import a\n"
+    )
+    (pkg / "c.py").write_text("import osnerf.b\n")
+    graph = import_graph(tmp_path, tops=("osnerf",))
+    assert graph["osnerf.b"] == {"osnerf.a"}  # the TYPE_CHECKING import is not an edge
+    assert import_cycles(graph) == [["osnerf.a", "osnerf.b"]]
+
+
+def test_cycle_walker_sees_a_circle_through_a_package_init(tmp_path):
+    """``from osnerf.run.x import f`` runs ``osnerf/run/__init__``, which may lead back."""
+    run = tmp_path / "osnerf" / "run"
+    run.mkdir(parents=True)
+    (tmp_path / "osnerf" / "__init__.py").write_text("")
+    (tmp_path / "osnerf" / "schemes.py").write_text("def f():\n    from osnerf.run.x import g\n")
+    (run / "__init__.py").write_text("from osnerf.run.config import C\n")
+    (run / "config.py").write_text("from osnerf.schemes import f\n")
+    (run / "x.py").write_text("from osnerf.run import config\n")
+    graph = import_graph(tmp_path, tops=("osnerf",))
+    assert "osnerf.run" not in graph["osnerf.run.x"]  # its own package is already running
+    assert import_cycles(graph) == [["osnerf.run", "osnerf.run.config", "osnerf.run.x", "osnerf.schemes"]]

@@ -51,8 +51,9 @@ def test_default_codec_on_two_kodak_images(shared_data):
     10 dB, seed 0): within 0.02 dB (float reductions differ between CPUs by far less)."""
     import phy
     from renderer import psnr
-    from semcodec import load_codec, transmit_jscc
-    from semcodec.evaluation import load_image_folder
+    from semcodec import load_codec
+    from semcodec.jscc import transmit_jscc
+    from semcodec.links.schemes import load_image_folder
 
     _, images = load_image_folder(shared_data / "kodak")
     codec = load_codec()

@@ -299,11 +299,3 @@ def iq_imbalance(y: np.ndarray, gain_db: float, phase_deg: float) -> np.ndarray:
     mu = (1 + g * np.exp(-1j * phi)) / 2
     nu = (1 - g * np.exp(1j * phi)) / 2
     return (mu * y + nu * np.conj(y)).astype(np.complex64)
-
-
-def quantize_ci8(y: np.ndarray) -> np.ndarray:
-    """[num_samples] complex, full scale 1.0 -> [2 * num_samples] int8 (round, clip to [-128, 127])."""
-    inter = np.empty(2 * len(y), np.float32)
-    inter[0::2] = y.real
-    inter[1::2] = y.imag
-    return np.clip(np.rint(inter * 128.0), -128, 127).astype(np.int8)

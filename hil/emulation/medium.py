@@ -31,8 +31,8 @@ from hil.emulation.air import (
     AirChannel,
     fractional_resample,
     iq_imbalance,
-    quantize_ci8,
 )
+from hil.iq import quantize_ci8
 
 AMP_GAIN_DB = 14.0
 

@@ -35,6 +35,7 @@ from hil.emulation.pluto_attrs import (
     DEFAULT_TX_GAIN_DB,
     PlutoAttributes,
     iio_errno,
+    parse_air_setting,
 )
 from hil.pluto import ad9361
 from hil.pluto.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
@@ -45,7 +46,6 @@ from hil.pluto.context import (
     RX_DEV,
     air_setting,
     context_xml,
-    parse_air_setting,
 )
 
 NETWORK_FAULTS = ("drop", "slow")

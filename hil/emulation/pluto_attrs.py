@@ -10,10 +10,16 @@ the sample buffers.
 from __future__ import annotations
 
 import errno
+import json
+import math
 import threading
 
+from hil.emulation.air import AirChannel
+from hil.emulation.hackrf import PPM_RANGE
 from hil.pluto import ad9361
+from hil.pluto.ad9361 import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 from hil.pluto.context import (
+    AIR_ATTR,
     BUFFER_ATTRS,
     DEBUG_ATTRS,
     DEVICE_ATTRS,
@@ -23,9 +29,6 @@ from hil.pluto.context import (
     TX_DEV,
     find_channel,
 )
-
-DEFAULT_RX_GAIN_DB = 30  # the gain the emulated AGC settles on and manual mode starts at
-DEFAULT_TX_GAIN_DB = -10.0
 
 
 def iio_errno(code: int, what: str) -> OSError:
@@ -289,3 +292,16 @@ def _parse_fir(text: str) -> tuple[str, int]:
     if dec not in (1, 2, 4) or not 1 <= taps <= 128:
         raise ValueError(f"FIR config: decimation {dec} (1, 2 or 4), {taps} taps (1-128)")
     return f"FIR Rx: {taps},{dec} Tx: {taps},{dec}", dec
+
+
+def parse_air_setting(text: str):
+    """``(hil.AirChannel, ppm, seed)`` of :func:`air_setting` text; ``ValueError`` otherwise."""
+    try:
+        d = json.loads(text)
+        channel = AirChannel.from_json(json.dumps(d["air"]))
+        ppm, seed = float(d["ppm"]), int(d["seed"])
+    except (TypeError, KeyError, ValueError) as e:
+        raise ValueError(f"{AIR_ATTR}: not an air setting ({e})") from None
+    if not (math.isfinite(ppm) and PPM_RANGE[0] <= ppm <= PPM_RANGE[1]) or seed < 0:
+        raise ValueError(f"{AIR_ATTR}: ppm must be in {list(PPM_RANGE)} and seed >= 0")
+    return channel, ppm, seed

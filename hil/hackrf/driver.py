@@ -25,10 +25,10 @@ from hil.errors import (
     usb_error_to_hil,
 )
 from hil.hackrf import protocol as p
-from hil.hackrf.iq import from_int8_iq, full_scale_samples, to_int8_iq
 from hil.hackrf.settings import HackRFSettings
 from hil.hackrf.stream import RxThread, StreamStats
 from hil.hackrf.usb_transport import UsbTransport, find_hackrfs
+from hil.iq import from_int8_iq, full_scale_samples, to_int8_iq
 
 
 class HackRF(HackRFSettings):
@@ -338,7 +338,7 @@ class HackRF(HackRFSettings):
                 self.stop_rx()
 
     def _save(self, raw: np.ndarray, path, note: str | None = None):
-        from hil.ota.sigmf_io import write_sigmf
+        from hil.sigmf_io import write_sigmf
 
         return write_sigmf(
             path,

@@ -10,7 +10,7 @@ import numpy as np
 from hil.errors import HilError
 from hil.ota.burst import BurstResult
 from hil.ota.config import OtaConfig
-from hil.ota.sigmf_io import Annotation, write_sigmf
+from hil.sigmf_io import Annotation, write_sigmf
 
 
 def save_partial_capture(

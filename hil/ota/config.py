@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hil.emulation.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 from hil.ota.header import HEADER_BITS
+from hil.pluto.ad9361 import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,10 @@ FIR_SAMPLE_RATE_MIN_HZ = 520_833  # with the FIR decimating by 4
 TX_ATTENUATION_RANGE_DB = (0.0, 89.75)
 TX_ATTENUATION_STEP_DB = 0.25
 GAIN_CONTROL_MODES = ("manual", "fast_attack", "slow_attack", "hybrid")
+# The Pluto's gains in an over-the-air run unless told otherwise (an emulated board's AGC
+# settles on the receive gain, and its manual mode starts there).
+DEFAULT_RX_GAIN_DB = 30
+DEFAULT_TX_GAIN_DB = -10.0
 
 # (ADC divider, R2, R1, RF half-band decimations), fastest oversampling first
 _CLOCK_DIVIDERS = ((12, 3, 2, 2), (8, 2, 2, 2), (6, 3, 1, 2), (4, 2, 2, 1), (3, 3, 1, 1), (2, 2, 1, 1), (1, 1, 1, 1))  # fmt: skip

@@ -77,25 +77,6 @@ def air_setting(channel, ppm: float, seed: int) -> str:
     return json.dumps({"air": json.loads(channel.to_json()), "ppm": ppm, "seed": seed})
 
 
-def parse_air_setting(text: str):
-    """``(hil.AirChannel, ppm, seed)`` of :func:`air_setting` text; ``ValueError`` otherwise."""
-    import json
-    import math
-
-    from hil.emulation.air import AirChannel
-    from hil.emulation.hackrf import PPM_RANGE
-
-    try:
-        d = json.loads(text)
-        channel = AirChannel.from_json(json.dumps(d["air"]))
-        ppm, seed = float(d["ppm"]), int(d["seed"])
-    except (TypeError, KeyError, ValueError) as e:
-        raise ValueError(f"{AIR_ATTR}: not an air setting ({e})") from None
-    if not (math.isfinite(ppm) and PPM_RANGE[0] <= ppm <= PPM_RANGE[1]) or seed < 0:
-        raise ValueError(f"{AIR_ATTR}: ppm must be in {list(PPM_RANGE)} and seed >= 0")
-    return channel, ppm, seed
-
-
 _DTD = (
     "<!DOCTYPE context ["
     "<!ELEMENT context (device | context-attribute)*>"

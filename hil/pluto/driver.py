@@ -18,8 +18,8 @@ import warnings
 import numpy as np
 
 from hil.errors import DeviceNotFoundError, HilError, StreamError
-from hil.hackrf.iq import full_scale_samples
 from hil.hackrf.stream import StreamStats
+from hil.iq import full_scale_samples
 from hil.pluto.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
 from hil.pluto.iio_access import (
     air_attribute,
@@ -376,7 +376,7 @@ class Pluto:
         return iq[None, :]
 
     def _save(self, iq, path, sample_rate_hz: float, center_freq_hz: float, note=None):
-        from hil.ota.sigmf_io import write_sigmf
+        from hil.sigmf_io import write_sigmf
 
         return write_sigmf(
             path,

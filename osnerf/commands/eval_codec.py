@@ -1,7 +1,7 @@
 """`osnerf eval-codec`: image transmission quality, JSCC vs digital vs ideal (vs analog).
 
 Reads every PNG/JPEG of ``--images`` (each at least 11x11 px: SSIM's Gaussian window, see
-``semcodec.evaluation.EVAL_MIN_SIDE_PX``), sends each image (one at a time, its own size)
+``semcodec.links.schemes.EVAL_MIN_SIDE_PX``), sends each image (one at a time, its own size)
 through every scheme at every SNR, ``--draws`` times over independent noise and fading
 draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
 "sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
@@ -49,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_link_arguments(p: argparse.ArgumentParser) -> None:
     """--images, --channel, --draws, --snr-db, --cbr, --schemes, --mcs, --refine-steps, --seed."""
-    from semcodec import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
+    from semcodec.links import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
 
     side = f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} px"
     p.add_argument(
@@ -91,7 +91,7 @@ def _add_link_arguments(p: argparse.ArgumentParser) -> None:
         help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    from semcodec import REFINE_STEPS
+    from semcodec.jscc import REFINE_STEPS
 
     p.add_argument(
         "--refine-steps",
@@ -245,13 +245,8 @@ def _inputs(args: argparse.Namespace):
     from osnerf.schemes import parse_schemes
     from phy import num_symbols_for_cbr, parse_cbr
     from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
-    from semcodec import (
-        DEFAULT_FIXED_MCS,
-        LINK_SCHEMES,
-        eval_channels,
-        load_image_folder,
-        require_capabilities,
-    )
+    from semcodec import LINK_SCHEMES, require_capabilities
+    from semcodec.links import DEFAULT_FIXED_MCS, eval_channels, load_image_folder
 
     inputs = {"--images": args.images}
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
@@ -327,7 +322,8 @@ def _point(
 
     from common import psnr
     from renderer import lpips
-    from semcodec import LINK_SCHEMES, ssim
+    from semcodec import LINK_SCHEMES
+    from semcodec.links import ssim
 
     ps, ss, ls, t0 = [], [], [], time.perf_counter()
     extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}

@@ -48,7 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import AIR_SNR_DB_RANGE, DEVICES, IIOD_PORT, NETWORK_FAULTS
+    from hil import DEVICES
+    from hil.emulation import AIR_SNR_DB_RANGE, IIOD_PORT, NETWORK_FAULTS
     from osnerf.commands import args as checks
 
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
@@ -79,7 +80,7 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _info_lines(index: int, dev) -> list[str]:
-    from hil import BOARD_IDS, usb_api_version_string
+    from hil.hackrf import BOARD_IDS, usb_api_version_string
 
     board = BOARD_IDS.get(dev.board_id, "unknown")
     return [

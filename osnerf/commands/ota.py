@@ -3,7 +3,7 @@
     osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 --images DIR --out ota.json
 
 Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
-receiver (``LinkScheme.framed``, :mod:`semcodec.contract.framed`): ``digital`` (image codec bytes ->
+receiver (``LinkScheme.framed``, :mod:`semcodec.links.framed`): ``digital`` (image codec bytes ->
 per-frame CRC + 5G LDPC + QAM from ``phy.digital``) and ``jscc`` (the semantic codec's
 symbols). Either way the symbols cross an :class:`osnerf.ota_link.OtaLink`: ``phy``'s OFDM
 frames (preamble, pilots), ``hil``'s PAPR control and int8 scaling, out of the TX HackRF
@@ -85,7 +85,9 @@ def check_codec_snr(codec, snr_db: float) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import AIR_SNR_DB_RANGE, FAULT_NAMES, FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ, OtaConfig
+    from hil import OtaConfig
+    from hil.emulation import AIR_SNR_DB_RANGE, FAULT_NAMES
+    from hil.hackrf import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
     from semcodec import LINK_SCHEMES
 
     dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
@@ -165,7 +167,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
     """The emulated air between the boards: seed, crystal errors, echoes, delay (refused
     with real radios, :mod:`osnerf.commands.ota_radios`)."""
-    from hil import MAX_DELAY_S
+    from hil.emulation import MAX_DELAY_S
 
     p.add_argument(
         "--seed", type=checks.seed, default=None, help="seed of the emulated air (default 0)"
@@ -192,7 +194,7 @@ def _add_air_arguments(p: argparse.ArgumentParser) -> None:
 def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     """The options of the digital scheme (MCS, image codec, quality) and of jscc (CBR, codec)."""
     from phy.digital import MCS_TABLE
-    from semcodec import IMAGE_CODECS, SCALES
+    from semcodec.digital import IMAGE_CODECS, SCALES
 
     p.add_argument(
         "--mcs",
@@ -270,7 +272,7 @@ def open_pair(args, ota_cfg):
     """(tx, rx, emulator or None) for the --tx/--rx kinds, the air from the air flags where
     it is emulated (``args.air``, :func:`osnerf.commands.ota_radios.resolve_air`); --fault is
     set on the receiver."""
-    from hil import Faults
+    from hil.emulation import Faults
     from osnerf.ota_link import open_radios
 
     kind, tx_serial, rx_serial = device_kinds(args)
@@ -294,18 +296,14 @@ def open_pair(args, ota_cfg):
 
 # ----------------------------------------------------------------------------- run
 def framed_settings(args, symbols_per_frame: int):
-    """The scheme's ``semcodec.FramedSettings`` from the flags, checked: ``--quality`` in the
+    """The scheme's ``semcodec.links.FramedSettings`` from the flags, checked: ``--quality`` in the
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
     from osnerf.provenance import open_codec
     from phy import parse_cbr
-    from semcodec import (
-        IMAGE_CODECS,
-        LINK_SCHEMES,
-        FramedSettings,
-        frame_payload_bytes,
-        require_capabilities,
-    )
+    from semcodec import LINK_SCHEMES, require_capabilities
+    from semcodec.digital import IMAGE_CODECS
+    from semcodec.links import FramedSettings, frame_payload_bytes
 
     qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
     if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
@@ -402,7 +400,7 @@ def run(args: argparse.Namespace) -> int:
 
 def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota"):
     """One burst of ``blocks`` over an :class:`osnerf.ota_link.OtaLink` between the --tx/--rx
-    radios: (``hil.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
+    radios: (``hil.ota.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
     in one line, with what the receiver got so far saved as SigMF; warnings are printed one
     line each."""
     from hil import HilError, save_partial_capture

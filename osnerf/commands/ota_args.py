@@ -48,7 +48,7 @@ def parse_uri(text: str) -> str:
 def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
     if value.strip().lower() in ("", "none"):
         return ()
-    from hil import MAX_MULTIPATH_DELAY
+    from hil.emulation import MAX_MULTIPATH_DELAY
 
     out = []
     try:
@@ -66,7 +66,7 @@ def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
 
 
 def parse_ppm(value: str) -> tuple[float, float]:
-    from hil import PPM_RANGE
+    from hil.emulation import PPM_RANGE
 
     lo, hi = PPM_RANGE
     try:

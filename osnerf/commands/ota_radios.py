@@ -1,6 +1,6 @@
 """Which of `osnerf ota`'s flags a run applies, decided before any work.
 
-* Scheme flags go to one kind of scheme (``semcodec.SCHEME_KINDS``): ``--cbr`` and
+* Scheme flags go to one kind of scheme (``semcodec.links.SCHEME_KINDS``): ``--cbr`` and
   ``--codec`` to jscc, ``--mcs``, ``--image-codec``, ``--quality`` and ``--scale`` to
   digital. One given for a kind that ``--schemes`` does not send is refused; one left out
   takes its default where it is used and is recorded as null where it is not.

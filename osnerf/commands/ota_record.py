@@ -15,7 +15,7 @@ import numpy as np
 
 def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
     """The result file's record: per scheme and image, the summary, every frame, the SigMF
-    paths. ``bursts``: (scheme, per-image receptions, ``hil.BurstResult``, SigMF paths)."""
+    paths. ``bursts``: (scheme, per-image receptions, ``hil.ota.BurstResult``, SigMF paths)."""
     from osnerf.provenance import codec_record, result_header
 
     results, frames, sigmf, by_scheme = [], [], [], {}

@@ -278,7 +278,7 @@ def _board_overruns(run) -> str:
 
 def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0) -> dict:
     """``ota_record``'s file with one row per view, and the ``stream`` section."""
-    from hil import BurstResult
+    from hil.ota import BurstResult
     from osnerf.commands.ota_record import ota_record
 
     view_names = [f"{names[i]}#{v}" for v, i in enumerate(pick)]

@@ -94,7 +94,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
-    from semcodec import IMAGE_CODECS
+    from semcodec.digital import IMAGE_CODECS
 
     add_config_arguments(
         p,

@@ -5,7 +5,7 @@ checkpoint starts from its weights). On one process it runs as is; under ``torch
 --nproc-per-node N -m osnerf.cli train-codec ...`` it trains with DDP (gloo on CPU, nccl on
 ``--device cuda``), each rank taking its share of ``--batch-size``, rank 0 writing.
 Resumable at any world size: run the same command again and it continues from
-``OUT/last_state.pt``. A resume may change only what ``semcodec.RESUMABLE_FIELDS`` lists
+``OUT/last_state.pt``. A resume may change only what ``semcodec.training.RESUMABLE_FIELDS`` lists
 (more ``--max-steps``, a later ``--max-minutes``, save and validation intervals, threads,
 device); each such change is recorded in the model card's ``resumes``. Any other change
 (``--lr``, ``--seed``, ``--data``, ...) is refused with the changed fields named, unless
@@ -128,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
 def parse(args: argparse.Namespace):
     """Check every input before any work: (config, data folders, validation folder, init
     checkpoint or None, output folder, whether to resume the training there)."""
-    from semcodec import TrainConfig, build_codec, with_architecture
+    from semcodec import TrainConfig
+    from semcodec.training import build_codec, with_architecture
 
     cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
     cfg = with_architecture(cfg)  # --model left out: the codec's own first architecture
@@ -185,9 +186,9 @@ def _resumable(args, cfg, data, init, out: Path) -> bool:
 
     Raises:
         UsageError: the state is unreadable, or resuming would change a field that may not
-            change (``semcodec.RESUMABLE_FIELDS``), named with its flag, without --overwrite.
+            change (``semcodec.training.RESUMABLE_FIELDS``), named with its flag, without --overwrite.
     """
-    from semcodec import (
+    from semcodec.training import (
         ResumeRefused,
         check_resume,
         describe_changes,

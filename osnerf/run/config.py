@@ -64,7 +64,7 @@ class RunConfig:
             the cache key: it changes what runs, never a result.
         mcs: the digital scheme's MCS: "auto" (from the average SNR, no CSI at the
             transmitter) or a fixed phy.digital.MCS_TABLE name.
-        image_codec: digital baseline image codec (``semcodec.IMAGE_CODECS``).
+        image_codec: digital baseline image codec (``semcodec.digital.IMAGE_CODECS``).
         render_spp: Mitsuba samples per pixel.
         nerf_clock: what ``max_seconds`` counts: "cpu" (this process's CPU seconds over its
             threads: the same work on a busy machine as on an idle one) or "wall".
@@ -80,12 +80,12 @@ class RunConfig:
             same renderer on a busy machine as on an idle one. 0 skips it.
         refine_steps: the semantic schemes' transmitter (jscc, full) refines each view's
             symbols with this many Adam steps on the expected squared error over its own
-            model of the channel at the view's measured SNR (:func:`semcodec.refine_symbols`,
-            :func:`osnerf.run.jscc.refine_model_link`), on demand weighted to the demanded
-            objects (:data:`osnerf.run.jscc.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
+            model of the channel at the view's measured SNR (:func:`semcodec.jscc.refine_symbols`,
+            :func:`osnerf.semantic_send.refine_model_link`), on demand weighted to the demanded
+            objects (:data:`osnerf.semantic_send.REFINE_OUTSIDE_WEIGHT`); 0: the encoder's symbols.
         layer_fusion: the semantic schemes' receiver estimates the codec's analog refinement
             layer as if the radiance field averaged each surface over about this many
-            independently received views (:func:`semcodec.for_fusion`, in [1, 1000]): a
+            independently received views (:func:`semcodec.jscc.for_fusion`, in [1, 1000]): a
             noisier, less shrunk estimate per view and a better field. On a static link
             (the SCU's pilot copies do not fade independently) the transmitter also simulates
             its split between learned channels and the layer for that receiver. 1: each
@@ -295,7 +295,7 @@ class RunConfig:
 
     def _check_digital(self) -> None:
         from phy.digital import MCS_TABLE
-        from semcodec import IMAGE_CODECS
+        from semcodec.digital import IMAGE_CODECS
 
         if self.mcs != "auto" and self.mcs not in MCS_TABLE:
             raise ValueError(

@@ -52,7 +52,7 @@ class ViewAirLink:
 
     def air(self, num_samples: int):
         """The ``hil.AirChannel`` of a burst of ``num_samples`` samples."""
-        from hil import segments_from_arrays
+        from hil.emulation import segments_from_arrays
         from osnerf.ota_link import DEFAULT_DELAY_S, air_channel
 
         cfg = self.ota.ota_cfg

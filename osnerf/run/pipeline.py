@@ -83,7 +83,7 @@ def prepare(cfg: RunConfig) -> Prepared:
         limits = semcodec.require_capabilities(codec)  # a malformed declaration: one line
         if limits.line():  # what it lacks, before any work (refinement off is reported)
             _log(limits.line())
-        rx = semcodec.for_fusion(rx, cfg.layer_fusion)
+        rx = semcodec.jscc.for_fusion(rx, cfg.layer_fusion)
     return Prepared(demand, schemes, codec, rx, scu)
 
 

@@ -18,8 +18,9 @@ from osnerf.collect import Collection, CollectorConfig, Demand
 from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan
 from osnerf.scheme_types import scheme_seed
 from osnerf.scu.policy import RatePolicy, combined_snr_db
-from semcodec import BLOCK_PX, box_side_symbols, focus_coverage, full_rate_symbols
 from semcodec import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
+from semcodec.contract import box_side_symbols
+from semcodec.jscc import BLOCK_PX, focus_coverage, full_rate_symbols
 
 
 @dataclass

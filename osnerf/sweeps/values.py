@@ -39,14 +39,14 @@ def _codec(command: str, value: str) -> None:
 
 def _channel(command: str, value: str) -> None:
     """The channels of the command: run's (``phy.CHANNELS`` and ``ota``), eval-codec's
-    (``semcodec.eval_channels``: ``phy.CHANNELS``, the TS 38.101-4 conditions and
+    (``semcodec.links.eval_channels``: ``phy.CHANNELS``, the TS 38.101-4 conditions and
     ``raytraced`` included), ber's (``phy.THEORY_CHANNELS``), train-codec's
-    (``semcodec.TRAIN_CHANNELS``, a comma-separated mixture)."""
+    (``semcodec.jscc.TRAIN_CHANNELS``, a comma-separated mixture)."""
     known: tuple[str, ...] | list[str] = ()
     if command == "run":
         from osnerf.run.config import RUN_CHANNELS as known
     elif command == "eval-codec":
-        from semcodec import eval_channels
+        from semcodec.links import eval_channels
 
         known = eval_channels()
     elif command == "ber":

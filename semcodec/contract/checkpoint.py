@@ -17,7 +17,6 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from common import InputError, write_bytes
-from semcodec.jscc.model import JSCCConfig, JSCCModel
 
 CARD_KEY = "model_card"
 JSCC_CODEC = "jscc"
@@ -154,18 +153,3 @@ def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[d
             f"checkpoint {path} is corrupt: weights hash {sha[:12]} != card {str(card.get('sha256'))[:12]}"
         )
     return state, card, cfg
-
-
-def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
-    """Load a JSCC checkpoint; returns (model in eval mode, card). Verifies the stored hash.
-
-    Raises FileNotFoundError when missing and ValueError (one line) when corrupt or of
-    another codec.
-    """
-    state, card, cfg = read_checkpoint(path, JSCC_CODEC, JSCCConfig)
-    model = JSCCModel(cfg)
-    try:
-        model.load_state_dict(state)
-    except RuntimeError:
-        raise ValueError(f"checkpoint {path} does not match its architecture {cfg.name}") from None
-    return model.eval(), card

@@ -177,19 +177,3 @@ def plugin_origin(name: str) -> dict[str, str | None] | None:
         "version": dist.version if dist is not None else None,
         "entry_point": f"{ENTRY_POINT_GROUP}: {name} = {value}",
     }
-
-
-@CODECS.register("jscc")
-def _jscc(checkpoint: str | None = None):
-    """semcodec's ADJSCC (``semcodec.load_codec``; None = the shipped checkpoint)."""
-    from semcodec.jscc.codec import load_codec
-
-    return load_codec(checkpoint)
-
-
-@CODECS.register("deepjscc")
-def _deep_jscc(checkpoint: str | None = None):
-    """Deep JSCC (Bourtsoulatze et al. 2019), :mod:`semcodec.jscc.deep_jscc`; None = untrained."""
-    from semcodec.jscc.deep_jscc import make_deep_jscc
-
-    return make_deep_jscc(checkpoint)

@@ -7,7 +7,7 @@ The schemes: :func:`semcodec.jscc.link.transmit_jscc` (any semantic codec, with
 transmitter-side refinement :func:`semcodec.jscc.link.refine_symbols`),
 :func:`semcodec.digital.link.transmit_digital` and
 :func:`semcodec.digital.link.transmit_ideal` (image codec + CRC + LDPC + QAM, or at
-capacity), :func:`semcodec.uncoded.transmit_analog` (uncoded pixels).
+capacity), :func:`semcodec.links.uncoded.transmit_analog` (uncoded pixels).
 """
 
 from __future__ import annotations

@@ -23,8 +23,9 @@ import torch
 from torch import Tensor
 
 from phy import power_normalize, validate_snr_db
-from semcodec.contract.checkpoint import load_checkpoint, save_checkpoint, weights_sha256
+from semcodec.contract.checkpoint import save_checkpoint, weights_sha256
 from semcodec.contract.protocol import FOCUS_FILL, Encoded, box_side_symbols, check_images
+from semcodec.contract.registry import CODECS
 from semcodec.jscc.analog import decode_residual
 from semcodec.jscc.encoded_meta import EncodedMeta, centre_first
 from semcodec.jscc.focus import attribution_box, demand_heatmap, demand_positions, densest_box
@@ -33,6 +34,7 @@ from semcodec.jscc.model import (
     JSCC_ARCHITECTURES,
     features_to_symbols,
     lmmse_input,
+    load_checkpoint,
     make_model,
     reliability_to_features,
     side_info,
@@ -377,3 +379,9 @@ def load_codec(path: str | os.PathLike | None = None) -> Codec:
     p = DEFAULT_CHECKPOINT if path is None else Path(path)
     model, card = load_checkpoint(p)
     return Codec(model, card, p)
+
+
+@CODECS.register("jscc")
+def _jscc(checkpoint: str | None = None) -> Codec:
+    """semcodec's ADJSCC (:func:`load_codec`; None = the shipped checkpoint)."""
+    return load_codec(checkpoint)

@@ -33,10 +33,11 @@ from semcodec.contract.checkpoint import (
     weights_sha256,
 )
 from semcodec.contract.protocol import Encoded, check_images
+from semcodec.contract.registry import CODECS
+from semcodec.jscc.channels import masked_transmit
 from semcodec.jscc.encoded_meta import EncodedMeta
 from semcodec.jscc.model import features_to_symbols, lmmse_input, symbols_to_features
 from semcodec.jscc.truncation import ChannelTruncationCodec, pad4
-from semcodec.training.channels import masked_transmit
 
 CODEC_NAME = "deepjscc"
 
@@ -200,6 +201,7 @@ def untrained(architecture: str | None = None) -> DeepJSCC:
     return DeepJSCC(model, {"name": name, "sha256": sha})
 
 
+@CODECS.register("deepjscc")
 def make_deep_jscc(checkpoint: str | os.PathLike | None = None) -> DeepJSCC:
     """The ``deepjscc`` factory: the checkpoint's codec, or an untrained default (None).
 

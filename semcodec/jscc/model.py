@@ -10,6 +10,7 @@ Shapes: images [batch, 3, height, width] float32 in [0, 1]; features
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
@@ -19,6 +20,7 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from common import Registry
+from semcodec.contract.checkpoint import JSCC_CODEC, read_checkpoint
 from semcodec.jscc.gdn import GDN
 
 SNR_SCALE_DB = 10.0  # snr_db / SNR_SCALE_DB is what the AF modules see
@@ -310,3 +312,18 @@ def make_model(name: str) -> JSCCModel:
     """Build a registered architecture; unknown names raise KeyError listing the known ones."""
     cfg = JSCC_ARCHITECTURES[name]()
     return JSCCModel(cfg)
+
+
+def load_checkpoint(path: str | os.PathLike) -> tuple[JSCCModel, dict]:
+    """Load a JSCC checkpoint; returns (model in eval mode, card). Verifies the stored hash.
+
+    Raises FileNotFoundError when missing and ValueError (one line) when corrupt or of
+    another codec.
+    """
+    state, card, cfg = read_checkpoint(path, JSCC_CODEC, JSCCConfig)
+    model = JSCCModel(cfg)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError:
+        raise ValueError(f"checkpoint {path} does not match its architecture {cfg.name}") from None
+    return model.eval(), card

@@ -9,8 +9,8 @@ import dataclasses
 
 import torch
 
+from semcodec.jscc.channels import masked_transmit
 from semcodec.jscc.model import JSCCModel, side_info
-from semcodec.training.channels import masked_transmit
 
 
 def forward_train(

@@ -8,8 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from semcodec.jscc.channels import parse_train_channels
 from semcodec.training import distributed
-from semcodec.training.channels import parse_train_channels
 
 
 @dataclass(frozen=True)

@@ -34,11 +34,11 @@ from torch import nn
 
 from semcodec.contract.protocol import CODEC_MEMBERS, TRAINABLE_MEMBERS, missing_members
 from semcodec.contract.registry import make_codec, parse_codec_spec
+from semcodec.jscc.channels import parse_train_channels, train_channel_records
 from semcodec.jscc.model import make_model
 from semcodec.jscc.train_link import forward_train, load_compatible
 from semcodec.training import distributed
 from semcodec.training.batches import draw_batch, noise_generator
-from semcodec.training.channels import parse_train_channels, train_channel_records
 from semcodec.training.config import TrainConfig, lr_at
 from semcodec.training.data import files_sha256, list_images, load_data
 from semcodec.training.state import TRAINING_FILES, TrainRun, load_train_state

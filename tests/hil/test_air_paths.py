@@ -8,10 +8,17 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hil import AirChannel, AirPath, EmulatedPluto, Medium, PathSegment, loopback_pair
-from hil.emulation.pluto_attrs import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
-from hil.pluto.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE, clock_chain
-from hil.pluto.context import air_setting, parse_air_setting
+from hil import AirChannel, EmulatedPluto, Medium, loopback_pair
+from hil.emulation import AirPath, PathSegment
+from hil.emulation.pluto_attrs import parse_air_setting
+from hil.pluto.ad9361 import (
+    DEFAULT_RX_GAIN_DB,
+    DEFAULT_TX_GAIN_DB,
+    RX_FULL_SCALE,
+    TX_FULL_SCALE,
+    clock_chain,
+)
+from hil.pluto.context import air_setting
 
 FS = 4e6
 

@@ -13,16 +13,16 @@ from hil import (
     DeviceNotFoundError,
     DisconnectedError,
     Emulator,
-    Faults,
     HackRF,
     RequestFailedError,
     StallError,
     StreamError,
     UsbTimeoutError,
     open_loopback,
-    protocol,
     read_sigmf,
 )
+from hil.emulation import Faults
+from hil.hackrf import protocol
 
 CHUNK = 16384  # small transfers keep the tests fast; a multiple of 512
 

@@ -6,15 +6,9 @@ import threading
 import numpy as np
 import pytest
 
-from hil import (
-    AirChannel,
-    Emulator,
-    HackRF,
-    fractional_resample,
-    iq_imbalance,
-    loopback_pair,
-    to_int8_iq,
-)
+from hil import AirChannel, Emulator, HackRF, loopback_pair
+from hil.emulation import fractional_resample, iq_imbalance
+from hil.iq import to_int8_iq
 
 FS = 2e6
 

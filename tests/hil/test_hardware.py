@@ -14,7 +14,7 @@ def _serials():
     try:
         import usb.core
 
-        from hil import protocol
+        from hil.hackrf import protocol
 
         devs = usb.core.find(find_all=True, idVendor=protocol.VENDOR_ID)
         return [d.serial_number for d in devs if d.idProduct in protocol.PRODUCT_IDS]

@@ -239,13 +239,13 @@ def test_the_framed_jscc_receiver_hands_the_noise_variance_to_the_codec():
     codec = semcodec.load_codec()
     g = torch.Generator().manual_seed(0)
     images = torch.rand(1, 3, 32, 32, generator=g).numpy()
-    settings = semcodec.FramedSettings(snr_db=0.0, symbols_per_frame=1024, codec=codec)
+    settings = semcodec.links.FramedSettings(snr_db=0.0, symbols_per_frame=1024, codec=codec)
     framed = semcodec.LINK_SCHEMES["jscc"].framed
     blocks, encoded = framed.transmit(images, settings)
     noise = 0.7 * torch.randn(blocks[0].shape, generator=g, dtype=torch.complex64)
     y = blocks[0] + noise.numpy()
     nv = np.ones(y.shape[0], np.float32)  # 0 dB
-    (rec,) = framed.receive([semcodec.ReceivedBlock(y, nv, [True], 0.0)], encoded, images, settings)
+    (rec,) = framed.receive([semcodec.links.ReceivedBlock(y, nv, [True], 0.0)], encoded, images, settings)
     expected = codec.decode(
         torch.from_numpy(y)[None], encoded[0].meta, 0.0, noise_var=torch.from_numpy(nv)[None]
     )

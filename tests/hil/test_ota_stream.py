@@ -14,19 +14,10 @@ import numpy as np
 import pytest
 
 import phy
-from hil import (
-    EmulatedPluto,
-    Emulator,
-    HackRF,
-    OtaConfig,
-    PhyFrames,
-    RingBuffer,
-    StreamReceiver,
-    StreamView,
-    build_views,
-    protocol,
-)
+from hil import EmulatedPluto, Emulator, HackRF, OtaConfig, build_views
 from hil.emulation.pacing import StreamPacer
+from hil.hackrf import protocol
+from hil.ota import PhyFrames, RingBuffer, StreamReceiver, StreamView
 from hil.ota.burst import build_burst
 from hil.ota.header import MAX_FRAMES, decode_header
 from osnerf.cli import main

@@ -2,7 +2,7 @@
 
 import pytest
 
-from hil import M0State, protocol
+from hil.hackrf import M0State, protocol
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,6 @@ import typing
 import pytest
 
 from hil import (
-    EmulatedHackRF,
     EmulatedPluto,
     Emulator,
     HackRF,
@@ -19,6 +18,7 @@ from hil import (
     open_loopback,
     send_blocks,
 )
+from hil.emulation import EmulatedHackRF
 from hil.ota.link import transmit_and_capture
 
 RADIO_MEMBERS = {"receiving", "rx", "tx", "close"}

@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from hil import Annotation, SigmfError, SigmfReplay, read_sigmf, to_int8_iq, write_sigmf
+from hil import Annotation, SigmfError, SigmfReplay, read_sigmf, write_sigmf
+from hil.iq import to_int8_iq
 
 
 def samples(n=1000, seed=0):

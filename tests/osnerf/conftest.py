@@ -12,7 +12,7 @@ import semcodec
 
 def _checkpoint(path, seed):
     torch.manual_seed(seed)
-    model = semcodec.make_model(sorted(semcodec.JSCC_ARCHITECTURES)[0])
+    model = semcodec.jscc.make_model(sorted(semcodec.jscc.JSCC_ARCHITECTURES)[0])
     semcodec.save_checkpoint(path, model, {"name": f"untrained-{seed}"})
     return str(path)
 

@@ -177,10 +177,10 @@ def test_refinement_reaches_the_codec_in_its_own_terms():
     mask = torch.zeros(1, 1, 40, 40)
     mask[..., 4:28, 8:30] = 1.0
     enc = semcodec.encode_with_focus(codec, x, 10.0, 1 / 8, mask)
-    assert isinstance(enc.meta, semcodec.BoxMeta) and isinstance(enc.meta.inner, semcodec.TiledMeta)
+    assert isinstance(enc.meta, semcodec.contract.BoxMeta) and isinstance(enc.meta.inner, semcodec.contract.TiledMeta)
     import phy
 
-    ref = semcodec.refine_symbols(
+    ref = semcodec.jscc.refine_symbols(
         codec, x, enc, phy.channel_link("awgn"), 10.0, steps=2, generator=torch.Generator()
     )
     assert ref.symbols.shape == enc.symbols.shape and not torch.equal(ref.symbols, enc.symbols)
@@ -263,19 +263,19 @@ def test_train_channel_returns_what_decode_receives():
     phase = torch.rand(2, 50_000, generator=g) * 6.2832
     x = torch.polar(torch.ones(2, 50_000), phase).requires_grad_(False)
     for ch in ("awgn", "rayleigh_fast"):
-        x_hat, nv = semcodec.train_channel(x, 0.0, ch, g)
+        x_hat, nv = semcodec.jscc.train_channel(x, 0.0, ch, g)
         assert x_hat.shape == nv.shape == x.shape and x_hat.dtype == torch.complex64
         gain = (x_hat * x.conj()).real.median().item()  # robust to 1 / |h|^2's tail
         assert abs(gain - 1.0) < 0.02, (ch, gain)
-    x_hat, nv = semcodec.train_channel(x, 0.0, "awgn", g)
+    x_hat, nv = semcodec.jscc.train_channel(x, 0.0, "awgn", g)
     err = (x_hat - x).abs().pow(2).mean().item()
     assert abs(err / nv.mean().item() - 1.0) < 0.02 and abs(nv.mean().item() - 1.0) < 1e-6
     v = x[:, :64].clone().requires_grad_(True)
-    out, _ = semcodec.train_channel(v, torch.tensor([5.0, 10.0]), "rayleigh", g)
+    out, _ = semcodec.jscc.train_channel(v, torch.tensor([5.0, 10.0]), "rayleigh", g)
     out.abs().pow(2).sum().backward()
     assert v.grad is not None and torch.isfinite(v.grad).all()
     with pytest.raises(KeyError, match="unknown training channel 'nope'"):
-        semcodec.train_channel(x, 0.0, "nope", g)
+        semcodec.jscc.train_channel(x, 0.0, "nope", g)
 
 
 @pytest.mark.parametrize("name", ["jscc", "deepjscc"])

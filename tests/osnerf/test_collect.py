@@ -9,7 +9,7 @@ from osnerf.collect import CollectorConfig, Demand, collect, masked_images
 from osnerf.scenes import SceneViews, intrinsics_from_fov
 from osnerf.scu import KnowledgeBaseError, RatePolicy, SemanticControlUnit
 from phy import CopyFading
-from semcodec import box_side_symbols
+from semcodec.contract import box_side_symbols
 from semcodec.jscc.grid import focus_coverage, focus_pixel_masks
 
 

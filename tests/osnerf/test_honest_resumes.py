@@ -192,12 +192,12 @@ def test_resumes_train_codec_finished_run_again_changes_nothing(run_copy, capsys
 
 def test_resumes_train_codec_overwrite_starts_over(run_copy):
     _, out, argv = run_copy
-    old = semcodec.load_train_state(out / "last_state.pt")["model"]
+    old = semcodec.training.load_train_state(out / "last_state.pt")["model"]
     assert main([*argv, "--lr", "0.002", "--overwrite"]) == 0
     card = semcodec.load_codec(out / "last.safetensors").card
     assert card["training"]["config"]["lr"] == 0.002 and card["training"]["steps"] == 2
     assert "resumes" not in card
-    state = semcodec.load_train_state(out / "last_state.pt")
+    state = semcodec.training.load_train_state(out / "last_state.pt")
     assert state["step"] == 2 and state["config"]["lr"] == 0.002
     # two new steps from the first weights at the new lr, not the old run's weights
     assert any(not (state["model"][k] == v).all() for k, v in old.items())

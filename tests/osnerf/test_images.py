@@ -61,7 +61,7 @@ def test_ota_refuses_to_upscale_a_1x1_image(one_line, tmp_path, capsys):
 
 @pytest.mark.parametrize("w, h", [(8, 8), (64, 8), (10, 64), (11, 10), (10, 11)])
 def test_eval_codec_states_its_true_minimum_size(one_line, tmp_path, capsys, w, h):
-    from semcodec.evaluation import EVAL_MIN_SIDE_PX
+    from semcodec.links.schemes import EVAL_MIN_SIDE_PX
 
     d = tmp_path / "img"
     d.mkdir()
@@ -99,7 +99,7 @@ def test_eval_codec_failing_mid_run_leaves_its_error_as_the_last_line(
 ):
     """A scheme that fails at run time: exit 1 with one error line, and the progress bar is
     closed before it, never drawn again after it."""
-    from semcodec import evaluation
+    from semcodec.links import schemes as evaluation
 
     def fails(*args, **kwargs):
         raise RuntimeError("the modem caught fire")
@@ -133,7 +133,7 @@ def test_train_codec_resumed_with_another_model_is_one_line(one_line, tmp_path, 
     from common.files import write_torch
     from semcodec.training.loop import TrainConfig
 
-    names = sorted(semcodec.JSCC_ARCHITECTURES)
+    names = sorted(semcodec.jscc.JSCC_ARCHITECTURES)
     trained, other = names[0], names[1]
     data = tmp_path / "data"
     data.mkdir()
@@ -141,7 +141,7 @@ def test_train_codec_resumed_with_another_model_is_one_line(one_line, tmp_path, 
     out = tmp_path / "out"
     state = {
         "config": dataclasses.asdict(TrainConfig(model=trained, crop_px=16)),
-        "model": semcodec.make_model(trained).state_dict(),
+        "model": semcodec.jscc.make_model(trained).state_dict(),
         "optimizer": {},
         "step": 1,
         "elapsed_s": 1.0,

@@ -171,7 +171,7 @@ def test_no_scheme_name_is_dispatched_by_string_outside_the_tables():
     """Plots, commands and benchmarks read a scheme's kind from its table
     (``osnerf.schemes.SCHEMES``, ``semcodec.LINK_SCHEMES``), never from its name."""
     root = Path(__file__).resolve().parents[2]
-    tables = {"osnerf/schemes.py", "semcodec/evaluation.py"}
+    tables = {"osnerf/schemes.py", "semcodec/links/schemes.py"}
     sources = {
         str(p.relative_to(root)): p.read_text()
         for folder in ("osnerf", "semcodec", "benchmarks")
@@ -203,7 +203,7 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     outside the box. (Averaging first gave those edge pixels the decoder's output for the
     erased positions: a dark frame around every box, which the NeRF had to explain.)"""
     import semcodec
-    from semcodec import receiver_mask
+    from semcodec.jscc import receiver_mask
 
     codec = semcodec.load_codec(env["codec"])
     seen = {}
@@ -270,7 +270,7 @@ def test_the_refining_transmitter_simulates_one_tap_per_symbol():
     """Flat channels as they are; frequency-selective OFDM links (tdl, and the ray-traced and
     radio links it assumes TDL for) as fast Rayleigh: each interleaved symbol on its own
     subcarrier fade, at a fraction of an OFDM grid's cost."""
-    from osnerf.run.jscc import refine_model_link
+    from osnerf.semantic_send import refine_model_link
 
     assert phy.channel_kind(refine_model_link("rayleigh")) == "rayleigh"
     for name in ("raytraced", "ota", "tdl", "cdl"):

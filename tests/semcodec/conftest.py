@@ -8,7 +8,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # smooth_images, besid
 import pytest  # noqa: E402
 import torch  # noqa: E402
 
-from semcodec import load_codec, make_model, save_checkpoint  # noqa: E402
+from semcodec import load_codec, save_checkpoint
+from semcodec.jscc import make_model
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -8,7 +8,8 @@ import torch
 from smooth_images import smooth_image
 
 import phy
-from semcodec import for_fusion, learned_only, load_codec, transmit_jscc
+from semcodec import load_codec
+from semcodec.jscc import for_fusion, learned_only, transmit_jscc
 from semcodec.jscc.analog import (
     FORMAT_BITS,
     POWER_SCALE_BITS,
@@ -216,8 +217,8 @@ def test_focus_box_gets_the_layer_at_its_offset(codec):
 
 
 def test_refinement_differentiates_through_the_layer(codec, shared_data):
-    from semcodec import refine_symbols
-    from semcodec.evaluation import load_image_folder
+    from semcodec.jscc import refine_symbols
+    from semcodec.links.schemes import load_image_folder
 
     x = load_image_folder(shared_data / "kodak")[1][0][:, :, 128:256, 256:448]
     link = phy.FlatLink(phy.make_channel("awgn"), csi="perfect", equalizer="zf")
@@ -278,7 +279,7 @@ def test_transmitter_for_a_fusing_receiver_splits_towards_the_layer(codec):
 
 def test_jscc_learned_scheme_sends_the_learned_channels_only(codec):
     from semcodec import LINK_SCHEMES
-    from semcodec.evaluation import EvalContext
+    from semcodec.links.schemes import EvalContext
 
     x = smooth_image(5, 96, 128)
     ctx = EvalContext(channel="awgn", codec=codec)

@@ -8,17 +8,16 @@ from smooth_images import smooth_image
 
 import phy
 from common import psnr
-from semcodec import (
+from semcodec import LINK_SCHEMES, LOST_IMAGE_VALUE
+from semcodec.digital import (
     IMAGE_CODECS,
-    LINK_SCHEMES,
-    LOST_IMAGE_VALUE,
     encode_image,
     encode_to_budget,
-    transmit_analog,
     transmit_digital,
     transmit_ideal,
 )
-from semcodec.evaluation import EvalContext
+from semcodec.links import transmit_analog
+from semcodec.links.schemes import EvalContext
 
 
 @pytest.mark.parametrize("codec", sorted(IMAGE_CODECS))

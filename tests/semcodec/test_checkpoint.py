@@ -5,14 +5,8 @@ import json
 import pytest
 import torch
 
-from semcodec import (
-    DEFAULT_CHECKPOINT,
-    KnowledgeBaseMismatch,
-    learned_only,
-    load_codec,
-    make_model,
-    save_checkpoint,
-)
+from semcodec import DEFAULT_CHECKPOINT, KnowledgeBaseMismatch, load_codec, save_checkpoint
+from semcodec.jscc import learned_only, make_model
 
 
 def test_round_trip_same_outputs_and_hash(tiny_ckpt, tiny_codec, tmp_path):

@@ -12,7 +12,7 @@ from smooth_images import smooth_image
 import phy
 from common import psnr
 from phy.digital import MCS_TABLE, codeword_layout
-from semcodec import IMAGE_CODECS, transmit_digital
+from semcodec.digital import IMAGE_CODECS, transmit_digital
 from semcodec.digital.calibration import (
     MEASURED,
     fade_grid,

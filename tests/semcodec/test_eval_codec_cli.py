@@ -157,14 +157,14 @@ def test_draws_give_mean_and_interval_and_the_genie_is_a_bound(image_dir, tmp_pa
 
 
 def test_zero_draws_refused_before_any_work(image_dir, tmp_path, capsys, monkeypatch):
-    import semcodec.evaluation
     import semcodec.jscc.codec
+    import semcodec.links.schemes
 
     def boom(*a, **k):
         raise AssertionError("work started")
 
     monkeypatch.setattr(semcodec.jscc.codec, "load_codec", boom)
-    monkeypatch.setattr(semcodec.evaluation, "load_image_folder", boom)
+    monkeypatch.setattr(semcodec.links.schemes, "load_image_folder", boom)
     for n in ("0", "-2"):
         _bad(tmp_path, "--draws", n, images=image_dir)
         assert f"argument --draws: must be an integer in [1, 10000], got {n!r}" in (
@@ -185,7 +185,8 @@ def test_unknown_channel_lists_the_known_ones(image_dir, tmp_path, capsys):
 def test_checkpoint_for_another_snr_range_is_refused_naming_both(image_dir, tmp_path, capsys):
     import dataclasses
 
-    from semcodec import JSCCModel, make_model, save_checkpoint
+    from semcodec import save_checkpoint
+    from semcodec.jscc import JSCCModel, make_model
 
     cfg = dataclasses.replace(make_model("adjscc_s4_w64").cfg, snr_min_db=5.0, snr_max_db=20.0)
     ck = tmp_path / "high.safetensors"

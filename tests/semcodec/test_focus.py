@@ -3,7 +3,8 @@
 import pytest
 import torch
 
-from semcodec import box_side_symbols, demand_weight_map, densest_box, learned_only
+from semcodec.contract import box_side_symbols
+from semcodec.jscc import demand_weight_map, densest_box, learned_only
 from semcodec.jscc.focus import attribution_box, demand_positions
 
 
@@ -124,7 +125,8 @@ def test_focus_spends_the_whole_budget_with_a_partial_channel_for_v2_models():
     """A reliability-aware decoder gets channel m + 1 at the box's central positions (the
     rest of that channel looks erased to it), so the focus budget is spent to the symbol:
     the box's side information and the symbols fill it."""
-    from semcodec import Codec, box_side_symbols, make_model
+    from semcodec.contract import box_side_symbols
+    from semcodec.jscc import Codec, make_model
     from semcodec.jscc.encoded_meta import centre_first
     from semcodec.jscc.model import features_to_symbols, side_info, symbols_to_features
 

@@ -5,14 +5,9 @@ import numpy as np
 import pytest
 import torch
 
-from semcodec import (
-    LINK_SCHEMES,
-    LOST_IMAGE_VALUE,
-    FramedSettings,
-    ReceivedBlock,
-    encode_image,
-    frame_payload_bytes,
-)
+from semcodec import LINK_SCHEMES, LOST_IMAGE_VALUE
+from semcodec.digital import encode_image
+from semcodec.links import FramedSettings, ReceivedBlock, frame_payload_bytes
 
 SPF = 256
 

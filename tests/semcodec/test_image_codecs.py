@@ -6,7 +6,7 @@ from PIL import Image
 from smooth_images import smooth_image
 
 from common import psnr
-from semcodec import IMAGE_CODECS
+from semcodec.digital import IMAGE_CODECS
 from semcodec.digital.image_codecs import (
     decode_image,
     decode_scaled,

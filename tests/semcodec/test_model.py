@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from semcodec import (
+from semcodec.jscc import (
     JSCC_ARCHITECTURES,
     JSCCConfig,
     features_to_symbols,

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 import phy
-from semcodec import features_to_symbols, learned_only
-from semcodec.training.channels import channel_mask, masked_transmit
+from semcodec.jscc import features_to_symbols, learned_only
+from semcodec.jscc.channels import channel_mask, masked_transmit
 
 
 def test_encoded_power_is_one_per_image(tiny_codec):

@@ -1,4 +1,4 @@
-"""Transmitter-side refinement of the JSCC symbols (semcodec.refine_symbols, jscc_refined)."""
+"""Transmitter-side refinement of the JSCC symbols (semcodec.jscc.refine_symbols, jscc_refined)."""
 
 import math
 
@@ -7,8 +7,9 @@ import torch
 from smooth_images import smooth_image
 
 import phy
-from semcodec import LINK_SCHEMES, load_codec, refine_symbols, transmit_jscc
-from semcodec.evaluation import EvalContext
+from semcodec import LINK_SCHEMES, load_codec
+from semcodec.jscc import refine_symbols, transmit_jscc
+from semcodec.links.schemes import EvalContext
 
 
 @pytest.fixture(scope="module")

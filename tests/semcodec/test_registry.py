@@ -9,13 +9,13 @@ import phy
 import semcodec
 from semcodec import (
     CODECS,
-    BoxMeta,
     CodecPluginError,
     KnowledgeBaseMismatch,
     SemanticCodec,
     TrainableCodec,
     make_codec,
 )
+from semcodec.contract import BoxMeta
 
 
 def smooth_images(n: int, h: int, w: int) -> torch.Tensor:
@@ -84,10 +84,10 @@ def test_focus_by_box_sends_the_box_at_the_budget():
     x = torch.rand(1, 3, 64, 96)
     mask = torch.zeros(1, 1, 64, 96)
     mask[..., 20:30, 40:61] = 1.0
-    assert semcodec.mask_box(mask, 64, 96) == (16, 40, 16, 24)
+    assert semcodec.contract.mask_box(mask, 64, 96) == (16, 40, 16, 24)
     # the box's side information: 4 coordinates of 5 bits in 4 px units, at 0.5 bit/symbol
-    box = semcodec.box_side_symbols(64, 96)
-    wide = semcodec.focus_by_box(codec, x, mask, 400, 5.0).meta
+    box = semcodec.contract.box_side_symbols(64, 96)
+    wide = semcodec.contract.focus_by_box(codec, x, mask, 400, 5.0).meta
     assert box == 40 and wide.side_info_bits() - wide.inner.side_info_bits() == 20
     budget = 16 * 24 * 3 // 16 + box  # CBR 1/16 over the box, and the box's side information
     enc = semcodec.encode_with_focus(codec, x, 5.0, budget / (3 * 64 * 96), mask)
@@ -99,30 +99,30 @@ def test_focus_by_box_sends_the_box_at_the_budget():
     outside[..., 16:32, 40:64] = False
     assert torch.all(y[outside] == 0.5)
     # a budget below the smallest rate over the box: the box goes downscaled, within budget
-    small = semcodec.focus_by_box(codec, x, mask, box + 10, 5.0)
+    small = semcodec.contract.focus_by_box(codec, x, mask, box + 10, 5.0)
     assert 4 <= small.meta.num_symbols <= 10 and small.meta.crop == (16, 40, 16, 24)
-    y = semcodec.decode_box(codec, small.symbols, small.meta, 5.0)
+    y = semcodec.contract.decode_box(codec, small.symbols, small.meta, 5.0)
     assert y.shape == x.shape
     with pytest.raises(ValueError, match="budget_symbols must be >= 1"):
-        semcodec.focus_by_box(codec, x, mask, 0, 5.0)
+        semcodec.contract.focus_by_box(codec, x, mask, 0, 5.0)
     with pytest.raises(ValueError, match="budget_symbols 3 is below the smallest message"):
-        semcodec.focus_by_box(codec, x, mask, box + 3, 5.0)
+        semcodec.contract.focus_by_box(codec, x, mask, box + 3, 5.0)
     with pytest.raises(ValueError, match="does not carry the box's side information"):
-        semcodec.focus_by_box(codec, x, mask, box, 5.0)
+        semcodec.contract.focus_by_box(codec, x, mask, box, 5.0)
 
 
 def test_a_plugin_codec_runs_over_awgn_and_block_rayleigh(plugin):
     codec = make_codec("demo")
     assert type(codec).__module__ == "semcodec_plugin_demo"
-    assert not isinstance(codec.module, semcodec.JSCCModel)
+    assert not isinstance(codec.module, semcodec.jscc.JSCCModel)
     assert isinstance(codec, SemanticCodec) and not semcodec.is_trainable(codec)
     assert "demo" in semcodec.codec_names()
     x = smooth_images(2, 32, 48)
     for channel in ("awgn", "rayleigh"):
         link = phy.channel_link(channel)
         g = torch.Generator().manual_seed(0)
-        lo = semcodec.transmit_jscc(codec, x, link, 0.0, 1 / 6, generator=g)
-        hi = semcodec.transmit_jscc(codec, x, link, 30.0, 1 / 6, generator=g)
+        lo = semcodec.jscc.transmit_jscc(codec, x, link, 0.0, 1 / 6, generator=g)
+        hi = semcodec.jscc.transmit_jscc(codec, x, link, 30.0, 1 / 6, generator=g)
         assert lo.stats["cbr"] == pytest.approx(1 / 6)
         assert lo.stats["side_info_bits"] == 2 * 32
         assert _psnr(hi.images, x) > _psnr(lo.images, x) + 3, channel
@@ -133,7 +133,7 @@ def test_a_plugin_codec_runs_as_the_eval_codec_link_scheme(plugin):
     codec = make_codec("demo")
     x = smooth_images(1, 32, 32)
     for channel in ("awgn", "rayleigh"):
-        ctx = semcodec.evaluation.EvalContext(channel=channel, codec=codec)
+        ctx = semcodec.links.schemes.EvalContext(channel=channel, codec=codec)
         out = semcodec.LINK_SCHEMES["jscc"](ctx, x, 20.0, 1 / 12, torch.Generator().manual_seed(1))
         assert out.images.shape == x.shape and _psnr(out.images, x) > 20
         with pytest.raises(ValueError, match="cannot refine"):
@@ -146,7 +146,7 @@ def test_a_plugin_without_focus_serves_a_focus_demand_by_its_box(plugin):
     mask = torch.zeros(1, 1, 48, 64)
     mask[..., 8:20, 16:40] = 1
     g = torch.Generator().manual_seed(0)
-    out = semcodec.transmit_jscc(codec, x, phy.channel_link("awgn"), 30.0, 1 / 48, mask, g)
+    out = semcodec.jscc.transmit_jscc(codec, x, phy.channel_link("awgn"), 30.0, 1 / 48, mask, g)
     box = out.images[..., 8:24, 16:40]
     assert _psnr(box, x[..., 8:24, 16:40]) > 24
     assert torch.all(out.images[..., 30:, :] == 0.5)

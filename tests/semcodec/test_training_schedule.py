@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from semcodec.training.channels import channel_mask
+from semcodec.jscc.channels import channel_mask
 from semcodec.training.loop import TrainConfig, lr_at
 
 

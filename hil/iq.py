@@ -41,3 +41,11 @@ def full_scale_samples(samples) -> np.ndarray:
     if peak > 1.0 + 1e-6:
         raise ValueError(f"samples must lie within full scale |I|, |Q| <= 1, peak is {peak:.3f}")
     return x
+
+
+def quantize_ci8(y: np.ndarray) -> np.ndarray:
+    """[num_samples] complex, full scale 1.0 -> [2 * num_samples] int8 (round, clip to [-128, 127])."""
+    inter = np.empty(2 * len(y), np.float32)
+    inter[0::2] = y.real
+    inter[1::2] = y.imag
+    return np.clip(np.rint(inter * 128.0), -128, 127).astype(np.int8)

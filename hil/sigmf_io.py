@@ -18,6 +18,7 @@ import numpy as np
 
 from common import write_bytes, write_text
 from hil.errors import SigmfError
+from hil.iq import quantize_ci8
 
 DATATYPES = ("ci8", "cf32_le")
 
@@ -83,8 +84,6 @@ def _payload(samples, datatype: str) -> bytes:
         if x.dtype == np.int8:
             raw = x.reshape(-1)
         else:
-            from hil.emulation.air import quantize_ci8
-
             raw = quantize_ci8(x.reshape(-1))
         payload = raw.astype(np.int8).tobytes()
     else:

@@ -12,12 +12,15 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+import phy
 from osnerf.scheme_types import Transmission, scheme_seed
+from phy import combine_repetitions
+from semcodec import codec_limits, decode_received, encode_with_focus, refinement_status
+from semcodec.jscc import for_fusion, receiver_mask, refine_symbols
 
 
 def _send_blocks(link, symbols: torch.Tensor, snr_db: float, repetitions: int, generator):
     """``repetitions`` copies of a [1, n] block through ``link``, MRC-combined."""
-    from phy import combine_repetitions
 
     out = link(symbols.expand(repetitions, -1).contiguous(), snr_db, generator=generator)
     return combine_repetitions(out.x_hat, out.noise_var)
@@ -33,12 +36,11 @@ _MODEL_LINKS: dict = {}
 
 def refine_model_link(channel: str):
     """The link the jscc transmitter simulates when it refines its symbols
-    (:func:`semcodec.refine_symbols`): a statistical model of the run's channel, drawn from
+    (:func:`semcodec.jscc.refine_symbols`): a statistical model of the run's channel, drawn from
     the transmitter's own generator, never the real link: ``phy.symbol_model`` of the run's
     channel (the channel itself where ``phy`` draws it from a flat distribution; fast
     Rayleigh for TDL/CDL over OFDM, for ``raytraced`` and for ``ota``, whose symbols ride
     independently faded subcarriers), one tap per symbol with perfect CSI."""
-    import phy
 
     name = phy.symbol_model(channel)
     if name not in _MODEL_LINKS:
@@ -113,7 +115,6 @@ def codec_use(ctx, sent: int, budget: int) -> dict:
     """What the run did with the codec, for the report: its declared limits, refinement on
     or off (and why), and the symbols sent against the plan's budget (repetitions included;
     a codec may send fewer than its budget, never silently)."""
-    from semcodec import codec_limits, refinement_status
 
     return {
         "codec": ctx.codec.name,
@@ -155,7 +156,6 @@ def _view_input(ctx, x, k: int, s_up: int, on_demand: bool) -> tuple[torch.Tenso
 def _encode(ctx, p, x, kw: dict):
     """Encode one view; with ``refine_steps``, refine its symbols against the transmitter's
     own model of the channel (:func:`refine_model_link`), weighted to the demanded objects."""
-    from semcodec import encode_with_focus, for_fusion, refine_symbols, refinement_status
 
     codec = ctx.codec
     if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
@@ -191,7 +191,6 @@ def _decode(ctx, p, enc, x_hat, nv, size, s_up: int, on_demand: bool):
     """Decode one view at the average SNR after combining (per-symbol noise in ``nv``); on
     demand, the background outside the sent box, then back to the captured size. Returns
     (image [3, h, w], the sent pixels at the decoded resolution or None)."""
-    from semcodec import decode_received, receiver_mask
 
     h, w = size
     bg = torch.as_tensor(ctx.background, dtype=torch.float32)[:, None, None]

@@ -16,13 +16,13 @@ import torch
 from common import Registry, list_images, read_image
 from phy import num_symbols_for_cbr
 from semcodec.contract.box_focus import encode_with_focus
-from semcodec.contract.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
 from semcodec.contract.protocol import MIN_SIDE_PX
 from semcodec.contract.transmit import TransmitResult
 from semcodec.digital.link import AUTO, GENIE, transmit_digital, transmit_ideal
 from semcodec.jscc.codec import Codec, learned_only
 from semcodec.jscc.link import REFINE_STEPS, refine_symbols, transmit_jscc
-from semcodec.uncoded import transmit_analog
+from semcodec.links.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
+from semcodec.links.uncoded import transmit_analog
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
 
@@ -136,7 +136,7 @@ class LinkScheme:
         kind: one of :data:`SCHEME_KINDS`.
         bound: what it bounds when it is not a real system (shown as such), else None.
         framed: its transmitter and receiver apart around a framed link
-            (:mod:`semcodec.contract.framed`: what ``osnerf ota`` sends between two radios), or None
+            (:mod:`semcodec.links.framed`: what ``osnerf ota`` sends between two radios), or None
             when it cannot cross one.
         mcs: how a digital scheme picks its modulation and code rate: ``"auto"`` (from the
             average SNR), ``"genie"`` (from the draw: a bound) or ``"fixed"`` (``--mcs``);
