@@ -1,5 +1,5 @@
 """The over-the-air receiver chain stage by stage, beside its reference implementation
-(phy.receiver_reference, phy.detection_reference) in the same run: real-time factors at
+(benchmarks.reference_receiver.receiver, benchmarks.reference_receiver.detection) in the same run: real-time factors at
 several sample rates, and a profile of where the time goes.
 
 Both implementations are timed alternately, call by call, so that load on a shared machine
@@ -18,7 +18,9 @@ import time
 import numpy as np
 
 import phy
-from phy import detection, detection_reference, receiver, receiver_reference
+from benchmarks.reference_receiver import detection as detection_reference
+from benchmarks.reference_receiver import receiver as receiver_reference
+from phy import detection, receiver
 
 RATES_HZ = (2e6, 10e6, 20e6)
 CFO_HZ = 49e3  # 20 ppm at 2.45 GHz
@@ -195,7 +197,7 @@ def profile(rate: float, rng: np.random.Generator, top: int = 12, runs: int = 20
 
 def run_all(rng: np.random.Generator) -> dict:
     return {
-        "note": "new beside reference (phy.receiver_reference), alternating calls; "
+        "note": "new beside reference (benchmarks.reference_receiver.receiver), alternating calls; "
         "realtime factor > 1 is faster than real time; speedup = reference / new",
         "rates": {f"{rate / 1e6:g} MS/s": rate_run(rate, rng) for rate in RATES_HZ},
         "profile_at_20msps": profile(20e6, rng),

@@ -239,7 +239,7 @@ def sync_sequence(cfg: FrameConfig) -> tuple[np.ndarray, np.ndarray]:
 
 
 @functools.cache
-def _lts(cfg: FrameConfig) -> np.ndarray:
+def long_training_symbol(cfg: FrameConfig) -> np.ndarray:
     """[fft_size] centred-order long training symbol: BPSK on every used carrier."""
     used = cfg.data_grid(1).used_subcarriers
     lts = np.zeros(cfg.fft_size, dtype=np.complex128)
@@ -266,7 +266,7 @@ def _amplitude_scale(cfg: FrameConfig) -> float:
     return cfg.rms_amplitude / math.sqrt(used / cfg.fft_size)
 
 
-def _as_complex_1d(x, name: str) -> np.ndarray:
+def as_complex_1d(x, name: str) -> np.ndarray:
     if isinstance(x, torch.Tensor):
         x = x.detach().cpu().numpy()
     x = np.asarray(x)
@@ -290,7 +290,7 @@ def build_frame(symbols, cfg: FrameConfig = FrameConfig()) -> np.ndarray:
         [cfg.num_samples(num_symbols)] complex64 numpy, RMS ``cfg.rms_amplitude``,
         |x| <= 1 (clipped).
     """
-    x = _as_complex_1d(symbols, "symbols")
+    x = as_complex_1d(symbols, "symbols")
     if x.size < 1:
         raise ValueError("symbols must hold at least 1 symbol")
     grid = cfg.data_grid(x.size)
@@ -299,7 +299,7 @@ def build_frame(symbols, cfg: FrameConfig = FrameConfig()) -> np.ndarray:
     if cfg.interleave:
         payload = payload[interleaver(grid.num_data_symbols)]
     data = map_to_grid(torch.from_numpy(payload)[None], grid)[0].numpy()
-    lts = _lts(cfg)
+    lts = long_training_symbol(cfg)
     freq = np.concatenate([lts[None], lts[None], data], axis=0)  # [2 + num_ofdm_symbols, fft_size]
     body = np.fft.ifft(np.fft.ifftshift(freq, axes=-1), axis=-1, norm="ortho")
     ofdm = np.concatenate([body[:, -cfg.cp_length :], body], axis=-1).reshape(-1)

@@ -23,7 +23,7 @@ import torch
 
 from phy import _kernels, estimation
 from phy.detection import find_preambles
-from phy.frame import FrameConfig, _as_complex_1d
+from phy.frame import FrameConfig, as_complex_1d
 from phy.ofdm.equalization import EQUALIZERS
 from phy.receiver_layout import _Layout, _layout
 
@@ -76,7 +76,7 @@ def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     Args:
         iq: [num_samples] complex64 (numpy or torch).
     """
-    raw = _as_complex_1d(iq, "iq")
+    raw = as_complex_1d(iq, "iq")
     return [d.start for d in find_preambles(raw, cfg, _mean(raw))]
 
 
@@ -171,7 +171,7 @@ def receive_frames(
 
 def _checked(iq, num_symbols, equalizer: str) -> np.ndarray:
     """The capture as [num_samples] complex64 once the arguments are checked."""
-    raw = _as_complex_1d(iq, "iq")
+    raw = as_complex_1d(iq, "iq")
     if not isinstance(num_symbols, int) or num_symbols < 1:
         raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
     if equalizer not in EQUALIZERS:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from phy import estimation
-from phy.frame import FrameConfig, _lts, interleaver
+from phy.frame import FrameConfig, interleaver, long_training_symbol
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
     rows = 2 + grid.num_ofdm_symbols
     body = cfg.sync_length + cp + s * np.arange(rows)
     x = np.zeros((rows, n), np.complex64)  # [rows, fft_size]
-    x[:2, used] = _lts(cfg)[used]
+    x[:2, used] = long_training_symbol(cfg)[used]
     x[2:, pk] = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
     k_row, k_col = np.nonzero(x)
     data = np.zeros((rows, n), bool)

@@ -1,5 +1,5 @@
 """The previous implementation of the receiver chain: the reference search
-(:mod:`phy.detection_reference`) and demodulation, kept unchanged for the benchmark's
+(:mod:`benchmarks.reference_receiver.detection`) and demodulation, kept unchanged for the benchmark's
 side-by-side timing and the equivalence test (the same frames, the same decoded bits).
 
 Every function of the chain is a copy, so that changes to :mod:`phy.receiver` leave it as it
@@ -17,16 +17,16 @@ import numpy as np
 import scipy.fft
 import torch
 
+from benchmarks.reference_receiver.detection import find_preambles
 from phy import estimation
-from phy.detection_reference import find_preambles
-from phy.frame import FrameConfig, _as_complex_1d, _lts, interleaver
+from phy.frame import FrameConfig, as_complex_1d, interleaver, long_training_symbol
 from phy.ofdm.equalization import EQUALIZERS
 from phy.receiver import FrameResult
 
 
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     """:func:`phy.receiver.find_frames` with the reference search."""
-    return [d.start for d in find_preambles(_without_dc(_as_complex_1d(iq, "iq")), cfg)]
+    return [d.start for d in find_preambles(_without_dc(as_complex_1d(iq, "iq")), cfg)]
 
 
 def receive_frame(
@@ -47,7 +47,7 @@ def receive_frame(
     Returns:
         :class:`FrameResult`; ``detected`` is False when no complete frame was found.
     """
-    raw = _as_complex_1d(iq, "iq")
+    raw = as_complex_1d(iq, "iq")
     if not isinstance(num_symbols, int) or num_symbols < 1:
         raise ValueError(f"num_symbols must be an integer >= 1, got {num_symbols!r}")
     if equalizer not in EQUALIZERS:
@@ -308,7 +308,7 @@ def _layout(cfg: FrameConfig, num_symbols: int) -> _Layout:
     rows = 2 + grid.num_ofdm_symbols
     body = cfg.sync_length + cp + s * np.arange(rows)
     x = np.zeros((rows, n), np.complex64)  # [rows, fft_size]
-    x[:2, used] = _lts(cfg)[used]
+    x[:2, used] = long_training_symbol(cfg)[used]
     x[2:, pk] = grid.pilots.numpy().reshape(grid.num_ofdm_symbols, pk.size)
     k_row, k_col = np.nonzero(x)
     data = np.zeros((rows, n), bool)
