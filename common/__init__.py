@@ -8,6 +8,7 @@
   orientation) and the one list of image file suffixes.
 * ``common.quality``: the one PSNR (peak 1.0).
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
+* ``common.jit``: ``lazy_njit``, the one numba wrapper (numba loaded on a kernel's first call).
 * ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
 
@@ -31,6 +32,7 @@ from common.files import (
     write_torch,
 )
 from common.images import IMAGE_SUFFIXES, list_images, load_square_images, read_image
+from common.jit import lazy_njit
 from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
 from common.quality import PSNR_MAX_DB, psnr
@@ -39,6 +41,7 @@ from common.registry import Registry
 __all__ = [
     "InputError",
     "json_default",
+    "lazy_njit",
     "load_plugins",
     "IMAGE_SUFFIXES",
     "PSNR_MAX_DB",

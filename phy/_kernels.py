@@ -6,34 +6,22 @@ accumulate in 64 bits.
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
+
+from common import lazy_njit
+
+
+def _compile_helpers(numba) -> None:
+    """What kernels call, compiled before the first kernel (module globals, so the kernels'
+    compiled code calls the compiled helpers)."""
+    for name, fn in _HELPERS.items():
+        if not isinstance(globals()[name], numba.core.registry.CPUDispatcher):
+            globals()[name] = numba.njit(cache=True)(fn)
 
 
 def njit(**options):
-    """numba's ``njit(**options)``, with numba imported and the kernel compiled (or loaded
-    from its on-disk cache) on the first call: importing ``phy`` loads no numba, so the
-    processes that never receive a frame (training, rendering) never start its runtime."""
-
-    def decorate(python_function):
-        compiled = None
-
-        @functools.wraps(python_function)
-        def kernel(*args):
-            nonlocal compiled
-            if compiled is None:
-                import numba
-
-                for name, fn in _HELPERS.items():  # what kernels call: compiled first
-                    if not isinstance(globals()[name], numba.core.registry.CPUDispatcher):
-                        globals()[name] = numba.njit(cache=True)(fn)
-                compiled = numba.njit(**options)(python_function)
-            return compiled(*args)
-
-        return kernel
-
-    return decorate
+    """:func:`common.lazy_njit` with the helpers compiled first."""
+    return lazy_njit(before=_compile_helpers, **options)
 
 
 _HELPERS: dict = {}

@@ -15,13 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hil.emulation.paths import KAISER_BETA as _KAISER_BETA
+from common import lazy_njit
 from hil.emulation.paths import (
     RESAMPLER_TAPS,
     AirPath,
     PathSegment,
     TimeVaryingFir,
     check_segments,
+    kaiser_sinc,
     segments_from_arrays,
 )
 
@@ -202,37 +203,18 @@ class AirChannel:
 _PHASES = 1024  # fractional-delay table resolution (timing error <= 1/2048 sample)
 
 
-def _window_table(num_taps: int = RESAMPLER_TAPS, phases: int = _PHASES) -> np.ndarray:
-    half = num_taps // 2
+def _window_table(phases: int = _PHASES) -> np.ndarray:
+    """[phases + 1, RESAMPLER_TAPS] float32: the kernel at each fractional delay k / phases."""
+    half = RESAMPLER_TAPS // 2
     offsets = np.arange(-half + 1, half + 1)
     frac = np.arange(phases + 1) / phases
-    d = offsets[None, :] - frac[:, None]
-    r = np.clip(d / (half + 1.0), -1, 1)
-    w = np.sinc(d) * np.i0(_KAISER_BETA * np.sqrt(1 - r * r)) / np.i0(_KAISER_BETA)
-    return w.astype(np.float32)  # [phases + 1, num_taps]
+    return kaiser_sinc(offsets[None, :] - frac[:, None]).astype(np.float32)
 
 
 _TABLE = _window_table()
 
 
-def _compiled(python_function):
-    """``python_function`` compiled by numba (float32 sums in any order, cached on disk) on
-    its first call, so importing ``hil`` loads no numba."""
-    compiled = None
-
-    def kernel(*args):
-        nonlocal compiled
-        if compiled is None:
-            import numba
-
-            fast = {"reassoc", "contract", "nsz"}  # sums in SIMD lanes
-            compiled = numba.njit(cache=True, nogil=True, fastmath=fast)(python_function)
-        return compiled(*args)
-
-    return kernel
-
-
-@_compiled
+@lazy_njit(cache=True, nogil=True, fastmath={"reassoc", "contract", "nsz"})  # SIMD sums
 def _resample_kernel(x, positions, table, phases, out):  # pragma: no cover - compiled
     """``out[k]``: the ``table`` row of ``positions[k]``'s fractional part (rounded to
     ``1 / phases``) over ``x`` around its integer part, zeros outside ``x``."""

@@ -154,6 +154,14 @@ def segments_from_arrays(a, tau_s, doppler_hz=None, start_s=None) -> tuple[PathS
     return check_segments(segs)
 
 
+def kaiser_sinc(offsets: np.ndarray) -> np.ndarray:
+    """The air's interpolation kernel: the Kaiser(:data:`KAISER_BETA`)-windowed sinc over
+    :data:`RESAMPLER_TAPS` taps, at ``offsets`` (tap position minus the interpolated point,
+    samples; any shape). Returns float64 of the same shape."""
+    r = np.clip(offsets / (RESAMPLER_TAPS // 2 + 1.0), -1, 1)
+    return np.sinc(offsets) * np.i0(KAISER_BETA * np.sqrt(1 - r * r)) / np.i0(KAISER_BETA)
+
+
 def fractional_delay_taps(delay_samples: float) -> tuple[int, np.ndarray]:
     """The band-limited filter of a delay: ``(l0, g)`` with ``y[n] = sum_j g[j] x[n - l0 - j]``.
 
@@ -169,10 +177,7 @@ def fractional_delay_taps(delay_samples: float) -> tuple[int, np.ndarray]:
     half = RESAMPLER_TAPS // 2
     base = math.floor(d)
     lags = np.arange(base - half + 1, base + half + 1)  # [num_taps]
-    off = lags - d
-    r = np.clip(off / (half + 1.0), -1, 1)
-    g = np.sinc(off) * np.i0(KAISER_BETA * np.sqrt(1 - r * r)) / np.i0(KAISER_BETA)
-    return int(lags[0]), g
+    return int(lags[0]), kaiser_sinc(lags - d)
 
 
 @dataclass(frozen=True)
