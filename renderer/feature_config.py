@@ -192,4 +192,5 @@ of the low-resolution pass once it is opaque; from 300 px the same (rays still e
 opaque), at the default step, within nine CPU-minutes (each teacher a full render at that
 size), a third-width pass, a feature grid at three quarters of the field's vertices per axis
 and half the pass cache (beside the cache, the grid with its gradient and two Adam moments dominates
-setup memory at these sizes). Measured on lego's test path (docs/renderer.md)."""
+setup memory at these sizes). Measured on lego's test path (docs/design-notes.md, "The
+renderer")."""

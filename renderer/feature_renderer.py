@@ -15,7 +15,7 @@ view-dependent colour sample by sample. The other channels are free features.
 The grid is stored vertex-major and read with one ``F.embedding_bag`` per batch
 (:func:`~renderer.fields.read_rows`); its gradient is added into the eight corner rows of
 each sample in place (:class:`_GridRead`). Measurements of speed and fidelity against the
-full render are in docs/renderer.md and docs/design-notes.md and ``python -m benchmarks renderer``.
+full render are in docs/design-notes.md and ``python -m benchmarks renderer``.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ full resolution of the training cameras and of jittered copies of them (no image
 needed; :mod:`renderer.teacher_cameras`). The teachers are streamed through a
 :class:`~renderer.teachers.TeacherPool` of bounded size, so setup memory does not grow with
 the number of teachers or, beyond the pool, with the image size. Measurements of speed and
-fidelity against the full render are in docs/renderer.md and docs/design-notes.md and
+fidelity against the full render are in docs/design-notes.md ("The renderer") and
 ``python -m benchmarks renderer``.
 """
 
