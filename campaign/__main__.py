@@ -171,7 +171,7 @@ def _check_channels(*mixtures: str) -> None:
     to a GPU machine)."""
     import importlib.util
 
-    from semcodec.jscc import TRAIN_CHANNELS
+    from semcodec.training import TRAIN_CHANNELS
 
     for mix in mixtures:
         for ch in mix.split(","):

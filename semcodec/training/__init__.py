@@ -1,6 +1,7 @@
 """Training any trainable codec through a channel: the loop, its config, state and resume, batches,
 data, training channels and torchrun."""
 
+from semcodec.jscc.channels import TRAIN_CHANNELS, train_channel
 from semcodec.training.config import TrainConfig
 from semcodec.training.loop import build_codec, train, train_inputs, validate, with_architecture
 from semcodec.training.state import (
@@ -13,6 +14,7 @@ from semcodec.training.state import (
 
 __all__ = [
     "RESUMABLE_FIELDS",
+    "TRAIN_CHANNELS",
     "ResumeRefused",
     "TrainConfig",
     "build_codec",
@@ -20,6 +22,7 @@ __all__ = [
     "describe_changes",
     "load_train_state",
     "train",
+    "train_channel",
     "train_inputs",
     "validate",
     "with_architecture",
