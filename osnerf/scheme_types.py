@@ -23,6 +23,8 @@ if TYPE_CHECKING:  # annotations only: the run's config imports the scheme table
 
 TRANSMISSION_ARRAYS = ("rx_masks", "received")
 """The optional arrays of a :class:`Transmission` (cached when present)."""
+TRANSMISSION_INFO = ("side_info_bits", "codec_use", "failed_codewords", "views_lost")
+"""The report's details a :class:`Transmission` carries (cached as JSON)."""
 
 
 def scheme_seed(run_seed: int, name: str, stage: str = "transmit") -> int:
@@ -42,7 +44,11 @@ class Transmission:
             (focus box or positions), or None for whole views.
         seconds: ``encode``, ``decode`` (and ``encode_cpu``, ``decode_cpu``, ``channel``, or
             ``codec_and_ldpc`` for separate schemes), wall seconds over all views.
-        info: JSON-able details for the report (``failed_codewords``, ``views_lost``, ...).
+        side_info_bits: bits of focus side information sent (semantic schemes on demand).
+        codec_use: semantic schemes: the codec's declared limits, refinement on or off, symbols
+            sent against the plan's budget (``osnerf.semantic_send.codec_use``); else None.
+        failed_codewords: LDPC codewords that failed (separate schemes), else None.
+        views_lost: ``{"budget": n, "channel": m}`` for separate schemes, else None.
         received: [num_views] bool, False for a view the receiver knows did not arrive (a
             failed checksum, or nothing fitted its budget): ``images`` holds mid-grey there,
             and the radiance field trains on the other views only. None: every view arrived.
@@ -52,8 +58,11 @@ class Transmission:
     symbols: np.ndarray
     rx_masks: np.ndarray | None = None
     seconds: dict = field(default_factory=dict)
-    info: dict = field(default_factory=dict)
     received: np.ndarray | None = None
+    side_info_bits: int = 0
+    codec_use: dict | None = None
+    failed_codewords: int | None = None
+    views_lost: dict | None = None
 
     def to_cache(self) -> tuple[dict, dict]:
         """(arrays, JSON info) for ``StageCache.save``."""
@@ -61,18 +70,20 @@ class Transmission:
         for name in TRANSMISSION_ARRAYS:
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
-        return arrays, {"seconds": self.seconds, "info": self.info}
+        return arrays, {"seconds": self.seconds} | {k: getattr(self, k) for k in TRANSMISSION_INFO}
 
     @classmethod
     def from_cache(cls, arrays: dict, info: dict) -> Transmission:
-        """The inverse of :meth:`to_cache`."""
+        """The inverse of :meth:`to_cache` (also of a cache that kept the details in a dict
+        under ``info``)."""
+        details = info.get("info", info)
         return cls(
             torch.from_numpy(arrays["images"]),
             arrays["symbols"],
             arrays.get("rx_masks"),
             info["seconds"],
-            info["info"],
             arrays.get("received"),
+            **{k: details[k] for k in TRANSMISSION_INFO if k in details},
         )
 
 

@@ -146,7 +146,7 @@ class Digital(Scheme):
 
         cfg = ctx.config
         channel = phy.assumed_channel(cfg.channel)
-        out, per_view, failed, arrived = [], [], 0, []
+        out, failed, arrived = [], 0, []
         lost = {"budget": 0, "channel": 0}
         t = time.perf_counter()
         for k, p in enumerate(plans):
@@ -166,17 +166,14 @@ class Digital(Scheme):
             for k in lost:
                 lost[k] += int(st["views_lost"][k])
             arrived.append(not any(st["views_lost"].values()))
-            per_view.append(
-                {k2: v for k2, v in st.items() if isinstance(v, (int, float, str, bool))}
-                | {k2: st[k2][0] for k2 in ("mcs", "quality", "scale")}
-            )
         return Transmission(
             torch.stack(out),
             np.asarray([p.part.symbols for p in plans], np.int64),
             None,
             {"codec_and_ldpc": time.perf_counter() - t},
-            {"failed_codewords": failed, "views_lost": lost, "per_view": per_view},
             received=np.asarray(arrived, bool),
+            failed_codewords=failed,
+            views_lost=lost,
         )
 
 

@@ -104,10 +104,8 @@ def send_views(ctx, plans, images, on_demand: bool) -> Transmission:
         np.asarray(symbols, np.int64),
         np.stack(rx_masks) if rx_masks else None,
         sec,
-        {
-            "side_info_bits": int(sum(side)) if on_demand else 0,
-            "codec_use": codec_use(ctx, int(sum(symbols)), int(sum(p.part.symbols for p in plans))),
-        },
+        side_info_bits=int(sum(side)) if on_demand else 0,
+        codec_use=codec_use(ctx, int(sum(symbols)), int(sum(p.part.symbols for p in plans))),
     )
 
 

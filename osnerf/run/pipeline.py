@@ -157,10 +157,10 @@ def reconstruct_and_score(
         + seconds["decode"]
         + seconds["nerf"]
         + seconds.get("codec_and_ldpc", 0.0),
-        side_info_bits=int(tx.info.get("side_info_bits", 0)),
-        views_lost=tx.info.get("views_lost"),
-        failed_codewords=tx.info.get("failed_codewords"),
-        codec_use=tx.info.get("codec_use"),
+        side_info_bits=tx.side_info_bits,
+        views_lost=tx.views_lost,
+        failed_codewords=tx.failed_codewords,
+        codec_use=tx.codec_use,
         bound=scheme.bound,
         help=scheme.help,
         training_bounds="demanded objects" if scheme.object_routed else "whole scene",
