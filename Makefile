@@ -76,7 +76,7 @@ bench: setup
 
 lint: setup
 	$(VENV)/bin/ruff check common phy semcodec renderer hil osnerf campaign tests benchmarks
-	$(VENV)/bin/mypy common phy hil semcodec/contract/protocol.py semcodec/contract/box_focus.py
+	$(VENV)/bin/mypy common phy hil semcodec/contract osnerf/run osnerf/plan.py osnerf/scheme_types.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

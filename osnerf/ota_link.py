@@ -27,7 +27,7 @@ import torch
 from hil import DEVICES as _HARDWARE
 
 if TYPE_CHECKING:
-    from hil import Emulator, Radio
+    from hil import Emulator, OtaConfig, Radio
 
 DEVICES = ("emulated", *_HARDWARE)  # emulated HackRFs, then hil's table of real front ends
 DEFAULT_PPM = (0.0, 20.0)
@@ -141,7 +141,7 @@ class OtaLink:
     tx: Radio
     rx: Radio
     snr_db: float | None
-    ota_cfg: object
+    ota_cfg: OtaConfig
     emulator: object | None = None
     air_ppm: float = ONE_BOARD_PPM[0]
     frames_sent: int = 0

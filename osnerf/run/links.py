@@ -12,11 +12,15 @@ with ``ota_air`` "raytraced", each view's ray-traced channel: :mod:`osnerf.run.o
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 import phy
 from osnerf.run.config import OTA, RunConfig
+
+if TYPE_CHECKING:  # annotations only
+    from osnerf.ota_link import OtaLink
 
 
 @dataclass
@@ -32,7 +36,7 @@ class RunLinks:
     snr_db: dict[int, float]
     outage: set[int] = field(default_factory=set)
     info: dict = field(default_factory=dict)
-    ota: object | None = None
+    ota: OtaLink | None = None
 
     def close(self) -> None:
         if self.ota is not None:

@@ -18,9 +18,14 @@ Real boards: nobody sets their air; the run is refused.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+
+if TYPE_CHECKING:  # annotations only
+    from osnerf.ota_link import OtaLink
+    from phy.raytrace import MovingTransmitter
 
 
 @dataclass
@@ -39,10 +44,10 @@ class ViewAirLink:
         record: this view's entry of the report's link info (updated per burst).
     """
 
-    ota: object
+    ota: OtaLink
     view: int
     snr_db: float
-    mover: object
+    mover: MovingTransmitter
     scale: float
     device: str
     air_snr_db: float
@@ -101,6 +106,7 @@ def raytraced_air_links(cfg, views, idx: list[int], ota, device: str) -> tuple:
     ch = drone_channels(views.folder, views.meta, pos, velocities_m_s=vel, movers_at_rest=True)
     gain = ch.path_gain_db
     ref = float(np.median(gain[~ch.outage])) if (~ch.outage).any() else 0.0
+    assert ch.movers is not None  # movers_at_rest: every position's mover is traced
     links, snrs, outage, per_view = {}, {}, set(), {}
     for k, i in enumerate(idx):
         if ch.outage[k]:

@@ -29,6 +29,7 @@ from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
 from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
 from osnerf.schemes import get_scheme
 from osnerf.scu import RatePolicy, SemanticControlUnit
+from semcodec import SemanticCodec
 
 METRIC_NOTES = (
     "psnr/ssim/lpips: mean over held-out views of per-view values on the whole view "
@@ -55,8 +56,8 @@ class Prepared:
 
     demand: Demand
     schemes: dict[str, Scheme]
-    codec: object | None
-    rx_codec: object | None
+    codec: SemanticCodec | None
+    rx_codec: SemanticCodec | None
     scu: SemanticControlUnit
 
 
@@ -216,8 +217,8 @@ def run_pipeline(
         plan, col = prep.scu.plan_run(
             collection=col,
             links=links,
-            cbr_range=tuple(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6),
-            snr_range_db=tuple(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
+            cbr_range=_range(codec.cbr_range) if codec is not None else (1 / 48, 1 / 6),
+            snr_range_db=_range(codec.snr_range_db) if codec is not None else (-10.0, 20.0),
             height=views.intrinsics.height,
             width=views.intrinsics.width,
             seed=cfg.seed,
@@ -242,8 +243,8 @@ def run_pipeline(
             _log(
                 f"{name}: psnr_object {results[name].psnr_object}, symbols {results[name].symbols_sent}"
             )
-            if results[name].codec_use:
-                _log(codec_use_line(name, results[name].codec_use))
+            if (use := results[name].codec_use) is not None:
+                _log(codec_use_line(name, use))
     finally:
         links.close()
     test = views.indices("test")
@@ -303,6 +304,11 @@ def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) ->
     }
 
 
+def _range(pair) -> tuple[float, float]:
+    lo, hi = pair
+    return float(lo), float(hi)
+
+
 def codec_summary(prep: Prepared, cfg: RunConfig) -> dict:
     """The codec as the report shows it: its record (:func:`osnerf.provenance.codec_record`:
     knowledge-base identity, trained or not, a plugin's distribution), its ranges, and the
@@ -310,6 +316,7 @@ def codec_summary(prep: Prepared, cfg: RunConfig) -> dict:
     from osnerf.provenance import codec_record
 
     codec = prep.codec
+    assert codec is not None  # called for runs with a codec only
     receiver = None
     if cfg.receiver_codec is not None:
         receiver = codec_record(prep.rx_codec, cfg.receiver_codec)
@@ -375,16 +382,16 @@ def comparisons(results: dict[str, SchemeReport], schemes: dict[str, Scheme]) ->
     PSNR; against the first whole-view scheme (full) its symbols, processing time and the
     paper's claim (processing time to the same object PSNR); ``unequal_budgets``: the pairs
     whose NeRF budgets differ (:func:`unequal_budgets`)."""
-    out = {"unequal_budgets": unequal_budgets(results)}
+    out: dict[str, object] = {"unequal_budgets": unequal_budgets(results)}
     subject = next((n for n, s in schemes.items() if s.headline), None)
-    j = results.get(subject)
+    j = results.get(subject) if subject is not None else None
     if j is None or j.psnr_object is None:
         return out
     for other, o in results.items():
         if other != subject and o.psnr_object is not None:
             out[f"{subject}_minus_{other}_psnr_object_db"] = j.psnr_object - o.psnr_object
     whole = next((n for n, s in schemes.items() if not s.object_routed), None)
-    f = results.get(whole)
+    f = results.get(whole) if whole is not None else None
     if f is None:
         return out
     if f.symbols_sent:

@@ -48,7 +48,7 @@ def received_dataset(images: torch.Tensor, poses, intrinsics, background, aabb, 
         images=images.detach().clamp(0, 1).permute(0, 2, 3, 1).contiguous().float(),
         poses=torch.as_tensor(np.asarray(poses), dtype=torch.float32),
         intrinsics=intrinsics,
-        background=tuple(float(c) for c in background),
+        background=(float(background[0]), float(background[1]), float(background[2])),
         aabb=torch.as_tensor(np.asarray(aabb), dtype=torch.float32),
         masks=None if masks is None else torch.as_tensor(np.asarray(masks), dtype=torch.float32),
     )
