@@ -6,6 +6,9 @@ May import ``phy`` only. Public names::
     DEVICES, DeviceKind           the one table of front ends ("hackrf", "pluto")
     HackRF                        the driver (HackRF.open(serial=None, backend=None))
     Pluto, find_plutos            the Pluto front end (Pluto.open(uri=None)) on pyadi-iio
+    SoapyRadio, SoapyCounts       any SoapySDR device (SoapyRadio.open("driver=uhd")) and what
+                                  its streams reported; find_soapy_devices
+    EmulatedSoapyDevice, SoapyRemoteServer   an emulated device served over SoapyRemote
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatorProcess               the same boards served from a process of their own
@@ -44,6 +47,8 @@ from hil.emulation.paths import (
     segments_from_arrays,
 )
 from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
+from hil.emulation.soapy_device import SOAPY_FAULTS, EmulatedSoapyDevice
+from hil.emulation.soapy_remote import SoapyRemoteServer
 from hil.emulation.process import EmulatorProcess
 from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
@@ -81,6 +86,7 @@ from hil.ota.stream_link import StreamRun, stream_over_the_air
 from hil.pluto.driver import Pluto
 from hil.pluto.iio_access import find_plutos
 from hil.radio import Radio
+from hil.soapy.driver import SoapyCounts, SoapyRadio, find_soapy_devices
 
 __all__ = [
     "AIR_SNR_DB_RANGE",
@@ -103,6 +109,12 @@ __all__ = [
     "IiodServer",
     "Pluto",
     "Radio",
+    "SOAPY_FAULTS",
+    "EmulatedSoapyDevice",
+    "SoapyCounts",
+    "SoapyRadio",
+    "SoapyRemoteServer",
+    "find_soapy_devices",
     "find_plutos",
     "TimedOutError",
     "AirChannel",
