@@ -47,9 +47,9 @@ from hil.emulation.paths import (
     segments_from_arrays,
 )
 from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
+from hil.emulation.process import EmulatorProcess
 from hil.emulation.soapy_device import SOAPY_FAULTS, EmulatedSoapyDevice
 from hil.emulation.soapy_remote import SoapyRemoteServer
-from hil.emulation.process import EmulatorProcess
 from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
 from hil.errors import (
     DeviceNotFoundError,
