@@ -1,6 +1,7 @@
-"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb) and
-the Plutos libiio finds; `osnerf hil emulate pluto --address 127.0.0.1 [--port N]`: serve an
-emulated Pluto over iiod's network protocol until SIGINT or SIGTERM."""
+"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb),
+the Plutos libiio finds and the devices SoapySDR finds; `osnerf hil emulate pluto|soapy
+--address 127.0.0.1 [--port N]`: serve an emulated Pluto over iiod's network protocol, or an
+emulated SoapySDR device over SoapyRemote's, until SIGINT or SIGTERM."""
 
 from __future__ import annotations
 
@@ -37,6 +38,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--emulate", action="store_true", help="use two emulated HackRFs instead of USB hardware"
     )
     info.add_argument("--serial", default=None, help="only the HackRF whose serial ends with this")
+    info.add_argument(
+        "--soapy-args",
+        default="",
+        help="what SoapySDR.Device.enumerate is asked for, e.g. 'driver=uhd' or "
+        "'driver=remote,remote=tcp://HOST:PORT' (default: every installed module's devices)",
+    )
     _add_emulate_arguments(
         sub.add_parser(
             "emulate",
@@ -48,13 +55,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import AIR_SNR_DB_RANGE, DEVICES, IIOD_PORT, NETWORK_FAULTS
+    from hil import AIR_SNR_DB_RANGE, DEVICES, NETWORK_FAULTS, SOAPY_FAULTS
     from osnerf.commands import args as checks
 
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
+    ports = ", ".join(f"{k} {DEVICES[k].default_port}" for k in served)
     p.add_argument("device", choices=served, help=f"which board: {', '.join(served)}")
     p.add_argument("--address", default="127.0.0.1", help="loopback IPv4 to listen on")
-    p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="TCP port")
+    p.add_argument(
+        "--port", type=_integer(0, 65535), default=None, help=f"TCP port (default {ports})"
+    )
     p.add_argument(
         "--snr-db",
         type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
@@ -66,9 +76,10 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--fault",
         default=None,
-        choices=NETWORK_FAULTS,
-        help="after --fault-after-samples received samples, drop (the board dies) or slow "
-        "(each receive reply 6 s late, past libiio's 5 s timeout)",
+        choices=sorted({*NETWORK_FAULTS, *SOAPY_FAULTS}),
+        help="after --fault-after-samples received samples, drop (the board dies), slow "
+        "(pluto: each receive reply 6 s late, past libiio's 5 s timeout) or overflow (soapy: "
+        "samples lost once, reported as SOAPY_SDR_OVERFLOW)",
     )
     p.add_argument(
         "--fault-after-samples",
@@ -96,7 +107,7 @@ def _emulate(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from hil import DEVICES, IiodServer
+    from hil import DEVICES, NETWORK_FAULTS, SOAPY_FAULTS
     from osnerf.cli import UsageError as usage_error
     from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
 
@@ -105,8 +116,13 @@ def _emulate(args: argparse.Namespace) -> int:
             "--fault-after-samples applies only with --fault (it says when the fault "
             "strikes); name a --fault or leave --fault-after-samples out"
         )
+    faults = SOAPY_FAULTS if args.device == "soapy" else NETWORK_FAULTS
+    if args.fault is not None and args.fault not in faults:
+        raise usage_error(f"--fault {args.fault}: a {args.device} emulator has {', '.join(faults)}")
     after = FAULT_AFTER_SAMPLES if args.fault_after_samples is None else args.fault_after_samples
-    board = DEVICES[args.device].emulator(
+    kind = DEVICES[args.device]
+    port = kind.default_port if args.port is None else args.port
+    board = kind.emulator(
         args.snr_db,
         seed=args.seed,
         multipath=DEFAULT_MULTIPATH,
@@ -115,28 +131,37 @@ def _emulate(args: argparse.Namespace) -> int:
         after_samples=after,
     )
     try:
-        server = IiodServer(board, args.address, args.port)
+        server = kind.serve(board, args.address, port)
     except ValueError as e:
         raise usage_error(f"--address/--port: {e}") from None
     except OSError as e:
-        raise OSError(e.errno, f"cannot listen on {args.address}:{args.port}: {e.strerror}") from e
+        raise OSError(e.errno, f"cannot listen on {args.address}:{port}: {e.strerror}") from e
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     server.serve_in_background()
     print(
-        f"osnerf hil emulate: {args.device} at {server.uri} (air {args.snr_db:g} dB); "
+        f"osnerf hil emulate: {args.device} at {getattr(server, 'uri', None) or server.args} "
+        f"(air {args.snr_db:g} dB); "
         "SIGINT or SIGTERM stops it",
         file=sys.stderr,
         flush=True,
     )
     told, underruns = False, 0
+    overflows = 0
     while not stop.is_set() and not board.dropped.is_set():
         stop.wait(0.05)
         if board.tx_underruns > underruns:
             underruns = board.tx_underruns
             print(
                 f"osnerf hil emulate: TX underrun ({underruns} so far): the host fed the DAC late",
+                file=sys.stderr,
+                flush=True,
+            )
+        if getattr(board, "overflows", 0) > overflows:
+            overflows = board.overflows
+            print(
+                f"osnerf hil emulate: fault: receive overflow ({overflows} so far)",
                 file=sys.stderr,
                 flush=True,
             )
@@ -171,6 +196,31 @@ def _pluto_info() -> int:
     return len(found)
 
 
+def _soapy_info(query: str) -> int:
+    """Print each device ``SoapySDR.Device.enumerate(query)`` finds (with its ranges when
+    it opens); returns how many (0 without the binding)."""
+    from hil import HilError, SoapyRadio
+    from hil.soapy.binding import args_string, available, soapysdr
+
+    if not available():
+        return 0
+    found = [args_string(k) for k in soapysdr().Device.enumerate(query)]
+    for args in found:
+        print(f"Found SoapySDR device\nArgs: {args}")
+        try:
+            with SoapyRadio.open(args) as radio:
+                r = radio.ranges()
+                print(
+                    f"Driver: {radio.driver_key}\nHardware: {radio.hardware_key}\n"
+                    f"Frequency range: {r['center_freq_range_hz'][0]:g}-"
+                    f"{r['center_freq_range_hz'][1]:g} Hz\nSample rate range: "
+                    f"{r['sample_rate_range_hz'][0]:g}-{r['sample_rate_range_hz'][1]:g} S/s"
+                )
+        except HilError as e:
+            print(f"error: {e}", file=sys.stderr)
+    return len(found)
+
+
 def run(args: argparse.Namespace) -> int:
     from hil import Emulator, HackRF, HilError, find_hackrfs
 
@@ -181,10 +231,12 @@ def run(args: argparse.Namespace) -> int:
     if args.serial:
         serials = [s for s in serials if s.endswith(args.serial.lower())]
     if not serials:
-        if _pluto_info():  # no HackRF, but a Pluto
+        found = _pluto_info()
+        found += _soapy_info(args.soapy_args)
+        if found:  # no HackRF, but a Pluto or a SoapySDR device
             return 0
         which = f" with a serial ending in {args.serial!r}" if args.serial else ""
-        raise RuntimeError(f"no HackRF board found{which}, and no Pluto")
+        raise RuntimeError(f"no HackRF board found{which}, no Pluto and no SoapySDR device")
     print("osnerf hil info (pure pyusb, no libhackrf)")
     for i, serial in enumerate(serials):
         try:
@@ -196,4 +248,5 @@ def run(args: argparse.Namespace) -> int:
         if i + 1 < len(serials):
             print()
     _pluto_info()
+    _soapy_info(args.soapy_args)
     return 0
