@@ -60,13 +60,13 @@ class DeviceKind:
         asked), else the fixed ranges of this kind."""
         if self.device_ranges is None:
             return self.center_freq_range_hz, self.sample_rate_range_hz, self.part
-        freq, rate, parts = [0.0, float("inf")], [0.0, float("inf")], []
-        for i in dict.fromkeys(ids):
-            r = self.device_ranges(i)
-            freq = [max(freq[0], r["center_freq_range_hz"][0]), min(freq[1], r["center_freq_range_hz"][1])]  # fmt: skip
-            rate = [max(rate[0], r["sample_rate_range_hz"][0]), min(rate[1], r["sample_rate_range_hz"][1])]  # fmt: skip
-            parts.append(r["part"])
-        return tuple(freq), tuple(rate), ", ".join(parts)
+        asked = [self.device_ranges(i) for i in dict.fromkeys(ids)]
+
+        def both(key: str) -> tuple[float, float]:  # what every board reaches
+            return (max(r[key][0] for r in asked), min(r[key][1] for r in asked))
+
+        parts = ", ".join(r["part"] for r in asked)
+        return both("center_freq_range_hz"), both("sample_rate_range_hz"), parts
 
     def open_pair(self, tx_id: str | None = None, rx_id: str | None = None):
         """``(tx, rx)`` for a link: a full-duplex kind uses one board for both ends unless

@@ -248,7 +248,8 @@ class SoapyRadio:
 
         if not self.air_settable:
             raise HilError(f"{self.args}: a real device; its air is not the host's to set")
-        self._call("set the emulated air", self._dev.writeSetting, AIR_SETTING, air_setting(channel, ppm, seed))  # fmt: skip
+        text = air_setting(channel, ppm, seed)
+        self._call("set the emulated air", self._dev.writeSetting, AIR_SETTING, text)
 
     # ------------------------------------------------------------------ streams
     def _stream_args(self) -> dict:
@@ -370,9 +371,12 @@ class SoapyRadio:
                 elif r.ret == s.SOAPY_SDR_TIMEOUT or r.ret == 0:
                     timeouts += r.ret != 0
                     if time.monotonic() - waited_since > self.timeout_s:
-                        raise TimedOutError(f"transmit: {self.args} took nothing for {self.timeout_s:g} s")  # fmt: skip
+                        raise TimedOutError(
+                            f"transmit: {self.args} took nothing for {self.timeout_s:g} s"
+                        )
                 else:
-                    raise StreamError(f"transmit: writeStream returned {s.SoapySDR_errToStr(r.ret)} ({r.ret})")  # fmt: skip
+                    what = s.SoapySDR_errToStr(r.ret)
+                    raise StreamError(f"transmit: writeStream returned {what} ({r.ret})")
             underflows += self._await_end_of_burst(stream, len(x) / rate)
         finally:
             self.last_counts["tx"] = SoapyCounts("tx", sent, 0, underflows, timeouts)
