@@ -70,9 +70,14 @@ def _span(ranges) -> tuple[float, float]:
     return (min(r.minimum() for r in ranges), max(r.maximum() for r in ranges))
 
 
-def find_soapy_devices() -> list[str]:
-    """Device strings of what ``SoapySDR.Device.enumerate()`` finds (every installed module)."""
-    return [args_string(k) for k in soapysdr().Device.enumerate()]
+def find_soapy_devices(query: str = "") -> list[str]:
+    """Device strings of what ``SoapySDR.Device.enumerate(query)`` finds (every installed
+    module's devices; ``query`` narrows it, e.g. ``driver=uhd``).
+
+    Raises:
+        DeviceNotFoundError: the binding is not installed.
+    """
+    return [args_string(k) for k in soapysdr().Device.enumerate(query)]
 
 
 class SoapyRadio:

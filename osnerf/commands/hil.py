@@ -199,12 +199,12 @@ def _pluto_info() -> int:
 def _soapy_info(query: str) -> int:
     """Print each device ``SoapySDR.Device.enumerate(query)`` finds (with its ranges when
     it opens); returns how many (0 without the binding)."""
-    from hil import HilError, SoapyRadio
-    from hil.soapy.binding import args_string, available, soapysdr
+    from hil import DeviceNotFoundError, HilError, SoapyRadio, find_soapy_devices
 
-    if not available():
+    try:
+        found = find_soapy_devices(query)
+    except DeviceNotFoundError:  # no binding: no SoapySDR device to list
         return 0
-    found = [args_string(k) for k in soapysdr().Device.enumerate(query)]
     for args in found:
         print(f"Found SoapySDR device\nArgs: {args}")
         try:
