@@ -38,6 +38,8 @@ class DeviceKind:
         device_ranges: ``(id) -> {"center_freq_range_hz": ..., "sample_rate_range_hz": ...}``
             asked of the device itself (a SoapySDR device's ``get*Range``), or None: the
             fixed ranges above.
+        open_link: ``(tx_id, rx_id) -> (tx, rx)`` where one object is both ends whatever
+            the ids (the ZMQ radio: two endpoints, one clock), or None.
     """
 
     name: str
@@ -53,6 +55,7 @@ class DeviceKind:
     serve: Callable | None = None
     default_port: int = 0
     device_ranges: Callable | None = None
+    open_link: Callable | None = None
 
     def ranges_of(self, ids) -> tuple[tuple[float, float], tuple[float, float], str]:
         """``(center_freq_range_hz, sample_rate_range_hz, part)`` of the boards ``ids``
@@ -77,6 +80,8 @@ class DeviceKind:
         """
         from hil.errors import DeviceNotFoundError
 
+        if self.open_link is not None:
+            return self.open_link(tx_id, rx_id)
         tx = self.open(tx_id)
         if self.full_duplex and (rx_id is None or rx_id == tx_id):
             return tx, tx
@@ -165,6 +170,19 @@ def _serve_soapy_remote(device, address: str, port: int):
     return SoapyRemoteServer(device, address, port)
 
 
+def _open_zmq(endpoint=None):
+    from hil.zmq.radio import ZmqRadio
+
+    return ZmqRadio(endpoint, None)
+
+
+def _open_zmq_link(tx_endpoint, rx_endpoint):
+    from hil.zmq.radio import ZmqRadio
+
+    radio = ZmqRadio(tx_endpoint, rx_endpoint)
+    return radio, radio
+
+
 DEVICES = Registry[DeviceKind](
     "device",
     {
@@ -205,6 +223,16 @@ DEVICES = Registry[DeviceKind](
             serve=_serve_soapy_remote,
             default_port=SOAPY_REMOTE_PORT,
             device_ranges=_soapy_ranges,
+        ),
+        "zmq": DeviceKind(
+            "zmq",
+            "GNU Radio flowgraph over ZMQ",
+            "endpoint",
+            True,
+            list,  # nothing to find: a flowgraph is where it is told to be
+            _open_zmq,
+            part="the flowgraph's (ZMQ carries samples, not settings)",
+            open_link=_open_zmq_link,
         ),
     },
 )
