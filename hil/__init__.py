@@ -9,6 +9,8 @@ May import ``phy`` only. Public names::
     SoapyRadio, SoapyCounts       any SoapySDR device (SoapyRadio.open("driver=uhd")) and what
                                   its streams reported; find_soapy_devices
     EmulatedSoapyDevice, SoapyRemoteServer   an emulated device served over SoapyRemote
+    ZmqRadio                      a GNU Radio flowgraph as the air (gr-zeromq's stream format)
+    Flowgraph, FLOWGRAPHS, ota_noise_voltage   gnuradio/*.grc run in their own process
     EmulatedPluto, IiodServer     an emulated Pluto served over iiod's network protocol
     Emulator, EmulatorBackend     emulated boards as a pyusb backend
     EmulatorProcess               the same boards served from a process of their own
@@ -87,6 +89,8 @@ from hil.pluto.driver import Pluto
 from hil.pluto.iio_access import find_plutos
 from hil.radio import Radio
 from hil.soapy.driver import SoapyCounts, SoapyRadio, find_soapy_devices
+from hil.zmq.flowgraph import FLOWGRAPHS, Flowgraph, compile_flowgraph, ota_noise_voltage
+from hil.zmq.radio import ZmqRadio
 
 __all__ = [
     "AIR_SNR_DB_RANGE",
@@ -115,6 +119,11 @@ __all__ = [
     "SoapyRadio",
     "SoapyRemoteServer",
     "find_soapy_devices",
+    "FLOWGRAPHS",
+    "Flowgraph",
+    "ZmqRadio",
+    "compile_flowgraph",
+    "ota_noise_voltage",
     "find_plutos",
     "TimedOutError",
     "AirChannel",

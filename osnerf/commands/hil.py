@@ -44,6 +44,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="what SoapySDR.Device.enumerate is asked for, e.g. 'driver=uhd' or "
         "'driver=remote,remote=tcp://HOST:PORT' (default: every installed module's devices)",
     )
+    _add_gnuradio_arguments(
+        sub.add_parser(
+            "gnuradio",
+            help="run a GNU Radio flowgraph (gnuradio/*.grc) headless until SIGINT or SIGTERM",
+            description="compile a flowgraph with grcc and run it on Debian's python3 in its "
+            "own process (GNU Radio 3.10 is built for numpy 1.x), until SIGINT or SIGTERM; "
+            "osnerf ota --tx zmq:ADDRESS --rx zmq:ADDRESS then sends through it",
+        )
+    )
     _add_emulate_arguments(
         sub.add_parser(
             "emulate",
@@ -52,6 +61,71 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "model) over iiod's network protocol, in the foreground, until SIGINT or SIGTERM",
         )
     )
+
+
+def _add_gnuradio_arguments(p: argparse.ArgumentParser) -> None:
+    from hil import FLOWGRAPHS
+    from osnerf.commands import args as checks
+
+    shipped = ", ".join(sorted(f.stem for f in FLOWGRAPHS.glob("*.grc")))
+    p.add_argument("flowgraph", help=f"a .grc file, or a shipped one: {shipped}")
+    p.add_argument(
+        "--snr-db",
+        type=checks.number(-30.0, 60.0, "dB"),
+        default=None,
+        help="set the flowgraph's noise_voltage so that osnerf ota's frames arrive at this SNR "
+        "per symbol (the loopback's noise)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="PARAM=VALUE",
+        help="a parameter of the flowgraph (its parameter blocks), e.g. --set echo_delay=2 "
+        "--set freq_offset=0.00025; repeatable",
+    )
+
+
+def _gnuradio(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from hil import Flowgraph, ota_noise_voltage
+    from osnerf.cli import UsageError as usage_error
+
+    params = {}
+    for item in args.set:
+        key, eq, value = item.partition("=")
+        if not eq or not key.isidentifier():
+            raise usage_error(f"--set must look like PARAM=VALUE, got {item!r}")
+        params[key] = value
+    if args.snr_db is not None:
+        if "noise_voltage" in params:
+            raise usage_error("--snr-db sets noise_voltage: give one of them")
+        params["noise_voltage"] = f"{ota_noise_voltage(args.snr_db):.9g}"
+    try:
+        graph = Flowgraph(args.flowgraph, params)
+    except FileNotFoundError as e:
+        raise usage_error(f"flowgraph: {e}") from None
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    graph.start()
+    shown = " ".join(f"{k}={v}" for k, v in params.items()) or "its defaults"
+    print(
+        f"osnerf hil gnuradio: {graph.grc.name} running (pid {graph.proc.pid}) with {shown}; "
+        "SIGINT or SIGTERM stops it",
+        file=sys.stderr,
+        flush=True,
+    )
+    while not stop.is_set() and graph.running:
+        stop.wait(0.1)
+    ended = not graph.running
+    rc = graph.close()
+    if ended:  # it stopped by itself: a failure
+        print(f"osnerf hil gnuradio: {graph.grc.name} exited ({rc})", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
@@ -226,6 +300,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.action == "emulate":
         return _emulate(args)
+    if args.action == "gnuradio":
+        return _gnuradio(args)
     backend = Emulator().backend if args.emulate else None
     serials = [d.serial_number for d in find_hackrfs(backend)]
     if args.serial:
