@@ -10,6 +10,7 @@
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
 * ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
+* ``common.threads``: ``one_blas_thread``, a receive path's bound on numpy's BLAS pool.
 
 Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
 may all import it.
@@ -35,9 +36,11 @@ from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
 from common.quality import PSNR_MAX_DB, psnr
 from common.registry import Registry
+from common.threads import one_blas_thread
 
 __all__ = [
     "InputError",
+    "one_blas_thread",
     "json_default",
     "load_plugins",
     "IMAGE_SUFFIXES",

@@ -232,9 +232,9 @@ class SoapyRadio:
         where given (None leaves the device's)."""
         self.sample_rate_hz = cfg.sample_rate_hz
         self.center_freq_hz = cfg.center_freq_hz
-        if getattr(cfg, "soapy_rx_gain_db", None) is not None:
+        if cfg.soapy_rx_gain_db is not None:
             self.rx_gain_db = cfg.soapy_rx_gain_db
-        if getattr(cfg, "soapy_tx_gain_db", None) is not None and self.can_transmit:
+        if cfg.soapy_tx_gain_db is not None and self.can_transmit:
             self.tx_gain_db = cfg.soapy_tx_gain_db
 
     # ------------------------------------------------------------------ the emulated air
