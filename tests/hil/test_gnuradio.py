@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from hil import FLOWGRAPHS, Flowgraph, ZmqRadio, compile_flowgraph, ota_noise_voltage
+from hil import FLOWGRAPHS, Flowgraph, Radio, ZmqRadio, compile_flowgraph, ota_noise_voltage
 
 pytest.importorskip("zmq", reason="pyzmq is not installed")
 HAVE_GNURADIO = shutil.which("grcc") is not None and (
@@ -80,6 +80,7 @@ def test_the_radio_pushes_raw_complex64_items(endpoints):
 
     tx, _ = endpoints
     with ZmqRadio(tx, None, sample_rate_hz=4e6) as radio:
+        assert isinstance(radio, Radio)
         ctx = zmq.Context()
         pull = ctx.socket(zmq.PULL)
         pull.connect(tx)

@@ -21,6 +21,7 @@ from hil import (  # noqa: E402
     DEVICES,
     EmulatedSoapyDevice,
     OtaConfig,
+    Radio,
     SoapyRadio,
     SoapyRemoteServer,
     StreamError,
@@ -100,6 +101,7 @@ def test_the_library_reads_the_ranges_and_quantisation_of_the_part(server):
     found = SoapySDR.Device.enumerate(server.args)
     assert len(found) == 1 and found[0]["remote:driver"] == "osnerf"
     with SoapyRadio.open(server.args) as radio:
+        assert isinstance(radio, Radio) and not isinstance(server.device, Radio)
         r = radio.ranges()
         assert r["center_freq_range_hz"] == ad9361.LO_RANGE_HZ
         assert r["sample_rate_range_hz"] == ad9361.SAMPLE_RATE_RANGE_HZ
