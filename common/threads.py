@@ -11,6 +11,7 @@ libraries), whatever the environment says, and gives the user's setting back aft
 from __future__ import annotations
 
 import functools
+import sys
 import threading
 from collections.abc import Callable
 from typing import TypeVar
@@ -19,17 +20,20 @@ F = TypeVar("F", bound=Callable)
 
 _lock = threading.Lock()
 _controller = None
+_modules_seen = -1  # how many modules were imported when the controller was made
 _local = threading.local()
 
 
 def _blas_controller():
-    """threadpoolctl's view of the BLAS libraries loaded now (made once)."""
-    global _controller
+    """threadpoolctl's view of the BLAS libraries loaded now: made again only after more
+    modules were imported (one may have brought a library of its own, e.g. scipy's)."""
+    global _controller, _modules_seen
     with _lock:
-        if _controller is None:
+        if _controller is None or len(sys.modules) != _modules_seen:
             from threadpoolctl import ThreadpoolController
 
             _controller = ThreadpoolController().select(user_api="blas")
+            _modules_seen = len(sys.modules)
         return _controller
 
 
