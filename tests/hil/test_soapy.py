@@ -26,7 +26,7 @@ from hil import (  # noqa: E402
     SoapyRemoteServer,
     StreamError,
 )
-from hil.emulation import soapy_remote, soapy_rpc  # noqa: E402
+from hil.emulation import soapy_rpc, soapy_streams  # noqa: E402
 from hil.emulation.soapy_device import RX, TX  # noqa: E402
 from hil.pluto import ad9361  # noqa: E402
 from osnerf.cli import main  # noqa: E402
@@ -64,12 +64,12 @@ def test_constants_are_the_librarys():
     codes = ("TIMEOUT", "STREAM_ERROR", "CORRUPTION", "OVERFLOW", "NOT_SUPPORTED")
     assert [getattr(SoapySDR, f"SOAPY_SDR_{c}") for c in codes] == [-1, -2, -3, -4, -5]
     assert (SoapySDR.SOAPY_SDR_TIME_ERROR, SoapySDR.SOAPY_SDR_UNDERFLOW) == (-6, -7)
-    assert (soapy_remote.OVERFLOW, soapy_remote.UNDERFLOW) == (
+    assert (soapy_streams.OVERFLOW, soapy_streams.UNDERFLOW) == (
         SoapySDR.SOAPY_SDR_OVERFLOW,
         SoapySDR.SOAPY_SDR_UNDERFLOW,
     )
     assert (
-        (soapy_remote.END_BURST, soapy_remote.HAS_TIME)
+        (soapy_streams.END_BURST, soapy_streams.HAS_TIME)
         == (
             SoapySDR.SOAPY_SDR_END_BURST,
             SoapySDR.SOAPY_SDR_HAS_TIME,
