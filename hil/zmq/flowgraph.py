@@ -105,7 +105,7 @@ class Flowgraph:
             out += [f"--{k.replace('_', '-')}", str(v)]
         return out
 
-    def start(self, settle_s: float = 1.0) -> Flowgraph:
+    def start(self, settle_s: float = 0.5) -> Flowgraph:
         """Compile and start it; raises ``HilError`` when it exits within ``settle_s``."""
         if not Path(self.python).is_file():
             raise DeviceNotFoundError(INSTALL_HINT)
