@@ -69,8 +69,14 @@ OTA_CONFIG_FIELDS = (
     "symbols_per_frame",
     "detection_threshold",
     "max_rx_overruns",
+    "soapy_rx_gain_db",
+    "soapy_tx_gain_db",
 )
-OTA_FLAGS = {"max_rx_overruns": "--max-overruns"}
+OTA_FLAGS = {
+    "max_rx_overruns": "--max-overruns",
+    "soapy_rx_gain_db": "--rx-gain-db",
+    "soapy_tx_gain_db": "--tx-gain-db",
+}
 
 
 def check_codec_snr(codec, snr_db: float) -> None:
@@ -160,6 +166,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "symbols_per_frame": checks.count(64, 1 << 20),
             "detection_threshold": checks.number(0.0, 1.0),
             "max_rx_overruns": checks.count(0, 1_000_000),
+            "soapy_rx_gain_db": finite,  # then the device's getGainRange (ota_radios)
+            "soapy_tx_gain_db": finite,
         },
         defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
     )

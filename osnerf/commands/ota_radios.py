@@ -75,8 +75,10 @@ def check_scheme_flags(args: argparse.Namespace) -> None:
 
 def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None:
     """``--center-freq-hz`` and ``--sample-rate-hz`` within the radio's own ranges (a
-    SoapySDR device's from its ``get*Range``: each of ``ids`` is opened and asked)."""
+    SoapySDR device's from its ``get*Range``: each of ``ids`` is opened and asked), and a
+    SoapySDR device's ``--rx-gain-db``/``--tx-gain-db`` within its ``getGainRange``."""
     hw = radio_of(kind)
+    _check_gains(args, kind, ids)
     freq_range, rate_range, part = hw.ranges_of(ids)
     for dest, flag, (lo, hi), unit in (
         ("center_freq_hz", "--center-freq-hz", freq_range, "Hz"),
@@ -87,6 +89,33 @@ def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None
             raise usage_error(
                 f"{flag} {value:g} {unit} is outside the {hw.label}'s range [{lo:g}, {hi:g}] "
                 f"{unit} ({part})"
+            )
+
+
+def _check_gains(args: argparse.Namespace, kind: str, ids) -> None:
+    given = {dest: getattr(args, dest, None) for dest in ("soapy_rx_gain_db", "soapy_tx_gain_db")}
+    if all(v is None for v in given.values()):
+        return
+    if kind != "soapy":
+        raise usage_error(
+            "--rx-gain-db/--tx-gain-db set a SoapySDR device's gains: they need --tx soapy "
+            "--rx soapy (the other radios take theirs from their own settings)"
+        )
+    tx_id, rx_id = (tuple(ids) + (None,))[:2]
+    for dest, flag, which, device in (
+        ("soapy_rx_gain_db", "--rx-gain-db", "rx_gain_range_db", rx_id),
+        ("soapy_tx_gain_db", "--tx-gain-db", "tx_gain_range_db", tx_id),
+    ):
+        if given[dest] is None:
+            continue
+        r = radio_of(kind).device_ranges(device)
+        if which not in r:
+            raise usage_error(f"{flag}: {r['part']} has no transmit channel")
+        lo, hi = r[which]
+        if not lo <= given[dest] <= hi:
+            raise usage_error(
+                f"{flag} {given[dest]:g} dB is outside the device's range [{lo:g}, {hi:g}] dB "
+                f"({r['part']})"
             )
 
 

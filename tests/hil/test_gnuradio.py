@@ -8,16 +8,20 @@ import socket
 import subprocess
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from hil import FLOWGRAPHS, Flowgraph, Radio, ZmqRadio, compile_flowgraph, ota_noise_voltage
+from hil.zmq.flowgraph import GNURADIO_PYTHON
 
 pytest.importorskip("zmq", reason="pyzmq is not installed")
-HAVE_GNURADIO = shutil.which("grcc") is not None and (
-    subprocess.run(
-        ["/usr/bin/python3", "-c", "from gnuradio import zeromq, channels"], capture_output=True
+HAVE_GNURADIO = (
+    shutil.which("grcc") is not None
+    and Path(GNURADIO_PYTHON).is_file()
+    and subprocess.run(
+        [GNURADIO_PYTHON, "-c", "from gnuradio import zeromq, channels"], capture_output=True
     ).returncode
     == 0
 )
@@ -72,7 +76,7 @@ def test_every_flowgraph_compiles_with_grcc(name, compiled):
     assert "zeromq.pull_source(gr.sizeof_gr_complex, 1, tx_address, 100, False, 2)" in text
     assert "zeromq.push_sink(gr.sizeof_gr_complex, 1, rx_address, 100, False, 2)" in text
     assert "qtgui" not in text and "tb.wait()" in text
-    assert subprocess.run(["/usr/bin/python3", "-m", "py_compile", str(script)]).returncode == 0
+    assert subprocess.run([GNURADIO_PYTHON, "-m", "py_compile", str(script)]).returncode == 0
 
 
 def test_the_radio_pushes_raw_complex64_items(endpoints):
@@ -155,7 +159,6 @@ def test_hil_gnuradio_runs_the_flowgraph_until_sigterm(endpoints):
     import os
     import signal
     import sys
-    from pathlib import Path
 
     import zmq
 

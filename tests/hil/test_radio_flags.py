@@ -16,6 +16,7 @@ from osnerf.cli import main
         ),
         (["--tx", "soapy:driver=uhd", "--rx", "soapy"], "name the devices with --tx-args"),
         (["--tx", "zmq:tcp://127.0.0.1:5555", "--rx", "soapy"], "--tx and --rx must both be"),
+        (["--tx", "emulated", "--rx", "emulated", "--tx-gain-db", "10"], "need --tx soapy"),
     ],
 )
 def test_device_flags_are_checked_first(tmp_path, capsys, argv, message):

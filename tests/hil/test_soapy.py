@@ -200,6 +200,9 @@ def test_a_frequency_outside_the_devices_range_is_a_usage_error(tmp_path, images
     rc, _ = ota(tmp_path, images, server.args, "--center-freq-hz", "5e9")
     assert rc == 2
     assert "outside the SoapySDR device's range [3.25e+08, 3.8e+09] Hz" in capsys.readouterr().err
+    rc, _ = ota(tmp_path, images, server.args, "--rx-gain-db", "75")
+    assert rc == 2
+    assert "--rx-gain-db 75 dB is outside the device's range [-3, 71] dB" in capsys.readouterr().err
 
 
 def test_emulate_soapy_serves_until_sigterm_then_exits_0():
