@@ -114,7 +114,9 @@ class ZmqRadio:
         """Push one chunk per ``CHUNK_SAMPLES / fs`` seconds while the clock runs: queued
         burst samples first, silence otherwise."""
         silence = np.zeros(CHUNK_SAMPLES, ITEM)
-        burst, pos, done = None, 0, None
+        burst: np.ndarray | None = None
+        done = threading.Event()
+        pos = 0
         t0, sent = time.monotonic(), 0
         while self._clock_on.is_set():
             if burst is None:
@@ -147,6 +149,7 @@ class ZmqRadio:
         (or the socket failed) before it went."""
         zmq = self._zmq
         raw = chunk.tobytes()
+        assert self._push is not None
         while self._clock_on.is_set():
             try:
                 self._push.send(raw, flags=zmq.NOBLOCK)
