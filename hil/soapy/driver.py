@@ -423,6 +423,10 @@ class SoapyRadio:
         if self._closed:
             return
         self._closed = True
+        try:
+            self._dev.close()  # the binding's unmake (a remote device hangs up)
+        except (RuntimeError, AttributeError):
+            pass
         self._dev = None
 
     def __enter__(self) -> SoapyRadio:
