@@ -8,6 +8,11 @@ Samples cross as the board's own: CS16, RX full scale 2048 (12-bit ADC), TX full
 32767 (the DAC's 12 MSBs of int16). :class:`hil.emulation.soapy_remote.SoapyRemoteServer`
 serves one over SoapyRemote's protocol.
 
+The receive side keeps :data:`BUFFER_S` of samples in blocks (the board's DMA blocks,
+:class:`hil.emulation.pacing.BlockQueue`): a reader later than that (the host stopped
+reading, and the stream's flow-control window filled) loses whole blocks, and the stream
+reports ``SOAPY_SDR_OVERFLOW`` before the samples that follow the gap, as a device does.
+
 Faults (``osnerf hil emulate soapy --fault``): ``overflow`` (once, after ``after_samples``
 received samples, the board loses :data:`OVERFLOW_LOST_SAMPLES` and the receive stream
 reports ``SOAPY_SDR_OVERFLOW``), ``drop`` (the board dies: every connection closes).
@@ -32,6 +37,8 @@ the JSON of ``hil.pluto.context.air_setting``."""
 SOAPY_FAULTS = ("overflow", "drop")
 OVERFLOW_LOST_SAMPLES = 8192
 NATIVE_FORMAT = "CS16"
+BUFFER_S = 0.5  # samples the device keeps for a late reader, seconds
+BLOCK_SAMPLES = 1 << 15
 
 
 class EmulatedSoapyDevice:
@@ -58,6 +65,8 @@ class EmulatedSoapyDevice:
         self.air_settable = air_settable
         self.serial = serial
         self.overflows = 0  # overflows reported to a receive stream
+        self._injected = False
+        self._lost_runs = 0  # the open buffer's runs of lost blocks, as last reported
         self.lock = threading.RLock()
         board.write_attr(PHY, "voltage0", False, "", "gain_control_mode", "manual")
 
@@ -197,20 +206,34 @@ class EmulatedSoapyDevice:
     def full_scale(direction: int) -> float:
         return float(TX_FULL_SCALE if direction == TX else RX_FULL_SCALE)
 
+    def open_rx(self) -> None:
+        """Start receiving "now", with :data:`BUFFER_S` of blocks for a late reader."""
+        b = self.board
+        blocks = max(2, round(BUFFER_S * b.sample_rate_hz / BLOCK_SAMPLES))
+        b.open_rx(block_samples=BLOCK_SAMPLES, num_blocks=blocks)
+        self._lost_runs = 0
+
     def read(self, num_samples: int) -> tuple[np.ndarray | None, bool]:
         """``([2 * n] int16 I, Q or None when the board dropped, overflowed)``: the next
-        samples of the open receive stream; ``overflowed``: samples were lost before them."""
+        samples of the open receive stream; ``overflowed``: samples were lost before them
+        (the reader was late, or the injected fault)."""
         b = self.board
         limit = self.overflow_after_samples
         if limit is not None and b.samples_received < limit:
             num_samples = min(num_samples, limit - b.samples_received)
         overflowed = False
-        if limit is not None and b.samples_received >= limit and self.overflows == 0:
-            self.overflows += 1
-            overflowed = True
+        if limit is not None and b.samples_received >= limit and not self._injected:
+            self._injected = overflowed = True
             if b.read_rx(OVERFLOW_LOST_SAMPLES) is None:  # the lost samples, never delivered
+                self.overflows += 1
                 return None, True
-        return b.read_rx(num_samples), overflowed
+        raw = b.read_rx(num_samples)
+        q = b.rx_blocks
+        if q is not None and q.overruns > self._lost_runs:  # blocks lost before these
+            self._lost_runs = q.overruns
+            overflowed = True
+        self.overflows += overflowed
+        return raw, overflowed
 
     def write(self, raw: np.ndarray) -> None:
         """[2 * n] int16 I, Q to transmit; opens a burst if none is open."""

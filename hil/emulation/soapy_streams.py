@@ -77,7 +77,7 @@ class RxStream(Stream):
     def activate(self) -> None:
         with self.device.lock:
             if not self.opened:
-                self.device.board.open_rx()
+                self.device.open_rx()
                 self.opened = True
         super().activate()
 

@@ -184,9 +184,36 @@ def test_an_overflow_reaches_the_counters_when_allowed():
         with pytest.warns(UserWarning, match="1 overflows"):
             y = r.rx(100_000, max_shortfalls=1)
         assert r.last_counts["rx"].overflows == 1 and y.shape == (1, 100_000)
-        with pytest.raises(StreamError):
-            srv.device.overflows = 0  # once more: now none is allowed
+    with serve(fault="overflow", after_samples=10_000) as srv, SoapyRadio.open(srv.args) as r:
+        with pytest.raises(StreamError, match="1 overflows") as err:
             r.rx(100_000, max_shortfalls=0)
+        assert err.value.capture.shape == (1, 10_000)  # what came before the lost samples
+
+
+def test_a_reader_that_stops_reading_overflows(server):
+    """The host stops reading: the flow-control window fills, the device's buffer (half a
+    second of blocks) runs over, and the next samples come after SOAPY_SDR_OVERFLOW."""
+    import time
+
+    before = server.device.overflows
+    dev = SoapySDR.Device(server.args)
+    dev.setSampleRate(RX, 0, 4e6)
+    stream = dev.setupStream(RX, SoapySDR.SOAPY_SDR_CF32, [0], {"remote:window": str(1 << 20)})
+    dev.activateStream(stream)
+    buff = np.zeros(1 << 14, np.complex64)
+    codes, got = [], 0
+    try:
+        dev.readStream(stream, [buff], len(buff), timeoutUs=1_000_000)
+        time.sleep(1.2)  # a host busy elsewhere
+        while got < 4_000_000 and SoapySDR.SOAPY_SDR_OVERFLOW not in codes:
+            r = dev.readStream(stream, [buff], len(buff), timeoutUs=1_000_000)
+            codes.append(min(r.ret, 0))
+            got += max(r.ret, 0)
+    finally:
+        dev.deactivateStream(stream)
+        dev.closeStream(stream)
+        dev.close()
+    assert SoapySDR.SOAPY_SDR_OVERFLOW in codes and server.device.overflows == before + 1
 
 
 def test_hil_info_lists_what_enumerate_finds(server, capsys):
