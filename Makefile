@@ -16,10 +16,13 @@ LPIPS_SDIST_DIR := $(XDG_CACHE_HOME)/osnerf/sdist
 LPIPS_REF := $(VENV)/.lpips-ref
 
 LIBIIO_LIB := /usr/lib/x86_64-linux-gnu/libiio.so.0
+DIST_PACKAGES := /usr/lib/python3/dist-packages
+SOAPY_REMOTE := /usr/lib/x86_64-linux-gnu/SoapySDR/modules0.8/libremoteSupport.so
+SOAPY_DIR := $(abspath $(VENV))/debian-soapysdr
 
-.PHONY: demo test bench setup llvm libiio lpips lint clean
+.PHONY: demo test bench setup llvm libiio soapysdr gnuradio lpips lint clean
 
-setup: $(STAMP) llvm libiio lpips
+setup: $(STAMP) llvm libiio soapysdr gnuradio lpips
 
 lpips: $(LPIPS_WEIGHTS) $(LPIPS_REF)
 
@@ -62,6 +65,37 @@ libiio:
 		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q libiio0 libiio-utils; \
 	else \
 		echo "the Pluto front end needs libiio 0.24: run 'sudo apt-get install libiio0 libiio-utils' (Debian 12), then re-run make" >&2; \
+		exit 1; \
+	fi
+
+# Every SoapySDR radio: Debian's binding (links no numpy: it loads beside the venv's numpy 2)
+# and its remote module (the tests reach the emulated device through it). A .pth names a
+# folder holding only the binding, after site-packages: nothing else of dist-packages.
+soapysdr: | $(STAMP)
+	@if [ -e $(DIST_PACKAGES)/SoapySDR.py ] && [ -e $(SOAPY_REMOTE) ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing python3-soapysdr, soapysdr-module-remote, soapysdr-tools (SoapySDR radios)"; \
+		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
+			--no-install-recommends python3-soapysdr soapysdr-module-remote soapysdr-tools; \
+	else \
+		echo "SoapySDR radios need Debian's binding: run 'sudo apt-get install --no-install-recommends python3-soapysdr soapysdr-module-remote soapysdr-tools', then re-run make" >&2; \
+		exit 1; \
+	fi
+	@mkdir -p $(SOAPY_DIR)
+	@ln -sf $(DIST_PACKAGES)/SoapySDR.py $(DIST_PACKAGES)/_SoapySDR.cpython-*.so $(SOAPY_DIR)/
+	@echo $(SOAPY_DIR) > "$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/zz-debian-soapysdr.pth"
+	@$(PY) -c 'import numpy, SoapySDR; assert int(numpy.__version__.split(".")[0]) >= 2'
+
+# The GNU Radio bridge: GNU Radio 3.10 (built for numpy 1.x, so it runs on Debian's python3
+# in its own process) with gr-zeromq, gr-channels, gr-uhd, gr-soapy, gr-iio and gr-osmosdr.
+gnuradio:
+	@if command -v grcc >/dev/null && /usr/bin/python3 -c 'import osmosdr; from gnuradio import zeromq, channels' 2>/dev/null; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		echo "installing gnuradio and gr-osmosdr (the GNU Radio bridge and its flowgraphs)"; \
+		apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
+			--no-install-recommends gnuradio gr-osmosdr; \
+	else \
+		echo "the GNU Radio bridge needs GNU Radio 3.10: run 'sudo apt-get install --no-install-recommends gnuradio gr-osmosdr', then re-run make" >&2; \
 		exit 1; \
 	fi
 

@@ -11,6 +11,7 @@
 * ``common.jit``: ``lazy_njit``, the one numba wrapper (numba loaded on a kernel's first call).
 * ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
+* ``common.threads``: ``one_blas_thread``, a receive path's bound on numpy's BLAS pool.
 
 Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` and ``osnerf``
 may all import it.
@@ -37,9 +38,11 @@ from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
 from common.quality import PSNR_MAX_DB, psnr
 from common.registry import Registry
+from common.threads import one_blas_thread
 
 __all__ = [
     "InputError",
+    "one_blas_thread",
     "json_default",
     "lazy_njit",
     "load_plugins",

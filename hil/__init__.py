@@ -4,6 +4,8 @@ May import ``common`` and ``phy`` only. Subpackages (each re-exports its public 
 
     hil.hackrf      the HackRF One on pure pyusb: USB protocol, driver, settings, receive stream
     hil.pluto       the ADALM-Pluto through pyadi-iio on libiio
+    hil.soapy       any SoapySDR device (USRP via SoapyUHD, LimeSDR, bladeRF, RTL-SDR, ...)
+    hil.zmq         a GNU Radio flowgraph as the air (gr-zeromq's stream format), gnuradio/*.grc
     hil.emulation   emulated radios and the air between them (channels, paths, medium, iiod)
     hil.ota         over-the-air bursts and streams of phy frames, their receiver and SigMF
 
@@ -11,7 +13,7 @@ The names a user needs are here at the top::
 
     DEVICES, DeviceKind           the one table of front ends
     Radio                         what the over-the-air path uses of a front end (a Protocol)
-    HackRF, find_hackrfs, Pluto, find_plutos
+    HackRF, find_hackrfs, Pluto, find_plutos, SoapyRadio, ZmqRadio
     open_loopback, loopback_pair  the HackRF driver talking straight to emulated boards
     Emulator, EmulatorProcess, EmulatedPluto, IiodServer, AirChannel, Medium
     OtaConfig, send_blocks, burst_num_samples, decode_capture, save_sigmf, save_partial_capture
@@ -57,6 +59,8 @@ from hil.ota import (
 from hil.pluto import Pluto, find_plutos
 from hil.radio import Radio
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
+from hil.soapy import SoapyRadio
+from hil.zmq import ZmqRadio
 
 __all__ = [
     "AirChannel",
@@ -79,11 +83,13 @@ __all__ = [
     "RequestFailedError",
     "SigmfError",
     "SigmfReplay",
+    "SoapyRadio",
     "StallError",
     "StreamError",
     "StreamRun",
     "TimedOutError",
     "UsbTimeoutError",
+    "ZmqRadio",
     "build_views",
     "burst_num_samples",
     "decode_capture",

@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common import Registry
+from hil.emulation.iiod import IIOD_PORT
+from hil.emulation.soapy_rpc import DEFAULT_PORT as SOAPY_REMOTE_PORT
 from hil.hackrf import protocol
 from hil.pluto import ad9361
 
@@ -30,6 +32,14 @@ class DeviceKind:
         center_freq_range_hz: the LO range it tunes, (low, high) Hz.
         sample_rate_range_hz: the sample rates it runs at, (low, high) S/s.
         part: what fixes those ranges, for messages (the RF chip).
+        serve: ``(board, address, port) -> server`` that serves an emulated board over the
+            network (``osnerf hil emulate``), or None.
+        default_port: the TCP port such a server listens on by default.
+        device_ranges: ``(id) -> {"center_freq_range_hz": ..., "sample_rate_range_hz": ...}``
+            asked of the device itself (a SoapySDR device's ``get*Range``), or None: the
+            fixed ranges above.
+        open_link: ``(tx_id, rx_id) -> (tx, rx)`` where one object is both ends whatever
+            the ids (the ZMQ radio: two endpoints, one clock), or None.
     """
 
     name: str
@@ -42,6 +52,24 @@ class DeviceKind:
     center_freq_range_hz: tuple[float, float] = (0.0, float("inf"))
     sample_rate_range_hz: tuple[float, float] = (0.0, float("inf"))
     part: str = ""
+    serve: Callable | None = None
+    default_port: int = 0
+    device_ranges: Callable | None = None
+    open_link: Callable | None = None
+
+    def ranges_of(self, ids) -> tuple[tuple[float, float], tuple[float, float], str]:
+        """``(center_freq_range_hz, sample_rate_range_hz, part)`` of the boards ``ids``
+        name: the device's own where it reports them (every board in ``ids`` opened and
+        asked), else the fixed ranges of this kind."""
+        if self.device_ranges is None:
+            return self.center_freq_range_hz, self.sample_rate_range_hz, self.part
+        asked = [self.device_ranges(i) for i in dict.fromkeys(ids)]
+
+        def both(key: str) -> tuple[float, float]:  # what every board reaches
+            return (max(r[key][0] for r in asked), min(r[key][1] for r in asked))
+
+        parts = ", ".join(r["part"] for r in asked)
+        return both("center_freq_range_hz"), both("sample_rate_range_hz"), parts
 
     def open_pair(self, tx_id: str | None = None, rx_id: str | None = None):
         """``(tx, rx)`` for a link: a full-duplex kind uses one board for both ends unless
@@ -52,6 +80,8 @@ class DeviceKind:
         """
         from hil.errors import DeviceNotFoundError
 
+        if self.open_link is not None:
+            return self.open_link(tx_id, rx_id)
         tx = self.open(tx_id)
         if self.full_duplex and (rx_id is None or rx_id == tx_id):
             return tx, tx
@@ -90,6 +120,12 @@ def _emulated_pluto(snr_db: float, **kwargs):
     return EmulatedPluto.for_link(snr_db, **kwargs)
 
 
+def _serve_iiod(board, address: str, port: int):
+    from hil.emulation.iiod import IiodServer
+
+    return IiodServer(board, address, port)
+
+
 def _find_plutos() -> list:
     from hil.pluto.iio_access import find_plutos
 
@@ -100,6 +136,51 @@ def _open_pluto(uri=None):
     from hil.pluto.driver import Pluto
 
     return Pluto.open(uri)
+
+
+def _find_soapy() -> list:
+    from hil.soapy.driver import find_soapy_devices
+
+    return find_soapy_devices()
+
+
+def _open_soapy(args=None):
+    from hil.soapy.driver import SoapyRadio
+
+    return SoapyRadio.open(args)
+
+
+def _soapy_ranges(args) -> dict:
+    from hil.soapy.driver import SoapyRadio
+
+    with SoapyRadio.open(args) as radio:
+        r = radio.ranges()
+        return {**r, "part": f"{radio.hardware_key} via SoapySDR driver {radio.driver_key}"}
+
+
+def _emulated_soapy(snr_db: float, **kwargs):
+    from hil.emulation.soapy_device import EmulatedSoapyDevice
+
+    return EmulatedSoapyDevice.for_link(snr_db, **kwargs)
+
+
+def _serve_soapy_remote(device, address: str, port: int):
+    from hil.emulation.soapy_remote import SoapyRemoteServer
+
+    return SoapyRemoteServer(device, address, port)
+
+
+def _open_zmq(endpoint=None):
+    from hil.zmq.radio import ZmqRadio
+
+    return ZmqRadio(endpoint, None)
+
+
+def _open_zmq_link(tx_endpoint, rx_endpoint):
+    from hil.zmq.radio import ZmqRadio
+
+    radio = ZmqRadio(tx_endpoint, rx_endpoint)
+    return radio, radio
 
 
 DEVICES = Registry[DeviceKind](
@@ -127,6 +208,31 @@ DEVICES = Registry[DeviceKind](
             center_freq_range_hz=ad9361.LO_RANGE_HZ,
             sample_rate_range_hz=(ad9361.FIR_SAMPLE_RATE_MIN_HZ, ad9361.SAMPLE_RATE_RANGE_HZ[1]),
             part="AD9363, a stock Pluto",
+            serve=_serve_iiod,
+            default_port=IIOD_PORT,
+        ),
+        "soapy": DeviceKind(
+            "soapy",
+            "SoapySDR device",
+            "args",
+            True,
+            _find_soapy,
+            _open_soapy,
+            _emulated_soapy,
+            part="the device's own ranges (SoapySDR get*Range)",
+            serve=_serve_soapy_remote,
+            default_port=SOAPY_REMOTE_PORT,
+            device_ranges=_soapy_ranges,
+        ),
+        "zmq": DeviceKind(
+            "zmq",
+            "GNU Radio flowgraph over ZMQ",
+            "endpoint",
+            True,
+            list,  # nothing to find: a flowgraph is where it is told to be
+            _open_zmq,
+            part="the flowgraph's (ZMQ carries samples, not settings)",
+            open_link=_open_zmq_link,
         ),
     },
 )

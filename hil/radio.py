@@ -2,8 +2,10 @@
 
 :func:`hil.send_blocks` and :class:`osnerf.ota_link.OtaLink` use exactly these members of a
 transmitter and a receiver, whatever the board: :class:`hil.HackRF` (over USB, over
-:class:`hil.EmulatorBackend`, or looped back without USB) and :class:`hil.Pluto` (a real
-board, or :class:`hil.EmulatedPluto` behind :class:`hil.IiodServer`). Settings are not part
+:class:`hil.EmulatorBackend`, or looped back without USB), :class:`hil.Pluto` (a real
+board, or :class:`hil.EmulatedPluto` behind :class:`hil.IiodServer`) and
+:class:`hil.SoapyRadio` (any SoapySDR device, or :class:`hil.EmulatedSoapyDevice` behind
+:class:`hil.SoapyRemoteServer`). Settings are not part
 of it: each front end has its own knobs (a Pluto's ``apply_ota_config``, a HackRF's gain
 properties), which :mod:`hil.ota.link` sets from :class:`hil.OtaConfig`.
 """
@@ -19,6 +21,7 @@ from hil.hackrf.stream import StreamStats
 if TYPE_CHECKING:
     from hil.hackrf.driver import HackRF
     from hil.pluto.driver import Pluto
+    from hil.soapy.driver import SoapyRadio
 
 
 @runtime_checkable
@@ -44,7 +47,9 @@ class Radio(Protocol):
         ...
 
 
-if TYPE_CHECKING:  # the type checker proves that both front ends are radios
+if TYPE_CHECKING:  # the type checker proves that the front ends are radios
 
-    def _front_ends_are_radios(hackrf: HackRF, pluto: Pluto) -> tuple[Radio, Radio]:
-        return hackrf, pluto
+    def _front_ends_are_radios(
+        hackrf: HackRF, pluto: Pluto, soapy: SoapyRadio
+    ) -> tuple[Radio, Radio, Radio]:
+        return hackrf, pluto, soapy

@@ -42,11 +42,12 @@ OTA_AIRS = ("fixed", "raytraced")
 def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath, path_segments=()):
     """The one air model of every emulated path: a ``hil.AirChannel`` at ``snr_db`` for the
     frames' mean power (``ota_cfg.tx_power_dbfs``) sent and received at ``ota_cfg``'s gains
-    of ``device`` ("emulated" HackRFs, or an emulated "pluto"), with the fixed ``multipath``
-    taps or, given ``path_segments`` (``hil.emulation.PathSegment`` s), those paths' gains as they are."""
+    of ``device`` ("emulated" HackRFs, an emulated "pluto" or "soapy" device), with the fixed
+    ``multipath`` taps or, given ``path_segments`` (``hil.emulation.PathSegment`` s), those
+    paths' gains as they are."""
     from hil import AirChannel
 
-    if device == "pluto":
+    if device in ("pluto", "soapy"):  # an emulated SoapySDR device is an AD9363 too
         txvga, rx_gain = ota_cfg.ad9361_tx_gain_db, ota_cfg.ad9361_rx_gain_db
     else:
         txvga, rx_gain = ota_cfg.txvga_gain_db, ota_cfg.lna_gain_db + ota_cfg.vga_gain_db

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from common import one_blas_thread
 from phy import _kernels, estimation
 from phy.detection import find_preambles
 from phy.frame import FrameConfig, as_complex_1d
@@ -70,6 +71,7 @@ def _mean(r: np.ndarray) -> np.complex64:
     return np.complex64(_sum(r) / r.size) if r.size else np.complex64(0)
 
 
+@one_blas_thread
 def find_frames(iq, cfg: FrameConfig = FrameConfig()) -> list[int]:
     """Start indices of every frame preamble in a capture (ascending).
 
@@ -112,6 +114,7 @@ def _not_detected(num_symbols: int) -> FrameResult:
     )
 
 
+@one_blas_thread
 def receive_frame(
     iq,
     cfg: FrameConfig = FrameConfig(),
@@ -149,6 +152,7 @@ def receive_frame(
     return _not_detected(num_symbols)
 
 
+@one_blas_thread
 def receive_frames(
     iq, cfg: FrameConfig = FrameConfig(), num_symbols: int = 1, equalizer: str = "mmse"
 ) -> list[FrameResult]:

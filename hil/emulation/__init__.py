@@ -10,10 +10,6 @@ from hil.emulation.air import (
     fractional_resample,
     iq_imbalance,
 )
-from hil.emulation.hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
-from hil.emulation.iiod import IIOD_PORT, IiodServer
-from hil.emulation.loopback import DirectTransport, loopback_pair, open_loopback
-from hil.emulation.medium import Medium
 from hil.emulation.paths import (
     MAX_DOPPLER_HZ,
     MAX_PATH_DELAY_S,
@@ -21,9 +17,15 @@ from hil.emulation.paths import (
     PathSegment,
     segments_from_arrays,
 )
-from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
-from hil.emulation.process import EmulatorProcess
+from hil.emulation.hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
 from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
+from hil.emulation.process import EmulatorProcess
+from hil.emulation.iiod import IIOD_PORT, IiodServer
+from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
+from hil.emulation.medium import Medium
+from hil.emulation.loopback import DirectTransport, loopback_pair, open_loopback
+from hil.emulation.soapy_device import SOAPY_FAULTS, EmulatedSoapyDevice
+from hil.emulation.soapy_remote import SoapyRemoteServer
 
 __all__ = [
     "AIR_SNR_DB_RANGE",
@@ -32,6 +34,7 @@ __all__ = [
     "DirectTransport",
     "EmulatedHackRF",
     "EmulatedPluto",
+    "EmulatedSoapyDevice",
     "Emulator",
     "EmulatorBackend",
     "EmulatorProcess",
@@ -48,6 +51,8 @@ __all__ = [
     "PPM_RANGE",
     "PathSegment",
     "RadioSpec",
+    "SOAPY_FAULTS",
+    "SoapyRemoteServer",
     "default_serial",
     "fractional_resample",
     "iq_imbalance",

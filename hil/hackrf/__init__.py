@@ -2,7 +2,6 @@
 loopback without USB."""
 
 from hil.hackrf import protocol
-from hil.hackrf.driver import HackRF
 from hil.hackrf.protocol import (
     BOARD_IDS,
     FREQ_RANGE_HZ,
@@ -11,8 +10,9 @@ from hil.hackrf.protocol import (
     M0State,
     usb_api_version_string,
 )
-from hil.hackrf.stream import StreamStats
+from hil.hackrf.driver import HackRF
 from hil.hackrf.usb_transport import find_hackrfs
+from hil.hackrf.stream import StreamStats
 
 __all__ = [
     "BOARD_IDS",

@@ -33,6 +33,8 @@ class OtaConfig:
             gain (minus the attenuation, <= 0), dB.
         max_rx_overruns: receive overruns (lost samples) tolerated before the capture
             fails with :class:`hil.StreamError` (None: warn only).
+        soapy_rx_gain_db, soapy_tx_gain_db: a SoapySDR device's overall RX and TX gains, dB,
+            checked against its ``getGainRange``; None leaves the device's own.
     """
 
     sample_rate_hz: float = 4e6
@@ -50,6 +52,8 @@ class OtaConfig:
     ad9361_rx_gain_db: float = DEFAULT_RX_GAIN_DB
     ad9361_tx_gain_db: float = DEFAULT_TX_GAIN_DB
     max_rx_overruns: int | None = None
+    soapy_rx_gain_db: float | None = None
+    soapy_tx_gain_db: float | None = None
 
     def __post_init__(self):
         from hil.hackrf.protocol import FREQ_RANGE_HZ

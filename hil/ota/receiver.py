@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from common import one_blas_thread
 from hil.ota.burst import as_numpy
 from hil.ota.config import OtaConfig
 from hil.ota.header import HEADER_BITS, header_mismatch, header_symbols
@@ -57,6 +58,7 @@ def assign_frames(
     return [int(i) if ok else None for i, ok in zip(*best[:2])]
 
 
+@one_blas_thread
 def receive_burst(
     capture: np.ndarray, reports: list, layout: list, block_sizes: list, cfg: OtaConfig, frames
 ):

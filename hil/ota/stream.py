@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common import one_blas_thread
 from hil.ota.burst import BurstResult, FrameReport, as_numpy
 from hil.ota.config import OtaConfig
 from hil.ota.header import MAX_FRAMES, decode_header
@@ -248,8 +249,10 @@ class StreamReceiver:
             self.frames.find(burst)
             self.frames.receive_all(burst, self.cfg.header_symbols + self.cfg.symbols_per_frame)
 
+    @one_blas_thread
     def run(self) -> StreamCounts:
-        """Search and decode until the ring is closed and every sample was searched."""
+        """Search and decode until the ring is closed and every sample was searched (numpy's
+        BLAS pool at one thread meanwhile)."""
         own_from = seg_lo = 0
         while True:
             target = own_from + self.need + self.block_samples

@@ -1,6 +1,7 @@
-"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb) and
-the Plutos libiio finds; `osnerf hil emulate pluto --address 127.0.0.1 [--port N]`: serve an
-emulated Pluto over iiod's network protocol until SIGINT or SIGTERM."""
+"""`osnerf hil info [--emulate]`: list HackRF boards as ``hackrf_info`` does (pure pyusb),
+the Plutos libiio finds and the devices SoapySDR finds; `osnerf hil emulate pluto|soapy
+--address 127.0.0.1 [--port N]`: serve an emulated Pluto over iiod's network protocol, or an
+emulated SoapySDR device over SoapyRemote's, until SIGINT or SIGTERM."""
 
 from __future__ import annotations
 
@@ -37,6 +38,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--emulate", action="store_true", help="use two emulated HackRFs instead of USB hardware"
     )
     info.add_argument("--serial", default=None, help="only the HackRF whose serial ends with this")
+    info.add_argument(
+        "--soapy-args",
+        default="",
+        help="what SoapySDR.Device.enumerate is asked for, e.g. 'driver=uhd' or "
+        "'driver=remote,remote=tcp://HOST:PORT' (default: every installed module's devices)",
+    )
+    _add_gnuradio_arguments(
+        sub.add_parser(
+            "gnuradio",
+            help="run a GNU Radio flowgraph (gnuradio/*.grc) headless until SIGINT or SIGTERM",
+            description="compile a flowgraph with grcc and run it on Debian's python3 in its "
+            "own process (GNU Radio 3.10 is built for numpy 1.x), until SIGINT or SIGTERM; "
+            "osnerf ota --tx zmq:ADDRESS --rx zmq:ADDRESS then sends through it",
+        )
+    )
     _add_emulate_arguments(
         sub.add_parser(
             "emulate",
@@ -47,15 +63,83 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_gnuradio_arguments(p: argparse.ArgumentParser) -> None:
+    from hil.zmq import FLOWGRAPHS
+    from osnerf.commands import args as checks
+
+    shipped = ", ".join(sorted(f.stem for f in FLOWGRAPHS.glob("*.grc")))
+    p.add_argument("flowgraph", help=f"a .grc file, or a shipped one: {shipped}")
+    p.add_argument(
+        "--snr-db",
+        type=checks.number(-30.0, 60.0, "dB"),
+        default=None,
+        help="set the flowgraph's noise_voltage so that osnerf ota's frames arrive at this SNR "
+        "per symbol (the loopback's noise)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="PARAM=VALUE",
+        help="a parameter of the flowgraph (its parameter blocks), e.g. --set echo_delay=2 "
+        "--set freq_offset=0.00025; repeatable",
+    )
+
+
+def _gnuradio(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from hil.zmq import Flowgraph, ota_noise_voltage
+    from osnerf.cli import UsageError as usage_error
+
+    params = {}
+    for item in args.set:
+        key, eq, value = item.partition("=")
+        if not eq or not key.isidentifier():
+            raise usage_error(f"--set must look like PARAM=VALUE, got {item!r}")
+        params[key] = value
+    if args.snr_db is not None:
+        if "noise_voltage" in params:
+            raise usage_error("--snr-db sets noise_voltage: give one of them")
+        params["noise_voltage"] = f"{ota_noise_voltage(args.snr_db):.9g}"
+    try:
+        graph = Flowgraph(args.flowgraph, params)
+    except FileNotFoundError as e:
+        raise usage_error(f"flowgraph: {e}") from None
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    graph.start()
+    shown = " ".join(f"{k}={v}" for k, v in params.items()) or "its defaults"
+    print(
+        f"osnerf hil gnuradio: {graph.grc.name} running (pid {graph.proc.pid}) with {shown}; "
+        "SIGINT or SIGTERM stops it",
+        file=sys.stderr,
+        flush=True,
+    )
+    while not stop.is_set() and graph.running:
+        stop.wait(0.1)
+    ended = not graph.running
+    rc = graph.close()
+    if ended:  # it stopped by itself: a failure
+        print(f"osnerf hil gnuradio: {graph.grc.name} exited ({rc})", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     from hil import DEVICES
-    from hil.emulation import AIR_SNR_DB_RANGE, IIOD_PORT, NETWORK_FAULTS
+    from hil.emulation import AIR_SNR_DB_RANGE, NETWORK_FAULTS, SOAPY_FAULTS
     from osnerf.commands import args as checks
 
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
+    ports = ", ".join(f"{k} {DEVICES[k].default_port}" for k in served)
     p.add_argument("device", choices=served, help=f"which board: {', '.join(served)}")
     p.add_argument("--address", default="127.0.0.1", help="loopback IPv4 to listen on")
-    p.add_argument("--port", type=_integer(0, 65535), default=IIOD_PORT, help="TCP port")
+    p.add_argument(
+        "--port", type=_integer(0, 65535), default=None, help=f"TCP port (default {ports})"
+    )
     p.add_argument(
         "--snr-db",
         type=checks.number(*AIR_SNR_DB_RANGE, "dB"),
@@ -67,9 +151,10 @@ def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--fault",
         default=None,
-        choices=NETWORK_FAULTS,
-        help="after --fault-after-samples received samples, drop (the board dies) or slow "
-        "(each receive reply 6 s late, past libiio's 5 s timeout)",
+        choices=sorted({*NETWORK_FAULTS, *SOAPY_FAULTS}),
+        help="after --fault-after-samples received samples, drop (the board dies), slow "
+        "(pluto: each receive reply 6 s late, past libiio's 5 s timeout) or overflow (soapy: "
+        "samples lost once, reported as SOAPY_SDR_OVERFLOW)",
     )
     p.add_argument(
         "--fault-after-samples",
@@ -97,7 +182,8 @@ def _emulate(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from hil import DEVICES, IiodServer
+    from hil import DEVICES
+    from hil.emulation import NETWORK_FAULTS, SOAPY_FAULTS
     from osnerf.cli import UsageError as usage_error
     from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
 
@@ -106,8 +192,13 @@ def _emulate(args: argparse.Namespace) -> int:
             "--fault-after-samples applies only with --fault (it says when the fault "
             "strikes); name a --fault or leave --fault-after-samples out"
         )
+    faults = SOAPY_FAULTS if args.device == "soapy" else NETWORK_FAULTS
+    if args.fault is not None and args.fault not in faults:
+        raise usage_error(f"--fault {args.fault}: a {args.device} emulator has {', '.join(faults)}")
     after = FAULT_AFTER_SAMPLES if args.fault_after_samples is None else args.fault_after_samples
-    board = DEVICES[args.device].emulator(
+    kind = DEVICES[args.device]
+    port = kind.default_port if args.port is None else args.port
+    board = kind.emulator(
         args.snr_db,
         seed=args.seed,
         multipath=DEFAULT_MULTIPATH,
@@ -116,28 +207,37 @@ def _emulate(args: argparse.Namespace) -> int:
         after_samples=after,
     )
     try:
-        server = IiodServer(board, args.address, args.port)
+        server = kind.serve(board, args.address, port)
     except ValueError as e:
         raise usage_error(f"--address/--port: {e}") from None
     except OSError as e:
-        raise OSError(e.errno, f"cannot listen on {args.address}:{args.port}: {e.strerror}") from e
+        raise OSError(e.errno, f"cannot listen on {args.address}:{port}: {e.strerror}") from e
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     server.serve_in_background()
     print(
-        f"osnerf hil emulate: {args.device} at {server.uri} (air {args.snr_db:g} dB); "
+        f"osnerf hil emulate: {args.device} at {getattr(server, 'uri', None) or server.args} "
+        f"(air {args.snr_db:g} dB); "
         "SIGINT or SIGTERM stops it",
         file=sys.stderr,
         flush=True,
     )
     told, underruns = False, 0
+    overflows = 0
     while not stop.is_set() and not board.dropped.is_set():
         stop.wait(0.05)
         if board.tx_underruns > underruns:
             underruns = board.tx_underruns
             print(
                 f"osnerf hil emulate: TX underrun ({underruns} so far): the host fed the DAC late",
+                file=sys.stderr,
+                flush=True,
+            )
+        if getattr(board, "overflows", 0) > overflows:
+            overflows = board.overflows
+            print(
+                f"osnerf hil emulate: fault: receive overflow ({overflows} so far)",
                 file=sys.stderr,
                 flush=True,
             )
@@ -172,20 +272,50 @@ def _pluto_info() -> int:
     return len(found)
 
 
+def _soapy_info(query: str) -> int:
+    """Print each device ``SoapySDR.Device.enumerate(query)`` finds (with its ranges when
+    it opens); returns how many (0 without the binding)."""
+    from hil import DeviceNotFoundError, HilError, SoapyRadio
+    from hil.soapy import find_soapy_devices
+
+    try:
+        found = find_soapy_devices(query)
+    except DeviceNotFoundError:  # no binding: no SoapySDR device to list
+        return 0
+    for args in found:
+        print(f"Found SoapySDR device\nArgs: {args}")
+        try:
+            with SoapyRadio.open(args) as radio:
+                r = radio.ranges()
+                print(
+                    f"Driver: {radio.driver_key}\nHardware: {radio.hardware_key}\n"
+                    f"Frequency range: {r['center_freq_range_hz'][0]:g}-"
+                    f"{r['center_freq_range_hz'][1]:g} Hz\nSample rate range: "
+                    f"{r['sample_rate_range_hz'][0]:g}-{r['sample_rate_range_hz'][1]:g} S/s"
+                )
+        except HilError as e:
+            print(f"error: {e}", file=sys.stderr)
+    return len(found)
+
+
 def run(args: argparse.Namespace) -> int:
     from hil import Emulator, HackRF, HilError, find_hackrfs
 
     if args.action == "emulate":
         return _emulate(args)
+    if args.action == "gnuradio":
+        return _gnuradio(args)
     backend = Emulator().backend if args.emulate else None
     serials = [d.serial_number for d in find_hackrfs(backend)]
     if args.serial:
         serials = [s for s in serials if s.endswith(args.serial.lower())]
     if not serials:
-        if _pluto_info():  # no HackRF, but a Pluto
+        found = _pluto_info()
+        found += _soapy_info(args.soapy_args)
+        if found:  # no HackRF, but a Pluto or a SoapySDR device
             return 0
         which = f" with a serial ending in {args.serial!r}" if args.serial else ""
-        raise RuntimeError(f"no HackRF board found{which}, and no Pluto")
+        raise RuntimeError(f"no HackRF board found{which}, no Pluto and no SoapySDR device")
     print("osnerf hil info (pure pyusb, no libhackrf)")
     for i, serial in enumerate(serials):
         try:
@@ -197,4 +327,5 @@ def run(args: argparse.Namespace) -> int:
         if i + 1 < len(serials):
             print()
     _pluto_info()
+    _soapy_info(args.soapy_args)
     return 0

@@ -69,8 +69,14 @@ OTA_CONFIG_FIELDS = (
     "symbols_per_frame",
     "detection_threshold",
     "max_rx_overruns",
+    "soapy_rx_gain_db",
+    "soapy_tx_gain_db",
 )
-OTA_FLAGS = {"max_rx_overruns": "--max-overruns"}
+OTA_FLAGS = {
+    "max_rx_overruns": "--max-overruns",
+    "soapy_rx_gain_db": "--rx-gain-db",
+    "soapy_tx_gain_db": "--tx-gain-db",
+}
 
 
 def check_codec_snr(codec, snr_db: float) -> None:
@@ -100,6 +106,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
     p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
+    p.add_argument(
+        "--tx-args",
+        default=None,
+        help="soapy: the transmitter's SoapySDR device string, e.g. 'driver=uhd,type=b200' or "
+        "'driver=remote,remote=tcp://127.0.0.1:55132' (default: the first device found)",
+    )
+    p.add_argument(
+        "--rx-args",
+        default=None,
+        help="soapy: the receiver's device string (default --tx-args: one full-duplex device "
+        "is both ends)",
+    )
     framed = [k for k, v in LINK_SCHEMES.items() if v.over_the_air]
     p.add_argument(
         "--schemes",
@@ -150,6 +168,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "symbols_per_frame": checks.count(64, 1 << 20),
             "detection_threshold": checks.number(0.0, 1.0),
             "max_rx_overruns": checks.count(0, 1_000_000),
+            "soapy_rx_gain_db": finite,  # then the device's getGainRange (ota_radios)
+            "soapy_tx_gain_db": finite,
         },
         defaults={"max_rx_overruns": 0},  # a lost sample fails a run from the command line
     )
@@ -257,6 +277,14 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
         raise usage_error("--uri needs --tx pluto --rx pluto")
     if tx_kind == "pluto":
         tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
+    soapy_args = getattr(args, "tx_args", None), getattr(args, "rx_args", None)
+    if any(a is not None for a in soapy_args) and tx_kind != "soapy":
+        raise usage_error("--tx-args/--rx-args need --tx soapy --rx soapy")
+    if tx_kind == "soapy":
+        if tx_serial or rx_serial:
+            raise usage_error("soapy: name the devices with --tx-args/--rx-args, not soapy:ARGS")
+        tx_serial = soapy_args[0]
+        rx_serial = soapy_args[1] if soapy_args[1] is not None else tx_serial
     if tx_kind != rx_kind and tx_kind in simulated:
         raise usage_error(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
@@ -345,9 +373,9 @@ def run(args: argparse.Namespace) -> int:
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
 
-    kind, tx_id, _ = device_kinds(args)
+    kind, tx_id, rx_id = device_kinds(args)
     check_scheme_flags(args)
-    check_radio_ranges(args, kind)
+    check_radio_ranges(args, kind, (tx_id, rx_id))
     check_overruns(args, kind)
     check_stream_flags(args, kind)
     parse_ppm(args.ppm or "0,0")
@@ -360,7 +388,7 @@ def run(args: argparse.Namespace) -> int:
     names, images = load_square_images(
         args.images, args.size, args.max_images, "--images", "--size"
     )
-    resolve_air(args, kind, air_is_emulated(args, kind, tx_id))  # asks a Pluto which it is
+    resolve_air(args, kind, air_is_emulated(args, kind, tx_id, rx_id))  # asks the board
     settings = framed_settings(args, cfg.symbols_per_frame)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     if args.overwrite:  # the whole output set is replaced, captures included

@@ -22,9 +22,11 @@ def usage_error(msg: str):
 
 def parse_device(value: str, name: str) -> tuple[str, str | None]:
     kind, _, serial = value.partition(":")
-    if kind not in DEVICE_KINDS or (serial and kind not in HARDWARE):
+    bad = kind not in DEVICE_KINDS or (serial and kind not in HARDWARE)
+    if bad or (kind == "zmq" and not serial):  # a flowgraph's address is not optional
         raise usage_error(
-            f"{name} must be one of {', '.join(DEVICE_KINDS)} or hackrf:SERIAL, got {value!r}"
+            f"{name} must be one of {', '.join(DEVICE_KINDS)}, hackrf:SERIAL or zmq:ENDPOINT "
+            f"(a ZeroMQ address, e.g. zmq:tcp://127.0.0.1:5555), got {value!r}"
         )
     return kind, serial or None
 

@@ -73,18 +73,49 @@ def check_scheme_flags(args: argparse.Namespace) -> None:
             setattr(args, dest, default)
 
 
-def check_radio_ranges(args: argparse.Namespace, kind: str) -> None:
-    """``--center-freq-hz`` and ``--sample-rate-hz`` within the radio's own ranges."""
+def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None:
+    """``--center-freq-hz`` and ``--sample-rate-hz`` within the radio's own ranges (a
+    SoapySDR device's from its ``get*Range``: each of ``ids`` is opened and asked), and a
+    SoapySDR device's ``--rx-gain-db``/``--tx-gain-db`` within its ``getGainRange``."""
     hw = radio_of(kind)
+    _check_gains(args, kind, ids)
+    freq_range, rate_range, part = hw.ranges_of(ids)
     for dest, flag, (lo, hi), unit in (
-        ("center_freq_hz", "--center-freq-hz", hw.center_freq_range_hz, "Hz"),
-        ("sample_rate_hz", "--sample-rate-hz", hw.sample_rate_range_hz, "S/s"),
+        ("center_freq_hz", "--center-freq-hz", freq_range, "Hz"),
+        ("sample_rate_hz", "--sample-rate-hz", rate_range, "S/s"),
     ):
         value = getattr(args, dest)
         if not lo <= value <= hi:
             raise usage_error(
                 f"{flag} {value:g} {unit} is outside the {hw.label}'s range [{lo:g}, {hi:g}] "
-                f"{unit} ({hw.part})"
+                f"{unit} ({part})"
+            )
+
+
+def _check_gains(args: argparse.Namespace, kind: str, ids) -> None:
+    given = {dest: getattr(args, dest, None) for dest in ("soapy_rx_gain_db", "soapy_tx_gain_db")}
+    if all(v is None for v in given.values()):
+        return
+    if kind != "soapy":
+        raise usage_error(
+            "--rx-gain-db/--tx-gain-db set a SoapySDR device's gains: they need --tx soapy "
+            "--rx soapy (the other radios take theirs from their own settings)"
+        )
+    tx_id, rx_id = (tuple(ids) + (None,))[:2]
+    for dest, flag, which, device in (
+        ("soapy_rx_gain_db", "--rx-gain-db", "rx_gain_range_db", rx_id),
+        ("soapy_tx_gain_db", "--tx-gain-db", "tx_gain_range_db", tx_id),
+    ):
+        if given[dest] is None:
+            continue
+        r = radio_of(kind).device_ranges(device)
+        if which not in r:
+            raise usage_error(f"{flag}: {r['part']} has no transmit channel")
+        lo, hi = r[which]
+        if not lo <= given[dest] <= hi:
+            raise usage_error(
+                f"{flag} {given[dest]:g} dB is outside the device's range [{lo:g}, {hi:g}] dB "
+                f"({r['part']})"
             )
 
 
@@ -100,12 +131,20 @@ def check_overruns(args: argparse.Namespace, kind: str) -> None:
         )
 
 
-def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None) -> bool:
-    """Whether the run sets the air: simulated radios, or a Pluto that answers as
-    ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers).
+def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None, rx_id=None) -> bool:
+    """Whether the run sets the air: simulated radios, a Pluto that answers as
+    ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers), or
+    one SoapySDR device that takes an emulated air (``osnerf hil emulate soapy``).
     Without ``--uri`` the Pluto found is named in ``args.uri``, and the run uses that one."""
     if kind in SIMULATED:
         return True
+    if kind == "soapy":
+        if rx_id != uri:  # two devices: the air between them is not one board's
+            return False
+        from hil import SoapyRadio
+
+        with SoapyRadio.open(uri) as radio:
+            return radio.air_settable
     if kind != "pluto":
         return False
     from hil import Pluto

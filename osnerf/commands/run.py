@@ -49,6 +49,8 @@ CONFIG_FIELDS = (
     "max_views",
     "csi",
     "ota_air",
+    "ota_tx_args",
+    "ota_rx_args",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -56,6 +58,8 @@ FLAGS = {
     "resolution_px": "--resolution",
     "num_train_views": "--views",
     "num_test_views": "--test-views",
+    "ota_tx_args": "--tx-args",
+    "ota_rx_args": "--rx-args",
 }
 MAX_NERF_STEPS = 10_000_000
 

@@ -71,8 +71,14 @@ class RunConfig:
         nerf_steps: NeRF optimiser steps per scheme (>= 1): every scheme's field gets the
             same steps (the fair default); None: the same ``max_seconds`` instead.
         ota_device: for channel "ota": "emulated" (two emulated HackRFs), or a real front end
-            of ``hil.DEVICES``: "hackrf" (two boards) or "pluto" (one board, full duplex: the
-            first libiio finds, or ``ip:$IIOD_REMOTE``).
+            of ``hil.DEVICES``: "hackrf" (two boards), "pluto" (one board, full duplex: the
+            first libiio finds, or ``ip:$IIOD_REMOTE``), "soapy" (a SoapySDR device named by
+            ``ota_tx_args``) or "zmq" (a GNU Radio flowgraph at ``ota_tx_args`` and
+            ``ota_rx_args``).
+        ota_tx_args, ota_rx_args: for ota_device "soapy", the Soapy device strings of the
+            transmitter and the receiver (None: the first found; the receiver's: the
+            transmitter's, one full-duplex device); for "zmq", the flowgraph's ZeroMQ
+            addresses (both needed). Not part of the cache key when None.
         renderer_steps: optimiser steps of the learned renderer (``renderer.FeatureConfig``:
             a feature grid and decoder distilled from the field's own renders) built for each
             scheme's field; it renders the held-out views beside the full render (time per
@@ -162,6 +168,8 @@ class RunConfig:
     max_views: int | None = None
     csi: str | None = None
     ota_air: str = "fixed"
+    ota_tx_args: str | None = None
+    ota_rx_args: str | None = None
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -210,6 +218,15 @@ class RunConfig:
             raise ValueError(
                 f"ota_device must be one of {', '.join(OTA_DEVICES)}, got {self.ota_device!r}"
             )
+        named = self.ota_tx_args is not None or self.ota_rx_args is not None
+        if named and (self.channel != OTA or self.ota_device not in ("soapy", "zmq")):
+            raise ValueError(
+                "ota_tx_args/ota_rx_args name the devices of channel ota with ota_device soapy "
+                "or zmq"
+            )
+        zmq = self.channel == OTA and self.ota_device == "zmq"
+        if zmq and None in (self.ota_tx_args, self.ota_rx_args):
+            raise ValueError("ota_device zmq needs ota_tx_args and ota_rx_args (ZMQ addresses)")
         if self.nerf_clock not in ("wall", "cpu"):
             raise ValueError(f"nerf_clock must be 'wall' or 'cpu', got {self.nerf_clock!r}")
         if not self.symbol_rate_hz > 0:
@@ -341,6 +358,9 @@ class RunConfig:
         d = {k: v for k, v in asdict(self).items() if k not in ("schemes", "allow_untrained")}
         if d["ota_air"] == "fixed":  # the air every run had before it was a choice: same key
             del d["ota_air"]
+        for name in ("ota_tx_args", "ota_rx_args"):  # likewise before devices were named
+            if d[name] is None:
+                del d[name]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float):  # the float fields (annotations are strings here)
                 d[f.name] = float(d[f.name])

@@ -14,8 +14,8 @@ from semcodec.training.state import (
 
 __all__ = [
     "RESUMABLE_FIELDS",
-    "TRAIN_CHANNELS",
     "ResumeRefused",
+    "TRAIN_CHANNELS",
     "TrainConfig",
     "build_codec",
     "check_resume",
