@@ -116,6 +116,19 @@ class RingBuffer:
                 return self._buf[i : i + n].copy()
             return np.concatenate([self._buf[i:], self._buf[: i + n - self.capacity]])
 
+    def held(self) -> np.ndarray:
+        """The last samples the ring holds, up to ``capacity`` ([num_samples] complex64,
+        dropped ones as zeros): what a stream that stopped early keeps as its capture."""
+        with self.cond:
+            lo = max(0, self.write_pos - self.capacity)
+            out = np.zeros(self.write_pos - lo, np.complex64)
+            idx = np.arange(lo, self.write_pos) % self.capacity
+            out[:] = self._buf[idx]
+            for g0, g1 in self.gaps:
+                if g1 > lo:
+                    out[max(g0, lo) - lo : g1 - lo] = 0
+            return out
+
     def release(self, position: int) -> None:
         """The consumer needs no sample before ``position`` any more."""
         with self.cond:
@@ -239,6 +252,13 @@ class StreamReceiver:
         self.last_number = views[0].first_number - 1 if views else -1
         self.next_view = 0  # views before this one were handed on
         self._view_cpu_s = 0.0  # CPU of on_view within the current search
+
+    @staticmethod
+    def ring_samples_needed(views: list, cfg: OtaConfig, block_samples: int) -> int:
+        """The smallest ring that can hold a frame with the samples searched around it: the
+        longest frame, the lead-in before it on both sides, one block of new samples."""
+        frame_len = max((r.num_samples for v in views for r in v.reports), default=0)
+        return frame_len + 2 * (cfg.gap_samples // 2) + max(int(block_samples), 1)
 
     def warm_up(self) -> None:
         """Search and receive the first view's burst as sent, once, counting nothing: the
