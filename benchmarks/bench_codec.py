@@ -203,7 +203,7 @@ def _codec_table(
                 )
                 row["schemes"][r["scheme"]] = {
                     "psnr": round(r["psnr"], 2),
-                    "psnr_ci95": [round(v, 2) for v in r["psnr_ci95"]],
+                    "psnr_ci95": [None if v is None else round(v, 2) for v in r["psnr_ci95"]],
                     "ssim": round(r["ssim"], 4),
                     **({"views_lost": r["views_lost"]} if "views_lost" in r else {}),
                     **({"mcs_used": r["mcs_used"]} if "mcs_used" in r else {}),

@@ -64,7 +64,11 @@ def train_inputs(train_dirs: list[Path], init: Path | None, data_sha256: str | N
     (``data_sha256`` when already computed)."""
     if data_sha256 is None:
         data_sha256 = files_sha256([p for d in train_dirs for p in list_images(d, "--data")])
-    return {"data": data_sha256, "init": str(Path(init).resolve()) if init is not None else None}
+    return {
+        "data": data_sha256,
+        "data_dirs": [str(d) for d in train_dirs],
+        "init": str(Path(init).resolve()) if init is not None else None,
+    }
 
 
 def nearest_level(levels, cbr: float) -> float:
