@@ -126,3 +126,38 @@ def test_the_boards_process_ends_quietly_when_its_host_goes_away():
         radios = [Radio()]
 
     _serve_connection(Gone(), Emu())  # returns; old code raised BrokenPipeError
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_the_command_exits_within_two_seconds_of_a_stop_with_its_result(tmp_path, images, sig):
+    """``osnerf ota --stream`` as a user runs it: the signal mid-stream, then the process
+    gone within 2 s, its result file holding the views decoded so far."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": str(root), "OMP_NUM_THREADS": "1"}
+    argv = _argv(tmp_path, images, 60, "--view-interval-s", "0.2")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "osnerf.cli", *argv], env=env, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert "streaming 60 view(s)" in proc.stderr.readline()
+        time.sleep(5.0)  # the boards' process starts, then views go out and are decoded
+        sent = time.monotonic()
+        proc.send_signal(getattr(signal, sig))
+        rc = proc.wait(timeout=30)
+        took = time.monotonic() - sent
+        err = proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert rc == 130, err
+    assert took < 2.0, f"{took:.2f} s from {sig} to exit"
+    assert "Traceback" not in err
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert doc["stopped"]["by"] == "interrupt" and doc["stream"]["views_decoded"] >= 1
+    assert doc["stream"]["views_sent"] < 60
