@@ -37,7 +37,7 @@ START_TIMEOUT_S = 60.0  # the child imports numpy and compiles the resampler onc
 _ERRORS = {"USBTimeoutError": usb.core.USBTimeoutError, "USBError": usb.core.USBError}
 
 
-def _serve_connection(conn: Connection, emu: Emulator) -> None:
+def serve_connection(conn: Connection, emu: Emulator) -> None:
     """Answer one host thread's calls ``(method, board, args)`` until it hangs up."""
     with conn:
         while True:
@@ -82,7 +82,7 @@ def _serve(options: dict) -> None:
                     conn = listener.accept()
                 except OSError:
                     return
-                threading.Thread(target=_serve_connection, args=(conn, emu), daemon=True).start()
+                threading.Thread(target=serve_connection, args=(conn, emu), daemon=True).start()
 
         threading.Thread(target=accept, daemon=True).start()
         print(json.dumps({"address": listener.address, "serials": emu.serials}), flush=True)

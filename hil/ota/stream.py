@@ -223,6 +223,14 @@ class StreamCounts:
     samples_searched: int = 0
 
 
+BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
+
+
+def stream_block_samples(cfg: OtaConfig) -> int:
+    """Samples of one driver block a stream pushes into its ring (:data:`BLOCK_SECONDS`)."""
+    return max(int(BLOCK_SECONDS * cfg.sample_rate_hz), 512)
+
+
 class StreamReceiver:
     """Frame search and decoding on a :class:`RingBuffer`, one view handed on at a time.
 
@@ -254,11 +262,13 @@ class StreamReceiver:
         self._view_cpu_s = 0.0  # CPU of on_view within the current search
 
     @staticmethod
-    def ring_samples_needed(views: list, cfg: OtaConfig, block_samples: int) -> int:
+    def ring_samples_needed(views: list, cfg: OtaConfig, block_samples: int | None = None) -> int:
         """The smallest ring that can hold a frame with the samples searched around it: the
-        longest frame, the lead-in before it on both sides, one block of new samples."""
+        longest frame, the lead-in before it on both sides, one block of new samples
+        (``block_samples``; None: a stream's, :func:`stream_block_samples`)."""
         frame_len = max((r.num_samples for v in views for r in v.reports), default=0)
-        return frame_len + 2 * (cfg.gap_samples // 2) + max(int(block_samples), 1)
+        block = stream_block_samples(cfg) if block_samples is None else int(block_samples)
+        return frame_len + 2 * (cfg.gap_samples // 2) + max(block, 1)
 
     def warm_up(self) -> None:
         """Search and receive the first view's burst as sent, once, counting nothing: the

@@ -23,9 +23,13 @@ from hil.errors import HilError
 from hil.ota.config import OtaConfig
 from hil.ota.link import _configure, _default_frames
 from hil.ota.radio_stream import rx_blocks, transfer_samples
-from hil.ota.stream import RingBuffer, StreamCounts, StreamReceiver, StreamView
-
-BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
+from hil.ota.stream import (
+    RingBuffer,
+    StreamCounts,
+    StreamReceiver,
+    StreamView,
+    stream_block_samples,
+)
 
 
 @dataclass
@@ -160,7 +164,7 @@ def stream_over_the_air(
     """
     frames = frames or _default_frames(cfg)
     fs = cfg.sample_rate_hz
-    block = max(int(BLOCK_SECONDS * fs), 512)
+    block = stream_block_samples(cfg)
     need = StreamReceiver.ring_samples_needed(views, cfg, block)
     if int(ring_s * fs) < need:
         raise ValueError(

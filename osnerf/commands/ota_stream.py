@@ -270,10 +270,9 @@ def check_ring(views: list, cfg, ring_s: float) -> None:
     """Refuse a ``--ring-s`` that cannot hold one frame with its search window (nothing
     could ever be decoded), before any radio opens."""
     from hil import StreamReceiver
-    from hil.ota.stream_link import BLOCK_SECONDS
 
     fs = cfg.sample_rate_hz
-    need = StreamReceiver.ring_samples_needed(views, cfg, max(int(BLOCK_SECONDS * fs), 512))
+    need = StreamReceiver.ring_samples_needed(views, cfg)
     if ring_s * fs < need:
         raise usage_error(
             f"--ring-s {ring_s:g} holds less than one frame with its search window: at least "

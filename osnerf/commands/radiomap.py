@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--samples",
-        type=_samples,
+        type=samples_count,
         default=10_000_000,
         help="rays shot from the ground station, an integer in [1e3, 1e9] such as 1e4 or "
         "10000 (default: 1e7)",
@@ -145,7 +145,7 @@ def _result(rm, args: argparse.Namespace) -> dict:
     return body
 
 
-def _samples(text: str) -> int:
+def samples_count(text: str) -> int:
     """``--samples``: a whole number in [1e3, 1e9], written as help writes it (``1e4``) or
     in digits."""
     try:

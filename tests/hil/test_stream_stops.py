@@ -98,7 +98,7 @@ def test_a_ring_shorter_than_a_frame_is_refused_up_front(tmp_path, images, monke
 def test_the_boards_process_ends_quietly_when_its_host_goes_away():
     """A call whose host hung up (SIGTERM, Ctrl-C) ends that connection's thread without
     an exception, so the child prints no thread traceback."""
-    from hil.emulation.process import _serve_connection
+    from hil.emulation.process import serve_connection
 
     class Gone:
         def __init__(self):
@@ -125,7 +125,7 @@ def test_the_boards_process_ends_quietly_when_its_host_goes_away():
     class Emu:
         radios = [Radio()]
 
-    _serve_connection(Gone(), Emu())  # returns; old code raised BrokenPipeError
+    serve_connection(Gone(), Emu())  # returns; old code raised BrokenPipeError
 
 
 @pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])

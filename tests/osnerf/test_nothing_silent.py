@@ -176,12 +176,16 @@ def test_no_pluto_found_names_iiod_remote_not_a_flag(monkeypatch):
 
 
 def test_radiomap_samples_as_its_help_writes_them():
-    from osnerf.commands.radiomap import _samples
+    from osnerf.commands.radiomap import samples_count
 
-    assert _samples("1e4") == 10_000 and _samples("1e3") == 1000 and _samples("20000") == 20000
+    assert (
+        samples_count("1e4") == 10_000
+        and samples_count("1e3") == 1000
+        and samples_count("20000") == 20000
+    )
     for bad in ("1500.5", "1e2", "x", "1e10"):
         with pytest.raises(Exception, match=r"must be an integer in \[1000, 1000000000\]"):
-            _samples(bad)
+            samples_count(bad)
 
 
 def test_radiomap_too_fine_a_cell_is_refused_naming_the_flag(tmp_path, capsys):
