@@ -233,7 +233,7 @@ def _codec_table(
         "num_images": n,
         "cbr": "1/16",
         "checkpoints": codecs,
-        "metric": "mean of per-image PSNR over images x draws; 95% Student-t interval",
+        "metric": "mean of per-image PSNR over images x draws; 95% percentile bootstrap interval",
         "ideal": "AVIF at the AWGN capacity of the average SNR, error free (a bound)",
         "table": table,
         "checks": checks,
