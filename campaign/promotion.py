@@ -107,27 +107,33 @@ def decide(kodak: list[dict], ota: list[dict], rule: dict = RULE) -> dict:
     }
 
 
-def _eval_codec(args, codec: Path, channel: str, cbr: str, out: Path) -> list[dict]:
+def osnerf(argv: list[str], what: str) -> None:
+    """``osnerf ARGV``, in this process: its Ctrl-C (exit 130, caught by the command) is
+    raised again as the interrupt it was; any other failure is a ``RuntimeError``."""
     from osnerf.cli import main
 
+    rc = main(argv)
+    if rc == 130:
+        raise KeyboardInterrupt
+    if rc != 0:
+        raise RuntimeError(f"{what} failed (exit {rc})")
+
+
+def _eval_codec(args, codec: Path, channel: str, cbr: str, out: Path) -> list[dict]:
     argv = ["eval-codec", "--images", args.images, "--channel", channel, "--cbr", cbr]
     argv += ["--snr-db=" + ",".join(f"{s:g}" for s in args.snrs_db), "--schemes", "jscc"]
     argv += ["--draws", str(DRAWS.get(channel, 1)), "--seed", "0", "--no-lpips"]
     argv += ["--max-images", str(args.max_images), "--codec", str(codec), "--out", str(out)]
-    if main([*argv, "--overwrite"]) != 0:
-        raise RuntimeError(f"osnerf {' '.join(argv)} failed")
+    osnerf([*argv, "--overwrite"], f"osnerf {' '.join(argv)}")
     return json.loads(out.read_text())["results"]
 
 
 def _ota(args, codec: Path, snr: float, seed: int, tmp: Path) -> float:
-    from osnerf.cli import main
-
     out = tmp / f"ota_{snr:g}_{seed}.json"
     argv = ["ota", "--schemes", "jscc", "--images", args.images, "--snr-db", f"{snr:g}"]
     argv += ["--seed", str(seed), "--max-images", str(args.max_images), "--codec", str(codec)]
     argv += ["--size", str(args.ota_size), "--out", str(out), "--sigmf-dir", str(tmp / "sigmf")]
-    if main([*argv, "--overwrite"]) != 0:
-        raise RuntimeError(f"osnerf {' '.join(argv)} failed")
+    osnerf([*argv, "--overwrite"], f"osnerf {' '.join(argv)}")
     return float(json.loads(out.read_text())["summary"]["schemes"]["jscc"]["mean_psnr"])
 
 
@@ -460,7 +466,6 @@ def _codec_table(images: int, codec: Path, folder: Path, new_sha: str) -> dict[s
     benchmarks codec`` writes for it), evaluated into ``folder``: file name -> JSON text."""
     from benchmarks.bench_codec import CHANNELS as TABLE_CHANNELS
     from benchmarks.bench_codec import TABLE_SNRS
-    from osnerf.cli import main
     from osnerf.paths import shared_data_dir
 
     out = {}
@@ -471,8 +476,7 @@ def _codec_table(images: int, codec: Path, folder: Path, new_sha: str) -> dict[s
         argv += ["--channel", channel, "--draws", str(draws), "--schemes", "jscc"]
         name = f"codec_{channel}_jscc_{new_sha[:12]}.json"
         run = ["eval-codec", *argv, "--codec", str(codec), "--out", str(folder / name)]
-        if main([*run, "--overwrite"]) != 0:
-            raise RuntimeError(f"eval-codec for the README table failed on {channel}")
+        osnerf([*run, "--overwrite"], f"eval-codec for the README table on {channel}")
         doc = json.loads((folder / name).read_text())
         doc["argv"] = argv  # the command as it reads once the candidate is the default
         out[name] = json.dumps(doc)

@@ -354,3 +354,23 @@ def test_pack_replaces_an_earlier_pack_and_a_failure_is_one_line(tmp_path, monke
     assert len(err) == 1 and "No space left" in err[0]
     assert not out.exists() and not pack.is_pack(out)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".carry")] == []
+
+
+def test_ctrl_c_in_the_tables_eval_codec_is_an_interruption(fake_root, monkeypatch, capsys):
+    """eval-codec catches its own Ctrl-C (exit 130): the promotion reports it as the
+    interruption it was, and no file changed."""
+    import osnerf.cli
+
+    root, _, argv = fake_root
+    monkeypatch.undo()  # the real codec table step; the fake root and comparison again:
+    monkeypatch.setattr(promotion, "ROOT", root)
+    points = [
+        {"channel": "awgn", "cbr": "1/16", "snr_db": 1.0, "candidate": 26.0, "baseline": 25.0}
+    ]
+    monkeypatch.setattr(promotion, "compare", lambda args, c, b: (points, []))
+    monkeypatch.setattr(osnerf.cli, "main", lambda argv: 130)  # Ctrl-C inside eval-codec
+    before = _tree(root)
+    assert main(argv) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("interrupted; nothing promoted, no file changed")
+    assert _tree(root) == before
