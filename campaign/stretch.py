@@ -220,6 +220,8 @@ def continue_line(camp: Campaign, opts: StretchOptions) -> dict:
         now = camp.doc["lines"].get(name)
         if now is None:
             raise RuntimeError(f"line {name} left campaign.json while this stretch ran")
+        pinned = camp.doc["validation"].get("images_sha256")  # pinned meanwhile, maybe
+        val_set["campaign_set"] = pinned is None or pinned == val_set["sha256"]
         now_best = now.get("best")
         if now_best is not None and "score" not in now_best and val_set["campaign_set"]:
             if best is not None and best.get("sha256") == now_best["sha256"]:
@@ -246,7 +248,6 @@ def continue_line(camp: Campaign, opts: StretchOptions) -> dict:
         now["stretches"] = int(now.get("stretches", 0)) + 1
         if val_set["campaign_set"]:
             now["lrs"] = next_lrs([s["config"]["lr"] for s in specs], winner["lr"])
-            val.setdefault("images_sha256", val_set["sha256"])
             camp.doc["validation"].setdefault("images_sha256", val_set["sha256"])
         spent = camp.doc.setdefault("spent", {"device_minutes": 0.0, "cpu_minutes": 0.0})
         for rec in records:
