@@ -313,7 +313,8 @@ def run(args) -> int:
         doc["promoted"] = True
         with Campaign.open(args.campaign).locked():  # no stretch saves between stage and swap
             files = at_work(stage_promotion, args, cand, path, decision)
-            doc["files"] = [str(p) for p in files]
+            doc["files"] = [str(p) for p, data in files.items() if data is not None]
+            doc["removed"] = [str(p) for p, data in files.items() if data is None]
             files[path] = _json_bytes(doc)  # last: the record says the set is complete
             swap(files)
     else:
