@@ -161,3 +161,30 @@ def test_the_command_exits_within_two_seconds_of_a_stop_with_its_result(tmp_path
     doc = json.loads((tmp_path / "s.json").read_text())
     assert doc["stopped"]["by"] == "interrupt" and doc["stream"]["views_decoded"] >= 1
     assert doc["stream"]["views_sent"] < 60
+
+
+def test_ctrl_c_stops_a_pluto_stream_as_fast(tmp_path, images, monkeypatch):
+    """The same stop over an emulated Pluto (one full-duplex board, libiio's buffers)."""
+    pytest.importorskip("adi", reason="pyadi-iio (and libiio0) are not installed")
+    import socket
+
+    from test_ota_stream import pluto_process
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.9", 0))
+        port = s.getsockname()[1]
+    emu = pluto_process(port)
+    try:
+        seen = _stop_at_view(monkeypatch, 2, _thread.interrupt_main)
+        argv = _argv(tmp_path, images, 40, "--view-interval-s", "0.1")
+        i = argv.index("--tx")
+        argv[i : i + 4] = ["--tx", "pluto", "--rx", "pluto", "--uri", f"ip:127.0.0.9:{port}"]
+        argv[argv.index("--sample-rate-hz") + 1] = "4e6"
+        rc = main(argv)
+        took = time.monotonic() - seen["at"]
+    finally:
+        emu.terminate()
+        emu.wait(10)
+    assert rc == 130 and took < 1.0, f"rc {rc}, {took:.2f} s"
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert doc["stopped"]["by"] == "interrupt" and doc["stream"]["views_sent"] < 40
