@@ -203,7 +203,7 @@ def _codec_table(
                 )
                 row["schemes"][r["scheme"]] = {
                     "psnr": round(r["psnr"], 2),
-                    "psnr_ci95": [round(v, 2) for v in r["psnr_ci95"]],
+                    "psnr_ci95": [None if v is None else round(v, 2) for v in r["psnr_ci95"]],
                     "ssim": round(r["ssim"], 4),
                     **({"views_lost": r["views_lost"]} if "views_lost" in r else {}),
                     **({"mcs_used": r["mcs_used"]} if "mcs_used" in r else {}),
@@ -233,7 +233,7 @@ def _codec_table(
         "num_images": n,
         "cbr": "1/16",
         "checkpoints": codecs,
-        "metric": "mean of per-image PSNR over images x draws; 95% Student-t interval",
+        "metric": "mean of per-image PSNR over images x draws; 95% percentile bootstrap interval",
         "ideal": "AVIF at the AWGN capacity of the average SNR, error free (a bound)",
         "table": table,
         "checks": checks,

@@ -9,13 +9,15 @@ It reads only what the benchmarks write there: ``osnerf eval-codec`` result file
 ``pipeline_tiny_ota_<snr>dB_seed<seed>/report.json``, from ``python -m benchmarks
 pipeline``), the moving-drone and view-selection benchmarks (:mod:`benchmarks.results_channels`),
 plus the shipped checkpoints' model cards. Every number it prints carries the
-commit that made it. A missing file leaves its rows out, never a stale number in.
+commit that made it. A missing file leaves its rows out, never a stale number in; a jscc
+result of another checkpoint than the shipped default is not read. A missing
+``bench-results/``, a file that is not JSON or a README without its markers is an error
+(exit 1, one line naming the file) and nothing is written.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import re
 import sys
 from collections.abc import Iterable
@@ -24,6 +26,8 @@ from pathlib import Path
 from statistics import mean
 
 from benchmarks import results_channels
+from benchmarks.results_channels import ResultsError, load_json
+from common import write_files
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench-results"
@@ -64,14 +68,30 @@ def _table(header: Iterable[str], rows: Iterable[Iterable[object]]) -> list[str]
 # --- loading -------------------------------------------------------------------------------
 
 
-def codec_results(folder: Path = RESULTS) -> dict:
-    """channel -> {"rows": {(scheme, snr_db): result row}, "docs": [eval-codec files]}."""
+def shipped_sha(cards_dir: Path = CARDS) -> str:
+    """The sha256 of the shipped default checkpoint (its ``default.card.json``)."""
+    path = cards_dir / "default.card.json"
+    if not path.is_file():
+        raise ResultsError(f"{path} not found: the shipped default's card")
+    sha = load_json(path).get("sha256")
+    if not isinstance(sha, str) or not re.fullmatch(r"[0-9a-f]{64}", sha):
+        raise ResultsError(f"{path} has no sha256")
+    return sha
+
+
+def codec_results(folder: Path = RESULTS, default_sha: str | None = None) -> dict:
+    """channel -> {"rows": {(scheme, snr_db): result row}, "docs": [eval-codec files]}; jscc
+    results only of the checkpoint whose sha256 starts ``default_sha`` (default: the shipped
+    one's)."""
+    sha12 = (default_sha or shipped_sha())[:12]
     out: dict = {}
     for path in sorted(folder.glob("codec_*.json")):
-        m = re.fullmatch(r"codec_(?P<ch>.+?)_(separate|jscc_[0-9a-f]{12})", path.stem)
+        m = re.fullmatch(r"codec_(?P<ch>.+?)_(separate|jscc_(?P<sha>[0-9a-f]{12}))", path.stem)
         if not m or m["ch"] not in CHANNEL_LABELS:  # Kodak's table only
             continue
-        doc = json.loads(path.read_text())
+        if m["sha"] and m["sha"] != sha12:  # another checkpoint's: not the shipped codec
+            continue
+        doc = load_json(path)
         entry = out.setdefault(m["ch"], {"rows": {}, "docs": []})
         entry["docs"].append((path.name, doc))
         for r in doc["results"]:
@@ -80,7 +100,7 @@ def codec_results(folder: Path = RESULTS) -> dict:
 
 
 def run_report(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.is_file() else None
+    return load_json(path) if path.is_file() else None
 
 
 def ota_reports(folder: Path = RESULTS) -> dict[float, list[dict]]:
@@ -96,7 +116,7 @@ def ota_reports(folder: Path = RESULTS) -> dict[float, list[dict]]:
 
 def cards(folder: Path = CARDS) -> list[tuple[str, dict]]:
     return [
-        (p.name.removesuffix(".card.json"), json.loads(p.read_text()))
+        (p.name.removesuffix(".card.json"), load_json(p))
         for p in sorted(folder.glob("*.card.json"))
     ]
 
@@ -303,10 +323,10 @@ def ota_section(ota: dict[float, list[dict]]) -> list[str]:
     return lines + [""]
 
 
-def checkpoint_section() -> list[str]:
+def checkpoint_section(cards_dir: Path = CARDS) -> list[str]:
     lines = ["## Shipped checkpoints", ""]
     rows = []
-    for stem, card in cards():
+    for stem, card in cards(cards_dir):
         rows.append(
             [
                 f"`semcodec/checkpoints/{stem}.safetensors`",
@@ -324,11 +344,16 @@ def checkpoint_section() -> list[str]:
     return lines + [""]
 
 
-def render() -> tuple[str, list[str]]:
-    """(docs/results.md, the README's table lines)."""
-    codec = codec_results()
-    demo = run_report(RESULTS / "pipeline_demo" / "report.json")
-    ota = ota_reports()
+def render(results: Path | None = None, cards_dir: Path | None = None) -> tuple[str, list[str]]:
+    """(docs/results.md, the README's table lines) from ``results`` (default
+    ``bench-results/``) and the checkpoints' cards in ``cards_dir``."""
+    results = results or RESULTS
+    cards_dir = cards_dir or CARDS
+    if not results.is_dir():
+        raise ResultsError(f"{results} not found: run make bench (or python -m benchmarks NAME)")
+    codec = codec_results(results, shipped_sha(cards_dir))
+    demo = run_report(results / "pipeline_demo" / "report.json")
+    ota = ota_reports(results)
     head = headline(codec, demo, ota)
     doc = [
         "# Results",
@@ -347,15 +372,16 @@ def render() -> tuple[str, list[str]]:
         *demo_section(demo),
         *ota_section(ota),
         *codec_section(codec),
-        *results_channels.sections(),
-        *checkpoint_section(),
+        *results_channels.sections(results),
+        *checkpoint_section(cards_dir),
     ]
     return "\n".join(doc).rstrip() + "\n", head
 
 
-def readme_with(table: list[str], text: str) -> str:
-    if BEGIN not in text or END not in text:
-        raise ValueError(f"README.md has no {BEGIN} ... {END} block")
+def readme_with(table: list[str], text: str, path: Path | str = "README.md") -> str:
+    """``text`` (the README at ``path``) with ``table`` between its markers."""
+    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
+        raise ResultsError(f"{path} has no {BEGIN} ... {END} block (once each, in that order)")
     before, rest = text.split(BEGIN, 1)
     _, after = rest.split(END, 1)
     return before + BEGIN + "\n" + "\n".join(table) + "\n" + END + after
@@ -365,8 +391,21 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.results", description=__doc__)
     parser.add_argument("--check", action="store_true", help="exit 1 if a file is out of date")
     args = parser.parse_args(argv)
-    doc, table = render()
-    readme = readme_with(table, README.read_text())
+    try:
+        doc, table = render()
+        if not README.is_file():
+            raise ResultsError(f"{README} not found")
+        readme = readme_with(table, README.read_text(), README)
+    except ResultsError as e:
+        print(f"python -m benchmarks.results: error: {e}", file=sys.stderr)
+        return 1
+    except (KeyError, TypeError, IndexError) as e:  # a file of another shape than expected
+        print(
+            f"python -m benchmarks.results: error: a file in {RESULTS} lacks what the pages "
+            f"read ({type(e).__name__}: {e}); rerun its benchmark",
+            file=sys.stderr,
+        )
+        return 1
     stale = [
         p for p, text in ((DOC, doc), (README, readme)) if not p.is_file() or p.read_text() != text
     ]
@@ -377,9 +416,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
         return 1 if stale else 0
-    DOC.parent.mkdir(exist_ok=True)
-    for p, text in ((DOC, doc), (README, readme)):
-        p.write_text(text)
+    write_files({DOC: doc.encode(), README: readme.encode()})  # both or neither
     return 0
 
 

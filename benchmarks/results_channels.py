@@ -22,9 +22,28 @@ BER_COLUMNS = {
 }
 
 
+class ResultsError(ValueError):
+    """A file the pages are made from that cannot be read; the message names it."""
+
+
+def load_json(path: Path) -> dict:
+    """A benchmark's JSON (``ResultsError`` naming the file when it is empty, truncated or not
+    an object)."""
+    try:
+        doc = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        what = "empty" if not path.read_text().strip() else f"not JSON ({e.msg}, line {e.lineno})"
+        raise ResultsError(f"{path} is {what}: rerun the benchmark that writes it") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ResultsError(f"{path} cannot be read ({e})") from None
+    if not isinstance(doc, dict):
+        raise ResultsError(f"{path} holds a {type(doc).__name__}, not a result object")
+    return doc
+
+
 def _doc(folder: Path, name: str) -> dict | None:
     path = folder / f"{name}.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+    return load_json(path) if path.is_file() else None
 
 
 def _commit(doc: dict) -> str:

@@ -114,11 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _data_defaults(args) -> tuple[list[Path], Path]:
-    from campaign.pack import PACK
+    from campaign.pack import PACK, is_pack
     from osnerf.paths import shared_data_dir
 
     packed = ROOT / PACK / "data"
-    base = packed if packed.is_dir() else shared_data_dir() / "bsds500"
+    base = packed if is_pack(ROOT / PACK) else shared_data_dir() / "bsds500"
     data = [Path(d) for d in args.data] if args.data else [base / "train", base / "val"]
     val = Path(args.val) if args.val else base / "test"
     for flag, d in [*(("--data", d) for d in data), ("--val", val)]:
@@ -136,6 +136,7 @@ def _continue(args) -> int:
     camp = Campaign.open(args.campaign)
     name, line = camp.line(args.line)
     camp.best_path(line)  # a moved reference is refused before any work
+    camp.check_writable()  # and a folder that cannot take the results
     data, val = _data_defaults(args)
     resolve_device(args.device)
     _check_channels(line["train"]["channel"], camp.doc["validation"]["channels"])
@@ -156,6 +157,13 @@ def _continue(args) -> int:
         overrides,
     )
     summary = at_work(continue_line, camp, opts)
+    vset = summary["validation_set"]
+    if not vset["campaign_set"]:
+        print(
+            f"campaign: scored on {vset['folder']}, not the campaign's held-out set: logged, "
+            "never kept as the line's best",
+            file=sys.stderr,
+        )
     for r in summary["records"]:
         print(
             f"campaign: {r['line']} stretch {r['stretch']} lr {r['lr']:g}: score "
@@ -238,10 +246,23 @@ def main(argv: list[str] | None = None) -> int:
         line = (str(msg).strip().splitlines() or [type(e).__name__])[0]
         print(f"python -m campaign {args.verb}: error: {line}", file=sys.stderr)
         return 2
-    except RuntimeError as e:
-        line = (str(e).strip().splitlines() or ["RuntimeError"])[0]
+    except (RuntimeError, OSError) as e:
+        line = (str(e).strip().splitlines() or [type(e).__name__])[0]
         print(f"python -m campaign {args.verb}: failed: {line}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(
+            f"python -m campaign {args.verb}: interrupted; {_UNTOUCHED[args.verb]}", file=sys.stderr
+        )
+        return 130
+
+
+_UNTOUCHED = {
+    "continue": "campaign.json and log.jsonl unchanged (the runs' folders keep what they wrote)",
+    "promote": "nothing promoted, no file changed",
+    "pack": "the pack folder not written",
+    "status": "nothing changed",
+}
 
 
 if __name__ == "__main__":

@@ -42,22 +42,58 @@ def _ignore(root: Path, skip_top: tuple[str, ...]):
     return ignore
 
 
+MARK = ".campaign-pack"
+"""The file a finished pack holds (written last): only a folder with it is replaced or used."""
+
+
+def is_pack(folder: Path) -> bool:
+    """Whether ``folder`` is a finished pack (an earlier one, or none half-written)."""
+    return (Path(folder) / MARK).is_file()
+
+
 def pack(bsds: Path, out: Path, val_count: int) -> dict:
-    """Write the carried folder ``out`` (replacing it); returns what it holds and its size."""
+    """Write the carried folder ``out`` (replacing an earlier pack, never another folder);
+    returns what it holds and its size. Written beside ``out`` first and renamed into place
+    when complete: a failure leaves the earlier pack (or nothing) and raises ``RuntimeError``.
+    """
+    import os
+    import tempfile
+
+    from common import InputError
+
     for split in ("train", "val", "test"):
         if not (bsds / split).is_dir():
             raise FileNotFoundError(f"--bsds: no {split} folder in {bsds}")
-    if out.exists():
-        shutil.rmtree(out)
-    data = out / "data"
-    for split in ("train", "val"):
-        shutil.copytree(bsds / split, data / split)
-    (data / "test").mkdir(parents=True)
-    for p in list_images(bsds / "test", "--bsds test")[:val_count]:
-        shutil.copy2(p, data / "test" / p.name)
-    for name in SITE_PACKAGES:
-        src = _package_dir(name)
-        skip = SIONNA_SKIP if name == "sionna" else ()
-        shutil.copytree(src, out / "site" / name, ignore=_ignore(src, skip))
-    size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    if out.exists() and not (out.is_dir() and not out.is_symlink() and is_pack(out)):
+        raise InputError(
+            f"--out {out} exists and is not an earlier pack (no {MARK} in it): not replaced; "
+            "name a new folder"
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".packing", dir=out.parent))
+    try:
+        data = tmp / "data"
+        for split in ("train", "val"):
+            shutil.copytree(bsds / split, data / split)
+        (data / "test").mkdir(parents=True)
+        for p in list_images(bsds / "test", "--bsds test")[:val_count]:
+            shutil.copy2(p, data / "test" / p.name)
+        for name in SITE_PACKAGES:
+            src = _package_dir(name)
+            skip = SIONNA_SKIP if name == "sionna" else ()
+            shutil.copytree(src, tmp / "site" / name, ignore=_ignore(src, skip))
+        (tmp / MARK).write_text("written by python -m campaign pack\n")
+        size = sum(p.stat().st_size for p in tmp.rglob("*") if p.is_file())
+        old = None
+        if out.exists():
+            old = out.with_name(f".{out.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            os.replace(out, old)
+        os.replace(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except OSError as e:
+        raise RuntimeError(f"--out {out}: {e.strerror or e} ({e.filename or out})") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     return {"folder": str(out), "megabytes": round(size / 2**20, 1)}

@@ -4,23 +4,25 @@ only by :data:`RULE`.
 The comparison: Kodak (first 12) through ``osnerf eval-codec`` on AWGN, fast and block
 Rayleigh (4 draws) at every CBR of :data:`CBRS` and SNR of :data:`SNRS_DB`, plus over the air
 (``osnerf ota``, emulated boards) on seeds 0-4; both codecs see the same images and seeds.
-It is written to ``bench-results/promotion_<sha12>.json`` whatever the decision. A promotion
-keeps the old default as ``semcodec/checkpoints/<its name's suffix>.safetensors``, writes the
-candidate as ``default.safetensors`` (weights as stored, card extended), repoints the
-campaign's lines, re-runs the README codec table's jscc rows for the new default and
-regenerates the table (``python -m benchmarks.results``).
+It is written to a new ``bench-results/promotion_<sha12>_<time>.json`` whatever the decision
+(every record is kept). Only that full comparison against the shipped default can promote:
+a narrower one (another ``--baseline``, fewer images, channels, ...) runs with ``--dry-run``
+only. A promotion keeps the old default as ``semcodec/checkpoints/<its name's
+suffix>.safetensors``, writes the candidate as ``default.safetensors`` (weights as stored,
+card extended), repoints the campaign's lines, re-runs the README codec table's jscc rows for
+the new default and regenerates the pages (:mod:`benchmarks.results`): all of it computed
+first, then swapped in as one step that an error or Ctrl-C undoes.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import tempfile
 from pathlib import Path
 from statistics import mean
 
-from common import InputError, write_bytes, write_text
+from common import InputError, write_bytes
 
 ROOT = Path(__file__).resolve().parent.parent
 RULE = {"max_loss_db": 0.1, "min_mean_gain_db": 0.2, "ota_max_loss_db": 0.1}
@@ -105,27 +107,33 @@ def decide(kodak: list[dict], ota: list[dict], rule: dict = RULE) -> dict:
     }
 
 
-def _eval_codec(args, codec: Path, channel: str, cbr: str, out: Path) -> list[dict]:
+def osnerf(argv: list[str], what: str) -> None:
+    """``osnerf ARGV``, in this process: its Ctrl-C (exit 130, caught by the command) is
+    raised again as the interrupt it was; any other failure is a ``RuntimeError``."""
     from osnerf.cli import main
 
+    rc = main(argv)
+    if rc == 130:
+        raise KeyboardInterrupt
+    if rc != 0:
+        raise RuntimeError(f"{what} failed (exit {rc})")
+
+
+def _eval_codec(args, codec: Path, channel: str, cbr: str, out: Path) -> list[dict]:
     argv = ["eval-codec", "--images", args.images, "--channel", channel, "--cbr", cbr]
     argv += ["--snr-db=" + ",".join(f"{s:g}" for s in args.snrs_db), "--schemes", "jscc"]
     argv += ["--draws", str(DRAWS.get(channel, 1)), "--seed", "0", "--no-lpips"]
     argv += ["--max-images", str(args.max_images), "--codec", str(codec), "--out", str(out)]
-    if main([*argv, "--overwrite"]) != 0:
-        raise RuntimeError(f"osnerf {' '.join(argv)} failed")
+    osnerf([*argv, "--overwrite"], f"osnerf {' '.join(argv)}")
     return json.loads(out.read_text())["results"]
 
 
 def _ota(args, codec: Path, snr: float, seed: int, tmp: Path) -> float:
-    from osnerf.cli import main
-
     out = tmp / f"ota_{snr:g}_{seed}.json"
     argv = ["ota", "--schemes", "jscc", "--images", args.images, "--snr-db", f"{snr:g}"]
     argv += ["--seed", str(seed), "--max-images", str(args.max_images), "--codec", str(codec)]
     argv += ["--size", str(args.ota_size), "--out", str(out), "--sigmf-dir", str(tmp / "sigmf")]
-    if main([*argv, "--overwrite"]) != 0:
-        raise RuntimeError(f"osnerf {' '.join(argv)} failed")
+    osnerf([*argv, "--overwrite"], f"osnerf {' '.join(argv)}")
     return float(json.loads(out.read_text())["summary"]["schemes"]["jscc"]["mean_psnr"])
 
 
@@ -154,37 +162,129 @@ def compare(args, candidate: Path, baseline: Path) -> tuple[list[dict], list[dic
     return points, ota
 
 
-def _resolve(args) -> tuple[Path, Path, dict, dict]:
-    """(candidate, baseline, their cards); a line name means that line's best."""
-    from campaign.store import Campaign, card_of
+def narrowed(args) -> list[str]:
+    """The options that make a comparison narrower than the rule's full one (another
+    baseline, images, channels, CBRs, SNRs, seeds or sizes); a promotion needs none."""
     from osnerf.paths import shared_data_dir
-    from semcodec import DEFAULT_CHECKPOINT
+
+    full = {
+        "--channels": (args.channels, CHANNELS),
+        "--cbrs": (args.cbrs, CBRS),
+        "--snrs-db": (tuple(args.snrs_db), SNRS_DB),
+        "--max-images": (args.max_images, 12),
+        "--ota-seeds": (tuple(args.ota_seeds), OTA_SEEDS),
+        "--ota-snrs-db": (tuple(args.ota_snrs_db), OTA_SNRS_DB),
+        "--ota-size": (args.ota_size, 256),
+        "--table-images": (args.table_images, 24),
+    }
+    out = [flag for flag, (given, rule) in full.items() if given != rule]
+    kodak = (shared_data_dir() / "kodak").resolve()
+    if args.images is not None and Path(args.images).resolve() != kodak:
+        out.insert(0, "--images")
+    if args.baseline is not None and Path(args.baseline).resolve() != default_checkpoint():
+        out.insert(0, "--baseline")
+    return out
+
+
+def default_checkpoint() -> Path:
+    """The shipped default that a promotion replaces (under :data:`ROOT`)."""
+    return (ROOT / "semcodec" / "checkpoints" / "default.safetensors").resolve()
+
+
+def _checkpoint(text: str, flag: str) -> tuple[Path, dict]:
+    from campaign.store import card_of
+
+    path = Path(text)
+    try:
+        card = card_of(path)
+    except ValueError as e:
+        raise InputError(f"{flag}: {e}") from None
+    if "sha256" not in card:
+        raise InputError(f"{flag}: {path} has no model card with a sha256 (not a codec checkpoint)")
+    return path, card
+
+
+def _candidate(args) -> Path:
+    """The candidate's file: a path, or a campaign line's best."""
+    from campaign.store import Campaign
 
     cand = Path(args.candidate)
-    if not cand.is_file():
-        camp = Campaign.open(args.campaign)
-        _, line = camp.line(args.candidate)
-        cand = camp.best_path(line)
-        if cand is None:
-            raise InputError(f"campaign line {args.candidate} has no best yet")
-    base = Path(args.baseline) if args.baseline else DEFAULT_CHECKPOINT
+    if cand.is_file():
+        return cand
+    camp = Campaign.open(args.campaign)
+    lines = camp.doc["lines"]
+    if args.candidate not in lines:
+        raise InputError(
+            f"candidate not found: {args.candidate} is neither a file nor a campaign line "
+            f"({', '.join(lines)})"
+        )
+    cand = camp.best_path(lines[args.candidate])
+    if cand is None:
+        raise InputError(f"campaign line {args.candidate} has no best yet")
+    return cand
+
+
+def _resolve(args) -> tuple[Path, Path, dict, dict]:
+    """(candidate, baseline, their cards); a line name means that line's best. Every option
+    is checked here, before any comparison."""
+    import phy
+    from osnerf.paths import shared_data_dir
+    from semcodec.links import eval_channels
+
+    if not 1 <= args.max_images <= 1000 or not 8 <= args.ota_size <= 1024:
+        raise InputError("--max-images must be in [1, 1000] and --ota-size in [8, 1024]")
+    if not 1 <= args.table_images <= 1000:
+        raise InputError(f"--table-images must be in [1, 1000], got {args.table_images}")
+    if not args.channels or not args.cbrs or not args.snrs_db:
+        raise InputError("--channels, --cbrs and --snrs-db each need at least one value")
+    known = eval_channels()
+    for ch in args.channels:
+        if ch not in known:
+            raise InputError(f"--channels: unknown channel {ch!r}; known: {', '.join(known)}")
+    for cbr in args.cbrs:
+        try:
+            phy.parse_cbr(cbr)
+        except ValueError as e:
+            raise InputError(f"--cbrs: {e}") from None
+    bad = [s for s in (*args.snrs_db, *args.ota_snrs_db) if not -30 <= s <= 40]
+    if bad:
+        raise InputError(f"--snrs-db and --ota-snrs-db must be in [-30, 40] dB, got {bad[0]:g}")
+    cand, cand_card = _checkpoint(str(_candidate(args)), "candidate")
+    base, base_card = _checkpoint(str(args.baseline or default_checkpoint()), "--baseline")
     args.images = args.images or str(shared_data_dir() / "kodak")
     if not Path(args.images).exists():
         raise InputError(f"--images not found: {args.images}")
-    if not 1 <= args.max_images <= 1000 or not 8 <= args.ota_size <= 1024:
-        raise InputError("--max-images must be in [1, 1000] and --ota-size in [8, 1024]")
-    if not args.channels or not args.cbrs or not args.snrs_db:
-        raise InputError("--channels, --cbrs and --snrs-db each need at least one value")
-    return cand, base, card_of(cand), card_of(base)
+    return cand, base, cand_card, base_card
+
+
+def record_path(folder: Path, sha: str) -> Path:
+    """A new promotion record's path: the candidate's hash and the time, never an earlier
+    record's name."""
+    from campaign.store import now_utc
+
+    stem = f"promotion_{sha[:12]}_{now_utc().replace('-', '').replace(':', '')}"
+    path, n = folder / f"{stem}.json", 1
+    while path.exists():
+        n += 1
+        path = folder / f"{stem}_{n}.json"
+    return path
 
 
 def run(args) -> int:
-    """Compare, write the JSON, promote when the rule says so (not with ``--dry-run``)."""
+    """Compare, write the JSON, promote when the rule says so (not with ``--dry-run``).
+
+    A promotion needs the rule's full comparison against the shipped default: any narrower
+    setting is refused (exit 2) before any work unless ``--dry-run``."""
     import sys
 
     from campaign.__main__ import at_work
-    from osnerf import result_header, write_json_atomic
+    from osnerf import result_header
 
+    if not args.dry_run and (flags := narrowed(args)):
+        raise InputError(
+            f"{', '.join(flags)} narrow the comparison; a promotion is judged on the full one "
+            "against the shipped default: add --dry-run to compare only"
+        )
     cand, base, cand_card, base_card = _resolve(args)
     kodak, ota = at_work(compare, args, cand, base)
     decision = decide(kodak, ota)
@@ -206,11 +306,19 @@ def run(args) -> int:
         "decision": decision,
         "promoted": False,
     }
-    path = Path(args.out) / f"promotion_{cand_card['sha256'][:12]}.json"
+    path = record_path(Path(args.out), cand_card["sha256"])
     if decision["promote"] and not args.dry_run:
+        from campaign.store import Campaign
+
         doc["promoted"] = True
-        doc["files"] = at_work(promote, args, cand, path.name, decision)
-    write_json_atomic(path, doc)
+        with Campaign.open(args.campaign).locked():  # no stretch saves between stage and swap
+            files = at_work(stage_promotion, args, cand, path, decision)
+            doc["files"] = [str(p) for p, data in files.items() if data is not None]
+            doc["removed"] = [str(p) for p, data in files.items() if data is None]
+            files[path] = _json_bytes(doc)  # last: the record says the set is complete
+            swap(files)
+    else:
+        swap({path: _json_bytes(doc)})
     verdict = "promoted" if doc["promoted"] else "not promoted"
     why = "; ".join(decision["reasons"]) or "meets the rule" + (
         " (dry run)" if args.dry_run else ""
@@ -223,80 +331,154 @@ def run(args) -> int:
     return 0
 
 
-def recard(src: Path, dst: Path, update: dict) -> dict:
-    """Copy a checkpoint with its model card extended by ``update`` (weights and sha256 as
-    stored); writes ``dst`` and its ``.card.json`` beside it. Returns the card."""
-    from safetensors.torch import load_file, save
+def _json_bytes(doc: dict) -> bytes:
+    from common import to_json
 
-    from campaign.store import card_of
-
-    card = {**card_of(src), **update}
-    state = load_file(str(src))
-    write_bytes(dst, save(state, metadata={"model_card": json.dumps(card, sort_keys=True)}))
-    write_text(dst.with_name(dst.name.replace(".safetensors", ".card.json")), _card_json(card))
-    return card
+    return (to_json(doc) + "\n").encode()
 
 
 def _card_json(card: dict) -> str:
     return json.dumps(card, indent=2, sort_keys=True) + "\n"
 
 
-def promote(args, cand: Path, comparison: str, decision: dict) -> list[str]:
-    """Install ``cand`` as the shipped default (the old one kept beside it), repoint the
-    campaign, regenerate the README codec table. Returns the files written."""
-    from campaign.store import Campaign, card_of
-    from semcodec import DEFAULT_CHECKPOINT
+def recard(src: Path, update: dict) -> tuple[bytes, dict]:
+    """A checkpoint's bytes with its model card extended by ``update`` (weights and sha256 as
+    stored), and the card."""
+    from safetensors.torch import load_file, save
 
-    ck = DEFAULT_CHECKPOINT.parent
-    old = card_of(DEFAULT_CHECKPOINT)
+    from campaign.store import card_of
+
+    card = {**card_of(src), **update}
+    state = load_file(str(src))
+    return save(state, metadata={"model_card": json.dumps(card, sort_keys=True)}), card
+
+
+def stage_promotion(args, cand: Path, record: Path, decision: dict) -> dict[Path, bytes | None]:
+    """Everything a promotion changes, computed before any file is touched: the new default
+    and its card, the old default kept beside it, the campaign's lines repointed, the README
+    codec table's jscc rows for the new default (the old default's removed), ``README.md`` and
+    ``docs/results.md`` regenerated from those. Returns path -> new bytes (None: removed),
+    for :func:`swap`."""
+    from benchmarks import results as pages
+    from campaign.store import Campaign, card_of
+    from common import to_json
+
+    default = default_checkpoint()
+    ck = default.parent
+    old = card_of(default)
     keep = ck / f"{old['name'].removeprefix(old['architecture']['name'] + '-')}.safetensors"
+    data, card = recard(cand, {"promotion": {"comparison": record.name, **decision}})
+    files: dict[Path, bytes | None] = {default: data}
+    files[ck / "default.card.json"] = _card_json(card).encode()
     if not keep.exists():
-        shutil.copyfile(DEFAULT_CHECKPOINT, keep)
-        write_text(keep.with_name(keep.name.replace(".safetensors", ".card.json")), _card_json(old))
-    staged = DEFAULT_CHECKPOINT.with_name("default.promoting.safetensors")
-    card = recard(cand, staged, {"promotion": {"comparison": comparison, **decision}})
-    staged.replace(DEFAULT_CHECKPOINT)
-    staged.with_name("default.promoting.card.json").replace(ck / "default.card.json")
+        files[keep] = default.read_bytes()
+        files[keep.with_name(keep.name.replace(".safetensors", ".card.json"))] = _card_json(
+            old
+        ).encode()
     camp = Campaign.open(args.campaign)
     for line in camp.doc["lines"].values():
         best = line.get("best") or {}
         if best.get("sha256") == old["sha256"]:
             best["path"] = str(Path("..", keep.relative_to(ROOT)))
         elif best.get("sha256") == card["sha256"]:
-            copy = camp.folder / best["path"]
-            if copy.resolve().is_relative_to(camp.folder.resolve()):
-                copy.unlink(missing_ok=True)  # referenced, not copied
-            best["path"] = str(Path("..", DEFAULT_CHECKPOINT.relative_to(ROOT)))
-    camp.save()
-    tables = _codec_table(args.table_images, old["sha256"], card["sha256"])
-    from benchmarks.results import main as regenerate
+            copy = (camp.folder / best["path"]).resolve()
+            if copy.is_relative_to(camp.folder.resolve()) and copy != default:
+                files[copy] = None  # referenced, not copied
+            best["path"] = str(Path("..", default.relative_to(ROOT)))
+    files[camp.folder / "campaign.json"] = (to_json(camp.doc) + "\n").encode()
+    results = ROOT / "bench-results"
+    with tempfile.TemporaryDirectory(prefix="promote-pages-") as tmp:
+        staged = Path(tmp) / "default.safetensors"
+        staged.write_bytes(data)
+        table = _codec_table(args.table_images, staged, Path(tmp), card["sha256"])
+        for name, text in table.items():
+            files[results / name] = text.encode()
+            gone = results / name.replace(card["sha256"][:12], old["sha256"][:12])
+            if gone.exists():
+                files[gone] = None
+        view = _staged_view(Path(tmp) / "view", files)
+        doc, head = pages.render(view / "bench-results", view / "checkpoints")
+    readme = ROOT / "README.md"
+    files[ROOT / "docs" / "results.md"] = doc.encode()
+    files[readme] = pages.readme_with(head, readme.read_text(), readme).encode()
+    return files
 
-    if regenerate([]) != 0:
-        raise RuntimeError("python -m benchmarks.results failed")
-    return [str(DEFAULT_CHECKPOINT), str(keep), *tables, "README.md", "docs/results.md"]
+
+def _staged_view(at: Path, files: dict[Path, bytes | None]) -> Path:
+    """``bench-results/`` and the checkpoints' cards as they will be after the swap, as links
+    to the files that stay and copies of the new ones (what the pages are rendered from)."""
+    dirs = (("bench-results", ROOT / "bench-results"), ("checkpoints", default_checkpoint().parent))
+    for sub, src in dirs:
+        dst = at / sub
+        dst.mkdir(parents=True)
+        for p in src.iterdir() if src.is_dir() else ():
+            if p not in files:
+                (dst / p.name).symlink_to(p.resolve())
+        for p, data in files.items():
+            if p.parent == src and data is not None:
+                (dst / p.name).write_bytes(data)
+    return at
 
 
-def _codec_table(images: int, old_sha: str, new_sha: str) -> list[str]:
-    """The README codec table's jscc rows for the new default (what ``python -m benchmarks
-    codec`` writes for it), the old default's files removed."""
+def swap(files: dict[Path, bytes | None]) -> None:
+    """Put a set of files in place as one step that is undone on any failure or interrupt:
+    every new file is written beside its target first (nothing replaced yet), then each target
+    is moved aside and the new one renamed in (None: the target removed); an error or Ctrl-C
+    midway moves every old file back. A file that is the set's record goes last."""
+    import contextlib
+    import os
+
+    staged: list[tuple[Path, Path | None]] = []
+    moved: list[tuple[Path, Path | None]] = []  # (target, its old file moved aside)
+    try:
+        for target, data in files.items():
+            tmp = None
+            if data is not None:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                tmp = target.with_name(f".{target.name}.promoting")
+                write_bytes(tmp, data)
+            staged.append((target, tmp))
+        for target, tmp in staged:
+            aside = None
+            if target.exists():
+                aside = target.with_name(f".{target.name}.before-promotion")
+                os.replace(target, aside)
+            moved.append((target, aside))
+            if tmp is not None:
+                os.replace(tmp, target)
+    except BaseException:
+        for target, aside in reversed(moved):
+            with contextlib.suppress(FileNotFoundError):
+                if aside is None:
+                    target.unlink()
+                else:
+                    os.replace(aside, target)
+        for _, tmp in staged:
+            if tmp is not None:
+                tmp.unlink(missing_ok=True)
+        raise
+    for _, aside in moved:
+        if aside is not None:
+            aside.unlink(missing_ok=True)
+
+
+def _codec_table(images: int, codec: Path, folder: Path, new_sha: str) -> dict[str, str]:
+    """The README codec table's jscc rows for the new default ``codec`` (what ``python -m
+    benchmarks codec`` writes for it), evaluated into ``folder``: file name -> JSON text."""
     from benchmarks.bench_codec import CHANNELS as TABLE_CHANNELS
     from benchmarks.bench_codec import TABLE_SNRS
-    from osnerf.cli import main
     from osnerf.paths import shared_data_dir
 
-    results = ROOT / "bench-results"
-    written = []
+    out = {}
     for channel, draws in TABLE_CHANNELS:
         argv = ["--images", str(shared_data_dir() / "kodak")]
         argv += ["--snr-db=" + ",".join(f"{s:g}" for s in TABLE_SNRS), "--cbr", "1/16"]
         argv += ["--seed", "0", "--max-images", str(images), "--no-lpips", "--threads", "1"]
         argv += ["--channel", channel, "--draws", str(draws), "--schemes", "jscc"]
-        path = results / f"codec_{channel}_jscc_{new_sha[:12]}.json"
-        if main(["eval-codec", *argv, "--out", str(path), "--overwrite"]) != 0:
-            raise RuntimeError(f"eval-codec for the README table failed on {channel}")
-        doc = json.loads(path.read_text())
-        doc["argv"] = argv
-        write_text(path, json.dumps(doc))
-        (results / f"codec_{channel}_jscc_{old_sha[:12]}.json").unlink(missing_ok=True)
-        written.append(str(path))
-    return written
+        name = f"codec_{channel}_jscc_{new_sha[:12]}.json"
+        run = ["eval-codec", *argv, "--codec", str(codec), "--out", str(folder / name)]
+        osnerf([*run, "--overwrite"], f"eval-codec for the README table on {channel}")
+        doc = json.loads((folder / name).read_text())
+        doc["argv"] = argv  # the command as it reads once the candidate is the default
+        out[name] = json.dumps(doc)
+    return out

@@ -10,13 +10,18 @@ longer holds that sha256 is refused rather than trained on.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import hashlib
 import json
 import math
+import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from common import InputError, to_json, write_text
+from common import InputError, to_json, write_bytes, write_files
 
 HERE = Path(__file__).resolve().parent
 MAX_WEIGHTS_BYTES = 10 * 1024 * 1024
@@ -51,6 +56,35 @@ class Campaign:
     def log_path(self) -> Path:
         return self.folder / "log.jsonl"
 
+    @contextlib.contextmanager
+    def locked(self) -> Iterator[Campaign]:
+        """Hold the campaign's lock (an exclusive ``flock`` on its folder, so no file is made)
+        and re-read ``campaign.json`` under it: a read-merge-save inside sees every earlier
+        save, and two ``continue`` runs that end together take turns."""
+        fd = os.open(self.folder, os.O_RDONLY)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            self.doc = Campaign.open(self.folder).doc
+            yield self
+        finally:
+            os.close(fd)  # releases the lock
+
+    def check_writable(self) -> None:
+        """Refuse (``InputError`` naming ``--campaign``) a folder that cannot take the files a
+        stretch writes at its end, before any training."""
+        probe = self.folder / ".campaign-write-check"
+        try:
+            write_bytes(probe, b"")
+            probe.unlink()
+            for name in ("campaign.json", "log.jsonl"):
+                path = self.folder / name
+                if path.exists() and not os.access(path, os.W_OK):
+                    raise PermissionError(13, "Permission denied", str(path))
+        except OSError as e:
+            raise InputError(
+                f"--campaign: {self.folder} cannot be written ({e.strerror or e}); nothing trained"
+            ) from None
+
     def line(self, name: str | None) -> tuple[str, dict]:
         """(name, line) of ``name`` (None: the campaign's default line)."""
         name = name or self.doc["default_line"]
@@ -81,14 +115,22 @@ class Campaign:
         sha = write_weights(src, dst, card)
         return {"path": str(dst.relative_to(self.folder)), "sha256": sha}
 
-    def save(self) -> None:
-        write_text(self.folder / "campaign.json", to_json(self.doc) + "\n")
+    def save(self, records: list[dict] | None = None) -> None:
+        """Write ``campaign.json`` atomically, with ``records`` appended to the log as one set
+        (both new or, after a failure, both old)."""
+        files = {}
+        if records:
+            old = self.log_path.read_text() if self.log_path.is_file() else ""
+            new = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
+            files[self.log_path] = (old + new).encode()
+        files[self.folder / "campaign.json"] = (to_json(self.doc) + "\n").encode()
+        write_files(files)
 
     def append_log(self, records: list[dict]) -> None:
         """Append records to ``log.jsonl`` (read back, re-written whole and atomically)."""
         old = self.log_path.read_text() if self.log_path.is_file() else ""
         new = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
-        write_text(self.log_path, old + new)
+        write_files({self.log_path: (old + new).encode()})
 
     def log(self) -> list[dict]:
         if not self.log_path.is_file():
@@ -97,14 +139,32 @@ class Campaign:
 
 
 def card_of(path: Path) -> dict:
-    """The model card inside a safetensors checkpoint (FileNotFoundError when missing)."""
+    """The model card inside a safetensors checkpoint.
+
+    Raises:
+        FileNotFoundError: nothing at ``path``.
+        ValueError: ``path`` is not a safetensors checkpoint with a JSON model card.
+    """
     from safetensors import safe_open
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
-    with safe_open(str(path), framework="pt") as f:
-        meta = f.metadata() or {}
-    return json.loads(meta.get("model_card", "{}"))
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = f.metadata() or {}
+        return json.loads(meta.get("model_card", "{}"))
+    except Exception as e:  # safetensors' own errors are not exceptions of one kind
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        raise ValueError(f"{path} is not a safetensors checkpoint ({first})") from None
+
+
+def images_sha256(images) -> str:
+    """The sha256 of a held-out set as scored: its images ([count, 3, side, side] float32 in
+    [0, 1], 8-bit values) as bytes, so another folder, count or crop hashes differently."""
+    import numpy as np
+
+    arr = np.round(images.detach().cpu().numpy() * 255.0).astype(np.uint8)
+    return hashlib.sha256(arr.tobytes() + str(arr.shape).encode()).hexdigest()
 
 
 def write_weights(src: Path, dst: Path, card: dict) -> str:

@@ -154,36 +154,61 @@ def _train_all(specs: list[dict], jobs: int) -> list[dict]:
         "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
     }
     procs = []
-    for s in specs:
-        out = Path(s["out"])
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "spec.json").write_text(json.dumps(s))
-        err = open(out / "stderr.log", "w")  # noqa: SIM115 - closed below
-        cmd = [sys.executable, "-m", "campaign.worker", str(out / "spec.json")]
-        procs.append((subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=err), err, out))
-    results = []
-    for proc, err, out in procs:
-        rc = proc.wait()
-        err.close()
-        if rc != 0:
-            lines = (out / "stderr.log").read_text().strip().splitlines() or ["no output"]
-            raise RuntimeError(f"training run {out.name} failed (exit {rc}): {lines[-1][:200]}")
-        results.append(json.loads((out / "result.json").read_text()))
-    return results
+    try:
+        for s in specs:
+            out = Path(s["out"])
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "spec.json").write_text(json.dumps(s))
+            err = open(out / "stderr.log", "w")  # noqa: SIM115 - closed below
+            cmd = [sys.executable, "-m", "campaign.worker", str(out / "spec.json")]
+            procs.append((subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=err), err, out))
+        results = []
+        for proc, err, out in procs:
+            rc = proc.wait()
+            err.close()
+            if rc != 0:
+                lines = (out / "stderr.log").read_text().strip().splitlines() or ["no output"]
+                raise RuntimeError(f"training run {out.name} failed (exit {rc}): {lines[-1][:200]}")
+            results.append(json.loads((out / "result.json").read_text()))
+        return results
+    finally:  # an interrupt or a failed run: no run is left training on its own
+        for proc, err, _ in procs:
+            if proc.poll() is None:
+                proc.terminate()
+                proc.wait()
+            err.close()
+
+
+def _held_out(camp: Campaign, opts: StretchOptions):
+    """(the held-out images, their set as logged); the set is the campaign's own when its
+    sha256 is the one ``validation.images_sha256`` pins (pinned by the first stretch)."""
+    from campaign.store import images_sha256
+
+    val = camp.doc["validation"]
+    images = load_validation(opts.val, int(val["count"]), int(val["side_px"]))
+    sha = images_sha256(images)
+    pinned = val.get("images_sha256")
+    own = pinned is None or pinned == sha
+    return images, {"folder": str(opts.val), "sha256": sha, "campaign_set": own}
 
 
 def continue_line(camp: Campaign, opts: StretchOptions) -> dict:
     """One stretch of ``opts.line``: train two learning rates, score both, append both to the
-    log, keep the better as the line's best when it beats the best so far. Returns a summary."""
+    log, keep the better as the line's best when it beats the best so far. Returns a summary.
+
+    Only the campaign's own held-out set decides a best: runs scored on another set are
+    logged (``validation_set`` names it) and never kept. The end is a read-merge-save under
+    the campaign's lock, so a stretch that ran beside another keeps both's records and
+    minutes, and its winner is compared with the best as it stands then."""
 
     name, line = camp.line(opts.line)
     device, machine = resolve_device(opts.device)
     val = camp.doc["validation"]
-    images = load_validation(opts.val, int(val["count"]), int(val["side_px"]))
+    images, val_set = _held_out(camp, opts)
     specs, jobs, init = _run_specs(camp, name, line, opts, device)
     best = line.get("best")
-    if best is not None and "score" not in best:  # a referenced checkpoint not yet scored
-        best["validation"], best["score"] = score(init, val, images, device)
+    if val_set["campaign_set"] and best is not None and "score" not in best:
+        best["validation"], best["score"] = score(init, val, images, device)  # not yet scored
     t0 = time.perf_counter()
     results = _train_all(specs, jobs)
     wall_min = (time.perf_counter() - t0) / 60.0
@@ -192,27 +217,51 @@ def continue_line(camp: Campaign, opts: StretchOptions) -> dict:
             Path(r["out"]) / "best.safetensors", val, images, device
         )
     winner = max(results, key=lambda r: r["score"])
-    incumbent = best["score"] if best else -math.inf
-    kept = winner["score"] > incumbent
-    records = _records(name, line, specs, results, winner, kept, machine, jobs, wall_min)
-    if kept:
-        rec = records[results.index(winner)]
-        ref = camp.store_best(
-            name, Path(winner["out"]) / "best.safetensors", {"campaign": _provenance(rec)}
-        )
-        line["best"] = {**ref, "score": rec["score"], "validation": rec["validation"]}
-        line["steps"] = rec["line_steps"]
-        line["device_minutes"] = rec["line_device_minutes"]
-        line["cpu_minutes"] = rec["line_cpu_minutes"]
-    line["stretches"] = int(line.get("stretches", 0)) + 1
-    line["lrs"] = next_lrs([s["config"]["lr"] for s in specs], winner["lr"])
-    spent = camp.doc.setdefault("spent", {"device_minutes": 0.0, "cpu_minutes": 0.0})
-    for rec in records:
-        spent["device_minutes"] = round(spent["device_minutes"] + rec["device_minutes"], 3)
-        spent["cpu_minutes"] = round(spent["cpu_minutes"] + rec["cpu_minutes"], 3)
-    camp.append_log(records)
-    camp.save()
-    return {"line": name, "kept": kept, "records": records, "best": line.get("best")}
+    with camp.locked():  # re-read: another stretch may have saved since this one began
+        now = camp.doc["lines"].get(name)
+        if now is None:
+            raise RuntimeError(f"line {name} left campaign.json while this stretch ran")
+        pinned = camp.doc["validation"].get("images_sha256")  # pinned meanwhile, maybe
+        val_set["campaign_set"] = pinned is None or pinned == val_set["sha256"]
+        now_best = now.get("best")
+        if now_best is not None and "score" not in now_best and val_set["campaign_set"]:
+            if best is not None and best.get("sha256") == now_best["sha256"]:
+                now_best.update(validation=best["validation"], score=best["score"])
+            else:
+                now_best["validation"], now_best["score"] = score(
+                    camp.best_path(now), val, images, device
+                )
+        incumbent = now_best["score"] if now_best else -math.inf
+        kept = val_set["campaign_set"] and winner["score"] > incumbent
+        records = _records(name, line, specs, results, winner, kept, machine, jobs, wall_min)
+        for rec in records:
+            rec["validation_set"] = val_set
+            rec["incumbent_score"] = round(incumbent, 4) if now_best else None
+        if kept:
+            rec = records[results.index(winner)]
+            ref = camp.store_best(
+                name, Path(winner["out"]) / "best.safetensors", {"campaign": _provenance(rec)}
+            )
+            now["best"] = {**ref, "score": rec["score"], "validation": rec["validation"]}
+            now["steps"] = rec["line_steps"]
+            now["device_minutes"] = rec["line_device_minutes"]
+            now["cpu_minutes"] = rec["line_cpu_minutes"]
+        now["stretches"] = int(now.get("stretches", 0)) + 1
+        if val_set["campaign_set"]:
+            now["lrs"] = next_lrs([s["config"]["lr"] for s in specs], winner["lr"])
+            camp.doc["validation"].setdefault("images_sha256", val_set["sha256"])
+        spent = camp.doc.setdefault("spent", {"device_minutes": 0.0, "cpu_minutes": 0.0})
+        for rec in records:
+            spent["device_minutes"] = round(spent["device_minutes"] + rec["device_minutes"], 3)
+            spent["cpu_minutes"] = round(spent["cpu_minutes"] + rec["cpu_minutes"], 3)
+        camp.save(records)
+    return {
+        "line": name,
+        "kept": kept,
+        "records": records,
+        "best": now.get("best"),
+        "validation_set": val_set,
+    }
 
 
 def _provenance(rec: dict) -> dict:

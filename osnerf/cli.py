@@ -160,7 +160,13 @@ def _first_line(e: BaseException) -> str:
 
 
 def entry() -> None:
-    sys.exit(main())
+    rc = main()
+    # the interpreter's last collection walks every object the libraries made (a second
+    # and more after a long run); nothing left needs it, so an interrupted run exits at once
+    import gc
+
+    gc.freeze()
+    sys.exit(rc)
 
 
 if __name__ == "__main__":

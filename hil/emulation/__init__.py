@@ -10,6 +10,10 @@ from hil.emulation.air import (
     fractional_resample,
     iq_imbalance,
 )
+from hil.emulation.hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
+from hil.emulation.iiod import IIOD_PORT, IiodServer
+from hil.emulation.loopback import DirectTransport, loopback_pair, open_loopback
+from hil.emulation.medium import Medium
 from hil.emulation.paths import (
     MAX_DOPPLER_HZ,
     MAX_PATH_DELAY_S,
@@ -17,15 +21,11 @@ from hil.emulation.paths import (
     PathSegment,
     segments_from_arrays,
 )
-from hil.emulation.hackrf import FAULT_NAMES, PPM_RANGE, EmulatedHackRF, Faults, RadioSpec
-from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
-from hil.emulation.process import EmulatorProcess
-from hil.emulation.iiod import IIOD_PORT, IiodServer
 from hil.emulation.pluto import NETWORK_FAULTS, EmulatedPluto
-from hil.emulation.medium import Medium
-from hil.emulation.loopback import DirectTransport, loopback_pair, open_loopback
+from hil.emulation.process import EmulatorProcess
 from hil.emulation.soapy_device import SOAPY_FAULTS, EmulatedSoapyDevice
 from hil.emulation.soapy_remote import SoapyRemoteServer
+from hil.emulation.usb_backend import Emulator, EmulatorBackend, default_serial
 
 __all__ = [
     "AIR_SNR_DB_RANGE",

@@ -37,7 +37,7 @@ START_TIMEOUT_S = 60.0  # the child imports numpy and compiles the resampler onc
 _ERRORS = {"USBTimeoutError": usb.core.USBTimeoutError, "USBError": usb.core.USBError}
 
 
-def _serve_connection(conn: Connection, emu: Emulator) -> None:
+def serve_connection(conn: Connection, emu: Emulator) -> None:
     """Answer one host thread's calls ``(method, board, args)`` until it hangs up."""
     with conn:
         while True:
@@ -56,7 +56,10 @@ def _serve_connection(conn: Connection, emu: Emulator) -> None:
                 reply = ("usb", type(e).__name__, e.strerror, e.backend_error_code, e.errno)
             except Exception as e:  # noqa: BLE001 - re-raised in the host's thread
                 reply = ("error", f"{type(e).__name__}: {e}")
-            conn.send(reply)
+            try:
+                conn.send(reply)
+            except (EOFError, OSError):  # the host went away mid-call (SIGTERM, Ctrl-C)
+                return
 
 
 def _serve(options: dict) -> None:
@@ -79,7 +82,7 @@ def _serve(options: dict) -> None:
                     conn = listener.accept()
                 except OSError:
                     return
-                threading.Thread(target=_serve_connection, args=(conn, emu), daemon=True).start()
+                threading.Thread(target=serve_connection, args=(conn, emu), daemon=True).start()
 
         threading.Thread(target=accept, daemon=True).start()
         print(json.dumps({"address": listener.address, "serials": emu.serials}), flush=True)
@@ -229,5 +232,14 @@ class EmulatorProcess:
 
 
 def main() -> None:
-    """The child's entry point: its options as one line of JSON on stdin."""
-    _serve(json.loads(sys.stdin.readline()))
+    """The child's entry point: its options as one line of JSON on stdin. The parent ends
+    it (by closing stdin); a Ctrl-C or SIGTERM meant for the parent's process group ends it
+    quietly, never with a thread's traceback."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent's to handle; it closes us
+    signal.signal(signal.SIGTERM, lambda *_: os._exit(0))
+    try:
+        _serve(json.loads(sys.stdin.readline()))
+    except (KeyboardInterrupt, BrokenPipeError, EOFError):
+        os._exit(0)

@@ -2,6 +2,7 @@
 loopback without USB."""
 
 from hil.hackrf import protocol
+from hil.hackrf.driver import HackRF
 from hil.hackrf.protocol import (
     BOARD_IDS,
     FREQ_RANGE_HZ,
@@ -10,9 +11,8 @@ from hil.hackrf.protocol import (
     M0State,
     usb_api_version_string,
 )
-from hil.hackrf.driver import HackRF
-from hil.hackrf.usb_transport import find_hackrfs
 from hil.hackrf.stream import StreamStats
+from hil.hackrf.usb_transport import find_hackrfs
 
 __all__ = [
     "BOARD_IDS",

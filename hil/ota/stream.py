@@ -117,6 +117,19 @@ class RingBuffer:
                 return self._buf[i : i + n].copy()
             return np.concatenate([self._buf[i:], self._buf[: i + n - self.capacity]])
 
+    def held(self) -> np.ndarray:
+        """The last samples the ring holds, up to ``capacity`` ([num_samples] complex64,
+        dropped ones as zeros): what a stream that stopped early keeps as its capture."""
+        with self.cond:
+            lo = max(0, self.write_pos - self.capacity)
+            out = np.zeros(self.write_pos - lo, np.complex64)
+            idx = np.arange(lo, self.write_pos) % self.capacity
+            out[:] = self._buf[idx]
+            for g0, g1 in self.gaps:
+                if g1 > lo:
+                    out[max(g0, lo) - lo : g1 - lo] = 0
+            return out
+
     def release(self, position: int) -> None:
         """The consumer needs no sample before ``position`` any more."""
         with self.cond:
@@ -211,6 +224,14 @@ class StreamCounts:
     samples_searched: int = 0
 
 
+BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
+
+
+def stream_block_samples(cfg: OtaConfig) -> int:
+    """Samples of one driver block a stream pushes into its ring (:data:`BLOCK_SECONDS`)."""
+    return max(int(BLOCK_SECONDS * cfg.sample_rate_hz), 512)
+
+
 class StreamReceiver:
     """Frame search and decoding on a :class:`RingBuffer`, one view handed on at a time.
 
@@ -240,6 +261,15 @@ class StreamReceiver:
         self.last_number = views[0].first_number - 1 if views else -1
         self.next_view = 0  # views before this one were handed on
         self._view_cpu_s = 0.0  # CPU of on_view within the current search
+
+    @staticmethod
+    def ring_samples_needed(views: list, cfg: OtaConfig, block_samples: int | None = None) -> int:
+        """The smallest ring that can hold a frame with the samples searched around it: the
+        longest frame, the lead-in before it on both sides, one block of new samples
+        (``block_samples``; None: a stream's, :func:`stream_block_samples`)."""
+        frame_len = max((r.num_samples for v in views for r in v.reports), default=0)
+        block = stream_block_samples(cfg) if block_samples is None else int(block_samples)
+        return frame_len + 2 * (cfg.gap_samples // 2) + max(block, 1)
 
     def warm_up(self) -> None:
         """Search and receive the first view's burst as sent, once, counting nothing: the

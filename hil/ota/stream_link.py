@@ -23,9 +23,13 @@ from hil.errors import HilError
 from hil.ota.config import OtaConfig
 from hil.ota.link import _configure, _default_frames
 from hil.ota.radio_stream import rx_blocks, transfer_samples
-from hil.ota.stream import RingBuffer, StreamCounts, StreamReceiver, StreamView
-
-BLOCK_SECONDS = 0.01  # driver blocks of about this much air time go into the ring
+from hil.ota.stream import (
+    RingBuffer,
+    StreamCounts,
+    StreamReceiver,
+    StreamView,
+    stream_block_samples,
+)
 
 
 @dataclass
@@ -111,14 +115,16 @@ def _produce(rx, ring: RingBuffer, block_samples: int, stop: threading.Event, ou
         ring.close()
 
 
-def _transmit(tx, views: list, interval_s: float, start: float, out: dict) -> None:
+def _transmit(
+    tx, views: list, interval_s: float, start: float, out: dict, stop: threading.Event
+) -> None:
     """The transmitter's thread: view ``v`` at ``start + v * interval_s`` (or as soon as
-    the previous one is out)."""
+    the previous one is out); no view goes out once ``stop`` is set."""
     try:
         for view in views:
             wait = start + view.index * interval_s - time.monotonic()
-            if wait > 0:
-                time.sleep(wait)
+            if stop.wait(wait) if wait > 0 else stop.is_set():
+                return
             view.sent_at = time.monotonic()
             tx.tx(view.burst)
     except BaseException as e:  # noqa: BLE001 - re-raised on the decoder's thread
@@ -148,15 +154,26 @@ def stream_over_the_air(
         ring_s: the ring buffer holds this much air time.
         emulator: the ``hil.Emulator`` of emulated boards, for their own loss counts.
     Returns:
-        :class:`StreamRun`. A failure of either radio raises its ``hil.HilError`` after
-        both threads ended.
+        :class:`StreamRun`. A stream that stops early (a radio's ``hil.HilError``, Ctrl-C)
+        raises that exception once both threads ended, within :data:`STOP_S` of the stop,
+        with what it got so far attached: ``stream_run`` (a :class:`StreamRun` of the
+        frames and samples until then) and ``capture`` (the ring's last samples).
+    Raises:
+        ValueError: ``ring_s`` holds less than one frame with its search window
+            (:meth:`StreamReceiver.ring_samples_needed`), before any radio is touched.
     """
     frames = frames or _default_frames(cfg)
+    fs = cfg.sample_rate_hz
+    block = stream_block_samples(cfg)
+    need = StreamReceiver.ring_samples_needed(views, cfg, block)
+    if int(ring_s * fs) < need:
+        raise ValueError(
+            f"ring_s {ring_s:g} s holds {int(ring_s * fs)} samples, less than one frame with "
+            f"its search window ({need} samples, {need / fs:.4g} s)"
+        )
     for dev in (tx, rx) if rx is not tx else (tx,):
         _configure(dev, cfg)
-    fs = cfg.sample_rate_hz
     ring = RingBuffer(max(int(ring_s * fs), 1))
-    block = max(int(BLOCK_SECONDS * fs), 512)
     receiver = StreamReceiver(ring, views, cfg, frames, on_view, block_samples=block)
     receiver.warm_up()  # the first frame costs no more than the others
     # the collector's full passes over everything imported hold the interpreter for tens
@@ -175,7 +192,7 @@ def stream_over_the_air(
         time.sleep(0.001)
     sender = threading.Thread(
         target=_transmit,
-        args=(tx, views, interval_s, time.monotonic() + cfg.rx_lead_s, tx_out),
+        args=(tx, views, interval_s, time.monotonic() + cfg.rx_lead_s, tx_out, stop),
         name="ota-stream-tx",
         daemon=True,
     )
@@ -188,22 +205,37 @@ def stream_over_the_air(
         transfer = transfer_samples(rx, block)
         deadline = time.monotonic() + (tail + transfer + 4 * block) / fs + 0.05
         while time.monotonic() < deadline and receiver.next_view < len(views):
-            time.sleep(0.005)  # ends early once the last view is decoded
+            if stop.wait(0.005):  # ends early once the last view is decoded, or on a stop
+                return
         stop.set()
 
     stopper = threading.Thread(target=stop_after_last_view, name="ota-stream-stop", daemon=True)
     stopper.start()
+    stopped: BaseException | None = None
     try:
-        counts = receiver.run()
+        receiver.run()
+    except BaseException as e:  # noqa: BLE001 - Ctrl-C or the decoder: raised again below
+        stopped = e
     finally:
-        stop.set()
-        producer.join(timeout=30)
-        sender.join(timeout=30)
+        stop.set()  # the transmitter sends nothing more; the producer ends its stream
+        for thread in (sender, producer, stopper):
+            thread.join(timeout=STOP_S / 3)
         gc.unfreeze()
-    for out in (rx_out, tx_out):
-        if "error" in out:
-            raise out["error"]
-    return _run_record(rx, ring, counts, emulator, rx_out.get("warnings", []))
+    stopped = stopped or rx_out.get("error") or tx_out.get("error")
+    if stopped is None:
+        return _run_record(rx, ring, receiver.counts, emulator, rx_out.get("warnings", []))
+    try:
+        run = _run_record(rx, ring, receiver.counts, emulator, rx_out.get("warnings", []))
+    except Exception:  # noqa: BLE001 - a board gone: what the receiver counted
+        run = StreamRun(samples_received=ring.received_samples, counts=receiver.counts)
+    stopped.stream_run = run  # type: ignore[union-attr]
+    if getattr(stopped, "capture", None) is None:
+        stopped.capture = ring.held()  # type: ignore[union-attr]
+    raise stopped
+
+
+STOP_S = 1.0
+"""A stream that is stopped early (Ctrl-C, a board gone) ends its threads within this."""
 
 
 def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: list) -> StreamRun:

@@ -110,8 +110,9 @@ class Pluto:
             found = find_plutos()
             if not found:
                 raise DeviceNotFoundError(
-                    "no Pluto found (libiio's USB scan found none and IIOD_REMOTE is unset); "
-                    "pass a URI such as ip:192.168.2.1"
+                    "no Pluto found: libiio's USB scan found none and IIOD_REMOTE is unset; "
+                    "connect one by USB, or set IIOD_REMOTE=ADDRESS for one on the network "
+                    "(such as 192.168.2.1)"
                 )
             uri = found[0][0]
         try:

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.errors import DeviceNotFoundError, HilError, StreamError, TimedOutError
-from hil.iq import full_scale_samples
 from hil.hackrf.stream import StreamStats
+from hil.iq import full_scale_samples
 from hil.soapy.binding import args_string, soapysdr
 
 AIR_SETTING = "emulated_air"  # hil.emulation.soapy_device.AIR_SETTING, a device setting

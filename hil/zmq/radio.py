@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hil.errors import DeviceNotFoundError, HilError, TimedOutError
-from hil.iq import full_scale_samples
 from hil.hackrf.stream import StreamStats
+from hil.iq import full_scale_samples
 
 ITEM = np.complex64  # gr_complex
 CHUNK_SAMPLES = 8192

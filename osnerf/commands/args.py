@@ -279,7 +279,7 @@ def output_dir(
     if kind == "a folder":
         if not os.access(p, os.W_OK | os.X_OK):
             raise UsageError(f"{flag} {str(p)!r} is not writable")
-        if any(p.iterdir()) and not overwrite and not (resumable and resumable(p)):
+        if _holds_files(p) and not overwrite and not (resumable and resumable(p)):
             raise UsageError(
                 f"{flag} {str(p)!r} exists and holds files; give --overwrite to write over "
                 "them, or another folder"
@@ -287,6 +287,12 @@ def output_dir(
     _check_parent(p, flag)
     _outside_inputs(p, flag, inputs)
     return p
+
+
+def _holds_files(folder: Path) -> bool:
+    """Whether anything but empty folders lies under ``folder`` (a run refused or failed
+    before its first file leaves at most empty folders: not files to protect)."""
+    return any(not q.is_dir() or q.is_symlink() for q in folder.rglob("*"))
 
 
 def distinct_outputs(**paths) -> None:

@@ -9,8 +9,9 @@ draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {
 :func:`osnerf.provenance.codec_record`: sha256, trained or not, a plugin's distribution)
 where psnr/ssim/lpips are the mean over images x draws of per-image values (PSNR peak
 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with ``--no-lpips`` or when an
-image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % Student-t interval of that
-mean over the images x draws values.
+image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % percentile bootstrap interval
+of that mean over the images x draws values (``[null, null]`` with fewer than
+:data:`CI_MIN_VALUES` of them: too few for an interval).
 
 Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI ZF receiver,
 ``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
@@ -148,16 +149,29 @@ def draw_seed(seed: int, snr_index: int, image_index: int, draw: int) -> int:
     return ((seed * 1_000_003 + snr_index) * 100_003 + image_index) * 1_009 + draw
 
 
-def mean_ci95(values) -> tuple[float, float, float]:
-    """(mean, low, high): the 95 % Student-t interval of the mean (a point for one value)."""
-    v = np.asarray(values, dtype=np.float64)
-    m = float(v.mean())
-    if v.size < 2:
-        return m, m, m
-    from scipy.stats import t
+CI_MIN_VALUES = 5
+"""Fewer images x draws than this give no interval: with so few a bootstrap only repeats
+the values (its interval would claim what they cannot show)."""
+CI_RESAMPLES = 10_000
+INTERVAL_TEXT = (
+    f"95% percentile bootstrap interval of the mean over images x draws ({CI_RESAMPLES} "
+    f"resamples, seed 0); none (null) with fewer than {CI_MIN_VALUES} values"
+)
 
-    half = float(t.ppf(0.975, v.size - 1) * v.std(ddof=1) / np.sqrt(v.size))
-    return m, m - half, m + half
+
+def mean_ci95(values) -> tuple[float, float | None, float | None]:
+    """(mean, low, high): the 95 % percentile bootstrap interval of the mean, resampling
+    the values with replacement (a fixed seed: the same values give the same interval). It
+    lies within the values' range, so within what a PSNR can be; (mean, None, None) with
+    fewer than :data:`CI_MIN_VALUES` values."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    m = float(v.mean())
+    if v.size < CI_MIN_VALUES:
+        return m, None, None
+    rng = np.random.default_rng(0)
+    means = v[rng.integers(0, v.size, size=(CI_RESAMPLES, v.size))].mean(axis=1)
+    lo, hi = np.quantile(means, [0.025, 0.975])
+    return m, float(lo), float(hi)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -183,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
         "channel_params": channel_record(link),
         "receiver": ctx.receiver,
         "draws": args.draws,
-        "interval": "95% Student-t interval of the mean over images x draws",
+        "interval": INTERVAL_TEXT,
         "bounds": {s: LINK_SCHEMES[s].bound for s in schemes if LINK_SCHEMES[s].bound},
         "snr_db": snrs,
         "cbr": cbr,
@@ -267,12 +281,19 @@ def _inputs(args: argparse.Namespace):
         cbr = parse_cbr(args.cbr)
     except ValueError as e:
         raise ValueError(f"--{e}") from None
-    mcs = args.mcs or DEFAULT_FIXED_MCS
-    if any(LINK_SCHEMES[s].mcs == "fixed" for s in schemes) or args.mcs:
+    mcs = DEFAULT_FIXED_MCS if args.mcs is None else args.mcs
+    fixed = [s for s in schemes if LINK_SCHEMES[s].mcs == "fixed"]
+    if args.mcs is not None and not fixed:
+        known = ", ".join(n for n, s in LINK_SCHEMES.items() if s.mcs == "fixed")
+        raise ValueError(
+            f"--mcs applies to the fixed-MCS schemes ({known}), not to --schemes "
+            f"{','.join(schemes)}: add one or leave --mcs out"
+        )
+    if fixed:
         from phy.digital import MCS_TABLE
 
         if mcs not in MCS_TABLE:
-            raise KeyError(f"--mcs must be one of {list(MCS_TABLE)}, got {mcs!r}")
+            raise KeyError(f"--mcs must be one of {', '.join(MCS_TABLE)}, got {mcs!r}")
     codec = None
     if any(LINK_SCHEMES[s].needs_codec for s in schemes):
         from osnerf.provenance import open_codec
@@ -387,9 +408,11 @@ def _point(
     if LINK_SCHEMES[scheme].bound:
         r["bound"] = LINK_SCHEMES[scheme].bound
     lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
+    ci = (
+        f"[{lo:.2f}, {hi:.2f}]" if lo is not None else f"(n = {len(flat)}: too few for an interval)"
+    )
     print(
-        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB [{lo:.2f}, {hi:.2f}], "
-        f"SSIM {np.mean(ss):.4f}{lp}",
+        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM {np.mean(ss):.4f}{lp}",
         file=sys.stderr,
     )
     return r
@@ -406,9 +429,15 @@ def _plot(results: list[dict], path: Path, title: str) -> None:
         rows = [r for r in results if r["scheme"] == s]
         x = [r["snr_db"] for r in rows]
         y = [r["psnr"] for r in rows]
-        err = [
-            [r["psnr"] - r["psnr_ci95"][0] for r in rows],
-            [r["psnr_ci95"][1] - r["psnr"] for r in rows],
+        err = [  # no bar where the values were too few for an interval
+            [
+                r["psnr"] - (r["psnr_ci95"][0] if r["psnr_ci95"][0] is not None else r["psnr"])
+                for r in rows
+            ],
+            [
+                (r["psnr_ci95"][1] if r["psnr_ci95"][1] is not None else r["psnr"]) - r["psnr"]
+                for r in rows
+            ],
         ]
         bound = rows[0].get("bound")
         ax.errorbar(

@@ -16,16 +16,22 @@ usual per-view rows (PSNR, frames, SNR) and a ``stream`` section: samples receiv
 dropped (by the board, the driver, the ring), frames found, decoded and lost, and each
 view's end-to-end latency, from the moment its transmission started to its image out of
 the decoder. A run that lost samples says so on stderr and exits 1 once the result is
-written, unless ``--max-overruns`` allows as many overruns.
+written, unless ``--max-overruns`` allows as many overruns. A stream that stops early
+(Ctrl-C or SIGTERM: exit 130; a board gone: exit 1) stops sending at once and writes the
+views decoded so far, its ``stopped`` section saying why, with the ring's last samples
+saved as SigMF (``<sigmf-dir>/ota_rx_partial``), as a burst keeps its capture.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
 import os
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -173,7 +179,7 @@ def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) 
 
 
 def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
-    from hil import build_views, stream_over_the_air
+    from hil import HilError, build_views, stream_over_the_air
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
@@ -182,7 +188,9 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     scheme = LINK_SCHEMES[scheme_name].framed
     num_views = args.views or len(names)
     pick = [v % len(names) for v in range(num_views)]
-    encoded = [scheme.transmit(images[i : i + 1], settings) for i in pick]  # (blocks, state)
+    first = scheme.transmit(images[pick[0] : pick[0] + 1], settings)  # (blocks, state)
+    check_ring(build_views([first[0][0]], cfg), cfg, args.ring_s)  # before the others
+    encoded = [first, *(scheme.transmit(images[i : i + 1], settings) for i in pick[1:])]
     views = build_views([blocks[0] for blocks, _ in encoded], cfg)
     print(
         f"ota: streaming {num_views} view(s) of scheme {scheme_name}, one every "
@@ -205,25 +213,33 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     # the decoder's one-off set-up before the stream: the first view is as quick as the rest
     first = pick[0]
     scheme.receive(received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings)  # fmt: skip
-    tx, rx, emu = _open_radios(args, cfg)
-    try:
-        run = stream_over_the_air(
-            tx,
-            rx,
-            views,
-            cfg,
-            on_view,
-            interval_s=args.view_interval_s,
-            ring_s=args.ring_s,
-            emulator=emu,
-        )
-    finally:
-        tx.close()
-        rx.close()
-        if hasattr(emu, "close"):  # the emulated boards' process
-            emu.close()
+    stopped = None
+    with _sigterm_as_interrupt():
+        tx, rx, emu = _open_radios(args, cfg)
+        try:
+            run = stream_over_the_air(
+                tx,
+                rx,
+                views,
+                cfg,
+                on_view,
+                interval_s=args.view_interval_s,
+                ring_s=args.ring_s,
+                emulator=emu,
+            )
+        except (KeyboardInterrupt, HilError) as e:
+            if getattr(e, "stream_run", None) is None or not recs:
+                raise
+            stopped, run = e, e.stream_run
+        finally:
+            tx.close()
+            rx.close()
+            if hasattr(emu, "close"):  # the emulated boards' process
+                emu.close()
     record = _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0)
     record["sigmf"][:0] = [str(p) for p in probe]
+    if stopped is not None:
+        return _write_stopped(args, cfg, out, record, stopped, len(recs), len(views))
     write_json_atomic(out, record)
     stream, lat = record["stream"], record["stream"]["latency_s"]
     print(
@@ -248,6 +264,79 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
         )
         return 1
     return 0
+
+
+def check_ring(views: list, cfg, ring_s: float) -> None:
+    """Refuse a ``--ring-s`` that cannot hold one frame with its search window (nothing
+    could ever be decoded), before any radio opens."""
+    from hil.ota import StreamReceiver
+
+    fs = cfg.sample_rate_hz
+    need = StreamReceiver.ring_samples_needed(views, cfg)
+    if ring_s * fs < need:
+        raise usage_error(
+            f"--ring-s {ring_s:g} holds less than one frame with its search window: at least "
+            f"{math.ceil(need / fs * 1000) / 1000:g} s at --sample-rate-hz {fs:g}"
+        )
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    """SIGTERM stops the stream as Ctrl-C does (the views decoded so far are written)."""
+    import signal
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt("SIGTERM")
+
+    try:
+        old = signal.signal(signal.SIGTERM, stop)
+    except ValueError:  # not the main thread: leave SIGTERM as it is
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _write_stopped(args, cfg, out, record: dict, stopped: BaseException, decoded: int, sent: int):
+    """Write the result of a stream that stopped early, marked as such, and its capture; 130
+    for an interrupt, 1 for a failure."""
+    from hil import HilError, save_partial_capture
+    from osnerf.provenance import write_json_atomic
+
+    interrupted = isinstance(stopped, KeyboardInterrupt)
+    by = (
+        f"interrupted ({stopped.args[0] if stopped.args else 'Ctrl-C'})"
+        if interrupted
+        else "failed"
+    )
+    sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
+    saved = None
+    if interrupted:
+        stopped = HilError(by, capture=getattr(stopped, "capture", None))
+    try:
+        saved = save_partial_capture(stopped, sigmf_dir / "ota", cfg)
+    except OSError as e:
+        print(f"ota: warning: the capture so far was not saved: {e}", file=sys.stderr)
+    if saved:
+        record["sigmf"].append(str(saved))
+    record["stopped"] = {
+        "by": "interrupt" if interrupted else "failure",
+        "message": str(stopped).splitlines()[0] if str(stopped) else by,
+        "views_decoded": decoded,
+        "views_planned": sent,
+        "capture": str(saved) if saved else None,
+    }
+    write_json_atomic(out, record)
+    kept = f"; capture so far saved to {saved}" if saved else ""
+    what = by if interrupted else f"failed: {record['stopped']['message']}"
+    print(
+        f"ota: stream {what} after {decoded} of {sent} view(s); the views decoded so far "
+        f"written to {out}{kept}",
+        file=sys.stderr,
+    )
+    return 130 if interrupted else 1
 
 
 def emulator_lag_warning(late_s: float | None, ring_s: float) -> str | None:
@@ -282,12 +371,14 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
     from osnerf.commands.ota_record import ota_record
 
     view_names = [f"{names[i]}#{v}" for v, i in enumerate(pick)]
-    reports = [replace(r, block=v.index) for v in views for r in v.reports]
-    blocks = [(v.x_hat, v.noise_var) for v in views]
+    done = [v for v in views if v.index in recs]  # all of them unless the stream stopped early
+    reports = [replace(r, block=b) for b, v in enumerate(done) for r in v.reports]
+    blocks = [(v.x_hat, v.noise_var) for v in done]
     empty = np.zeros(0, np.complex64)
     result = BurstResult(blocks, reports, empty, empty)
-    per_view = [recs[v.index] for v in views]
-    record = ota_record(args, cfg, settings, view_names, [(args.schemes[0], per_view, result, [])], t0)  # fmt: skip
+    per_view = [recs[v.index] for v in done]
+    done_names = [view_names[v.index] for v in done]
+    record = ota_record(args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0)  # fmt: skip
     start = min((v.sent_at for v in views if v.sent_at is not None), default=0.0)
     rows = []
     for v in views:
@@ -304,12 +395,14 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
             }
         )
     known = [r["latency_s"] for r in rows if r["latency_s"] is not None]
-    frames_sent = len(reports)
+    frames_sent = sum(len(v.reports) for v in views if v.sent_at is not None)
     record["stream"] = {
         **run.as_dict(),
         "frames_sent": frames_sent,
         "frames_lost": frames_sent - run.counts.frames_decoded,
-        "views_sent": len(views),
+        "views_planned": len(views),
+        "views_sent": sum(v.sent_at is not None for v in views),
+        "views_decoded": len(done),
         "views_complete": sum(v.complete for v in views),
         "view_interval_s": args.view_interval_s,
         "ring_s": args.ring_s,

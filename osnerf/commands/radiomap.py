@@ -42,9 +42,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--samples",
-        type=checks.count(1_000, 1_000_000_000),
+        type=samples_count,
         default=10_000_000,
-        help="rays shot from the ground station, in [1e3, 1e9] (default: 1e7)",
+        help="rays shot from the ground station, an integer in [1e3, 1e9] such as 1e4 or "
+        "10000 (default: 1e7)",
     )
     p.add_argument(
         "--cell-size-m",
@@ -144,9 +145,24 @@ def _result(rm, args: argparse.Namespace) -> dict:
     return body
 
 
+def samples_count(text: str) -> int:
+    """``--samples``: a whole number in [1e3, 1e9], written as help writes it (``1e4``) or
+    in digits."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (1e3 <= value <= 1e9 and value == int(value)):
+        raise argparse.ArgumentTypeError(
+            f"must be an integer in [1000, 1000000000] (1e3 to 1e9, such as 1e4 or 10000), "
+            f"got {text!r}"
+        )
+    return int(value)
+
+
 def run(args: argparse.Namespace) -> int:
     import phy.raytrace as prt
-    from common import to_json, write_files
+    from common import InputError, to_json, write_files
     from osnerf.cli import inputs_checked
     from osnerf.scenes import DEFAULT_SCENE, RenderConfig, get_scene
     from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
@@ -163,7 +179,12 @@ def run(args: argparse.Namespace) -> int:
     )
     render = RenderConfig(num_train_views=args.views, radius_scale=args.ring_scale)
     inputs_checked()
-    rm = scene_radio_map(scene, target, render, map_config, args.cell_size_m, args.ground_station)
+    try:
+        rm = scene_radio_map(
+            scene, target, render, map_config, args.cell_size_m, args.ground_station
+        )
+    except InputError as e:  # the cell size, known once the map's extent is
+        raise checks.flag_error(e, {"cell_size_m": "--cell-size-m"}) from None
     m = rm.map
     body = _result(rm, args)
     npz = io.BytesIO()

@@ -181,6 +181,13 @@ def run(args: argparse.Namespace) -> int:
         args.renderer, model, None, config, torch.Generator().manual_seed(args.seed)
     )
     setup_seconds, setup_cpu = time.perf_counter() - t0, time.process_time() - c0
+    if _learned(args.renderer) and (setup_stats or {}).get("steps") == 0:
+        raise UsageError(
+            f"--renderer-cpu-seconds {args.renderer_cpu_seconds} ran out before the first "
+            f"distillation step ({setup_stats.get('teacher_views', 0)} teacher views rendered "
+            f"in {setup_cpu:.1f} CPU-s): the renderer learnt nothing; give a larger budget or "
+            "--renderer-steps"
+        )
     rendered = rend.render_path(poses, intr)
     payoff = _payoff(rend, model, poses, intr, rendered["seconds_per_view"], setup_seconds)
 

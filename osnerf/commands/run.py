@@ -135,6 +135,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "csi": phy.CSI_OFDM,
         },
     )
+    for a in p._actions:  # given or not: digital's flags are refused without a digital scheme
+        if a.dest in DIGITAL_FLAGS:
+            a.default = None
     schemes = next(a for a in p._actions if a.dest == "schemes")
     schemes.help += "; known: " + "; ".join(f"{n}: {c.help}" for n, c in SCHEMES.items()).replace(
         "%", "%%"
@@ -155,12 +158,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def run_config(args: argparse.Namespace):
-    """The ``osnerf.run.RunConfig`` of parsed arguments (validates them)."""
-    from osnerf.run import RunConfig
+DIGITAL_FLAGS = {"mcs": "--mcs", "image_codec": "--image-codec"}
+"""Options that only the digital schemes read (those with an MCS)."""
 
+
+def run_config(args: argparse.Namespace):
+    """The ``osnerf.run.RunConfig`` of parsed arguments (validates them); ``--mcs`` or
+    ``--image-codec`` without a digital scheme is refused, not recorded unused."""
+    import dataclasses
+
+    from osnerf.run import RunConfig
+    from osnerf.schemes import SCHEMES
+
+    digital = [n for n in args.schemes if n in SCHEMES and hasattr(SCHEMES[n], "mcs")]
+    filled = argparse.Namespace(**vars(args))
+    defaults = {f.name: f.default for f in dataclasses.fields(RunConfig)}
+    for dest, flag in DIGITAL_FLAGS.items():
+        if getattr(args, dest, None) is None:
+            setattr(filled, dest, defaults[dest])
+        elif not digital:
+            from osnerf.cli import UsageError
+
+            known = ", ".join(n for n in SCHEMES if hasattr(SCHEMES[n], "mcs"))
+            raise UsageError(
+                f"{flag} applies to the digital schemes ({known}), not to --schemes "
+                f"{','.join(args.schemes)}: add one or leave {flag} out"
+            )
     return config_from_args(
-        RunConfig, args, CONFIG_FIELDS, flags=FLAGS, allow_untrained=args.allow_untrained
+        RunConfig, filled, CONFIG_FIELDS, flags=FLAGS, allow_untrained=args.allow_untrained
     )
 
 

@@ -41,11 +41,12 @@ def check_stage_files(folder: Path) -> None:
 
 
 class StageCache:
-    """Each stage's arrays and JSON info; an interrupted run resumes from what is here."""
+    """Each stage's arrays and JSON info; an interrupted run resumes from what is here. The
+    folder is made with the first stage saved: a run refused or failed before it leaves
+    none."""
 
     def __init__(self, root: Path):
         self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
 
     def load(self, stage: str):
         """(arrays, info) of ``stage``, or None when it has not finished yet."""
@@ -65,5 +66,6 @@ class StageCache:
 
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
+        self.root.mkdir(parents=True, exist_ok=True)
         write_bytes(self.root / f"{stage}.npz", buf.getvalue())
         write_json_atomic(self.root / f"{stage}.json", info)

@@ -213,6 +213,30 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
     return RunLinks(links, snrs, outage, info)
 
 
+def ground_station_warning(meta: dict, gs) -> str | None:
+    """Why the ground station's antenna sits where no antenna can (inside an object's box, or
+    below the lowest surface of the scene), or None. ``meta``: the scene's ``object_aabb``
+    (object -> [[min x, y, z], [max x, y, z]] metres); ``gs``: [3] metres."""
+    gs = np.asarray(gs, np.float64).reshape(3)
+    boxes = {o: np.asarray(b, np.float64) for o, b in meta.get("object_aabb", {}).items()}
+    if not boxes:
+        return None
+    at = ", ".join(f"{v:g}" for v in gs)
+    floor = min(b[0, 2] for b in boxes.values())
+    if gs[2] < floor:
+        return (
+            f"the ground station at ({at}) m is {floor - gs[2]:.3g} m below the scene's lowest "
+            f"surface (z = {floor:g} m): its rays start under the terrain"
+        )
+    for name, b in boxes.items():
+        if name != "ground" and np.all(gs > b[0]) and np.all(gs < b[1]):
+            return (
+                f"the ground station at ({at}) m lies inside the box of object {name!r} "
+                f"({', '.join(f'{v:g}' for v in b[0])} to {', '.join(f'{v:g}' for v in b[1])} m)"
+            )
+    return None
+
+
 def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) -> dict:
     """Where the radio ends were: the ground station (the scene's or ``--ground-station``),
     the drones' ring and each view's drone; ``channel_params`` repeats the geometry that
@@ -235,9 +259,15 @@ def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) 
         "drone_speed_m_s": float(cfg.drone_speed_m_s),
         "carrier_frequency_hz": float(meta["carrier_frequency_hz"]),
     }
+    where = ground_station_warning(meta, gs)
+    if where is not None:
+        import sys
+
+        print(f"run: warning: {where}", file=sys.stderr)
     return {
         "ground_station_m": params["ground_station_m"],
         "ground_station_from": params["ground_station_from"],
+        "ground_station_warning": where,
         "drone_ring": ring,
         "drone_positions_m": {i: [float(v) for v in p] for i, p in zip(idx, pos)},
         "distance_to_ground_station_m": {i: float(d) for i, d in zip(idx, dist)},

@@ -126,7 +126,7 @@ def reconstruct_and_score(
     cached = cache.load(f"{scheme.name}_nerf")
     if cached is None:
         export_views(Path(out_dir) / "received" / scheme.name, ds)
-        _log(f"{scheme.name}: training the radiance field ({ctx.config.max_seconds:g} s)")
+        _log(f"{scheme.name}: training the radiance field ({nerf_budget(ctx.config)})")
         union = np.stack([views.masks[o][views.indices("test")] for o in prep.demand.objects]).max(
             0
         )
@@ -169,6 +169,11 @@ def reconstruct_and_score(
         **m,
     )
     return report, rec
+
+
+def nerf_budget(cfg: RunConfig) -> str:
+    """The NeRF budget as the log says it: the steps when they are the budget, else seconds."""
+    return f"{cfg.nerf_steps} steps" if cfg.nerf_steps else f"{cfg.max_seconds:g} s"
 
 
 def export_views(folder: Path, ds) -> None:
@@ -279,6 +284,11 @@ def choose_views(
     the default (sight, no count) keeps every view untouched."""
     if cfg.view_selection == "sight" and cfg.max_views is None:
         return col
+    from osnerf.scu.selection import radio_tie
+
+    tie = radio_tie(cfg.view_selection, [snr_db[int(v)] for v in col.indices if int(v) in snr_db])
+    if tie is not None:
+        _log(f"warning: {tie}")
     directions = view_directions(views, prep.demand.objects)
     return prep.scu.choose_views(col, snr_db, directions, cfg.view_selection, cfg.max_views)
 
@@ -329,7 +339,7 @@ def codec_summary(prep: Prepared, cfg: RunConfig) -> dict:
 
 
 def _flag(comp: dict) -> dict:
-    for line in comp.get("unequal_budgets", []):
+    for line in [*comp.get("unequal_budgets", []), *comp.get("nothing_arrived", [])]:
         _log(f"warning: {line}")
     return comp
 
@@ -377,19 +387,47 @@ def unequal_budgets(results: dict[str, SchemeReport]) -> list[str]:
     return out
 
 
+def _all_lost(r: SchemeReport) -> bool:
+    lost = r.views_lost or {}
+    n = int(sum(lost.values())) if isinstance(lost, dict) else int(lost)
+    return r.views_sent > 0 and n >= r.views_sent
+
+
+def nothing_arrived(results: dict[str, SchemeReport]) -> list[str]:
+    """One line per scheme none of whose views arrived (a fixed MCS that fits no view, or a
+    channel that lost them all): its field saw nothing, so it is compared with nothing."""
+    out = []
+    for name, r in results.items():
+        if _all_lost(r):
+            lost = r.views_lost if isinstance(r.views_lost, dict) else {"all": r.views_lost}
+            why = ", ".join(f"{n} to the {k}" for k, n in lost.items() if n)
+            out.append(
+                f"{name}: none of its {r.views_sent} views arrived ({why}); its field saw "
+                "nothing and is compared with nothing"
+            )
+    return out
+
+
 def comparisons(results: dict[str, SchemeReport], schemes: dict[str, Scheme]) -> dict:
     """The headline numbers: the headline scheme (jscc) minus every other scheme in object
     PSNR; against the first whole-view scheme (full) its symbols, processing time and the
     paper's claim (processing time to the same object PSNR); ``unequal_budgets``: the pairs
-    whose NeRF budgets differ (:func:`unequal_budgets`)."""
-    out: dict[str, object] = {"unequal_budgets": unequal_budgets(results)}
+    whose NeRF budgets differ (:func:`unequal_budgets`); ``nothing_arrived``: the schemes
+    none of whose views arrived (:func:`nothing_arrived`), whose differences are None."""
+    out: dict[str, object] = {
+        "unequal_budgets": unequal_budgets(results),
+        "nothing_arrived": nothing_arrived(results),
+    }
     subject = next((n for n, s in schemes.items() if s.headline), None)
     j = results.get(subject) if subject is not None else None
     if j is None or j.psnr_object is None:
         return out
+    empty = {n for n, r in results.items() if _all_lost(r)}
     for other, o in results.items():
         if other != subject and o.psnr_object is not None:
-            out[f"{subject}_minus_{other}_psnr_object_db"] = j.psnr_object - o.psnr_object
+            key = f"{subject}_minus_{other}_psnr_object_db"
+            # a field that saw no view is no comparison: the key stays, with no number
+            out[key] = None if other in empty else j.psnr_object - o.psnr_object
     whole = next((n for n, s in schemes.items() if not s.object_routed), None)
     f = results.get(whole) if whole is not None else None
     if f is None:

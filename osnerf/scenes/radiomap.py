@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common import InputError
 from osnerf.scenes.dataset import RenderConfig, check_demand, trajectory
 from osnerf.scenes.registry import get_scene
 from osnerf.scenes.spec import SceneGeometry
@@ -27,6 +28,8 @@ MAP_MARGIN_M = 0.15
 """The map spans the candidates, the scene and the ground station, plus this fraction of
 its largest side on each face."""
 DEFAULT_CELLS_PER_SIDE = 60
+MAX_CELLS_PER_SIDE = 4096
+"""The most cells along a side that the ray tracer's map takes (``phy.raytrace.radio_map``)."""
 """Cells along the larger side when no cell size is given."""
 
 
@@ -115,6 +118,11 @@ def scene_radio_map(
     )
     centre, size = map_extent(np.concatenate([train, geometry.bounds_m, gs[None]]))
     cell = cell_size_m if cell_size_m is not None else float(size.max()) / DEFAULT_CELLS_PER_SIDE
+    if float(size.max()) / cell > MAX_CELLS_PER_SIDE:  # refused before any tracing
+        raise InputError(
+            f"cell_size_m {cell:g} gives more than {MAX_CELLS_PER_SIDE} cells along the map's "
+            f"{float(size.max()):g} m side: give at least {float(size.max()) / MAX_CELLS_PER_SIDE:.3g}"
+        )
     altitudes = np.unique(np.round(train[:, 2], 6))
     with tempfile.TemporaryDirectory(prefix="osnerf-radiomap-") as tmp:
         radio = geometry.radio_scene

@@ -160,6 +160,20 @@ def select_views(
     return out
 
 
+def radio_tie(rule: str, expected_snr_db) -> str | None:
+    """Why ``rule`` cannot rank the views by radio (every view expects the same SNR: a
+    channel without a per-view SNR), or None. Sight alone never needs the SNR."""
+    snr = np.asarray(expected_snr_db, np.float64).reshape(-1)
+    if rule == "sight" or len(snr) < 2 or np.ptp(snr) > 0:
+        return None
+    what = "ranks nothing" if rule == "radio" else "adds nothing to coverage"
+    return (
+        f"--view-selection {rule}: every one of the {len(snr)} views expects {snr[0]:g} dB "
+        f"(the channel gives no per-view SNR), so radio {what}; ties go to the lower view "
+        "index, not to a better link"
+    )
+
+
 def choose_views(
     log: Callable[..., None],
     collection: Collection,
@@ -179,6 +193,9 @@ def choose_views(
     views = [int(v) for v in collection.indices if int(v) in snr_db]
     if not views:
         return collection
+    tie = radio_tie(rule, [snr_db[v] for v in views])
+    if tie is not None:
+        log("selection", f"warning: {tie}", rule=rule, tie=True)
     choices = select_views(
         rule, views, [snr_db[v] for v in views], [directions_m[v] for v in views], max_views
     )

@@ -100,7 +100,9 @@ def run_sweep(
         raise ValueError(f"--workers must be >= 1, got {workers}")
     rule = metric_rule(spec.command)
     out = Path(out)
-    check_results(out, spec.sha256)  # a refusal creates nothing: no folder, no lock
+    check_results(
+        out, spec.sha256, spec=spec.to_dict()
+    )  # a refusal creates nothing: no folder, no lock
     out.parent.mkdir(parents=True, exist_ok=True)
     with _exclusive(out):
         run = _Sweep(spec, rule, executor, run_executor, workers, cpus, progress, keep)
@@ -188,7 +190,9 @@ def _run_points(run: _Sweep, points, out, ray_address, ray_runtime_env) -> Sweep
     from tqdm import tqdm
 
     spec = run.spec
-    done = {point_key(r["point"], r.get("seed")) for r in open_results(out, spec.sha256)}
+    done = {
+        point_key(r["point"], r.get("seed")) for r in open_results(out, spec.sha256, spec.to_dict())
+    }
     todo: list[Point] = [p for p in points if p.key not in done]
     summary = SweepSummary(total=len(points), skipped=len(points) - len(todo))
     errors = errors_path(out)
@@ -247,6 +251,7 @@ def _record(run: _Sweep, p: Point, outcome: Outcome, out, errors, summary, bar) 
                 "command": spec.command,
                 "argv": list(p.argv),
                 "spec_hash": spec.sha256,
+                "spec": spec.to_dict(),
                 "versions": result.get("versions"),
                 "codec": result.get("codec"),
                 "channel": channel_params(result),

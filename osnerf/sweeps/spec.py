@@ -162,6 +162,31 @@ def count_points(d: dict[str, Any]) -> int:
     return max(int(n), 0)
 
 
+COUNT_KEPT_LIMIT = 10**6
+"""Combinations of axis values that :func:`spec_from_dict` walks to count a spec's points
+without its ``exclude`` ones; past it, the count before exclusion stands."""
+
+
+def _count_kept(d: dict[str, Any], n: int, max_points: int) -> int:
+    """The spec's points without those ``exclude`` leaves out (``n``: with them)."""
+    axes = d.get("axes") or {}
+    combos = 1
+    for values in axes.values():
+        combos *= len(values) if isinstance(values, list | tuple) else 1
+    if not isinstance(axes, dict) or combos == 0 or combos > COUNT_KEPT_LIMIT:
+        return n
+    try:
+        check_exclude(d["exclude"], list(axes))
+    except ValueError:
+        return n  # refused with its own message when the spec is built
+    names = [k for k, v in axes.items() if isinstance(v, list | tuple)]
+    kept = sum(
+        not any(matches(e, dict(zip(names, combo))) for e in d["exclude"])
+        for combo in itertools.product(*(axes[k] for k in names))
+    )
+    return n // combos * kept
+
+
 def spec_from_dict(d: dict[str, Any], max_points: int = MAX_POINTS) -> SweepSpec:
     """Build a :class:`SweepSpec` from a parsed YAML/TOML mapping (unknown keys refused).
 
@@ -179,6 +204,8 @@ def spec_from_dict(d: dict[str, Any], max_points: int = MAX_POINTS) -> SweepSpec
     if "command" not in d:
         raise ValueError(f"spec field 'command' is missing; allowed keys: {list(SPEC_KEYS)}")
     n = count_points(d)
+    if n > max_points and d.get("exclude"):
+        n = _count_kept(d, n, max_points)
     if n > max_points:
         raise ValueError(
             f"the spec has {n} points, more than --max-points {max_points}; "

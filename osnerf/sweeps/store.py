@@ -8,6 +8,7 @@ Only the sweep's driver process writes the file.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import sys
@@ -31,7 +32,15 @@ def read_results(path: str | Path) -> list[dict[str, Any]]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"results file {str(path)!r} does not exist")
-    records, _ = _parse(path.read_bytes(), path)
+    data = path.read_bytes()
+    records, good = _parse(data, path)
+    if good < len(data) and data[good:].strip():
+        print(
+            f"warning: {path}: a partial last line ({len(data) - good} bytes, a write cut "
+            f"short) is left out; {len(records)} complete points read (rerunning the sweep "
+            "repairs the file)",
+            file=sys.stderr,
+        )
     return records
 
 
@@ -63,7 +72,7 @@ def _parse(data: bytes, path: Path) -> tuple[list[dict[str, Any]], int]:
 
 
 def check_results(
-    path: str | Path, spec_hash: str, data: bytes | None = None
+    path: str | Path, spec_hash: str, data: bytes | None = None, spec: dict | None = None
 ) -> tuple[list[dict[str, Any]], int]:
     """Refuse a file that is not this spec's results, changing nothing (no file: nothing to
     refuse). Returns its records and the byte length of their valid prefix.
@@ -87,14 +96,37 @@ def check_results(
         )
     others = sorted({r.get("spec_hash", "?") for r in records} - {spec_hash})
     if others:
+        old = next(
+            (r["spec"] for r in records if r.get("spec_hash") == others[0] and "spec" in r), None
+        )
+        changed = spec_changes(old, spec) if old is not None and spec is not None else ""
         raise ValueError(
             f"--out {str(path)!r} holds results of another sweep spec (spec_hash "
-            f"{others[0][:12]}, this spec {spec_hash[:12]}); use another --out or remove it"
+            f"{others[0][:12]}, this spec {spec_hash[:12]}{changed}); use another --out or "
+            "remove it"
         )
     return records, good
 
 
-def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
+def spec_changes(old: dict, new: dict) -> str:
+    """What differs between two specs' fields (``to_dict`` form), as ``: exclude was X, is
+    now Y; ...`` (empty when nothing is known to differ)."""
+    parts = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key), new.get(key)
+        if a != b:
+            parts.append(f"{key} was {_dumps_short(a)}, is now {_dumps_short(b)}")
+    return (": " + "; ".join(parts)) if parts else ""
+
+
+def _dumps_short(value: Any) -> str:
+    text = json.dumps(value, default=str, separators=(",", ":"))
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+def open_results(
+    path: str | Path, spec_hash: str, spec: dict | None = None
+) -> list[dict[str, Any]]:
     """Load a results file for appending; refuse a file that is not this spec's results; then
     repair a torn last line.
 
@@ -110,7 +142,7 @@ def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     data = path.read_bytes()
-    records, good = check_results(path, spec_hash, data)
+    records, good = check_results(path, spec_hash, data, spec)
     if good < len(data):
         torn = path.with_name(path.name + ".torn")
         with open(torn, "ab") as f:
@@ -125,13 +157,27 @@ def open_results(path: str | Path, spec_hash: str) -> list[dict[str, Any]]:
 
 
 def append_record(path: str | Path, record: dict[str, Any]) -> None:
-    """Append one record as one line: a single write of the whole line, flushed and fsynced."""
+    """Append one record as one line: a single write of the whole line, flushed and fsynced.
+
+    A write that fails or falls short (a full disk) is cut off again, so the file keeps its
+    earlier points and no torn line; the ``OSError`` names the file.
+    """
     line = (_dumps(record) + "\n").encode()
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:
-        n = os.write(fd, line)
-        if n != len(line):  # pragma: no cover - regular files write fully or raise
-            raise OSError(f"short write to {path}: {n} of {len(line)} bytes")
-        os.fsync(fd)
+        size = os.fstat(fd).st_size  # the driver is the file's only writer
+        try:
+            n = _write(fd, line)
+            if n != len(line):
+                raise OSError(errno.ENOSPC, f"short write ({n} of {len(line)} bytes)")
+            os.fsync(fd)
+        except OSError as e:
+            os.ftruncate(fd, size)  # the line whole or not at all
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
     finally:
         os.close(fd)
+
+
+def _write(fd: int, data: bytes) -> int:
+    """The one write of a line (tests make it fail as a full disk does)."""
+    return os.write(fd, data)

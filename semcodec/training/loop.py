@@ -64,7 +64,11 @@ def train_inputs(train_dirs: list[Path], init: Path | None, data_sha256: str | N
     (``data_sha256`` when already computed)."""
     if data_sha256 is None:
         data_sha256 = files_sha256([p for d in train_dirs for p in list_images(d, "--data")])
-    return {"data": data_sha256, "init": str(Path(init).resolve()) if init is not None else None}
+    return {
+        "data": data_sha256,
+        "data_dirs": [str(d) for d in train_dirs],
+        "init": str(Path(init).resolve()) if init is not None else None,
+    }
 
 
 def nearest_level(levels, cbr: float) -> float:
@@ -293,22 +297,29 @@ def _loop(run: TrainRun, forward, data, val) -> dict:
     (rank 0)."""
     from tqdm import tqdm
 
-    cfg, place = run.cfg, run.place
-    lead = place.rank == 0
-    budget = cfg.max_minutes * 60.0
+    lead = run.place.rank == 0
+    done, total, unit = progress(run)
     # both are closed on the way out, by an error too: the bar never redraws after its line
     with (
         open(run.out_dir / "log.jsonl", "a") if lead else contextlib.nullcontext() as log,
         tqdm(
-            total=int(budget),
-            initial=int(run.elapsed),
-            unit="s",
+            total=total,
+            initial=done,
+            unit=unit,
             desc="train-codec",
             file=sys.stderr,
             disable=not lead,
         ) as bar,
     ):
         return _steps(run, forward, data, val, log, bar)
+
+
+def progress(run: TrainRun) -> tuple[int, int, str]:
+    """(done, total, unit) of the progress bar: steps when ``max_steps`` is the budget, else
+    seconds of ``max_minutes``."""
+    if run.cfg.max_steps:
+        return run.step, run.cfg.max_steps, "step"
+    return int(run.elapsed), int(run.cfg.max_minutes * 60.0), "s"
 
 
 def _steps(run: TrainRun, forward, data, val, log, bar) -> dict:
@@ -330,7 +341,7 @@ def _steps(run: TrainRun, forward, data, val, log, bar) -> dict:
                 )
             continue
         acc = [acc[0] + out[0], acc[1] + out[1], acc[2] + 1, acc[3] + dt]
-        bar.update(int(run.elapsed) - bar.n)
+        bar.update(progress(run)[0] - bar.n)
         evaluate = val is not None and run.elapsed - last_eval >= cfg.eval_every_s
         if evaluate or run.step % LOG_EVERY_STEPS == 0 or run.elapsed - last_log >= LOG_EVERY_S:
             rec = _record(run, acc)

@@ -167,9 +167,20 @@ def resume_changes(state: dict, cfg, inputs: dict) -> dict[str, list]:
     changed = {k: [old.get(k), v] for k, v in dataclasses.asdict(cfg).items() if old.get(k) != v}
     recorded = state.get("inputs") or {}
     for k, v in inputs.items():
-        if k in recorded and recorded[k] != v:
+        if k in recorded and recorded[k] != v and k not in DESCRIBING_INPUTS:
             changed[k] = [recorded[k], v]
+    if "data" in changed:  # the folders as typed, beside their files' hash
+        was = recorded.get("data_dirs")
+        changed["data"] = [
+            f"{', '.join(was) if was else 'the earlier folders'} (sha256 {_short(recorded['data'])})",
+            f"{', '.join(inputs.get('data_dirs') or ['?'])} (sha256 {_short(inputs['data'])})",
+        ]
     return changed
+
+
+DESCRIBING_INPUTS = ("data_dirs",)
+"""Inputs recorded to name a change, never compared themselves: the training folders as
+typed (the same files under another path are the same training)."""
 
 
 def check_resume(state: dict, cfg, inputs: dict, path: Path) -> dict[str, list]:

@@ -323,3 +323,12 @@ def test_train_nerf_on_a_full_disk_names_the_file_and_leaves_nothing_half_writte
     assert "inline_container" not in err
     left = [p for p in out.rglob("*") if p.is_file()]
     assert not [p for p in left if ".tmp" in p.name or p.stat().st_size == 0], left
+
+
+def test_render_a_budget_that_trains_nothing_is_refused_naming_it(run_dir, tmp_path, capsys):
+    out = tmp_path / "none"
+    argv = ["--renderer", "features", "--renderer-cpu-seconds", "0.01", "--threads", "1"]
+    assert _render(run_dir, out, *argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]  # after the setup's progress bar
+    assert "--renderer-cpu-seconds 0.01 ran out before the first distillation step" in err
+    assert not (out / "render.json").exists()

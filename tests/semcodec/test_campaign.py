@@ -4,49 +4,12 @@ accumulates, a moved reference is refused, and promotion follows its stated rule
 import json
 from pathlib import Path
 
-import numpy as np
-import pytest
-from PIL import Image
-from smooth_images import smooth_image
+from smooth_images import write_images
 
 from campaign.__main__ import main
 from campaign.promotion import RULE, decide
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _images(folder: Path, n: int, side: int, seed: int) -> Path:
-    folder.mkdir(parents=True)
-    for i in range(n):
-        a = smooth_image(seed + i, side, side)[0].permute(1, 2, 0).numpy()
-        Image.fromarray(np.round(a * 255).astype(np.uint8)).save(folder / f"{i}.png")
-    return folder
-
-
-@pytest.fixture
-def tiny_campaign(tmp_path):
-    """A campaign folder with one from-scratch line of the small architecture, tiny crops,
-    and its data (3 training images, 2 held-out ones)."""
-    doc = json.loads((ROOT / "campaign" / "campaign.json").read_text())
-    doc["validation"].update(count=2, side_px=32, channels="awgn")
-    doc["lines"] = {
-        "tiny": {
-            "model": "adjscc_s4_w64",
-            "train": {"channel": "awgn", "batch_size": 2, "crop_px": 32, "warmup_steps": 2},
-            "lrs": [1e-3, 5e-4],
-            "seed": 0,
-            "best": None,
-        }
-    }
-    doc["default_line"] = "tiny"
-    camp = tmp_path / "camp"
-    camp.mkdir()
-    (camp / "campaign.json").write_text(json.dumps(doc))
-    train = _images(tmp_path / "train", 3, 48, 0)
-    val = _images(tmp_path / "val", 2, 40, 100)
-    argv = ["continue", "--campaign", str(camp), "--steps", "6", "--device", "cpu"]
-    argv += ["--data", str(train), "--val", str(val), "--work", str(tmp_path / "work")]
-    return camp, argv
 
 
 def test_continue_runs_two_learning_rates_and_accumulates(tiny_campaign):
@@ -110,7 +73,7 @@ def test_promotion_rule():
 
 
 def test_promote_dry_run_writes_the_comparison(tmp_path, tiny_ckpt):
-    images = _images(tmp_path / "kodak", 2, 32, 7)
+    images = write_images(tmp_path / "kodak", 2, 32, 7)
     argv = ["promote", str(tiny_ckpt), "--baseline", str(tiny_ckpt), "--images", str(images)]
     argv += ["--channels", "awgn", "--cbrs", "1/16", "--snrs-db", "10", "--ota-seeds", "0"]
     argv += ["--ota-snrs-db", "10", "--ota-size", "32", "--out", str(tmp_path), "--dry-run"]

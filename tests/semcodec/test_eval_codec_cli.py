@@ -138,7 +138,7 @@ def test_draws_give_mean_and_interval_and_the_genie_is_a_bound(image_dir, tmp_pa
     argv += ["--codec", str(tiny_ckpt), "--out", str(out)]
     assert main(argv) == 0
     doc = json.loads(out.read_text())
-    assert doc["config"]["draws"] == 3 and "Student-t" in doc["config"]["interval"]
+    assert doc["config"]["draws"] == 3 and "bootstrap" in doc["config"]["interval"]
     assert "perfect CSI" in doc["config"]["receiver"]
     rows = {r["scheme"]: r for r in doc["results"]}
     for r in rows.values():

@@ -25,7 +25,9 @@ def test_no_warmup_by_default_and_wall_clock_decay():
     assert cfg.warmup_steps == 0
     assert lr_at(cfg, 0.0, 0) == pytest.approx(2e-4)
     t = (1.0 - 0.35 / 2) * 600.0
-    assert lr_at(cfg, t, 5) == pytest.approx(2e-4 * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi / 2))))
+    assert lr_at(cfg, t, 5) == pytest.approx(
+        2e-4 * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi / 2)))
+    )
 
 
 def test_warmup_steps_out_of_range_is_refused_by_name():
