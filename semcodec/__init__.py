@@ -110,6 +110,7 @@ from semcodec.evaluation import (
     EvalContext,
     eval_channels,
     load_image_folder,
+    ms_ssim,
     schemes_help,
     ssim,
 )
@@ -133,6 +134,7 @@ from semcodec.jscc.model import (
     make_model,
     symbols_to_features,
 )
+from semcodec.softcast import transmit_softcast
 from semcodec.training.channels import TRAIN_CHANNELS, train_channel
 from semcodec.training.config import TrainConfig
 from semcodec.training.loop import build_codec, train, train_inputs, validate, with_architecture
@@ -158,6 +160,7 @@ __all__ = [
     "load_image_folder",
     "schemes_help",
     "ssim",
+    "ms_ssim",
     "SCALES",
     "REFINE_STEPS",
     "TrainConfig",
@@ -222,6 +225,7 @@ __all__ = [
     "encode_image",
     "encode_to_budget",
     "transmit_analog",
+    "transmit_softcast",
     "transmit_digital",
     "transmit_ideal",
     "refine_symbols",
