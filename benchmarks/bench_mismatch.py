@@ -1,0 +1,209 @@
+"""When the transmitter's SNR is wrong: every scheme planned from a belief, judged at the truth.
+
+All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, through
+``osnerf eval-codec``:
+
+* ``panel``: AWGN, every transmitter planned at :data:`PLAN_SNR_DB` (``--plan-snr-db``),
+  the channel at :data:`PANEL_SNRS`: jscc, digital, softcast, and ideal at the true SNR (a
+  bound); digital's staircase, ``digital_fixed`` at each of :data:`STAIRCASE_MCS` (it plans
+  nothing). Where each scheme leads, where digital loses its images and whether it gains
+  above its plan are stated in ``findings``.
+* ``estimate``: each image's estimate is its true SNR plus a 2 dB Gaussian error
+  (``--snr-error-db 2``) at :data:`ESTIMATE_SNRS`, on AWGN (1 draw) and block Rayleigh
+  (:data:`RAYLEIGH_DRAWS` draws): digital planned over the error against ``digital_naive``,
+  jscc and softcast with the same estimates; and the same with exact knowledge beside it.
+  Block Rayleigh rows carry the per-image outage statistics (5th and 10th percentile PSNR,
+  fraction lost).
+* ``forecast``: the digital planner with exact knowledge on AWGN at :data:`FORECAST_SNRS`:
+  the images it expected to lose (the sum of its per-image loss probabilities) against those
+  lost.
+
+Each eval-codec run is written to ``mismatch_<part>.json`` in the output folder and reused
+when its arguments match and a clean tree of the same commit made it.
+``OSNERF_BENCH_MISMATCH_PARTS``: comma-separated subset of ``panel,staircase,estimate,
+forecast``. On a shared 2-core CPU the whole benchmark on 24 images takes hours: the
+digital chain (AVIF at many qualities, LDPC decoding) dominates.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from common import write_text
+
+PLAN_SNR_DB = 4.0
+PANEL_SNRS = (-2.0, 0.0, 2.0, 4.0, 7.0, 10.0, 13.0)
+PANEL_SCHEMES = "jscc,digital,softcast,ideal"
+STAIRCASE_MCS = (
+    "qpsk-120/1024",
+    "qpsk-1/3",
+    "qpsk-1/2",
+    "qpsk-3/4",
+    "16qam-1/2",
+    "16qam-3/4",
+    "64qam-2/3",
+    "64qam-5/6",
+)
+"""The MCSs of digital's staircase (every third step of ``phy.digital.MCS_TABLE`` or so)."""
+ESTIMATE_SNRS = (0.0, 4.0, 10.0)
+ESTIMATE_SCHEMES = "jscc,digital,digital_naive,softcast"
+SNR_ERROR_DB = 2.0
+RAYLEIGH_DRAWS = 4
+FORECAST_SNRS = tuple(float(s) for s in range(-10, 14))
+PARTS = ("panel", "staircase", "estimate", "forecast")
+
+
+def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
+    """One ``osnerf eval-codec`` run, reused when its file has the same arguments and a clean
+    tree of the same commit made it."""
+    from osnerf.cli import main
+    from osnerf.provenance import git_commit
+
+    path = out_dir / f"mismatch_{tag}.json"
+    if path.exists():
+        doc = json.loads(path.read_text())
+        commit = git_commit()
+        same = doc.get("git_commit") == commit and commit != "unknown" and "-dirty" not in commit
+        if doc.get("argv") == argv and same:
+            return doc
+    if main(["eval-codec", *argv, "--out", str(path), "--overwrite"]) != 0:
+        raise RuntimeError(f"eval-codec failed: {' '.join(argv)}")
+    doc = json.loads(path.read_text())
+    doc["argv"] = argv
+    write_text(path, json.dumps(doc))
+    return doc
+
+
+def _row(r: dict) -> dict:
+    keys = (
+        "scheme",
+        "snr_db",
+        "psnr",
+        "psnr_ci95",
+        "ssim",
+        "ms_ssim",
+        "num_images",
+        "draws",
+        "lost_images",
+        "lost_fraction",
+        "psnr_p5",
+        "psnr_p10",
+        "mcs_used",
+        "forecast_lost_images",
+        "plan_snr_db",
+        "snr_error_db",
+        "bound",
+    )
+    out = {k: r[k] for k in keys if k in r}
+    if r.get("mcs_choice") == "fixed":
+        out["mcs"] = next(iter(r.get("mcs_used") or {}), None)
+    return out
+
+
+def _common(n: int) -> list[str]:
+    from osnerf.paths import shared_data_dir
+
+    folder = os.environ.get("OSNERF_BENCH_MISMATCH_FOLDER") or str(shared_data_dir() / "kodak")
+    return ["--images", folder, "--max-images", str(n), "--cbr", "1/16", "--no-lpips"]
+
+
+def _snrs(values) -> str:
+    return ",".join(f"{v:g}" for v in values)
+
+
+def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
+    """Where each scheme leads at each SNR; digital's losses below its plan and its gain
+    above it."""
+    by = {(r["scheme"], r["snr_db"]): r for r in panel}
+    out = []
+    for s in PANEL_SNRS:
+        real = {k: by[k, s]["psnr"] for k in ("jscc", "digital", "softcast") if (k, s) in by}
+        if real:
+            lead = max(real, key=real.get)
+            out.append(
+                f"{s:g} dB: {lead} leads ("
+                + ", ".join(f"{k} {v:.2f}" for k, v in sorted(real.items()))
+                + ")"
+            )
+    dig = [by["digital", s] for s in PANEL_SNRS if ("digital", s) in by]
+    if dig:
+        lost = [f"{r['snr_db']:g} dB: {r['lost_images']}/{r['num_images']}" for r in dig]
+        out.append("digital planned at 4 dB, images lost: " + ", ".join(lost))
+        above = [r["psnr"] for r in dig if r["snr_db"] >= PLAN_SNR_DB]
+        if len(above) > 1:
+            out.append(
+                f"digital from {PLAN_SNR_DB:g} to {max(PANEL_SNRS):g} dB: "
+                f"{min(above):.2f} .. {max(above):.2f} dB (no gain above its plan)"
+            )
+    if staircase:
+        env = {}
+        for r in staircase:
+            env[r["snr_db"]] = max(env.get(r["snr_db"], -1.0), r["psnr"])
+        out.append(
+            "staircase envelope: " + ", ".join(f"{s:g} dB {v:.2f}" for s, v in sorted(env.items()))
+        )
+    return out
+
+
+def run(out_dir: Path) -> dict:
+    torch.set_num_threads(1)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    n = int(os.environ.get("OSNERF_BENCH_MISMATCH_IMAGES", "24"))
+    parts = [p for p in os.environ.get("OSNERF_BENCH_MISMATCH_PARTS", ",".join(PARTS)).split(",")]
+    base = _common(n)
+    result: dict = {"images": n, "cbr": "1/16", "plan_snr_db": PLAN_SNR_DB}
+    panel: list[dict] = []
+    staircase: list[dict] = []
+    if "panel" in parts:
+        argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
+        argv += ["--plan-snr-db", f"{PLAN_SNR_DB:g}", "--schemes", PANEL_SCHEMES]
+        panel = [_row(r) for r in _eval(out_dir, "panel", argv)["results"]]
+        result["panel"] = panel
+    if "staircase" in parts:
+        for mcs in STAIRCASE_MCS:
+            argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
+            argv += ["--schemes", "digital_fixed", "--mcs", mcs]
+            tag = "staircase_" + mcs.replace("/", "_")
+            staircase += [_row(r) for r in _eval(out_dir, tag, argv)["results"]]
+        result["staircase"] = staircase
+    result["findings"] = _findings(panel, staircase)
+    if "estimate" in parts:
+        rows = []
+        for channel, draws in (("awgn", 1), ("rayleigh", RAYLEIGH_DRAWS)):
+            for err in (SNR_ERROR_DB, 0.0):
+                argv = base + ["--channel", channel, "--snr-db", _snrs(ESTIMATE_SNRS)]
+                argv += ["--draws", str(draws), "--schemes", ESTIMATE_SCHEMES]
+                argv += ["--snr-error-db", f"{err:g}"]
+                doc = _eval(out_dir, f"estimate_{channel}_err{err:g}", argv)
+                rows += [{"channel": channel, **_row(r)} for r in doc["results"]]
+        result["estimate"] = rows
+    if "forecast" in parts:
+        argv = base + ["--channel", "awgn", "--snr-db", _snrs(FORECAST_SNRS)]
+        argv += ["--schemes", "digital"]
+        doc = _eval(out_dir, "forecast", argv)
+        rows = [
+            {
+                "snr_db": r["snr_db"],
+                "forecast_lost_images": r["forecast_lost_images"],
+                "lost_images": r["lost_images"],
+                "num_images": r["num_images"],
+                "mcs_used": r["mcs_used"],
+                "psnr": r["psnr"],
+            }
+            for r in doc["results"]
+        ]
+        f = np.array([r["forecast_lost_images"] for r in rows])
+        m = np.array([r["lost_images"] for r in rows])
+        result["forecast"] = {
+            "rows": rows,
+            "forecast_total": float(f.sum()),
+            "lost_total": int(m.sum()),
+            "sends": int(sum(r["num_images"] for r in rows)),
+        }
+    return result
