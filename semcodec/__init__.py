@@ -98,6 +98,7 @@ from semcodec.digital.image_codecs import (
     encode_to_budget,
 )
 from semcodec.digital.link import transmit_digital, transmit_ideal
+from semcodec.digital.timing import digital_timing
 from semcodec.evaluation import (
     ANALOG,
     DEFAULT_FIXED_MCS,
@@ -226,6 +227,7 @@ __all__ = [
     "encode_to_budget",
     "transmit_analog",
     "transmit_softcast",
+    "digital_timing",
     "transmit_digital",
     "transmit_ideal",
     "refine_symbols",
