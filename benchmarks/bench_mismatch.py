@@ -19,9 +19,12 @@ All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, throu
   lost.
 
 Each eval-codec run is written to ``mismatch_<part>.json`` in the output folder and reused
-when its arguments match and a clean tree of the same commit made it.
+when its arguments match and a clean tree of the same commit made it; the figures (the panel,
+digital's staircase and envelope in PSNR and MS-SSIM, the outage CDF on block Rayleigh) go
+to ``mismatch/`` beside them.
 ``OSNERF_BENCH_MISMATCH_PARTS``: comma-separated subset of ``panel,staircase,estimate,
-forecast``. On a shared 2-core CPU the whole benchmark on 24 images takes hours: the
+forecast``; ``OSNERF_BENCH_MISMATCH_REUSE=any``: reuse a file with the same arguments
+whatever commit made it (each keeps its own ``git_commit``). On a shared 2-core CPU the whole benchmark on 24 images takes hours: the
 digital chain (AVIF at many qualities, LDPC decoding) dominates.
 """
 
@@ -69,6 +72,7 @@ def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
         doc = json.loads(path.read_text())
         commit = git_commit()
         same = doc.get("git_commit") == commit and commit != "unknown" and "-dirty" not in commit
+        same = same or os.environ.get("OSNERF_BENCH_MISMATCH_REUSE") == "any"
         if doc.get("argv") == argv and same:
             return doc
     if main(["eval-codec", *argv, "--out", str(path), "--overwrite"]) != 0:
@@ -116,13 +120,19 @@ def _snrs(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
 
+def _bound(scheme: str) -> bool:
+    from semcodec import LINK_SCHEMES
+
+    return bool(LINK_SCHEMES[scheme].bound)
+
+
 def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
     """Where each scheme leads at each SNR; digital's losses below its plan and its gain
     above it."""
     by = {(r["scheme"], r["snr_db"]): r for r in panel}
     out = []
     for s in PANEL_SNRS:
-        real = {k: by[k, s]["psnr"] for k in ("jscc", "digital", "softcast") if (k, s) in by}
+        real = {k: r["psnr"] for (k, x), r in by.items() if x == s and not _bound(k)}
         if real:
             lead = max(real, key=real.get)
             out.append(
@@ -150,6 +160,39 @@ def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
     return out
 
 
+def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
+    """The figure set from the eval-codec files of this run, as PNGs under ``mismatch/``."""
+    from common import write_figure
+    from osnerf.plots import (
+        eval_record,
+        outage_entries,
+        plot_digital_cliff,
+        plot_mismatch,
+        plot_outage_cdf,
+    )
+    from osnerf.results import result_rows
+
+    def rows(*tags):
+        return result_rows([eval_record(docs[t]) for t in tags if t in docs])
+
+    stairs = [t for t in docs if t.startswith("staircase_")]
+    figs = []
+    if "panel" in docs:
+        figs.append(("mismatch", plot_mismatch(rows("panel", *stairs))))
+    if stairs:
+        matched = rows(*stairs, "estimate_awgn_err0")
+        figs.append(("staircase_psnr", plot_digital_cliff(matched, "psnr", anchors=True)))
+        figs.append(("staircase_ms_ssim", plot_digital_cliff(matched, "ms_ssim")))
+    fading = [eval_record(docs[t]) for t in docs if t.startswith("estimate_rayleigh")]
+    if fading:
+        figs.append(("outage_cdf", plot_outage_cdf(outage_entries(fading))))
+    folder = out_dir / "mismatch"
+    folder.mkdir(exist_ok=True)
+    for name, fig in figs:
+        write_figure(folder / f"{name}.png", fig, dpi=110)
+    return [f"mismatch/{name}.png" for name, _ in figs]
+
+
 def run(out_dir: Path) -> dict:
     torch.set_num_threads(1)
     out_dir = Path(out_dir)
@@ -160,17 +203,20 @@ def run(out_dir: Path) -> dict:
     result: dict = {"images": n, "cbr": "1/16", "plan_snr_db": PLAN_SNR_DB}
     panel: list[dict] = []
     staircase: list[dict] = []
+    docs: dict[str, dict] = {}
     if "panel" in parts:
         argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
         argv += ["--plan-snr-db", f"{PLAN_SNR_DB:g}", "--schemes", PANEL_SCHEMES]
-        panel = [_row(r) for r in _eval(out_dir, "panel", argv)["results"]]
+        docs["panel"] = _eval(out_dir, "panel", argv)
+        panel = [_row(r) for r in docs["panel"]["results"]]
         result["panel"] = panel
     if "staircase" in parts:
         for mcs in STAIRCASE_MCS:
             argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
             argv += ["--schemes", "digital_fixed", "--mcs", mcs]
             tag = "staircase_" + mcs.replace("/", "_")
-            staircase += [_row(r) for r in _eval(out_dir, tag, argv)["results"]]
+            docs[tag] = _eval(out_dir, tag, argv)
+            staircase += [_row(r) for r in docs[tag]["results"]]
         result["staircase"] = staircase
     result["findings"] = _findings(panel, staircase)
     if "estimate" in parts:
@@ -180,8 +226,9 @@ def run(out_dir: Path) -> dict:
                 argv = base + ["--channel", channel, "--snr-db", _snrs(ESTIMATE_SNRS)]
                 argv += ["--draws", str(draws), "--schemes", ESTIMATE_SCHEMES]
                 argv += ["--snr-error-db", f"{err:g}"]
-                doc = _eval(out_dir, f"estimate_{channel}_err{err:g}", argv)
-                rows += [{"channel": channel, **_row(r)} for r in doc["results"]]
+                tag = f"estimate_{channel}_err{err:g}"
+                docs[tag] = _eval(out_dir, tag, argv)
+                rows += [{"channel": channel, **_row(r)} for r in docs[tag]["results"]]
         result["estimate"] = rows
     if "forecast" in parts:
         argv = base + ["--channel", "awgn", "--snr-db", _snrs(FORECAST_SNRS)]
@@ -206,4 +253,5 @@ def run(out_dir: Path) -> dict:
             "lost_total": int(m.sum()),
             "sends": int(sum(r["num_images"] for r in rows)),
         }
+    result["figures"] = _figures(out_dir, docs)
     return result

@@ -23,7 +23,7 @@ from fractions import Fraction
 from pathlib import Path
 from statistics import mean
 
-from benchmarks import results_channels
+from benchmarks import results_channels, results_mismatch
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench-results"
@@ -181,6 +181,7 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
                     ", ".join(commits),
                 ]
             )
+    rows += results_mismatch.headline_rows(results_mismatch.load(RESULTS))
     header = ["experiment", "link", "jscc (dB)", "digital (dB)", "bound (dB)", "commit"]
     return _table(header, rows)
 
@@ -347,6 +348,7 @@ def render() -> tuple[str, list[str]]:
         *demo_section(demo),
         *ota_section(ota),
         *codec_section(codec),
+        *results_mismatch.section(RESULTS),
         *results_channels.sections(),
         *checkpoint_section(),
     ]

@@ -436,7 +436,7 @@ def eval_record(doc: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _outage_entries(records: list[dict[str, Any]]) -> list[tuple[str, list[float]]]:
+def outage_entries(records: list[dict[str, Any]]) -> list[tuple[str, list[float]]]:
     """(label, per-image-per-draw PSNRs) of every eval-codec row on block fading."""
     out = []
     for rec in records:
@@ -497,7 +497,7 @@ def make_plots(
             figures.append(("digital_cliff_ms_ssim", plot_digital_cliff(matched, "ms_ssim")))
     if any(_finite(r.get("plan_snr_db")) and _finite(r.get("psnr")) for r in with_scheme):
         figures.append(("mismatch", plot_mismatch(with_scheme)))
-    outage = _outage_entries(records)
+    outage = outage_entries(records)
     if outage:
         figures.append(("outage_cdf", plot_outage_cdf(outage)))
     if not figures:

@@ -49,6 +49,8 @@ CONFIG_FIELDS = (
     "max_views",
     "csi",
     "ota_air",
+    "plan_snr_db",
+    "snr_error_db",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -119,6 +121,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "ground_station_m": checks.ground_station,
             "ring_scale": checks.number(*RADIUS_SCALE_RANGE),
             "max_views": checks.count(1, 512),
+            "plan_snr_db": checks.snr_db,
+            "snr_error_db": checks.number(0.0, 20.0, "dB"),
         },
         choices={
             "channel": RUN_CHANNELS,

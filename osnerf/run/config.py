@@ -130,6 +130,13 @@ class RunConfig:
             Doppler shifts when ``drone_speed_m_s`` > 0, ``snr_db`` at the median drone
             position as for channel "raytraced"; :mod:`osnerf.run.ota_air`). Real boards'
             air is nobody's to set: "raytraced" is refused for them.
+        plan_snr_db: what every transmitter believes each view's SNR is, in place of the
+            SCU's pilot measurement (jscc's encoder SNR, rate and copies, the digital MCS);
+            None: the measurement. The channel still runs at ``snr_db``.
+        snr_error_db: a zero-mean Gaussian error (dB) added to each view's estimate (the
+            measurement, or ``plan_snr_db``), drawn from the run seed, the same for every
+            scheme; digital plans over it. With either set, digital plans from the estimate,
+            not the link's true average SNR.
     """
 
     scene: str = DEFAULT_SCENE
@@ -162,6 +169,14 @@ class RunConfig:
     max_views: int | None = None
     csi: str | None = None
     ota_air: str = "fixed"
+    plan_snr_db: float | None = None
+    snr_error_db: float = 0.0
+
+    @property
+    def transmitter_estimates(self) -> bool:
+        """Whether the transmitters plan from an estimate apart from the link's true SNR
+        (``plan_snr_db`` or ``snr_error_db`` set)."""
+        return self.plan_snr_db is not None or self.snr_error_db > 0
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -182,6 +197,10 @@ class RunConfig:
             raise ValueError(f"schemes must not repeat a name, got {','.join(self.schemes)}")
         if not math.isfinite(self.snr_db):
             raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
+        if self.plan_snr_db is not None and not math.isfinite(self.plan_snr_db):
+            raise ValueError(f"plan_snr_db must be finite or None, got {self.plan_snr_db!r}")
+        if not (math.isfinite(self.snr_error_db) and 0 <= self.snr_error_db <= 20):
+            raise ValueError(f"snr_error_db must be in [0, 20] dB, got {self.snr_error_db!r}")
         if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
             raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
         if self.nerf_steps is not None and not (
@@ -341,8 +360,10 @@ class RunConfig:
         d = {k: v for k, v in asdict(self).items() if k not in ("schemes", "allow_untrained")}
         if d["ota_air"] == "fixed":  # the air every run had before it was a choice: same key
             del d["ota_air"]
+        if d["plan_snr_db"] is None and not d["snr_error_db"]:  # exact knowledge: as before
+            del d["plan_snr_db"], d["snr_error_db"]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
-            if isinstance(f.default, float):  # the float fields (annotations are strings here)
+            if isinstance(f.default, float) and f.name in d:  # the float fields
                 d[f.name] = float(d[f.name])
         d["codec_sha256"] = self._codec_sha256
         blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)

@@ -223,6 +223,8 @@ def run_pipeline(
             width=views.intrinsics.width,
             seed=cfg.seed,
             cache=cache,
+            plan_snr_db=cfg.plan_snr_db,
+            snr_error_db=cfg.snr_error_db,
         )
         ctx = RunContext(
             cfg,
