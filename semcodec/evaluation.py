@@ -30,7 +30,7 @@ from semcodec.contract.transmit import TransmitResult
 from semcodec.digital.link import AUTO, GENIE, transmit_digital, transmit_ideal
 from semcodec.jscc.codec import Codec, learned_only
 from semcodec.jscc.link import REFINE_STEPS, refine_symbols, transmit_jscc
-from semcodec.softcast import transmit_softcast
+from semcodec.softcast import framed_softcast, transmit_softcast
 from semcodec.uncoded import transmit_analog
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
@@ -249,6 +249,7 @@ LINK_SCHEMES = Registry[LinkScheme](
             "SoftCast: DCT chunks, lowest-energy dropped, power from chunk variances, LLSE at "
             "the receiver, metadata in the budget (training-free analog)",
             ANALOG,
+            framed=framed_softcast(),
         ),
         "digital_webp": LinkScheme(
             _digital("webp"),

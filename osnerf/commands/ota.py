@@ -104,7 +104,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         required=True,
         type=checks.names_from(framed, "--schemes"),
         help=f"comma-separated, each sent in its own burst: {', '.join(framed)} (digital: "
-        "image codec + LDPC + QAM at --mcs; jscc: the semantic codec at --cbr)",
+        "image codec + LDPC + QAM at --mcs; jscc: the semantic codec at --cbr; softcast: "
+        "DCT chunks at --cbr)",
     )
     p.add_argument(
         "--snr-db",
@@ -300,6 +301,8 @@ def framed_settings(args, symbols_per_frame: int):
     from osnerf.provenance import open_codec
     from phy import parse_cbr
     from semcodec import (
+        ANALOG,
+        DIGITAL,
         IMAGE_CODECS,
         LINK_SCHEMES,
         FramedSettings,
@@ -313,6 +316,12 @@ def framed_settings(args, symbols_per_frame: int):
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
     cbr, codec = FramedSettings.cbr, None
+    analog = any(LINK_SCHEMES[name].kind == ANALOG for name in args.schemes)
+    if analog and args.cbr is not None:  # an analog scheme sends at --cbr too
+        try:
+            cbr = parse_cbr(args.cbr)
+        except ValueError as e:
+            raise usage_error(f"--{e}") from None
     if any(LINK_SCHEMES[name].needs_codec for name in args.schemes):
         try:
             cbr = parse_cbr(args.cbr)
@@ -324,7 +333,7 @@ def framed_settings(args, symbols_per_frame: int):
         limits = require_capabilities(codec)  # ota does not refine: nothing is refused
         if limits.line():
             print(f"ota: {limits.line()}", file=sys.stderr)
-    digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
+    digital = any(LINK_SCHEMES[name].kind == DIGITAL for name in args.schemes)
     if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
