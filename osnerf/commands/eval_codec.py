@@ -4,13 +4,20 @@ Reads every PNG/JPEG of ``--images`` (each at least 11x11 px: SSIM's Gaussian wi
 ``semcodec.evaluation.EVAL_MIN_SIDE_PX``), sends each image (one at a time, its own size)
 through every scheme at every SNR, ``--draws`` times over independent noise and fading
 draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
-"sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
-"num_images", "draws", ...}], "codec": {...}}`` (the codec's record,
+"sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "ms_ssim",
+"lpips", "psnr_p5", "psnr_p10", "lost_fraction", "num_images", "draws", ...}], "codec":
+{...}}`` (the codec's record,
 :func:`osnerf.provenance.codec_record`: sha256, trained or not, a plugin's distribution)
 where psnr/ssim/lpips are the mean over images x draws of per-image values (PSNR peak
 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with ``--no-lpips`` or when an
 image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % Student-t interval of that
-mean over the images x draws values.
+mean over the images x draws values. MS-SSIM (pytorch-msssim) is null for images under
+161 px a side.
+
+What the transmitter knows is apart from the channel: ``--plan-snr-db`` and
+``--snr-error-db`` set its belief (rows then record ``snr_believed_db`` per image and draw,
+as each scheme's transmitter used it: jscc's clipped to its codec's SNR range); without
+them the transmitter knows the true average SNR, as before.
 
 Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI ZF receiver,
 ``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
