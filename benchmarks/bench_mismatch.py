@@ -17,6 +17,10 @@ All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, throu
 * ``forecast``: the digital planner with exact knowledge on AWGN at :data:`FORECAST_SNRS`:
   the images it expected to lose (the sum of its per-image loss probabilities) against those
   lost.
+* ``blocks``: the same forecast tested where it is thin, without the image codec: whole
+  Kodak-sized blocks (CBR 1/16) of random payload filling an MCS's capacity, sent
+  ``OSNERF_BENCH_MISMATCH_BLOCKS`` times (default 60) over AWGN at :data:`BLOCK_POINTS`
+  (the MCS the planner picks there), against the calibration's image BLER.
 
 Each eval-codec run is written to ``mismatch_<part>.json`` in the output folder and reused
 when its arguments match and a clean tree of the same commit made it; the figures (the panel,
@@ -58,7 +62,38 @@ ESTIMATE_SCHEMES = "jscc,digital,digital_naive,softcast"
 SNR_ERROR_DB = 2.0
 RAYLEIGH_DRAWS = 4
 FORECAST_SNRS = tuple(float(s) for s in range(-10, 14))
-PARTS = ("panel", "staircase", "estimate", "forecast")
+BLOCK_POINTS = (("16qam-1/2", 7.0), ("qpsk-3/4", 5.0), ("qpsk-157/1024", -4.0))
+PARTS = ("panel", "staircase", "estimate", "forecast", "blocks")
+
+
+def _blocks(trials: int) -> list[dict]:
+    """Image loss of whole blocks of random payload against the calibration's forecast."""
+    import phy
+    from phy.digital import codeword_layout, payload_capacity_bits, transmit_bytes
+    from semcodec.digital.calibration import load_calibration
+
+    cal = load_calibration()
+    n = 512 * 768 * 3 // 16
+    link = phy.channel_link("awgn")
+    out = []
+    for mcs, snr in BLOCK_POINTS:
+        cap = payload_capacity_bits(n, mcs) // 8
+        g = torch.Generator().manual_seed(11)
+        lost = 0
+        for _ in range(trials):
+            data = bytes(torch.randint(0, 256, (cap,), generator=g, dtype=torch.uint8).tolist())
+            lost += not transmit_bytes(data, mcs, link, snr, generator=g, num_symbols=n).ok
+        out.append(
+            {
+                "mcs": mcs,
+                "snr_db": snr,
+                "codewords": codeword_layout(n, mcs).num_codewords,
+                "blocks": trials,
+                "lost": lost,
+                "forecast_loss": cal.image_bler("awgn", mcs, snr, n),
+            }
+        )
+    return out
 
 
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
@@ -253,5 +288,7 @@ def run(out_dir: Path) -> dict:
             "lost_total": int(m.sum()),
             "sends": int(sum(r["num_images"] for r in rows)),
         }
+    if "blocks" in parts:
+        result["blocks"] = _blocks(int(os.environ.get("OSNERF_BENCH_MISMATCH_BLOCKS", "60")))
     result["figures"] = _figures(out_dir, docs)
     return result

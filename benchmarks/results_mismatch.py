@@ -144,6 +144,21 @@ def section(folder: Path = RESULTS) -> list[str]:
             f"{f['lost_total']} lost."
         )
         lines.append("")
+    if "blocks" in res:
+        lines.append("Whole Kodak-sized blocks of random payload at the planner's MCS (AWGN):")
+        lines.append("")
+        rows = [
+            [
+                b["mcs"],
+                f"{b['snr_db']:g}",
+                b["codewords"],
+                f"{b['lost']}/{b['blocks']}",
+                f"{b['forecast_loss'] * b['blocks']:.2f}",
+            ]
+            for b in res["blocks"]
+        ]
+        lines += _table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
+        lines.append("")
     for name in res.get("figures", []):
         if (folder / name).is_file():
             lines.append(f"![{Path(name).stem}](../bench-results/{name})")
