@@ -54,7 +54,7 @@ def headline_rows(doc: dict | None) -> list[list[str]]:
             continue
         rows.append(
             [
-                f"Kodak-{res['images']}, CBR 1/16, every transmitter planned at "
+                f"Kodak-{by['jscc', snr]['num_images']}, CBR 1/16, every transmitter planned at "
                 f"{res['plan_snr_db']:g} dB, image PSNR",
                 f"AWGN {snr:g} dB",
                 _psnr(by["jscc", snr]),
@@ -75,8 +75,19 @@ def section(folder: Path = RESULTS) -> list[str]:
             "",
         ]
     res = doc["results"]
+    counts = {
+        part: sorted({r["num_images"] for r in rows})
+        for part, rows in (
+            ("panel", res.get("panel", [])),
+            ("staircase", res.get("staircase", [])),
+            ("estimate", res.get("estimate", [])),
+            ("forecast", res.get("forecast", {}).get("rows", [])),
+        )
+        if rows
+    }
+    told = ", ".join(f"{p} {'/'.join(map(str, n))}" for p, n in counts.items())
     lines.append(
-        f"`python -m benchmarks mismatch` on {res['images']} Kodak images, CBR 1/16, commit "
+        f"`python -m benchmarks mismatch`, Kodak images per part: {told}; CBR 1/16, commit "
         f"{_commit(doc)}. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
     )
     lines.append("")

@@ -169,12 +169,16 @@ def llse_gain(gains: np.ndarray, variances: np.ndarray, noise_var_real) -> np.nd
 
 
 def plan_image(
-    image: Tensor, num_symbols: int, chunks_per_side: int = CHUNKS_PER_SIDE
+    image: Tensor,
+    num_symbols: int,
+    chunks_per_side: int = CHUNKS_PER_SIDE,
+    allow_empty: bool = False,
 ) -> tuple[SoftcastPlan, np.ndarray]:
     """The transmitter's plan of one image [3, height, width] and its DCT coefficients.
 
     Keeps the most chunks, highest variance first, whose coefficients and metadata fit
-    ``num_symbols`` (at least one chunk's worth must fit: ValueError otherwise).
+    ``num_symbols``. When not one chunk fits: ValueError, or with ``allow_empty`` (and the
+    metadata fitting) no chunk at all: the receiver shows the planes' means.
     Returns (plan, coefficients [3, height, width] float64).
     """
     x = image.detach().to(torch.float64).numpy()
@@ -203,13 +207,17 @@ def plan_image(
         if (int(slots[m - 1]) + 1) // 2 + metadata_symbols(num_chunks, m) <= num_symbols:
             kept_n = m
             break
-    if kept_n == 0:
+    if kept_n == 0 and not (allow_empty and metadata_symbols(num_chunks, 0) <= num_symbols):
         raise ValueError(
             f"softcast: {num_symbols} symbols hold no chunk of a {h}x{w} image with its metadata"
         )
     kept = order[:kept_n]
     q = quantise_variance(var[kept])
-    gains = allocate_gains(q, var[kept] * size[kept], (int(slots[kept_n - 1]) + 1) // 2)
+    gains = (
+        allocate_gains(q, var[kept] * size[kept], (int(slots[kept_n - 1]) + 1) // 2)
+        if kept_n
+        else np.zeros(0)
+    )
     bits = metadata_bits(num_chunks, kept_n)
     plan = SoftcastPlan(
         (3, h, w), means, eh, ew, kept, q, gains, bits, metadata_symbols(num_chunks, kept_n)
@@ -222,11 +230,11 @@ def plan_fitting(
 ) -> tuple[SoftcastPlan, np.ndarray]:
     """:func:`plan_image` at ``chunks_per_side`` (at most the image's shorter side), or, when
     the metadata of that many chunks leaves no room (small images, small budgets), at the
-    most chunks per side that fit."""
+    most chunks per side that fit; below that, the planes' means alone (no chunk)."""
     k = min(int(chunks_per_side), *image.shape[-2:])
     while True:
         try:
-            return plan_image(image, num_symbols, k)
+            return plan_image(image, num_symbols, k, allow_empty=k == 1)
         except ValueError:
             if k == 1:
                 raise
@@ -239,7 +247,7 @@ def encode_chunks(coeffs: np.ndarray, plan: SoftcastPlan) -> Tensor:
         plan.gains[n] * coeffs[p, r, c].reshape(-1)
         for n, (p, r, c) in enumerate(plan.chunk_slices(i) for i in plan.kept)
     ]
-    v = np.concatenate(vals)
+    v = np.concatenate(vals) if vals else np.zeros(0)
     if v.size % 2:
         v = np.concatenate([v, [0.0]])
     return torch.view_as_complex(torch.from_numpy(v.reshape(-1, 2)).to(torch.float32).contiguous())
@@ -296,7 +304,7 @@ def transmit_softcast(
         plan, coeffs = plan_fitting(img, n, chunks_per_side)
         plans.append(plan)
         syms.append(encode_chunks(coeffs, plan))
-    width = max(s.shape[0] for s in syms)
+    width = max(max(s.shape[0] for s in syms), 1)  # one symbol when only means are sent
     block = torch.zeros(len(syms), width, dtype=torch.complex64)
     for b, s in enumerate(syms):  # images of one batch share a size: one width
         block[b, : s.shape[0]] = s

@@ -141,3 +141,15 @@ def test_framed_softcast_decodes_its_frames_and_a_lost_frame_costs_only_its_chun
     assert np.isfinite(one_lost.image).all()
     assert 10.0 < one_lost.psnr < ok.psnr
     assert ok.stats["num_symbols"] <= ok.stats["symbol_budget"]
+
+
+def test_a_budget_under_one_chunk_sends_the_means_and_none_refuses():
+    """Under one chunk and its metadata the image arrives as its colour means; under the
+    means' metadata nothing can be sent (ValueError)."""
+    x = smooth_image(0, 32, 32)
+    res = transmit_softcast(x, phy.AWGN(), 0.0, 238)
+    assert res.stats["chunks_kept"] == [0] and res.stats["num_symbols"] <= 238
+    means = x.mean(dim=(2, 3), keepdim=True).expand_as(x)
+    assert torch.allclose(res.images, means, atol=1e-5)
+    with pytest.raises(ValueError, match="hold no chunk"):
+        transmit_softcast(x, phy.AWGN(), 0.0, 100)
