@@ -90,6 +90,21 @@ def _ber_row_is_pooled(rows: list[dict]) -> bool:
     return all(_finite(r.get("num_errors")) and _finite(r.get("num_bits")) for r in rows)
 
 
+LEGEND_INSIDE_MAX = 8
+"""Legends of more entries go beside the axes, where they cover no curve."""
+
+
+def _legend(ax) -> None:
+    n = len(ax.get_legend_handles_labels()[1])
+    if n > LEGEND_INSIDE_MAX:
+        fig = ax.figure
+        w, h = fig.get_size_inches()
+        fig.set_size_inches(w + 4.2, max(h, 0.16 * n + 1.0))
+        ax.legend(fontsize=6.5, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    else:
+        ax.legend(fontsize=7)
+
+
 def _mean_line(ax, xs, ys, sd, color, label):
     """The mean as a labelled line with markers; one std across seeds as error bars."""
     ax.plot(xs, ys, marker="o", ms=4, color=color, label=label)
@@ -135,7 +150,7 @@ def plot_ber(rows: list[dict], theory: bool = True) -> Figure:
     ax.set_xlabel("SNR Es/N0 per complex symbol [dB]")
     ax.set_ylabel("bit error rate")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax)
     ax.set_title("Uncoded BER vs SNR")
     return fig
 
@@ -185,7 +200,7 @@ def plot_quality_vs_snr(
     unit = " [dB]" if metric.startswith("psnr") else ""
     ax.set_ylabel(f"{metric.upper().replace('_', ' ')}{unit} (mean per image)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax)
     ax.set_title(f"{metric.upper().replace('_', ' ')} vs SNR")
     return fig
 
@@ -266,7 +281,7 @@ def plot_psnr_vs_cbr(
     ax.set_xlabel("CBR (complex symbols per real source value)")
     ax.set_ylabel("PSNR [dB] (mean per image)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax)
     ax.set_title("PSNR vs bandwidth ratio")
     return fig
 
@@ -338,7 +353,7 @@ def plot_digital_cliff(
     name = "PSNR [dB]" if metric == "psnr" else metric.upper().replace("_", "-")
     ax.set_ylabel(f"{name} (mean per image)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax)
     ax.set_title("Digital baseline: the cliff (shaded: steepest drop of each scheme)")
     return fig
 
@@ -388,30 +403,42 @@ def plot_mismatch(rows: list[dict], metric: str = "psnr") -> Figure:
     name = "PSNR [dB]" if metric == "psnr" else metric.upper().replace("_", "-")
     ax.set_ylabel(f"{name} (mean per image)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
+    _legend(ax)
     ax.set_title("Transmitters planned at one SNR, judged at the channel's (bounds dashed)")
     return fig
 
 
-def plot_outage_cdf(entries: list[tuple[str, list[float]]]) -> Figure:
-    """Empirical CDF of per-image (per draw) PSNR, one line per (label, values): the tail that
-    a mean hides (lost images sit at the left)."""
-    entries = [(k, sorted(v)) for k, v in entries if v]
+def plot_outage_cdf(entries: list[tuple[str, str, list[float]]]) -> Figure:
+    """Empirical CDF of per-image (per draw) PSNR: one panel per (SNR, channel), one line per
+    scheme (the same colour in every panel; dashed with an SNR-estimate error): the tail that
+    a mean hides (lost images sit at the left).
+
+    Args:
+        entries: (panel, line label, values) as :func:`outage_entries` gives them.
+    """
+    entries = [(p, k, sorted(v)) for p, k, v in entries if v]
     if not entries:
         raise ValueError("no per-image PSNR values")
-    fig = Figure(figsize=(6.8, 4.6), layout="constrained")
-    ax = fig.add_subplot()
-    styles = ("-", "--", ":", "-.")
-    for i, (label, v) in enumerate(entries):
-        y = [(k + 1) / len(v) for k in range(len(v))]
-        ax.step(v, y, where="post", color=f"C{i % 10}", ls=styles[(i // 10) % 4], label=label)
-    ax.axhline(0.05, color="0.5", lw=0.8, ls=":")
-    ax.axhline(0.10, color="0.5", lw=0.8, ls=":")
-    ax.set_xlabel("PSNR per image and draw [dB]")
-    ax.set_ylabel("fraction of images at or below")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title("Outage on block fading: per-image PSNR CDF (5 % and 10 % marked)")
+    panels = list(dict.fromkeys(p for p, _, _ in entries))
+    labels = list(dict.fromkeys(k for _, k, _ in entries))
+    schemes = list(dict.fromkeys(k.split(",")[0] for k in labels))
+    fig = Figure(figsize=(3.4 * len(panels) + 1.8, 3.8), layout="constrained")
+    axes = fig.subplots(1, len(panels), sharey=True, squeeze=False)[0]
+    for ax, panel in zip(axes, panels):
+        for _, label, v in (e for e in entries if e[0] == panel):
+            y = [(k + 1) / len(v) for k in range(len(v))]
+            color = f"C{schemes.index(label.split(',')[0]) % 10}"
+            ls = "--" if "error" in label else "-"
+            ax.step(v, y, where="post", color=color, ls=ls, lw=1.2, label=label)
+        ax.axhline(0.05, color="0.5", lw=0.8, ls=":")
+        ax.axhline(0.10, color="0.5", lw=0.8, ls=":")
+        ax.set_title(panel, fontsize=9)
+        ax.set_xlabel("PSNR per image and draw [dB]")
+        ax.grid(True, alpha=0.3)
+    axes[0].set_ylabel("fraction of images at or below")
+    handles, names = axes[-1].get_legend_handles_labels()
+    axes[-1].legend(handles, names, fontsize=6.5, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    fig.suptitle("Outage on block fading: per-image PSNR CDF (5 % and 10 % dotted)", fontsize=10)
     return fig
 
 
@@ -436,8 +463,9 @@ def eval_record(doc: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def outage_entries(records: list[dict[str, Any]]) -> list[tuple[str, list[float]]]:
-    """(label, per-image-per-draw PSNRs) of every eval-codec row on block fading."""
+def outage_entries(records: list[dict[str, Any]]) -> list[tuple[str, str, list[float]]]:
+    """(panel "SNR, channel", line label "scheme[, error S dB]", per-image-per-draw PSNRs) of
+    every eval-codec row on block fading."""
     out = []
     for rec in records:
         channel = str((rec.get("config") or {}).get("channel", ""))
@@ -447,10 +475,10 @@ def outage_entries(records: list[dict[str, Any]]) -> list[tuple[str, list[float]
             per = r.get("psnr_per_draw")
             if isinstance(per, list) and r.get("scheme") is not None:
                 vals = [float(v) for row in per for v in (row if isinstance(row, list) else [row])]
-                label = f"{r['scheme']}, {float(r['snr_db']):g} dB, {channel}"
+                label = str(r["scheme"])
                 if _finite(r.get("snr_error_db")) and r["snr_error_db"]:
                     label += f", error {r['snr_error_db']:g} dB"
-                out.append((label, vals))
+                out.append((f"{float(r['snr_db']):g} dB, {channel}", label, vals))
     return out
 
 
