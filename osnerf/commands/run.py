@@ -51,6 +51,7 @@ CONFIG_FIELDS = (
     "ota_air",
     "plan_snr_db",
     "snr_error_db",
+    "digital_box",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -123,6 +124,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "max_views": checks.count(1, 512),
             "plan_snr_db": checks.snr_db,
             "snr_error_db": checks.number(0.0, 20.0, "dB"),
+            "digital_box": checks.boolean,
         },
         choices={
             "channel": RUN_CHANNELS,

@@ -137,6 +137,11 @@ class RunConfig:
             measurement, or ``plan_snr_db``), drawn from the run seed, the same for every
             scheme; digital plans over it. With either set, digital plans from the estimate,
             not the link's true average SNR.
+        digital_box: the object-routed digital schemes (digital, digital_genie) send the
+            demanded objects' bounding box of each on-demand view (its position charged to
+            the view's budget, ``semcodec.box_side_symbols``), as codecs that cannot focus do
+            (``semcodec.encode_with_focus``), instead of the whole masked view: the framing of
+            jscc's on-demand region, so the end-to-end gap measures the link.
     """
 
     scene: str = DEFAULT_SCENE
@@ -171,6 +176,7 @@ class RunConfig:
     ota_air: str = "fixed"
     plan_snr_db: float | None = None
     snr_error_db: float = 0.0
+    digital_box: bool = False
 
     @property
     def transmitter_estimates(self) -> bool:
@@ -362,6 +368,8 @@ class RunConfig:
             del d["ota_air"]
         if d["plan_snr_db"] is None and not d["snr_error_db"]:  # exact knowledge: as before
             del d["plan_snr_db"], d["snr_error_db"]
+        if not d["digital_box"]:  # the whole masked view, as before: same key
+            del d["digital_box"]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
             if isinstance(f.default, float) and f.name in d:  # the float fields
                 d[f.name] = float(d[f.name])
