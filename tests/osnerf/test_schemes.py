@@ -257,7 +257,9 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     plans = [ViewSend(v, 5.0, part) for v in range(4)]
     out = {}
     for steps in (0, 30):
-        cfg = SimpleNamespace(seed=0, channel="awgn", refine_steps=steps)
+        cfg = SimpleNamespace(
+            seed=0, channel="awgn", refine_steps=steps, transmitter_estimates=False
+        )
         run_plan = RunPlan((), (), oversampling=1, height=48, width=48, static_link=False)
         ctx = RunContext(cfg, dict.fromkeys(range(4), link), run_plan, codec, codec, np.ones(3))
         out[steps] = SCHEMES["full"]().transmit(ctx, plans, images)
