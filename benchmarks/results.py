@@ -25,7 +25,7 @@ from fractions import Fraction
 from pathlib import Path
 from statistics import mean
 
-from benchmarks import results_channels
+from benchmarks import results_channels, results_mismatch
 from benchmarks.results_channels import ResultsError, load_json
 from common import write_files
 
@@ -201,6 +201,7 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
                     ", ".join(commits),
                 ]
             )
+    rows += results_mismatch.headline_rows(results_mismatch.load(RESULTS))
     header = ["experiment", "link", "jscc (dB)", "digital (dB)", "bound (dB)", "commit"]
     return _table(header, rows)
 
@@ -220,6 +221,38 @@ def _eval_command(doc: dict) -> str:
         ]
     text = "osnerf eval-codec " + " ".join(argv)
     return re.sub(r"\S*/shared/data/", "../shared/data/", text)
+
+
+OUTAGE_CHANNELS = ("rayleigh",)
+"""Block fading: where the tail of per-image PSNR (outage) is shown beside the mean."""
+
+
+def _percentile(values: list[float], q: float) -> float:
+    """The q-th percentile, linear between order statistics (numpy's default)."""
+    v = sorted(values)
+    k = (len(v) - 1) * q / 100.0
+    lo = int(k)
+    hi = min(lo + 1, len(v) - 1)
+    return v[lo] + (v[hi] - v[lo]) * (k - lo)
+
+
+def _outage_table(entry: dict, schemes: list[str], snrs: list[float]) -> list[str]:
+    """5th and 10th percentile of per-image PSNR over images x draws, per scheme and SNR
+    (from each row's ``psnr_per_draw``)."""
+    rows = []
+    for scheme in schemes:
+        cells = []
+        for snr in snrs:
+            r = entry["rows"].get((scheme, snr))
+            per = [v for row in (r or {}).get("psnr_per_draw") or [] for v in row]
+            cells.append(f"{_percentile(per, 5):.2f} / {_percentile(per, 10):.2f}" if per else "–")
+        rows.append([_label(scheme), *cells])
+    return [
+        "The tail: 5th / 10th percentile of per-image PSNR over images x draws (dB).",
+        "",
+        *_table(["scheme", *(f"{s:g} dB" for s in snrs)], rows),
+        "",
+    ]
 
 
 def codec_section(codec: dict) -> list[str]:
@@ -253,6 +286,8 @@ def codec_section(codec: dict) -> list[str]:
             rows.append([_label(scheme), *cells])
         lines += _table(["scheme", *(f"{s:g} dB" for s in snrs)], rows)
         lines.append("")
+        if channel in OUTAGE_CHANNELS:
+            lines += _outage_table(entry, schemes, snrs)
     lines.append(
         "Mean of per-image PSNR over images x draws (peak 1.0); `lost` counts images that "
         "did not arrive (the digital link shows them mid-grey). `digital_genie` knows each "
@@ -372,6 +407,7 @@ def render(results: Path | None = None, cards_dir: Path | None = None) -> tuple[
         *demo_section(demo),
         *ota_section(ota),
         *codec_section(codec),
+        *results_mismatch.section(results),
         *results_channels.sections(results),
         *checkpoint_section(cards_dir),
     ]

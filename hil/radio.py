@@ -2,10 +2,10 @@
 
 :func:`hil.send_blocks` and :class:`osnerf.ota_link.OtaLink` use exactly these members of a
 transmitter and a receiver, whatever the board: :class:`hil.HackRF` (over USB, over
-:class:`hil.EmulatorBackend`, or looped back without USB), :class:`hil.Pluto` (a real
+:class:`hil.emulation.EmulatorBackend`, or looped back without USB), :class:`hil.Pluto` (a real
 board, or :class:`hil.EmulatedPluto` behind :class:`hil.IiodServer`) and
-:class:`hil.SoapyRadio` (any SoapySDR device, or :class:`hil.EmulatedSoapyDevice` behind
-:class:`hil.SoapyRemoteServer`). Settings are not part
+:class:`hil.SoapyRadio` (any SoapySDR device, or :class:`hil.emulation.EmulatedSoapyDevice` behind
+:class:`hil.emulation.SoapyRemoteServer`). Settings are not part
 of it: each front end has its own knobs (a Pluto's ``apply_ota_config``, a HackRF's gain
 properties), which :mod:`hil.ota.link` sets from :class:`hil.OtaConfig`.
 """

@@ -47,7 +47,11 @@ COMMANDS = Registry[tuple[str, str]](
         ),
         "run": ("osnerf.commands.run", "the end-to-end pipeline: scene -> link -> NeRF -> report"),
         "sweep": ("osnerf.commands.sweep", "run a sweep spec; resumes where it stopped"),
-        "plot": ("osnerf.commands.plot", "plots from a sweep results file"),
+        "plot": ("osnerf.commands.plot", "plots from sweep or eval-codec results"),
+        "codec-info": (
+            "osnerf.commands.codec_info",
+            "a codec's complexity: parameters, MACs per pixel, encode and decode time",
+        ),
         "demo": ("osnerf.commands.demo", "the main job on its embedded default"),
     },
 )
@@ -58,7 +62,7 @@ COMMANDS = Registry[tuple[str, str]](
 # A fraction ("--cbr -1/16") passes too, so the option's own check can say what is wrong.
 _NUM = r"[-+]?\d*\.?\d+([eE][-+]?\d+)?(/\d*\.?\d+)?"
 _NEGATIVE_LIST = re.compile(rf"^-\d*\.?\d+([eE][-+]?\d+)?(/\d*\.?\d+)?(,{_NUM})*$")
-STDOUT_COMMANDS = ("scenes", "hil")  # their result is what they print
+STDOUT_COMMANDS = ("scenes", "hil", "codec-info")  # their result is what they print
 
 
 class UsageError(InputError):

@@ -105,11 +105,13 @@ class ViewSend:
     Attributes:
         view: index in ``SceneViews``; snr_db: the SNR its link runs at.
         part: the plan's on-demand part (object-routed schemes) or its whole view.
+        measured_snr_db: what the transmitter believes the SNR is (the SCU's estimate).
     """
 
     view: int
     snr_db: float
     part: Allocation
+    measured_snr_db: float | None = None
 
 
 @dataclass(frozen=True)
@@ -142,9 +144,13 @@ class RunPlan:
         object-routed, else the whole part of every view."""
         if object_routed:
             return [
-                ViewSend(p.view, p.link.snr_db, p.focus) for p in self.views if p.focus is not None
+                ViewSend(p.view, p.link.snr_db, p.focus, p.link.measured_snr_db)
+                for p in self.views
+                if p.focus is not None
             ]
-        return [ViewSend(p.view, p.link.snr_db, p.whole) for p in self.views]
+        return [
+            ViewSend(p.view, p.link.snr_db, p.whole, p.link.measured_snr_db) for p in self.views
+        ]
 
     @property
     def full_scene_symbols(self) -> int:

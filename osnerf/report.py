@@ -23,7 +23,7 @@ from common import path_kind, to_json, write_files
 from osnerf.plan import ViewPlan
 from osnerf.provenance import result_header
 
-QUALITY_METRICS = ("psnr", "ssim", "lpips", "psnr_object")
+QUALITY_METRICS = ("psnr", "ssim", "ms_ssim", "lpips", "psnr_object")
 """Per-scheme quality metrics of a run (LPIPS: lower is better)."""
 
 
@@ -34,6 +34,8 @@ class SchemeReport:
     Attributes:
         psnr, ssim, lpips: held-out novel views, whole view (object-routed schemes against
             the demanded objects on the background colour).
+        ms_ssim: MS-SSIM of the same (pytorch-msssim, five scales); None when the views are
+            under 161 px a side.
         psnr_object: over the demanded objects' pixels of held-out views showing them.
         mask_iou: rendered opacity vs the objects' mask (object-routed schemes only).
         symbols_sent, views_sent: what crossed the channel; side_info_bits: focus side info.
@@ -78,6 +80,7 @@ class SchemeReport:
     training_bounds: str = "demanded objects"
     help: str = ""
     renderers: dict | None = None
+    ms_ssim: float | None = None
     codec_use: dict | None = None
 
 
@@ -354,6 +357,7 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
         "psnr",
         "psnr_object",
         "ssim",
+        "ms_ssim",
         "lpips",
         "mask_iou",
         "symbols_sent",

@@ -163,7 +163,10 @@ def _encode(ctx, p, x, kw: dict):
     steps = int(ctx.config.refine_steps)
     if not refinement_status(codec, steps)["on"]:
         return enc  # a codec without a differentiable decode is sent as encoded (reported)
-    model = _Copies(refine_model_link(ctx.config.channel), p.snr_db, p.part.repetitions)
+    # the SNR the transmitter simulates: the link's (as before), or its estimate when the run
+    # sets the transmitters' belief apart from the channel
+    sim_snr = p.measured_snr_db if ctx.config.transmitter_estimates else p.snr_db
+    model = _Copies(refine_model_link(ctx.config.channel), sim_snr, p.part.repetitions)
     gen = torch.Generator().manual_seed(
         scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
     )
@@ -177,7 +180,7 @@ def _encode(ctx, p, x, kw: dict):
         x,
         enc,
         model,
-        p.snr_db,
+        sim_snr,
         steps,
         generator=gen,
         decoder_snr_db=p.part.encoder_snr_db,

@@ -73,3 +73,56 @@ def test_default_codec_on_two_kodak_images(shared_data):
         assert g == pytest.approx(w, abs=0.02), key
 
     _check("codec_kodak2", got, close)
+
+
+_MATCHED_SCHEMES = "jscc,digital,digital_genie,ideal,analog"
+
+
+def _matched_eval(shared_data, tmp_path, channel: str, *flags: str) -> dict:
+    """eval-codec on two 128x96 Kodak crops at CBR 1/16, 1 draw, seed 3: each row's numbers
+    by ``channel/scheme@snr``."""
+    from PIL import Image
+
+    from osnerf.cli import main
+
+    d = tmp_path / "imgs"
+    d.mkdir(exist_ok=True)
+    for i, name in enumerate(sorted((shared_data / "kodak").iterdir())[:2]):
+        Image.open(name).convert("RGB").crop((200, 150, 328, 246)).save(d / f"im{i}.png")
+    out = tmp_path / f"{channel}-{len(list(tmp_path.glob('*.json')))}.json"
+    argv = ["eval-codec", "--images", str(d), "--channel", channel, "--cbr", "1/16"]
+    argv += ["--schemes", _MATCHED_SCHEMES, "--draws", "1", "--seed", "3", "--no-lpips"]
+    assert main([*argv, "--out", str(out), *flags]) == 0
+    keys = ("psnr_per_draw", "ssim", "failed_codewords", "lost_images", "num_symbols")
+    return {
+        f"{channel}/{r['scheme']}@{r['snr_db']:g}dB": {k: r[k] for k in keys}
+        for r in json.loads(out.read_text())["results"]
+    }
+
+
+def test_exact_knowledge_is_todays_matched_evaluation(shared_data, tmp_path):
+    """With the transmitter's belief equal to the channel's SNR (``--plan-snr-db`` at the
+    channel SNR, or ``--snr-error-db 0``) every scheme's numbers are those of the matched
+    evaluation, to the bit; the matched numbers themselves match the reviewed ones (written
+    before the belief was apart from the channel) within 0.02 dB."""
+    got = {}
+    for ch in ("awgn", "rayleigh"):
+        got.update(_matched_eval(shared_data, tmp_path, ch, "--snr-db", "1,10"))
+
+    def close(key, g, w):
+        flat = [v for row in g["psnr_per_draw"] for v in row]
+        want = [v for row in w["psnr_per_draw"] for v in row]
+        assert flat == pytest.approx(want, abs=0.02), key
+        assert g["ssim"] == pytest.approx(w["ssim"], abs=1e-3), key
+        for k in ("failed_codewords", "lost_images", "num_symbols"):
+            assert g[k] == w[k], (key, k)
+
+    _check("eval_matched", got, close)
+    no_error = _matched_eval(
+        shared_data, tmp_path, "rayleigh", "--snr-db", "1,10", "--snr-error-db", "0"
+    )
+    assert no_error == {k: v for k, v in got.items() if k.startswith("rayleigh/")}
+    planned = _matched_eval(
+        shared_data, tmp_path, "rayleigh", "--snr-db", "1", "--plan-snr-db", "1"
+    )
+    assert planned == {k: v for k, v in got.items() if k.startswith("rayleigh/") and "@1dB" in k}

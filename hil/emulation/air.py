@@ -49,7 +49,7 @@ class AirChannel:
             (integer delays >= 1, complex gains) after the direct path.
         direct_gain: complex gain of the direct path (tap 0).
         path_segments: instead of ``multipath`` and ``direct_gain``, a time-varying
-            multipath of :class:`hil.PathSegment` s (paths with fractional delays in
+            multipath of :class:`hil.emulation.PathSegment` s (paths with fractional delays in
             seconds, complex gains and Doppler shifts; see :mod:`hil.emulation.paths`), e.g. a
             ray-traced channel (:meth:`from_paths`). Empty: the fixed taps above.
         normalize_taps: scale the taps to unit energy (a pure multipath profile; with

@@ -3,7 +3,7 @@
 The boards of a :class:`hil.Emulator` render the air (channel, resampling, noise, the ADC)
 for every sample they deliver; in the receiver's process that work would share the
 interpreter lock with the decoder. Here the boards live in a child process and the host
-sees them through the same pyusb backend (:class:`hil.EmulatorBackend`): enumeration and
+sees them through the same pyusb backend (:class:`hil.emulation.EmulatorBackend`): enumeration and
 descriptors are answered locally, and every control request and bulk transfer goes to the
 child over a local socket, one connection per host thread, so a receive that waits for its
 samples never holds up a transmit. The boards' pacing and their overrun and underrun
@@ -90,7 +90,7 @@ def _serve(options: dict) -> None:
 
 
 class _RemoteRadio:
-    """A board in the child as :class:`hil.EmulatorBackend` sees it: identity and USB state
+    """A board in the child as :class:`hil.emulation.EmulatorBackend` sees it: identity and USB state
     here, requests and transfers there."""
 
     def __init__(self, owner: EmulatorProcess, spec: RadioSpec, index: int):

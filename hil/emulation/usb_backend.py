@@ -1,7 +1,7 @@
 """Emulated HackRF Ones as a pyusb backend (``usb.backend.IBackend``).
 
 The backend enumerates boards like real ones (descriptors, strings, serial through
-GET_DESCRIPTOR) and hands their requests and transfers to :class:`hil.EmulatedHackRF`
+GET_DESCRIPTOR) and hands their requests and transfers to :class:`hil.emulation.EmulatedHackRF`
 (the radio state and its faults, :mod:`hil.emulation.hackrf`); :class:`Emulator` builds the
 boards on one :class:`hil.Medium`. The same :class:`hil.HackRF` code runs on it and on
 real hardware::

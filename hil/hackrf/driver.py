@@ -1,7 +1,7 @@
 """The HackRF One driver on pure pyusb (no libhackrf): settings, receive and transmit.
 
 ``HackRF.open(serial=None, backend=None)`` finds the device with pyusb (any backend: the
-system libusb, or :class:`hil.EmulatorBackend` for tests), claims interface 0 and reads
+system libusb, or :class:`hil.emulation.EmulatorBackend` for tests), claims interface 0 and reads
 its identity. Its knobs (one property each) are those of
 :class:`hil.hackrf.settings.HackRFSettings`; the transport and discovery are in
 :mod:`hil.hackrf.usb_transport`. ``rx`` receives on a dedicated thread in 256 KiB transfers and

@@ -144,7 +144,7 @@ class StreamView:
     Attributes:
         index: the view's place in the stream.
         first_number: the stream-wide number of its first frame.
-        reports: one ``hil.FrameReport`` per frame (``number`` is the frame within the view).
+        reports: one ``hil.ota.FrameReport`` per frame (``number`` is the frame within the view).
         layout: per frame ``(block, offset, length)`` of its data symbols.
         block_size: symbols of the view's block.
         burst: [num_samples] complex64 as sent.
@@ -172,7 +172,7 @@ class StreamView:
         return all(r.detected for r in self.reports)
 
     def result(self) -> BurstResult:
-        """What arrived, as a ``hil.BurstResult`` of one block (no capture kept)."""
+        """What arrived, as a ``hil.ota.BurstResult`` of one block (no capture kept)."""
         return BurstResult(
             [(self.x_hat, self.noise_var)], self.reports, self.burst, np.zeros(0, np.complex64)
         )
@@ -239,7 +239,7 @@ class StreamReceiver:
         ring: the samples, as the driver delivers them.
         views: the stream's views (:func:`build_views`), in sending order.
         cfg: ``hil.OtaConfig``.
-        frames: the frame layer (``hil.PhyFrames``): ``find(iq)`` and ``receive_all(iq, n)``.
+        frames: the frame layer (``hil.ota.PhyFrames``): ``find(iq)`` and ``receive_all(iq, n)``.
         on_view: called with each :class:`StreamView` once it is complete, or once a
             frame of a later view (or the end of the stream) shows it never will be.
         block_samples: new samples per search (at least one frame's worth is sensible).

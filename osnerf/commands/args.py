@@ -95,6 +95,16 @@ def resolution(text: str) -> int:
     return int_in(text, *RESOLUTION_PX_RANGE, "of pixels ")
 
 
+def boolean(text: str) -> bool:
+    """A yes/no option's value: true/false (also yes/no, on/off, 1/0), any case."""
+    t = str(text).strip().lower()
+    if t in ("true", "yes", "on", "1"):
+        return True
+    if t in ("false", "no", "off", "0"):
+        return False
+    raise argparse.ArgumentTypeError(f"must be true or false, got {text!r}")
+
+
 def number(lo: float, hi: float, unit: str = "", *, low_open: bool = False) -> Callable:
     """An argparse type: a finite float in [lo, hi] (``(lo, hi]`` with ``low_open``)."""
     span = f"{'(' if low_open else '['}{lo:g}, {hi:g}]{' ' + unit if unit else ''}"

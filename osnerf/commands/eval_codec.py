@@ -4,14 +4,21 @@ Reads every PNG/JPEG of ``--images`` (each at least 11x11 px: SSIM's Gaussian wi
 ``semcodec.links.schemes.EVAL_MIN_SIDE_PX``), sends each image (one at a time, its own size)
 through every scheme at every SNR, ``--draws`` times over independent noise and fading
 draws, and writes ``{"config", "seed", "git_commit", "versions", "checkpoint": {"name",
-"sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "lpips",
-"num_images", "draws", ...}], "codec": {...}}`` (the codec's record,
+"sha256"}, "results": [{"scheme", "snr_db", "cbr", "psnr", "psnr_ci95", "ssim", "ms_ssim",
+"lpips", "psnr_p5", "psnr_p10", "lost_fraction", "num_images", "draws", ...}], "codec":
+{...}}`` (the codec's record,
 :func:`osnerf.provenance.codec_record`: sha256, trained or not, a plugin's distribution)
 where psnr/ssim/lpips are the mean over images x draws of per-image values (PSNR peak
 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with ``--no-lpips`` or when an
 image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % percentile bootstrap interval
 of that mean over the images x draws values (``[null, null]`` with fewer than
 :data:`CI_MIN_VALUES` of them: too few for an interval).
+MS-SSIM (pytorch-msssim) is null for images under 161 px a side.
+
+What the transmitter knows is apart from the channel: ``--plan-snr-db`` and
+``--snr-error-db`` set its belief (rows then record ``snr_believed_db`` per image and draw,
+as each scheme's transmitter used it: jscc's clipped to its codec's SNR range); without
+them the transmitter knows the true average SNR, as before.
 
 Channels: every name of ``phy.CHANNELS``; flat ones with a one-tap perfect-CSI ZF receiver,
 ``tdl``/``cdl`` over OFDM with pilot LS estimates; the decoder gets the per-symbol noise
@@ -39,6 +46,9 @@ from osnerf.commands.eval_partial import check_partial_kind, partial_path, resum
 
 MAX_DRAWS = 10_000
 MAX_IMAGES = 100_000
+MAX_SNR_ERROR_DB = 20.0
+ESTIMATE_STREAM = 0x5E57
+"""Tag of the SNR-estimate error's random stream (apart from every channel draw)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -101,6 +111,23 @@ def _add_link_arguments(p: argparse.ArgumentParser) -> None:
         help=f"Adam steps of jscc_refined per image and SNR (default {REFINE_STEPS}; about one "
         "CPU second each for a Kodak image)",
     )
+    p.add_argument(
+        "--plan-snr-db",
+        type=checks.snr_db,
+        default=None,
+        help="what every transmitter believes the average SNR is (jscc's encoder SNR, the "
+        "digital MCS); the channel applies --snr-db and the receiver measures its noise "
+        "(default: the true --snr-db, exact knowledge)",
+    )
+    p.add_argument(
+        "--snr-error-db",
+        type=checks.number(0.0, MAX_SNR_ERROR_DB, "dB"),
+        default=0.0,
+        help="each image's SNR estimate is its true SNR (or --plan-snr-db) plus a zero-mean "
+        "Gaussian error of this many dB, drawn per image and draw from --seed, the same for "
+        "every scheme; digital plans over the error, digital_naive as if it were exact "
+        f"(default 0, at most {MAX_SNR_ERROR_DB:g})",
+    )
     p.add_argument("--seed", type=checks.seed, default=0, help="seed of channel noise and fading")
 
 
@@ -159,6 +186,39 @@ INTERVAL_TEXT = (
 )
 
 
+def snr_belief(
+    snr_db: float,
+    plan_snr_db: float | None,
+    snr_error_db: float,
+    seed: int,
+    snr_index: int,
+    image_index: int,
+    draw: int,
+) -> float | None:
+    """What the transmitter believes the average SNR of one draw is: ``plan_snr_db`` (else
+    the truth) plus ``snr_error_db`` times a standard normal from the run's seed, the same
+    for every scheme (its own stream: the channel's draws are untouched). None when it
+    knows the truth exactly (no plan, no error)."""
+    if plan_snr_db is None and not snr_error_db:
+        return None
+    believed = float(snr_db if plan_snr_db is None else plan_snr_db)
+    if snr_error_db:
+        rng = np.random.default_rng([ESTIMATE_STREAM, seed, snr_index, image_index, draw])
+        believed += float(snr_error_db) * float(rng.standard_normal())
+    return believed
+
+
+def outage_stats(psnrs, lost: int, total: int) -> dict:
+    """Per-image outage statistics over images x draws: the 5th and 10th percentile of PSNR
+    and the fraction of images lost (received as nothing)."""
+    v = np.asarray(psnrs, dtype=np.float64)
+    return {
+        "psnr_p5": float(np.percentile(v, 5)),
+        "psnr_p10": float(np.percentile(v, 10)),
+        "lost_fraction": lost / total if total else 0.0,
+    }
+
+
 def mean_ci95(values) -> tuple[float, float | None, float | None]:
     """(mean, low, high): the 95 % percentile bootstrap interval of the mean, resampling
     the values with replacement (a fixed seed: the same values give the same interval). It
@@ -186,6 +246,7 @@ def run(args: argparse.Namespace) -> int:
         fixed_mcs=mcs,
         refine_steps=args.refine_steps,
         refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
+        snr_error_db=args.snr_error_db,
     )
     from phy import channel_record
 
@@ -200,6 +261,9 @@ def run(args: argparse.Namespace) -> int:
         "interval": INTERVAL_TEXT,
         "bounds": {s: LINK_SCHEMES[s].bound for s in schemes if LINK_SCHEMES[s].bound},
         "snr_db": snrs,
+        "plan_snr_db": args.plan_snr_db,
+        "snr_error_db": args.snr_error_db,
+        "transmitter_knows": _knowledge(args.plan_snr_db, args.snr_error_db),
         "cbr": cbr,
         "schemes": schemes,
         "fixed_mcs": mcs,
@@ -207,7 +271,8 @@ def run(args: argparse.Namespace) -> int:
         if any(LINK_SCHEMES[s].refines for s in schemes)
         else None,
         "codec": args.codec,
-        "metric": "mean of per-image PSNR (peak 1.0), SSIM and LPIPS (AlexNet, v0.1)",
+        "metric": "mean of per-image PSNR (peak 1.0), SSIM, MS-SSIM (pytorch-msssim, 5 scales) "
+        "and LPIPS (AlexNet, v0.1)",
         "lpips": score_lpips,
         "lost_image": "mid-grey 0.5",
     }
@@ -249,6 +314,14 @@ def run(args: argparse.Namespace) -> int:
     partial.unlink(missing_ok=True)
     print(f"eval-codec: {len(results)} points -> {out}", file=sys.stderr)
     return 0
+
+
+def _knowledge(plan_snr_db, snr_error_db) -> str:
+    """What the transmitters know of the SNR, in words (for result files)."""
+    base = "the true average SNR" if plan_snr_db is None else f"{plan_snr_db:g} dB, fixed"
+    if not snr_error_db:
+        return base + (" (exact)" if plan_snr_db is None else "")
+    return f"{base} plus a Gaussian error of {snr_error_db:g} dB per image and draw"
 
 
 def _inputs(args: argparse.Namespace):
@@ -344,9 +417,11 @@ def _point(
     from common import psnr
     from renderer import lpips
     from semcodec import LINK_SCHEMES
-    from semcodec.links import ssim
+    from semcodec.links import ms_ssim, ssim
 
-    ps, ss, ls, t0 = [], [], [], time.perf_counter()
+    ps, ss, ms, ls, t0 = [], [], [], [], time.perf_counter()
+    beliefs: list[list[float]] = []
+    forecast = None  # the digital planner's expected number of lost images
     extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
     lost = {"budget": 0, "channel": 0}
     mcs_used: dict[str, int] = {}
@@ -355,12 +430,18 @@ def _point(
     separate = False  # the scheme reported views lost (a separate source-channel code)
     budget = None  # the codec's symbol budget over images x draws (semantic schemes)
     for ii, img in enumerate(images):
-        row = []
+        row, believed = [], []
         for d in range(args.draws):
             gen = torch.Generator().manual_seed(draw_seed(args.seed, ki, ii, d))
-            res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen)
+            plan = snr_belief(snr, args.plan_snr_db, args.snr_error_db, args.seed, ki, ii, d)
+            plan = _within_codec(ctx, scheme, plan)
+            res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen, plan)
+            believed.append(snr if plan is None else plan)
             row.append(psnr(res.images, img))
             ss.append(ssim(res.images, img))
+            ms.append(ms_ssim(res.images, img))
+            if res.stats.get("forecast_loss") is not None:
+                forecast = (forecast or 0.0) + sum(res.stats["forecast_loss"])
             if score_lpips:
                 ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
             for k in extra:
@@ -379,6 +460,7 @@ def _point(
                     stats_keys[k] = res.stats[k]
             bar.update(1)
         ps.append(row)
+        beliefs.append(believed)
     flat = [v for row in ps for v in row]
     mean, lo, hi = mean_ci95(flat)
     r = {
@@ -388,14 +470,22 @@ def _point(
         "psnr": mean,
         "psnr_ci95": [lo, hi],
         "ssim": float(np.mean(ss)),
+        "ms_ssim": None if any(v is None for v in ms) else float(np.mean(ms)),
         "lpips": float(np.mean(ls)) if ls else None,
         "num_images": len(images),
         "draws": args.draws,
         "psnr_per_image": [float(np.mean(row)) for row in ps],
         "psnr_per_draw": ps,
         **extra,
+        **outage_stats(flat, extra["lost_images"], len(flat)),
         "seconds": round(time.perf_counter() - t0, 2),
     }
+    if args.plan_snr_db is not None or args.snr_error_db:  # what it believed, by the truth
+        r["plan_snr_db"] = args.plan_snr_db
+        r["snr_error_db"] = args.snr_error_db
+        r["snr_believed_db"] = beliefs
+    if forecast is not None:  # the planner's forecast of lost images, beside the count
+        r["forecast_lost_images"] = forecast
     if budget is not None:
         r["symbol_budget"] = budget
         r["symbols_unused"] = budget - extra["num_symbols"]
@@ -411,11 +501,23 @@ def _point(
     ci = (
         f"[{lo:.2f}, {hi:.2f}]" if lo is not None else f"(n = {len(flat)}: too few for an interval)"
     )
+    msl = f", MS-SSIM {r['ms_ssim']:.4f}" if r["ms_ssim"] is not None else ""
     print(
-        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM {np.mean(ss):.4f}{lp}",
+        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM {np.mean(ss):.4f}{msl}{lp}",
         file=sys.stderr,
     )
     return r
+
+
+def _within_codec(ctx, scheme: str, plan: float | None) -> float | None:
+    """A belief outside the semantic codec's SNR range is clipped to it (an encoder is told
+    only SNRs it was trained for); other schemes take it as it is."""
+    from semcodec import LINK_SCHEMES
+
+    if plan is None or not LINK_SCHEMES[scheme].needs_codec:
+        return plan
+    lo, hi = ctx.codec.snr_range_db
+    return min(max(plan, lo), hi)
 
 
 def _plot(results: list[dict], path: Path, title: str) -> None:

@@ -124,7 +124,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         required=True,
         type=checks.names_from(framed, "--schemes"),
         help=f"comma-separated, each sent in its own burst: {', '.join(framed)} (digital: "
-        "image codec + LDPC + QAM at --mcs; jscc: the semantic codec at --cbr)",
+        "image codec + LDPC + QAM at --mcs; jscc: the semantic codec at --cbr; softcast: "
+        "DCT chunks at --cbr)",
     )
     p.add_argument(
         "--snr-db",
@@ -331,7 +332,7 @@ def framed_settings(args, symbols_per_frame: int):
     from phy import parse_cbr
     from semcodec import LINK_SCHEMES, require_capabilities
     from semcodec.digital import IMAGE_CODECS
-    from semcodec.links import FramedSettings, frame_payload_bytes
+    from semcodec.links import ANALOG, DIGITAL, FramedSettings, frame_payload_bytes
 
     qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
     if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
@@ -339,6 +340,12 @@ def framed_settings(args, symbols_per_frame: int):
             f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
         )
     cbr, codec = FramedSettings.cbr, None
+    analog = any(LINK_SCHEMES[name].kind == ANALOG for name in args.schemes)
+    if analog and args.cbr is not None:  # an analog scheme sends at --cbr too
+        try:
+            cbr = parse_cbr(args.cbr)
+        except ValueError as e:
+            raise usage_error(f"--{e}") from None
     if any(LINK_SCHEMES[name].needs_codec for name in args.schemes):
         try:
             cbr = parse_cbr(args.cbr)
@@ -350,7 +357,7 @@ def framed_settings(args, symbols_per_frame: int):
         limits = require_capabilities(codec)  # ota does not refine: nothing is refused
         if limits.line():
             print(f"ota: {limits.line()}", file=sys.stderr)
-    digital = any(not LINK_SCHEMES[name].needs_codec for name in args.schemes)
+    digital = any(LINK_SCHEMES[name].kind == DIGITAL for name in args.schemes)
     if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
         raise usage_error(
             f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"

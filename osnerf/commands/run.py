@@ -51,6 +51,9 @@ CONFIG_FIELDS = (
     "ota_air",
     "ota_tx_args",
     "ota_rx_args",
+    "plan_snr_db",
+    "snr_error_db",
+    "digital_box",
 )
 FLAGS = {
     "drone_speed_m_s": "--drone-speed",
@@ -123,6 +126,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             "ground_station_m": checks.ground_station,
             "ring_scale": checks.number(*RADIUS_SCALE_RANGE),
             "max_views": checks.count(1, 512),
+            "plan_snr_db": checks.snr_db,
+            "snr_error_db": checks.number(0.0, 20.0, "dB"),
+            "digital_box": checks.boolean,
         },
         choices={
             "channel": RUN_CHANNELS,

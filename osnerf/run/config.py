@@ -136,6 +136,18 @@ class RunConfig:
             Doppler shifts when ``drone_speed_m_s`` > 0, ``snr_db`` at the median drone
             position as for channel "raytraced"; :mod:`osnerf.run.ota_air`). Real boards'
             air is nobody's to set: "raytraced" is refused for them.
+        plan_snr_db: what every transmitter believes each view's SNR is, in place of the
+            SCU's pilot measurement (jscc's encoder SNR, rate and copies, the digital MCS);
+            None: the measurement. The channel still runs at ``snr_db``.
+        snr_error_db: a zero-mean Gaussian error (dB) added to each view's estimate (the
+            measurement, or ``plan_snr_db``), drawn from the run seed, the same for every
+            scheme; digital plans over it. With either set, digital plans from the estimate,
+            not the link's true average SNR.
+        digital_box: the object-routed digital schemes (digital, digital_genie) send the
+            demanded objects' bounding box of each on-demand view (its position charged to
+            the view's budget, ``semcodec.contract.box_side_symbols``), as codecs that cannot focus do
+            (``semcodec.encode_with_focus``), instead of the whole masked view: the framing of
+            jscc's on-demand region, so the end-to-end gap measures the link.
     """
 
     scene: str = DEFAULT_SCENE
@@ -170,6 +182,15 @@ class RunConfig:
     ota_air: str = "fixed"
     ota_tx_args: str | None = None
     ota_rx_args: str | None = None
+    plan_snr_db: float | None = None
+    snr_error_db: float = 0.0
+    digital_box: bool = False
+
+    @property
+    def transmitter_estimates(self) -> bool:
+        """Whether the transmitters plan from an estimate apart from the link's true SNR
+        (``plan_snr_db`` or ``snr_error_db`` set)."""
+        return self.plan_snr_db is not None or self.snr_error_db > 0
 
     def __post_init__(self):
         from osnerf.schemes import SCHEMES
@@ -190,6 +211,10 @@ class RunConfig:
             raise ValueError(f"schemes must not repeat a name, got {','.join(self.schemes)}")
         if not math.isfinite(self.snr_db):
             raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
+        if self.plan_snr_db is not None and not math.isfinite(self.plan_snr_db):
+            raise ValueError(f"plan_snr_db must be finite or None, got {self.plan_snr_db!r}")
+        if not (math.isfinite(self.snr_error_db) and 0 <= self.snr_error_db <= 20):
+            raise ValueError(f"snr_error_db must be in [0, 20] dB, got {self.snr_error_db!r}")
         if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
             raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
         if self.nerf_steps is not None and not (
@@ -361,8 +386,12 @@ class RunConfig:
         for name in ("ota_tx_args", "ota_rx_args"):  # likewise before devices were named
             if d[name] is None:
                 del d[name]
+        if d["plan_snr_db"] is None and not d["snr_error_db"]:  # exact knowledge: as before
+            del d["plan_snr_db"], d["snr_error_db"]
+        if not d["digital_box"]:  # the whole masked view, as before: same key
+            del d["digital_box"]
         for f in fields(self):  # 60 and 60.0 are the same run (the API takes either)
-            if isinstance(f.default, float):  # the float fields (annotations are strings here)
+            if isinstance(f.default, float) and f.name in d:  # the float fields
                 d[f.name] = float(d[f.name])
         d["codec_sha256"] = self._codec_sha256
         blob = json.dumps({**d, "v": CACHE_VERSION}, sort_keys=True, default=str)

@@ -32,9 +32,10 @@ from osnerf.scu import RatePolicy, SemanticControlUnit
 from semcodec import SemanticCodec
 
 METRIC_NOTES = (
-    "psnr/ssim/lpips: mean over held-out views of per-view values on the whole view "
+    "psnr/ssim/ms_ssim/lpips: mean over held-out views of per-view values on the whole view "
     "(object-routed schemes: against the demanded objects on the background colour, since "
-    "they never send the rest of the scene); lpips: AlexNet LPIPS (lower is better); "
+    "they never send the rest of the scene); ms_ssim: pytorch-msssim, null under 161 px; "
+    "lpips: AlexNet LPIPS (lower is better); "
     "psnr_object: PSNR over the demanded objects' visible pixels (mask > 0.5) of held-out "
     "views showing them; mask_iou: rendered opacity > 0.5 vs the objects' mask (object-routed "
     "schemes only); air = symbols_sent / symbol_rate_hz; seconds.nerf follows --nerf-clock; "
@@ -228,6 +229,8 @@ def run_pipeline(
             width=views.intrinsics.width,
             seed=cfg.seed,
             cache=cache,
+            plan_snr_db=cfg.plan_snr_db,
+            snr_error_db=cfg.snr_error_db,
         )
         ctx = RunContext(
             cfg,

@@ -162,6 +162,11 @@ def _train_and_render(ds, views, held_out, config, seed: int, object_routed: boo
     return rgb, op, training
 
 
+def _mean_or_none(values: list) -> float | None:
+    """The mean, or None when a value is missing (views too small for MS-SSIM)."""
+    return None if not values or any(v is None for v in values) else float(np.mean(values))
+
+
 def _scores(rgb, op, gt, ref, union, seen: list[int], object_routed: bool) -> dict:
     """Scores of the renders ``rgb`` (opacity ``op``) of the held-out views: whole view
     against ``ref``, over the objects against ``gt`` on the views in ``seen``."""
@@ -169,6 +174,7 @@ def _scores(rgb, op, gt, ref, union, seen: list[int], object_routed: bool) -> di
     return {
         "psnr": float(np.mean([renderer.psnr(rgb[k], ref[k]) for k in range(n)])),
         "ssim": float(np.mean([renderer.ssim(rgb[k], ref[k]) for k in range(n)])),
+        "ms_ssim": _mean_or_none([renderer.ms_ssim(rgb[k], ref[k]) for k in range(n)]),
         "lpips": lpips_mean(rgb, ref),
         "psnr_object": float(
             np.mean([renderer.masked_psnr(rgb[k], gt[k], union[k] > 0.5) for k in seen])

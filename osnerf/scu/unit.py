@@ -352,6 +352,8 @@ class SemanticControlUnit:
         width: int,
         seed: int,
         cache,
+        plan_snr_db: float | None = None,
+        snr_error_db: float = 0.0,
     ) -> tuple[RunPlan, Collection]:
         """Measure every link with pilots, then :meth:`plan` the run. The plan and the
         decisions that made it are cached together, so a resumed run logs them as the
@@ -362,6 +364,8 @@ class SemanticControlUnit:
             links: ``osnerf.run.links.RunLinks`` (``links``, ``snr_db``, ``outage``).
             seed: the run seed (the pilots' draws come from it).
             cache: the run's ``StageCache``.
+            plan_snr_db, snr_error_db: what the transmitters believe in place of the
+                measurement, and the error on it (:func:`transmitter_estimate`).
         Returns:
             (the plan, the collection without views in outage).
         Raises:
@@ -383,6 +387,7 @@ class SemanticControlUnit:
         view_links, view_snr = [links.links[v] for v in whole], [links.snr_db[v] for v in whole]
         measured = phy.measure_snr_db(view_links, view_snr, gen)
         fading = phy.measure_copy_fading(view_links, view_snr, gen)  # after: the same draws
+        measured = transmitter_estimate(measured, plan_snr_db, snr_error_db, seed)
         plan = self.plan(
             candidates=collection.candidates,
             on_demand=sent,
@@ -422,3 +427,25 @@ def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
     b = np.asarray(bounds, np.float64)
     pad = pad_fraction * float((b[1] - b[0]).max())
     return np.stack([b[0] - pad, b[1] + pad])
+
+
+def transmitter_estimate(
+    measured_snr_db: np.ndarray, plan_snr_db: float | None, snr_error_db: float, seed: int
+) -> np.ndarray:
+    """Each view's SNR as its transmitter believes it: the pilot measurement (or
+    ``plan_snr_db`` for every view) plus a zero-mean Gaussian error of ``snr_error_db`` drawn
+    from the run seed (its own stream), the same for every scheme. Unchanged with neither.
+
+    Args:
+        measured_snr_db: [num_views] the SCU's measurements.
+    Returns:
+        [num_views] float64.
+    """
+    est = np.asarray(measured_snr_db, dtype=np.float64)
+    if plan_snr_db is not None:
+        est = np.full_like(est, float(plan_snr_db))
+    if snr_error_db:
+        gen = torch.Generator().manual_seed(scheme_seed(seed, "scu", "estimate error"))
+        z = torch.randn(est.shape, generator=gen, dtype=torch.float64).numpy()
+        est = est + float(snr_error_db) * z
+    return est

@@ -11,7 +11,7 @@ back, with the SNR and the rate as inputs:
   Returns :class:`Encoded`: ``symbols`` ``[batch, num_symbols]`` complex64 with
   mean ``|x|^2 = 1`` per image, ``meta`` the side information: any :class:`CodecMeta`
   (``height``, ``width``, ``num_symbols``, ``cbr`` (num_symbols / (3 * height * width)),
-  ``codec_sha256`` and ``side_info_bits()``, bits per image), e.g. :class:`semcodec.EncodedMeta`.
+  ``codec_sha256`` and ``side_info_bits()``, bits per image), e.g. :class:`semcodec.jscc.EncodedMeta`.
 * ``decode(x_hat, meta, snr_db, expected_sha256=None, noise_var=None) -> images``:
   ``x_hat`` ``[batch, num_symbols]`` complex64 *unbiased* equalised symbols (``x + e``),
   ``noise_var`` the effective variance of ``e`` (None: ``10**(-snr_db/10)``; a float,
@@ -46,7 +46,7 @@ reports the symbols sent against the budget (:func:`symbol_budget`): unused budg
 stated, never silent.
 
 A codec that the trainer can train is also a :class:`TrainableCodec`; its
-``forward_train`` sends its symbols through :func:`semcodec.train_channel`, which returns
+``forward_train`` sends its symbols through :func:`semcodec.training.train_channel`, which returns
 what ``decode`` receives at inference.
 
 The contract owns the types and checks both ends of every codec share (:class:`Encoded`,
@@ -147,8 +147,8 @@ class TrainableCodec(SemanticCodec, Protocol):
             x: [batch, 3, height, width] float32 in [0, 1] (height, width multiples of 4).
             snr_db: [batch] float32 Es/N0 per complex symbol.
             cbr: [batch] float32, each a value of ``rate_levels``.
-            channel: a name of ``semcodec.TRAIN_CHANNELS``; apply it to the symbols with
-                ``semcodec.train_channel(symbols, snr_db, channel, generator)``, which
+            channel: a name of ``semcodec.training.TRAIN_CHANNELS``; apply it to the symbols with
+                ``semcodec.training.train_channel(symbols, snr_db, channel, generator)``, which
                 returns ``decode``'s inputs (unbiased estimates, noise variance).
             generator: the channel's noise and fading draws.
         Returns:

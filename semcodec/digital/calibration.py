@@ -8,7 +8,7 @@ the MCS of :data:`phy.digital.MCS_TABLE` that maximises the expected PSNR
 
 where BLER is the probability that some payload codeword of the image fails over the
 channel's fading distribution, PSNR(rate) the image codec's rate-distortion curve (Kodak,
-:data:`semcodec.IMAGE_CODECS`, container stripped) at the MCS's payload bits per pixel, the
+:data:`semcodec.digital.IMAGE_CODECS`, container stripped) at the MCS's payload bits per pixel, the
 best over the scales the image may be sent at (downscaled and upscaled at the receiver,
 :func:`semcodec.digital.image_codecs.encode_scaled_to_budget`), and PSNR(lost) that of the mid-grey
 a lost image is shown as. Deep fades cost outages.
@@ -35,6 +35,11 @@ Image BLER with ``C`` codewords (they are independent given the fade):
   non-central chi-square (Rician, the channel's default K), by quadrature on a log grid.
 
 Channels without a curve of their own use the nearest calibrated one (:data:`ALIASES`).
+
+Planning from an estimate (``snr_error_db`` > 0): the transmitter's SNR estimate is the true
+average SNR plus a zero-mean Gaussian error of ``snr_error_db``; given the estimate, the
+true SNR is (flat prior) the estimate plus that error, and every loss probability above is
+averaged over it (:func:`error_grid`): a link adapter's back-off, priced rather than fixed.
 """
 
 from __future__ import annotations
@@ -134,6 +139,24 @@ def fade_grid(kind: str, k_factor_db: float = RICIAN_K_DB) -> tuple[np.ndarray, 
     return mid, w / w.sum()
 
 
+ERROR_GRID_STEP = 0.05
+ERROR_GRID_SIGMAS = 5.0
+
+
+@functools.lru_cache(maxsize=1)
+def error_grid() -> tuple[np.ndarray, np.ndarray]:
+    """Quadrature of a standard normal error ``z``: (z [num_points], weight [num_points]),
+    ``sum(weight) == 1``, exact CDF differences between midpoints on [-5, 5] in steps of
+    0.05 (the loss curves are near steps, which Gauss-Hermite nodes would miss)."""
+    from scipy.stats import norm
+
+    edges = np.arange(-ERROR_GRID_SIGMAS, ERROR_GRID_SIGMAS + 1e-9, ERROR_GRID_STEP)
+    cdf = norm.cdf(edges)
+    cdf[0], cdf[-1] = 0.0, 1.0
+    w = np.diff(cdf)
+    return 0.5 * (edges[1:] + edges[:-1]), w / w.sum()
+
+
 # ----------------------------------------------------------------------------- the table
 class DigitalCalibration:
     """Lookups in the shipped calibration table (see the module docstring)."""
@@ -171,20 +194,46 @@ class DigitalCalibration:
         s = np.interp(x, [math.log2(e) for e in es], [fits[str(e)]["s_db"] for e in es])
         return _q((np.asarray(snr_db, dtype=np.float64) - t) / s)
 
-    def image_bler(self, channel: str, mcs: str, snr_db: float, num_symbols: int) -> float:
+    def image_bler(
+        self,
+        channel: str,
+        mcs: str,
+        snr_db: float,
+        num_symbols: int,
+        snr_error_db: float = 0.0,
+    ) -> float:
         """Probability that an image of ``num_symbols`` symbols at ``mcs`` is lost to the
-        channel (some codeword fails) at average SNR ``snr_db`` over ``channel``'s fades."""
+        channel (some codeword fails) at average SNR ``snr_db`` over ``channel``'s fades.
+
+        ``snr_error_db`` > 0: ``snr_db`` is an estimate, the true average SNR is ``snr_db +
+        snr_error_db * z`` with z ~ N(0, 1), and the probability is averaged over z (one
+        failed codeword still loses the whole image: ``1 - (1 - p)^C`` inside the average).
+        """
         from phy.digital import codeword_layout
 
         self.source(channel)
+        if snr_error_db < 0:
+            raise ValueError(f"snr_error_db must be >= 0, got {snr_error_db}")
         lay = codeword_layout(int(num_symbols), mcs)
         c, e = lay.num_codewords, lay.coded_bits(0)
+        if snr_error_db > 0:
+            z, wz = error_grid()
+            snrs = float(snr_db) + float(snr_error_db) * z  # [num_error_points]
+        else:
+            snrs, wz = None, None
         if channel in BLOCK_FADING:
             base, fade = BLOCK_FADING[channel]
             gain_db, w = fade_grid(fade)
-            p = self.codeword_bler(base, mcs, float(snr_db) + gain_db, e)
+            if snrs is not None:  # [num_error_points, num_fade_points]
+                p = self.codeword_bler(base, mcs, snrs[:, None] + gain_db[None, :], e)
+                w = wz[:, None] * w[None, :]
+            else:
+                p = self.codeword_bler(base, mcs, float(snr_db) + gain_db, e)
             return float(np.sum(w * -np.expm1(c * np.log1p(-np.minimum(p, 1 - 1e-15)))))
         curve = ALIASES.get(channel, channel)
+        if snrs is not None:
+            p = self.codeword_bler(curve, mcs, snrs, e)
+            return float(np.sum(wz * -np.expm1(c * np.log1p(-np.minimum(p, 1 - 1e-15)))))
         p = float(self.codeword_bler(curve, mcs, float(snr_db), e))
         return float(-math.expm1(c * math.log1p(-min(p, 1 - 1e-15))))
 
@@ -217,6 +266,7 @@ class DigitalCalibration:
         num_pixels: int,
         image_codec: str = "avif",
         min_bytes=None,
+        snr_error_db: float = 0.0,
     ) -> float:
         """E[PSNR] of sending at ``mcs``: (1 - BLER) PSNR(rate) + BLER PSNR(lost).
 
@@ -224,8 +274,28 @@ class DigitalCalibration:
         each scale it may be sent at (the transmitter knows them), or one number for the
         full image alone; the scales whose smallest file exceeds the payload capacity are
         out, and with none left the image is lost with certainty. None: every scale of the
-        table, at least one byte each.
+        table, at least one byte each. ``snr_error_db``: the estimate's error (BLER averaged
+        over it, :meth:`image_bler`).
         """
+        from phy.digital import payload_capacity_bits
+
+        if not self.fits(mcs, num_symbols, image_codec, min_bytes):
+            return self.lost_psnr_db
+        cap = payload_capacity_bits(int(num_symbols), mcs)
+        bler = self.image_bler(channel, mcs, snr_db, num_symbols, snr_error_db)
+        good = self.psnr_at_bpp(
+            image_codec,
+            cap / float(num_pixels),
+            self._fitting(mcs, num_symbols, image_codec, min_bytes),
+        )
+        return (1.0 - bler) * good + bler * self.lost_psnr_db
+
+    def fits(self, mcs: str, num_symbols: int, image_codec: str = "avif", min_bytes=None) -> bool:
+        """Whether some file of the image fits ``mcs``'s payload in ``num_symbols`` (see
+        :meth:`expected_psnr` for ``min_bytes``); False: lost to the budget for certain."""
+        return bool(self._fitting(mcs, num_symbols, image_codec, min_bytes))
+
+    def _fitting(self, mcs, num_symbols, image_codec, min_bytes) -> list[int]:
         from phy.digital import payload_capacity_bits
 
         if min_bytes is None:
@@ -235,12 +305,24 @@ class DigitalCalibration:
         else:
             smallest = {1: int(min_bytes)}
         cap = payload_capacity_bits(int(num_symbols), mcs)
-        fits = [s for s, b in smallest.items() if cap >= 8 * max(int(b), 1)]
-        if not fits:
-            return self.lost_psnr_db
-        bler = self.image_bler(channel, mcs, snr_db, num_symbols)
-        good = self.psnr_at_bpp(image_codec, cap / float(num_pixels), fits)
-        return (1.0 - bler) * good + bler * self.lost_psnr_db
+        return [s for s, b in smallest.items() if cap >= 8 * max(int(b), 1)]
+
+    def image_loss(
+        self,
+        channel: str,
+        mcs: str,
+        snr_db: float,
+        num_symbols: int,
+        image_codec: str = "avif",
+        min_bytes=None,
+        snr_error_db: float = 0.0,
+    ) -> float:
+        """The planner's forecast that the image is lost at ``mcs``: 1 when no file fits,
+        else :meth:`image_bler` (the probability that a measured fraction of lost images
+        should match)."""
+        if not self.fits(mcs, num_symbols, image_codec, min_bytes):
+            return 1.0
+        return self.image_bler(channel, mcs, snr_db, num_symbols, snr_error_db)
 
     def choose_mcs(
         self,
@@ -250,20 +332,31 @@ class DigitalCalibration:
         num_pixels: int,
         image_codec: str = "avif",
         min_bytes=None,
+        snr_error_db: float = 0.0,
     ) -> tuple[str, float]:
         """(MCS name, its expected PSNR): the argmax of :meth:`expected_psnr` over
         :data:`phy.digital.MCS_TABLE` (ties: the lower rate). No channel draw is consulted.
-        Answers are memoised per argument set."""
+        ``snr_db`` is what the transmitter believes; ``snr_error_db`` the standard deviation
+        of its belief's error (0: it plans as if it were exact). Answers are memoised per
+        argument set."""
         from phy.digital import MCS_TABLE
 
         smallest = tuple(sorted(min_bytes.items())) if isinstance(min_bytes, Mapping) else min_bytes
-        key = (channel, float(snr_db), int(num_symbols), int(num_pixels), image_codec, smallest)
+        key = (
+            channel,
+            float(snr_db),
+            int(num_symbols),
+            int(num_pixels),
+            image_codec,
+            smallest,
+            float(snr_error_db),
+        )
         if key in self._choices:
             return self._choices[key]
         best = None
         for name in MCS_TABLE:
             v = self.expected_psnr(
-                channel, name, snr_db, num_symbols, num_pixels, image_codec, min_bytes
+                channel, name, snr_db, num_symbols, num_pixels, image_codec, min_bytes, snr_error_db
             )
             if best is None or v > best[1] + 1e-9:
                 best = (name, v)

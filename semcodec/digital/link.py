@@ -180,6 +180,8 @@ def transmit_digital(
     image_codec: str = "avif",
     generator: torch.Generator | None = None,
     channel: str | None = None,
+    plan_snr_db=None,
+    snr_error_db: float = 0.0,
 ) -> TransmitResult:
     """Image codec + CRC + 5G LDPC + QAM through ``link`` in ``num_symbols`` symbols per image.
 
@@ -204,18 +206,23 @@ def transmit_digital(
     Args:
         images: [batch, 3, height, width] float32 in [0, 1].
         link: ``phy.FlatLink`` / ``phy.OFDMLink`` with ``equalizer="zf"``.
-        snr_db: average Es/N0 in dB (what the transmitter knows).
+        snr_db: the channel's true average Es/N0 in dB (what the link applies).
         num_symbols: channel symbols per image.
-        image_codec: a name of ``semcodec.IMAGE_CODECS``.
+        image_codec: a name of ``semcodec.digital.IMAGE_CODECS``.
         generator: the draws; each image takes one seed from it (the same seed for every
             try of the genie, so the same fade and noise).
         channel: ``phy.CHANNELS`` name of the link's channel for ``"auto"`` (and the genie's
             starting point) (default: told from ``link``; see ``phy.channel_kind``). Needed
             for links whose channel type does not tell (``raytraced`` per-position links); a
             genie without it searches from the lowest MCS.
+        plan_snr_db: what the transmitter believes the average SNR is, the MCS's input: a
+            float or one per image (default ``snr_db``: exact knowledge).
+        snr_error_db: the standard deviation of that belief's error (dB) that ``"auto"``
+            plans over (:meth:`DigitalCalibration.choose_mcs`); 0 plans as if it were exact.
     Returns:
         TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images,
-        views_lost {"budget", "channel"}, mcs / quality / scale / expected_psnr per image,
+        views_lost {"budget", "channel"}, mcs / quality / scale / expected_psnr /
+        forecast_loss (the planner's probability that the image is lost) per image,
         resample_filter,
         mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
         calibrated).
@@ -231,11 +238,16 @@ def transmit_digital(
 
         table = load_calibration()
         calibration = table.source(kind)
+    if not snr_error_db >= 0:
+        raise ValueError(f"snr_error_db must be >= 0, got {snr_error_db}")
+    plans = _per_image(snr_db if plan_snr_db is None else plan_snr_db, len(x))
     gen = generator or torch.Generator().manual_seed(0)
     out, infos = [], []
-    for img in x:
+    for img, plan in zip(x, plans):
         seed = int(torch.randint(0, 2**62, (1,), generator=gen))
-        rec, ok, info = _send_image(img, mode, kind, table, link, snr_db, n, image_codec, seed)
+        rec, ok, info = _send_image(
+            img, mode, kind, table, link, snr_db, n, image_codec, seed, plan, snr_error_db
+        )
         info["ok"] = ok
         out.append(rec)
         infos.append(info)
@@ -244,33 +256,65 @@ def transmit_digital(
         stats["channel"] = kind
         stats["calibration"] = calibration
         stats["expected_psnr"] = [i["expected_psnr"] for i in infos]
+        stats["forecast_loss"] = [i["forecast_loss"] for i in infos]
     if mode == GENIE:
         stats["tries"] = sum(i["tries"] for i in infos)
     return TransmitResult(torch.stack(out), stats)
 
 
-def _send_image(img, mode, kind, table, link, snr_db, n: int, image_codec: str, seed: int):
+def _per_image(snr_db, batch: int) -> list[float]:
+    """A float or one value per image -> one float per image."""
+    if isinstance(snr_db, (int, float)):
+        return [float(snr_db)] * batch
+    v = [float(s) for s in torch.as_tensor(snr_db, dtype=torch.float64).reshape(-1)]
+    if len(v) == 1:
+        return v * batch
+    if len(v) != batch:
+        raise ValueError(f"plan_snr_db: {len(v)} values for {batch} images")
+    return v
+
+
+def _send_image(
+    img,
+    mode,
+    kind,
+    table,
+    link,
+    snr_db,
+    n: int,
+    image_codec: str,
+    seed: int,
+    plan_snr_db: float,
+    snr_error_db: float = 0.0,
+):
     """One image at the MCS that ``mode`` gives it: a fixed one; ``"auto"``'s choice from the
-    calibration ``table`` for channel ``kind``; or the genie's search from that choice (from
-    the lowest MCS without a ``kind``). Returns :func:`_send_digital`'s (received, ok, info),
-    with ``info["expected_psnr"]`` where the table chose."""
+    calibration ``table`` for channel ``kind`` planned at ``plan_snr_db`` (over an error of
+    ``snr_error_db``); or the genie's search from that choice (from the lowest MCS without a
+    ``kind``). Returns :func:`_send_digital`'s (received, ok, info), with
+    ``info["expected_psnr"]`` and ``info["forecast_loss"]`` where the table chose."""
     from phy.digital import MCS_TABLE
 
     if mode not in MCS_MODES:
         return _send_digital(img, mode, link, snr_db, n, image_codec, seed)
     names = list(MCS_TABLE)
-    choice, expected = names[0], None
+    choice, expected, forecast = names[0], None, None
     if kind is not None:
         h, w = img.shape[1:]
         min_bytes = smallest_files(img, image_codec)
-        choice, expected = table.choose_mcs(kind, snr_db, n, h * w, image_codec, min_bytes)
+        choice, expected = table.choose_mcs(
+            kind, plan_snr_db, n, h * w, image_codec, min_bytes, snr_error_db
+        )
         expected = round(expected, 3)
+        forecast = table.image_loss(
+            kind, choice, plan_snr_db, n, image_codec, min_bytes, snr_error_db
+        )
     if mode == AUTO:
         rec, ok, info = _send_digital(img, choice, link, snr_db, n, image_codec, seed)
     else:
         start = names.index(choice)
         rec, ok, info = _genie(img, start, names, link, snr_db, n, image_codec, seed)
     info["expected_psnr"] = expected
+    info["forecast_loss"] = forecast
     return rec, ok, info
 
 

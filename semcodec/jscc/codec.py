@@ -49,7 +49,7 @@ DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "defa
 class Codec(LayerPlanner, ChannelTruncationCodec):
     """A loaded JSCC (encoder + decoder) with its model card and hash: semcodec's own
     :class:`semcodec.SemanticCodec` and :class:`semcodec.TrainableCodec` (registry name
-    ``jscc``; architectures :data:`semcodec.JSCC_ARCHITECTURES`)."""
+    ``jscc``; architectures :data:`semcodec.jscc.JSCC_ARCHITECTURES`)."""
 
     supports_focus = True
     analog_layer = True
@@ -70,7 +70,7 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
     """Architectures :meth:`untrained` builds; the first is the default."""
 
     def untrained(self, architecture: str | None = None) -> Codec:
-        """A fresh JSCC of ``architecture`` (a :data:`semcodec.JSCC_ARCHITECTURES` name; None = the first
+        """A fresh JSCC of ``architecture`` (a :data:`semcodec.jscc.JSCC_ARCHITECTURES` name; None = the first
         of :attr:`architectures`)."""
         model = make_model(architecture or self.architectures[0])
         name = model.cfg.name

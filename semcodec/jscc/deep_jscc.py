@@ -12,7 +12,7 @@ Rate by channel truncation: the encoder's output at 1/4 resolution holds
 ``m / 48``. Trained with random ``m`` (the trainer's rate levels), the first channels learn
 to carry the most. The decoder sees the LMMSE estimates ``x_hat / (1 + noise_var)`` with
 dropped channels at zero; it has no focus mode (``supports_focus = False``: focus callers
-use :func:`semcodec.focus_by_box`).
+use :func:`semcodec.contract.focus_by_box`).
 """
 
 from __future__ import annotations

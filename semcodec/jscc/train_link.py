@@ -1,6 +1,6 @@
 """Training-time pieces of semcodec's own JSCC: the differentiable link and warm starts.
 
-:class:`semcodec.Codec` exposes them as its :class:`semcodec.TrainableCodec` methods.
+:class:`semcodec.jscc.Codec` exposes them as its :class:`semcodec.TrainableCodec` methods.
 """
 
 from __future__ import annotations

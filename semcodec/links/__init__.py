@@ -20,9 +20,11 @@ from semcodec.links.schemes import (
     EvalContext,
     eval_channels,
     load_image_folder,
+    ms_ssim,
     schemes_help,
     ssim,
 )
+from semcodec.links.softcast import transmit_softcast
 from semcodec.links.uncoded import transmit_analog
 
 __all__ = [
@@ -42,7 +44,9 @@ __all__ = [
     "eval_channels",
     "frame_payload_bytes",
     "load_image_folder",
+    "ms_ssim",
     "schemes_help",
     "ssim",
     "transmit_analog",
+    "transmit_softcast",
 ]

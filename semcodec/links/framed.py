@@ -41,7 +41,7 @@ class FramedSettings:
         snr_db: the air's average Es/N0 in dB (the JSCC encoder's SNR input).
         symbols_per_frame: channel symbols per frame, >= 1.
         mcs: digital: a name of ``phy.digital.MCS_TABLE``.
-        image_codec: digital: a name of ``semcodec.IMAGE_CODECS``.
+        image_codec: digital: a name of ``semcodec.digital.IMAGE_CODECS``.
         quality: digital: the image codec's quality setting.
         scale: digital: the image is sent downscaled by this factor of
             ``semcodec.digital.image_codecs.SCALES`` and upscaled at the receiver (1: whole).

@@ -1,8 +1,16 @@
 """Scheme registry and per-image scoring for ``osnerf eval-codec`` and the benchmark.
 
 :data:`LINK_SCHEMES`: name -> :class:`LinkScheme`, called as ``scheme(ctx, image [1, 3, H, W],
-snr_db, cbr, generator) -> TransmitResult``. One table; unknown names raise KeyError listing
-the known ones. ``digital_genie`` and ``ideal*`` are bounds (``LinkScheme.bound``).
+snr_db, cbr, generator, plan_snr_db=None) -> TransmitResult``. One table; unknown names raise
+KeyError listing the known ones. ``digital_genie`` and ``ideal*`` are bounds
+(``LinkScheme.bound``).
+
+What the transmitter knows is apart from the channel: ``snr_db`` is the channel's true
+average SNR (the link applies it; the receiver measures its noise), ``plan_snr_db`` what the
+transmitter believes (default: the truth). Every transmitter plans from the belief (the
+jscc encoder's SNR, the digital MCS); ``ctx.snr_error_db`` is the spread of the belief's
+error that ``digital`` plans over (``digital_naive`` ignores it). Bounds (``ideal``, the
+genie's draw) keep the truth.
 """
 
 from __future__ import annotations
@@ -22,6 +30,7 @@ from semcodec.digital.link import AUTO, GENIE, transmit_digital, transmit_ideal
 from semcodec.jscc.codec import Codec, learned_only
 from semcodec.jscc.link import REFINE_STEPS, refine_symbols, transmit_jscc
 from semcodec.links.framed import DIGITAL_FRAMED, JSCC_FRAMED, FramedScheme
+from semcodec.links.softcast import framed_softcast, transmit_softcast
 from semcodec.links.uncoded import transmit_analog
 
 DEFAULT_FIXED_MCS = "16qam-1/2"
@@ -52,6 +61,9 @@ class EvalContext:
     """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc.link.refine_symbols`)."""
     refine_seed: int = 0
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
+    snr_error_db: float = 0.0
+    """Standard deviation (dB) of the transmitter's SNR estimate's error, which ``digital``
+    plans over (0: it plans as if the estimate were exact)."""
 
     def link(self):
         """The ``phy`` link of ``channel`` (built once, ``phy.channel_link``)."""
@@ -74,16 +86,16 @@ def _n(img, cbr) -> int:
 
 
 def _send_jscc(refine: bool, layer: bool = True):
-    def run(ctx, img, snr, cbr, gen):
-        key = (id(img), float(snr), float(cbr), refine, layer)
+    def run(ctx, img, snr, cbr, gen, plan):
+        key = (id(img), float(plan), float(cbr), refine, layer)
         if key not in ctx.encodings:  # the transmitter's symbols: once for all draws
             ctx.encodings.clear()
             tx_codec = ctx.codec if layer else learned_only(ctx.codec)
-            enc = encode_with_focus(tx_codec, img, snr, cbr)
+            enc = encode_with_focus(tx_codec, img, plan, cbr)
             if refine:  # on the transmitter's own draws, never the evaluation's
                 tx = torch.Generator().manual_seed(ctx.refine_seed)
                 enc = refine_symbols(
-                    ctx.codec, img, enc, ctx.link(), snr, ctx.refine_steps, generator=tx
+                    ctx.codec, img, enc, ctx.link(), plan, ctx.refine_steps, generator=tx
                 )
             ctx.encodings[key] = (img, enc)
         enc = ctx.encodings[key][1]
@@ -92,8 +104,8 @@ def _send_jscc(refine: bool, layer: bool = True):
     return run
 
 
-def _digital(codec_name, mcs=AUTO):
-    def run(ctx, img, snr, cbr, gen):
+def _digital(codec_name, mcs=AUTO, over_error: bool = True):
+    def run(ctx, img, snr, cbr, gen, plan):
         m = ctx.fixed_mcs if mcs is None else mcs
         return transmit_digital(
             img,
@@ -104,20 +116,26 @@ def _digital(codec_name, mcs=AUTO):
             image_codec=codec_name,
             generator=gen,
             channel=ctx.channel,
+            plan_snr_db=plan,
+            snr_error_db=ctx.snr_error_db if over_error else 0.0,
         )
 
     return run
 
 
 def _ideal(codec_name):
-    def run(ctx, img, snr, cbr, gen):
+    def run(ctx, img, snr, cbr, gen, plan):  # a bound: the truth, whatever was believed
         return transmit_ideal(img, snr, _n(img, cbr), image_codec=codec_name)
 
     return run
 
 
-def _analog(ctx, img, snr, cbr, gen):
+def _analog(ctx, img, snr, cbr, gen, plan):  # plans nothing: no SNR at the transmitter
     return transmit_analog(img, ctx.link(), snr, _n(img, cbr), generator=gen)
+
+
+def _softcast(ctx, img, snr, cbr, gen, plan):  # plans nothing: no SNR at the transmitter
+    return transmit_softcast(img, ctx.link(), snr, _n(img, cbr), generator=gen)
 
 
 SCHEME_KINDS = (JSCC, DIGITAL, IDEAL, ANALOG) = ("jscc", "digital", "ideal", "analog")
@@ -141,7 +159,7 @@ class LinkScheme:
         mcs: how a digital scheme picks its modulation and code rate: ``"auto"`` (from the
             average SNR), ``"genie"`` (from the draw: a bound) or ``"fixed"`` (``--mcs``);
             None for the other kinds.
-        image_codec: the ``semcodec.IMAGE_CODECS`` name a separate (digital, ideal) scheme
+        image_codec: the ``semcodec.digital.IMAGE_CODECS`` name a separate (digital, ideal) scheme
             compresses with; None for the others.
     """
 
@@ -166,8 +184,11 @@ class LinkScheme:
         """Whether it sends through the semantic codec (``ctx.codec`` must be loaded)."""
         return self.kind == JSCC
 
-    def __call__(self, ctx, img, snr_db, cbr, generator) -> TransmitResult:
-        return self.run(ctx, img, snr_db, cbr, generator)
+    def __call__(self, ctx, img, snr_db, cbr, generator, plan_snr_db=None) -> TransmitResult:
+        """Send ``img`` over the channel at ``snr_db``; the transmitter plans from
+        ``plan_snr_db`` (default ``snr_db``: exact knowledge)."""
+        plan = snr_db if plan_snr_db is None else plan_snr_db
+        return self.run(ctx, img, snr_db, cbr, generator, plan)
 
 
 _GENIE = "bound: knows this draw's fade and noise, the best MCS that decodes on it"
@@ -198,6 +219,14 @@ LINK_SCHEMES = Registry[LinkScheme](
             mcs=AUTO,
             image_codec="avif",
         ),
+        "digital_naive": LinkScheme(
+            _digital("avif", over_error=False),
+            "AVIF + 5G LDPC + QAM, the MCS from the SNR estimate as if it were exact (no "
+            "back-off for its error)",
+            DIGITAL,
+            mcs=AUTO,
+            image_codec="avif",
+        ),
         "digital_genie": LinkScheme(
             _digital("avif", GENIE),
             f"AVIF, {_GENIE}",
@@ -215,6 +244,13 @@ LINK_SCHEMES = Registry[LinkScheme](
         ),
         "ideal": LinkScheme(_ideal("avif"), f"AVIF, {_IDEAL}", IDEAL, _IDEAL, image_codec="avif"),
         "analog": LinkScheme(_analog, "uncoded pixels, LMMSE at the receiver", ANALOG),
+        "softcast": LinkScheme(
+            _softcast,
+            "SoftCast: DCT chunks, lowest-energy dropped, power from chunk variances, LLSE at "
+            "the receiver, metadata in the budget (training-free analog)",
+            ANALOG,
+            framed=framed_softcast(),
+        ),
         "digital_webp": LinkScheme(
             _digital("webp"),
             "WebP + LDPC + QAM, MCS from the average SNR",
@@ -292,3 +328,19 @@ def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
             use_sample_covariance=False,
         )
     )
+
+
+MS_SSIM_MIN_SIDE_PX = 161
+"""The smallest side MS-SSIM's five scales with an 11-px window accept (pytorch-msssim:
+more than (11 - 1) * 2^4 px)."""
+
+
+def ms_ssim(x: torch.Tensor, y: torch.Tensor) -> float | None:
+    """MS-SSIM (pytorch-msssim, five scales, 11-px Gaussian window, RGB in [0, 1]) of one
+    image pair [1, 3, H, W]; None when a side is under :data:`MS_SSIM_MIN_SIDE_PX`."""
+    if min(y.shape[-2:]) < MS_SSIM_MIN_SIDE_PX:
+        return None
+    from pytorch_msssim import ms_ssim as _ms_ssim
+
+    with torch.no_grad():
+        return float(_ms_ssim(x.clamp(0, 1).float(), y.float(), data_range=1.0, size_average=True))

@@ -21,7 +21,7 @@ class TrainConfig:
             or ``NAME:CHECKPOINT`` to start from that checkpoint's weights (as ``init``).
         model: the codec's architecture, one of its ``architectures`` (None: the codec's
             first, its default; :func:`semcodec.training.loop.with_architecture` fills it in).
-        channel: training channel in ``semcodec.TRAIN_CHANNELS``, or a comma-separated
+        channel: training channel in ``semcodec.training.TRAIN_CHANNELS``, or a comma-separated
             mixture of them (one drawn uniformly per step).
         crop_px: side of the square random crops.
         batch_size: crops per step.

@@ -23,10 +23,10 @@ PLAN = RunPlan(
 
 
 def test_a_scheme_carries_out_one_part_of_each_view():
-    assert PLAN.for_scheme(object_routed=True) == [ViewSend(3, 0.0, FOCUS)]
+    assert PLAN.for_scheme(object_routed=True) == [ViewSend(3, 0.0, FOCUS, 0.0)]
     assert PLAN.for_scheme(object_routed=False) == [
-        ViewSend(3, 0.0, WHOLE),
-        ViewSend(4, 1.0, WHOLE),
+        ViewSend(3, 0.0, WHOLE, 0.0),
+        ViewSend(4, 1.0, WHOLE, 0.5),  # the truth and what the transmitter believes
     ]
     assert [p.view for p in PLAN.on_demand()] == [3] and PLAN.outage == (5,)
     assert PLAN.full_scene_symbols == 1200
@@ -93,3 +93,27 @@ def test_report_views_have_int_keys_and_json_string_keys():
     }
     assert d["views"]["plan"][0]["focus"]["symbols"] == 400
     assert Report.from_dict({"seed": 0, **d}) == report
+
+
+def test_the_transmitters_estimate_is_the_measurement_plan_or_both_with_a_seeded_error():
+    """Unchanged with exact knowledge; a fixed plan replaces every view's measurement; the
+    error is zero-mean with the asked spread, the same for the same seed, and a config with
+    exact knowledge keeps the cache key it always had."""
+    import numpy as np
+    import pytest
+
+    from osnerf.run.config import RunConfig
+    from osnerf.scu.unit import transmitter_estimate
+
+    measured = np.linspace(-5.0, 10.0, 4000)
+    assert np.array_equal(transmitter_estimate(measured, None, 0.0, 7), measured)
+    assert np.array_equal(transmitter_estimate(measured, 4.0, 0.0, 7), np.full(4000, 4.0))
+    err = transmitter_estimate(measured, None, 2.0, 7) - measured
+    assert abs(err.mean()) < 4 * 2.0 / np.sqrt(4000)
+    assert err.std() == pytest.approx(2.0, rel=0.05)
+    assert np.array_equal(transmitter_estimate(measured, None, 2.0, 7) - measured, err)
+    assert not np.array_equal(transmitter_estimate(measured, None, 2.0, 8) - measured, err)
+    assert RunConfig(snr_error_db=0.0, plan_snr_db=None).key() == RunConfig().key()
+    assert RunConfig(snr_error_db=2.0).key() != RunConfig().key()
+    assert RunConfig(plan_snr_db=4.0).key() != RunConfig().key()
+    assert not RunConfig().transmitter_estimates and RunConfig(snr_error_db=1).transmitter_estimates

@@ -257,7 +257,9 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     plans = [ViewSend(v, 5.0, part) for v in range(4)]
     out = {}
     for steps in (0, 30):
-        cfg = SimpleNamespace(seed=0, channel="awgn", refine_steps=steps)
+        cfg = SimpleNamespace(
+            seed=0, channel="awgn", refine_steps=steps, transmitter_estimates=False
+        )
         run_plan = RunPlan((), (), oversampling=1, height=48, width=48, static_link=False)
         ctx = RunContext(cfg, dict.fromkeys(range(4), link), run_plan, codec, codec, np.ones(3))
         out[steps] = SCHEMES["full"]().transmit(ctx, plans, images)
@@ -276,3 +278,23 @@ def test_the_refining_transmitter_simulates_one_tap_per_symbol():
     for name in ("raytraced", "ota", "tdl", "cdl"):
         link = refine_model_link(name)
         assert isinstance(link, phy.FlatLink) and phy.channel_kind(link) == "rayleigh_fast", name
+
+
+def test_digital_box_is_the_objects_bounding_box_and_the_rest_is_background():
+    """--digital-box: the box covers every pixel off the background colour (grown to the
+    focus box's 8 px grid), and the receiver's canvas is the background outside it."""
+    import numpy as np
+    import torch
+
+    from osnerf.schemes import object_box, paste_box
+
+    bg = np.array([0.2, 0.4, 0.6], np.float32)
+    img = torch.as_tensor(bg).reshape(3, 1, 1).expand(3, 64, 96).clone()
+    img[:, 20:30, 41:50] = 0.9  # the object
+    top, left, rows, cols = object_box(img, bg)
+    assert top <= 20 and top + rows >= 30 and left <= 41 and left + cols >= 50
+    assert all(v % 8 == 0 for v in (top, left, rows, cols)) and rows * cols < 64 * 96 / 4
+    got = paste_box(img[:, top : top + rows, left : left + cols], img, bg, (top, left, rows, cols))
+    assert torch.equal(got, img)  # a perfect box reproduces the masked view
+    empty = torch.as_tensor(bg).reshape(3, 1, 1).expand(3, 64, 96).clone()
+    assert object_box(empty, bg) == (0, 0, 64, 96)

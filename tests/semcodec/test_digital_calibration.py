@@ -237,3 +237,46 @@ def test_the_link_records_the_scale_it_sent_and_the_image_round_trips_at_it():
     assert st["lost_images"] == 0 and st["scale"][0] > 1 and st["resample_filter"] == "lanczos"
     assert MCS_TABLE[st["mcs"][0]].code_rate < 0.2
     assert psnr(res.images, x) > 25
+
+
+@pytest.mark.parametrize("mcs,snr_db", [("qpsk-1/2", 1.0), ("16qam-1/2", 6.0), ("qpsk-1/3", -3.0)])
+def test_loss_over_an_estimate_error_is_the_loss_averaged_over_a_gaussian(cal, mcs, snr_db):
+    """Planning from an estimate with a Gaussian error of S dB: P(lost) = int phi(z)
+    [1 - (1 - p(snr + S z))^C] dz (adaptive quadrature); S = 0 is the exact-knowledge value,
+    to the bit."""
+    n = 512 * 768 * 3 // 16
+    lay = codeword_layout(n, mcs)
+    c, e = lay.num_codewords, lay.coded_bits(0)
+    s = 2.0
+
+    def lost(z):
+        p = float(cal.codeword_bler("awgn", mcs, snr_db + s * z, e))
+        return (1.0 - (1.0 - p) ** c) * math.exp(-0.5 * z * z) / math.sqrt(2 * math.pi)
+
+    t = _longest(cal, "awgn", mcs)["t_db"]
+    ref = quad(lost, -8, 8, points=[(t - snr_db) / s], limit=400, epsabs=1e-10)[0]
+    assert cal.image_bler("awgn", mcs, snr_db, n, s) == pytest.approx(ref, rel=5e-3, abs=1e-5)
+    assert cal.image_bler("awgn", mcs, snr_db, n, 0.0) == cal.image_bler("awgn", mcs, snr_db, n)
+    # block fading: the error and the fade average together, and cost more than either alone
+    both = cal.image_bler("rayleigh", mcs, snr_db, n, s)
+    assert both >= cal.image_bler("rayleigh", mcs, snr_db, n) - 0.02
+
+
+def test_an_uncertain_planner_backs_off_and_prices_the_lost_image(cal):
+    """With an error on its estimate the planner never picks a faster MCS than when it trusts
+    it, backs off somewhere, and forecasts the loss of its choice as its image BLER."""
+    n_px = 512 * 768
+    n = n_px * 3 // 16
+    names = list(MCS_TABLE)
+    backed_off = 0
+    for snr in (-4.0, 0.0, 4.0, 7.0, 10.0, 13.0):
+        exact, _ = cal.choose_mcs("awgn", snr, n, n_px)
+        unsure, v = cal.choose_mcs("awgn", snr, n, n_px, snr_error_db=2.0)
+        assert names.index(unsure) <= names.index(exact), snr
+        backed_off += unsure != exact
+        forecast = cal.image_loss("awgn", unsure, snr, n, snr_error_db=2.0)
+        assert forecast == cal.image_bler("awgn", unsure, snr, n, 2.0)
+        assert v == pytest.approx(
+            cal.expected_psnr("awgn", unsure, snr, n, n_px, snr_error_db=2.0), abs=1e-12
+        )
+    assert backed_off >= 3

@@ -244,3 +244,23 @@ def test_an_interrupted_evaluation_resumes_from_its_finished_points(tmp_path, mo
     assert calls == [10.0] and not partial.exists()
     rows = json.loads(out.read_text())["results"]
     assert [r["snr_db"] for r in rows] == [1.0, 10.0] and rows[0] == first[0]
+
+
+def test_every_scheme_plans_from_the_same_seeded_estimate(image_dir, tmp_path):
+    """--snr-error-db: each image's estimate is the truth plus a seeded Gaussian error, the
+    same for every scheme and recorded beside the truth; the error has its spread."""
+    from osnerf.commands.eval_codec import snr_belief
+
+    assert snr_belief(4.0, None, 0.0, 0, 0, 0, 0) is None  # exact knowledge: as before
+    assert snr_belief(10.0, 4.0, 0.0, 0, 0, 0, 0) == 4.0
+    errs = np.array([snr_belief(4.0, None, 2.0, 5, 0, i, 0) - 4.0 for i in range(4000)])
+    assert errs.std() == pytest.approx(2.0, rel=0.05) and abs(errs.mean()) < 0.13
+    out = tmp_path / "est.json"
+    argv = ["eval-codec", "--images", str(image_dir), "--snr-db", "4", "--snr-error-db", "2"]
+    argv += ["--schemes", "jscc,digital,digital_naive,softcast", "--no-lpips", "--out", str(out)]
+    assert main(argv) == 0
+    doc = json.loads(out.read_text())
+    believed = {r["scheme"]: r["snr_believed_db"] for r in doc["results"]}
+    assert len({json.dumps(v) for v in believed.values()}) == 1, believed
+    assert all(v != 4.0 for row in believed["digital"] for v in row)
+    assert doc["config"]["snr_error_db"] == 2.0 and all(r["snr_db"] == 4.0 for r in doc["results"])

@@ -262,3 +262,74 @@ def test_bounds_are_labelled_and_rayleigh_anchors_sit_beside_fast_fading():
     assert "digital" in labels and "digital_genie (bound)" in labels and "ideal (bound)" in labels
     assert any("WITT (plot) [Kodak, rayleigh_fast" in s for s in labels)
     assert "rayleigh" not in KODAK  # block fading has no published counterpart
+
+
+def test_eval_codec_files_give_the_mismatch_panel_staircase_and_outage_cdf(tmp_path):
+    """eval-codec result files (planned at 4 dB, fixed MCSs, block fading) are drawn together:
+    the panel marks the plan, the staircase's envelope is the best fixed MCS at each SNR, the
+    CDF ends at 1 and anchors are labelled published."""
+    from osnerf.plots import eval_record, plot_mismatch
+
+    def doc(rows, **config):
+        return {"config": {"cbr": 0.0625, "channel": "awgn", **config}, "seed": 0, "results": rows}
+
+    snrs = (-2.0, 4.0, 10.0)
+    panel = doc(
+        [
+            {"scheme": "digital", "snr_db": s, "cbr": 0.0625, "psnr": p, "plan_snr_db": 4.0}
+            for s, p in zip(snrs, (14.6, 25.9, 25.9))
+        ]
+        + [
+            {"scheme": "jscc", "snr_db": s, "cbr": 0.0625, "psnr": p, "plan_snr_db": 4.0}
+            for s, p in zip(snrs, (22.5, 25.3, 27.1))
+        ],
+        plan_snr_db=4.0,
+    )
+    fixed = [
+        doc(
+            [
+                {
+                    "scheme": "digital_fixed",
+                    "snr_db": s,
+                    "cbr": 0.0625,
+                    "psnr": p,
+                    "ms_ssim": p / 40,
+                    "mcs_choice": "fixed",
+                }
+                for s, p in zip(snrs, ys)
+            ],
+            fixed_mcs=m,
+        )
+        for m, ys in (("qpsk-1/2", (14.6, 25.1, 25.1)), ("16qam-1/2", (14.6, 14.6, 27.1)))
+    ]
+    fading = doc(
+        [
+            {
+                "scheme": "digital",
+                "snr_db": 4.0,
+                "cbr": 0.0625,
+                "psnr": 20.0,
+                "psnr_per_draw": [[14.6, 25.0], [25.0, 25.0]],
+            }
+        ],
+        channel="rayleigh",
+    )
+    paths = []
+    for k, d in enumerate([panel, *fixed, fading]):
+        paths.append(tmp_path / f"e{k}.json")
+        paths[-1].write_text(json.dumps(d))
+    out = tmp_path / "figs"
+    assert osnerf.cli.main(["plot", *map(str, paths), "--out", str(out), "--formats", "png"]) == 0
+    names = {p.stem for p in out.iterdir()}
+    assert {"mismatch", "digital_cliff", "digital_cliff_ms_ssim", "outage_cdf"} <= names
+    fig = plot_mismatch(result_rows([eval_record(d) for d in (panel, *fixed)]))
+    ax = fig.axes[0]
+    assert any(list(ln.get_xdata()) == [4.0, 4.0] for ln in ax.get_lines())  # the plan
+    (dig,) = [ln for ln in ax.get_lines() if ln.get_label() == "digital"]
+    assert list(dig.get_ydata()) == [14.6, 25.9, 25.9]
+    cliff = plot_digital_cliff(result_rows([eval_record(d) for d in fixed]))
+    x, y = _line(cliff.axes[0], "digital envelope")
+    assert list(y) == [14.6, 25.1, 27.1]
+    rows = result_rows([eval_record(panel)])
+    labels = [ln.get_label() for ln in plot_quality_vs_snr(rows).axes[0].get_lines()]
+    assert any(lb.startswith("anchor:") and lb.endswith("published]") for lb in labels)

@@ -1,0 +1,176 @@
+"""The SNR-mismatch rows of ``docs/results.md`` and the README's table, from
+``bench-results/mismatch.json`` (``python -m benchmarks mismatch``) and its figures under
+``bench-results/mismatch/``. A missing file leaves its rows out."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent.parent / "bench-results"
+PANEL_SCHEMES = ("jscc", "digital", "softcast", "ideal")
+ESTIMATE_SCHEMES = ("digital_naive", "digital", "jscc", "softcast")
+HEADLINE_SNRS = (-2.0, 13.0)
+
+
+def load(folder: Path = RESULTS) -> dict | None:
+    path = folder / "mismatch.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _bound(scheme: str) -> bool:
+    from semcodec import LINK_SCHEMES
+
+    return scheme in LINK_SCHEMES and bool(LINK_SCHEMES[scheme].bound)
+
+
+def _commit(doc: dict) -> str:
+    sha = doc.get("git_commit", "unknown")
+    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
+
+
+def _psnr(r: dict | None) -> str:
+    if not r:
+        return "–"
+    total = r.get("num_images", 0) * r.get("draws", 1)
+    lost = r.get("lost_images", 0)
+    return f"{r['psnr']:.2f}" + (f" ({lost}/{total} lost)" if lost else "")
+
+
+def _table(header, rows) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return out + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+
+
+def headline_rows(doc: dict | None) -> list[list[str]]:
+    """README rows: the panel's jscc and digital (planned at 4 dB) at the extremes."""
+    if not doc or "panel" not in doc["results"]:
+        return []
+    res = doc["results"]
+    by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
+    rows = []
+    for snr in HEADLINE_SNRS:
+        if ("jscc", snr) not in by or ("digital", snr) not in by:
+            continue
+        rows.append(
+            [
+                f"Kodak-{by['jscc', snr]['num_images']}, CBR 1/16, every transmitter planned at "
+                f"{res['plan_snr_db']:g} dB, image PSNR",
+                f"AWGN {snr:g} dB",
+                _psnr(by["jscc", snr]),
+                _psnr(by["digital", snr]),
+                "ideal " + _psnr(by.get(("ideal", snr))),
+                _commit(doc),
+            ]
+        )
+    return rows
+
+
+def section(folder: Path = RESULTS) -> list[str]:
+    doc = load(folder)
+    lines = ["## When the transmitter's SNR is wrong", ""]
+    if not doc:
+        return lines + [
+            "No `mismatch.json` in bench-results/ (`python -m benchmarks mismatch`).",
+            "",
+        ]
+    res = doc["results"]
+    counts = {
+        part: sorted({r["num_images"] for r in rows})
+        for part, rows in (
+            ("panel", res.get("panel", [])),
+            ("staircase", res.get("staircase", [])),
+            ("estimate", res.get("estimate", [])),
+            ("forecast", res.get("forecast", {}).get("rows", [])),
+        )
+        if rows
+    }
+    told = ", ".join(f"{p} {'/'.join(map(str, n))}" for p, n in counts.items())
+    lines.append(
+        f"`python -m benchmarks mismatch`, Kodak images per part: {told}; CBR 1/16, commit "
+        f"{_commit(doc)}. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
+    )
+    lines.append("")
+    if "panel" in res:
+        by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
+        snrs = sorted({r["snr_db"] for r in res["panel"]})
+        lines.append(
+            f"### Every transmitter planned at {res['plan_snr_db']:g} dB, AWGN at the truth"
+        )
+        lines.append("")
+        rows = [
+            [
+                s + (" (bound, true SNR)" if _bound(s) else ""),
+                *(_psnr(by.get((s, x))) for x in snrs),
+            ]
+            for s in PANEL_SCHEMES
+            if any((s, x) in by for x in snrs)
+        ]
+        stairs: dict[str, dict] = {}
+        for r in res.get("staircase", []):
+            stairs.setdefault(r.get("mcs") or "?", {})[r["snr_db"]] = r
+        rows += [
+            [f"digital_fixed {m}", *(_psnr(v.get(x)) for x in snrs)] for m, v in stairs.items()
+        ]
+        lines += _table(["scheme", *(f"{x:g} dB" for x in snrs)], rows)
+        lines.append("")
+        lines += [f"- {f}" for f in res.get("findings", [])]
+        lines.append("")
+    if "estimate" in res:
+        lines.append("### A 2 dB Gaussian error on each image's SNR estimate")
+        lines.append("")
+        rows = []
+        for r in res["estimate"]:
+            err = r.get("snr_error_db") or 0.0
+            p5 = f"{r['psnr_p5']:.2f}" if r.get("psnr_p5") is not None else "–"
+            ms = f"{r['ms_ssim']:.4f}" if r.get("ms_ssim") is not None else "–"
+            rows.append(
+                [r["channel"], f"{err:g}", r["scheme"], f"{r['snr_db']:g}", _psnr(r), ms, p5]
+            )
+        header = ["channel", "error (dB)", "scheme", "SNR (dB)", "PSNR", "MS-SSIM", "5th pct"]
+        lines += _table(header, rows)
+        lines.append("")
+        lines.append(
+            "`digital` plans its MCS over the estimate's error; `digital_naive` plans as if the "
+            "estimate were exact; jscc is told the same estimate; softcast plans nothing."
+        )
+        lines.append("")
+    if "forecast" in res:
+        f = res["forecast"]
+        lines.append("### The digital planner's own forecast (AWGN, exact knowledge)")
+        lines.append("")
+        rows = [
+            [
+                f"{r['snr_db']:g}",
+                f"{r['forecast_lost_images']:.2f}",
+                r["lost_images"],
+                r["num_images"],
+            ]
+            for r in f["rows"]
+        ]
+        lines += _table(["SNR (dB)", "forecast lost", "lost", "images"], rows)
+        lines.append("")
+        lines.append(
+            f"Over all {f['sends']} sends: {f['forecast_total']:.2f} images forecast lost, "
+            f"{f['lost_total']} lost."
+        )
+        lines.append("")
+    if "blocks" in res:
+        lines.append("Whole Kodak-sized blocks of random payload at the planner's MCS (AWGN):")
+        lines.append("")
+        rows = [
+            [
+                b["mcs"],
+                f"{b['snr_db']:g}",
+                b["codewords"],
+                f"{b['lost']}/{b['blocks']}",
+                f"{b['forecast_loss'] * b['blocks']:.2f}",
+            ]
+            for b in res["blocks"]
+        ]
+        lines += _table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
+        lines.append("")
+    for name in res.get("figures", []):
+        if (folder / name).is_file():
+            lines.append(f"![{Path(name).stem}](../bench-results/{name})")
+    return lines + [""]
