@@ -16,6 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from campaign.store import at_work
 from common import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -205,17 +206,6 @@ def _status(args) -> int:
             f"CPU-min, next lrs {line['lrs']}"
         )
     return 0
-
-
-def at_work(fn, *args):
-    """Call ``fn`` once the inputs are checked: its ValueError, KeyError or FileNotFoundError
-    is a runtime failure (exit 1), not bad input; an ``InputError`` stays bad input."""
-    try:
-        return fn(*args)
-    except InputError:
-        raise
-    except (ValueError, KeyError, FileNotFoundError) as e:
-        raise RuntimeError(f"{type(e).__name__}: {e}") from e
 
 
 def main(argv: list[str] | None = None) -> int:

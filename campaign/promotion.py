@@ -277,7 +277,7 @@ def run(args) -> int:
     setting is refused (exit 2) before any work unless ``--dry-run``."""
     import sys
 
-    from campaign.__main__ import at_work
+    from campaign.store import at_work
     from osnerf import result_header
 
     if not args.dry_run and (flags := narrowed(args)):

@@ -198,3 +198,14 @@ def next_lrs(lrs: list[float], winner: float) -> list[float]:
 
 def now_utc() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def at_work(fn, *args):
+    """Call ``fn`` once the inputs are checked: its ValueError, KeyError or FileNotFoundError
+    is a runtime failure (exit 1), not bad input; an ``InputError`` stays bad input."""
+    try:
+        return fn(*args)
+    except InputError:
+        raise
+    except (ValueError, KeyError, FileNotFoundError) as e:
+        raise RuntimeError(f"{type(e).__name__}: {e}") from e

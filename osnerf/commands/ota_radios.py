@@ -16,10 +16,13 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
+from pathlib import Path
 
 from common import Registry
 from hil import DEVICES as HARDWARE
-from osnerf.commands.ota_args import parse_ppm, usage_error
+from osnerf.commands.ota_args import parse_device, parse_multipath, parse_ppm, usage_error
 
 SIMULATED = ("emulated", "loopback")  # two emulated HackRFs, with or without USB
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
@@ -194,8 +197,6 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
     import numpy as np
 
     from hil import HilError, save_sigmf
-    from osnerf.commands.ota import send_over_the_air
-
     bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
     block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
     result, hw = send_over_the_air(args, cfg, [block], sigmf_dir, "ota_probe")
@@ -207,3 +208,92 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
     used = float(min(max(snr, lo), hi))
     print(f"ota: measured {snr:.1f} dB; jscc encodes at {used:.1f} dB", file=sys.stderr)
     return used, paths
+
+
+def device_kinds(args) -> tuple[str, str | None, str | None]:
+    """``(kind, tx_serial, rx_serial)`` of --tx/--rx: "emulated", "loopback" or "hackrf"."""
+    tx_kind, tx_serial = parse_device(args.tx, "--tx")
+    rx_kind, rx_serial = parse_device(args.rx, "--rx")
+    simulated = {"emulated", "loopback"}
+    if (tx_kind in simulated) != (rx_kind in simulated) or (
+        tx_kind != rx_kind and tx_kind not in simulated
+    ):
+        raise usage_error(
+            "--tx and --rx must both be simulated (emulated/loopback) or both the same hardware "
+            f"({', '.join(HARDWARE)})"
+        )
+    uri = getattr(args, "uri", None)
+    if uri is not None and tx_kind != "pluto":
+        raise usage_error("--uri needs --tx pluto --rx pluto")
+    if tx_kind == "pluto":
+        tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
+    soapy_args = getattr(args, "tx_args", None), getattr(args, "rx_args", None)
+    if any(a is not None for a in soapy_args) and tx_kind != "soapy":
+        raise usage_error("--tx-args/--rx-args need --tx soapy --rx soapy")
+    if tx_kind == "soapy":
+        if tx_serial or rx_serial:
+            raise usage_error("soapy: name the devices with --tx-args/--rx-args, not soapy:ARGS")
+        tx_serial = soapy_args[0]
+        rx_serial = soapy_args[1] if soapy_args[1] is not None else tx_serial
+    if tx_kind != rx_kind and tx_kind in simulated:
+        raise usage_error(
+            "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
+        )
+    if getattr(args, "fault", None) and tx_kind not in simulated:
+        raise usage_error(
+            "--fault needs emulated boards (--tx emulated --rx emulated, or loopback)"
+        )
+    return tx_kind, tx_serial, rx_serial
+
+
+def open_pair(args, ota_cfg):
+    """(tx, rx, emulator or None) for the --tx/--rx kinds, the air from the air flags where
+    it is emulated (``args.air``, :func:`osnerf.commands.ota_radios.resolve_air`); --fault is
+    set on the receiver."""
+    from hil.emulation import Faults
+    from osnerf.ota_link import open_radios
+
+    kind, tx_serial, rx_serial = device_kinds(args)
+    air = {}
+    if args.air == "emulated":
+        air = {
+            "seed": args.seed,
+            "ppm": parse_ppm(args.ppm),
+            "multipath": parse_multipath(args.multipath),
+            "delay_s": args.delay_us * 1e-6,
+        }
+    if kind in HARDWARE:
+        ids = {"tx_serial": tx_serial, "rx_serial": rx_serial}
+        return open_radios(kind, args.snr_db, ota_cfg, **air, **ids)
+    tx, rx, emu = open_radios("emulated", args.snr_db, ota_cfg, **air, loopback=kind == "loopback")
+    if getattr(args, "fault", None):  # after the lead-in and half the margin: some capture
+        lead = int(ota_cfg.rx_lead_s * ota_cfg.sample_rate_hz)
+        emu.radios[1].faults = Faults.named(args.fault, lead + ota_cfg.rx_margin_samples // 2)
+    return tx, rx, emu
+
+
+def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota"):
+    """One burst of ``blocks`` over an :class:`osnerf.ota_link.OtaLink` between the --tx/--rx
+    radios: (``hil.ota.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
+    in one line, with what the receiver got so far saved as SigMF; warnings are printed one
+    line each."""
+    from hil import HilError, save_partial_capture
+    from osnerf.ota_link import OtaLink
+
+    kind = device_kinds(args)[0]
+    tx, rx, emu = open_pair(args, cfg)
+    hw = radio_of(kind).label + (" (emulated)" if args.air == "emulated" else "")
+    link = OtaLink(tx, rx, args.snr_db, cfg, emu)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = link.send_blocks(blocks)
+    except HilError as e:  # keep what arrived, then report the fault in one line (exit 1)
+        saved = save_partial_capture(e, sigmf_dir / base, cfg, hw=hw)
+        kept = f"; capture so far saved to {saved}" if saved else "; nothing was received"
+        raise type(e)(f"{e}{kept}", capture=e.capture, sigmf_path=saved) from e
+    finally:
+        link.close()
+    for w in caught:  # one line each, not a Python warning with its source line
+        print(f"ota: warning: {w.message}", file=sys.stderr)
+    return result, hw

@@ -140,8 +140,8 @@ def _open_radios(args, cfg):
     the decoder for the interpreter), or the --tx/--rx boards (an emulated Pluto's air set
     from the air flags, as for a burst)."""
     from hil import EmulatorProcess, HackRF
-    from osnerf.commands.ota import device_kinds, open_pair
     from osnerf.commands.ota_args import parse_multipath, parse_ppm
+    from osnerf.commands.ota_radios import device_kinds, open_pair
     from osnerf.ota_link import air_channel
 
     kind = device_kinds(args)[0]
