@@ -11,15 +11,12 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
 
 from osnerf.plan import RunPlan, ViewSend
-
-if TYPE_CHECKING:  # annotations only: the run's config imports the scheme table
-    from osnerf.run.config import RunConfig
 
 TRANSMISSION_ARRAYS = ("rx_masks", "received")
 """The optional arrays of a :class:`Transmission` (cached when present)."""
@@ -87,12 +84,66 @@ class Transmission:
         )
 
 
-@dataclass
-class RunContext:
-    """What every scheme may use: the run's config, codec, links and plan.
+@dataclass(frozen=True)
+class SendSettings:
+    """What a run tells its transmitters and receivers, derived once from its config
+    (``osnerf.run.RunConfig.send_settings``): the schemes read these, never the config.
 
     Attributes:
-        config: the :class:`osnerf.run.RunConfig`.
+        channel: the run's channel (a name of ``phy.CHANNELS``, or "raytraced"/"ota").
+        snr_db: the run's SNR (Es/N0, dB).
+        seed: the run's seed (each scheme's draws from it and the scheme's name).
+        mcs: the digital scheme's MCS ("auto": from the average SNR).
+        image_codec: the digital schemes' image codec.
+        refine_steps: the semantic transmitter's refinement steps per view (0: none).
+        layer_fusion: the semantic receiver's refinement-layer fusion (``semcodec.jscc.for_fusion``).
+        digital_box: the object-routed digital schemes send the objects' box.
+        snr_error_db: the Gaussian error (dB) of each view's SNR estimate.
+        transmitter_estimates: transmitters plan from the SCU's estimate apart from the truth.
+        symbol_rate_hz: channel symbols per second (air time).
+    """
+
+    channel: str
+    snr_db: float
+    seed: int
+    mcs: str = "auto"
+    image_codec: str = "avif"
+    refine_steps: int = 0
+    layer_fusion: float = 4.0
+    digital_box: bool = False
+    snr_error_db: float = 0.0
+    transmitter_estimates: bool = False
+    symbol_rate_hz: float = 1e6
+
+
+@dataclass(frozen=True)
+class NerfBudget:
+    """Each scheme's radiance-field training budget, the same for every scheme, derived once
+    from the run's config (``osnerf.run.RunConfig.nerf_budget``).
+
+    Attributes:
+        max_seconds: cap on the training, seconds of ``clock`` (> 0).
+        steps: optimiser steps (None: ``max_seconds`` is the budget).
+        clock: what ``max_seconds`` counts ("cpu" or "wall").
+        renderer_steps: optimiser steps of the learned renderer (0: none).
+    """
+
+    max_seconds: float
+    steps: int | None
+    clock: str
+    renderer_steps: int
+
+    def describe(self) -> str:
+        """As the log says it: the steps when they are the budget, else seconds."""
+        return f"{self.steps} steps" if self.steps else f"{self.max_seconds:g} s"
+
+
+@dataclass
+class RunContext:
+    """What every scheme may use: what the run tells it, the codec, links and plan.
+
+    Attributes:
+        send: the run's :class:`SendSettings`.
         links: view -> ``phy.Link`` (unbiased ZF receivers with perfect or estimated CSI).
         plan: the SCU's :class:`osnerf.plan.RunPlan`.
         codec, rx_codec: transmitter's and receiver's codecs (None when no scheme needs one).
@@ -100,7 +151,7 @@ class RunContext:
         routing: (object masks [n_on_demand, K, h, w] tensor, K demand weights) for focus mode.
     """
 
-    config: RunConfig
+    send: SendSettings
     links: dict
     plan: RunPlan
     codec: object | None
@@ -111,7 +162,7 @@ class RunContext:
     def view_generator(self, view: int) -> torch.Generator:
         """The channel draws of one view (fades, noise): from the run seed and the view only."""
         return torch.Generator().manual_seed(
-            scheme_seed(self.config.seed, f"view {int(view)}", "link")
+            scheme_seed(self.send.seed, f"view {int(view)}", "link")
         )
 
 

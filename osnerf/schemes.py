@@ -34,7 +34,7 @@ import numpy as np
 import torch
 
 from common import Registry
-from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
+from osnerf.scheme_types import RunContext, Scheme, SendSettings, Transmission, scheme_seed
 from osnerf.semantic_send import send_views
 from semcodec.links import ANALOG, DIGITAL, IDEAL, JSCC
 
@@ -45,6 +45,7 @@ __all__ = [
     "SCHEMES",
     "RunContext",
     "Scheme",
+    "SendSettings",
     "Transmission",
     "get_scheme",
     "parse_schemes",
@@ -137,14 +138,14 @@ class Digital(Scheme):
     object_routed = True
     help = "image codec + 5G LDPC + QAM, MCS from the average SNR (no CSI at the transmitter)"
 
-    def mcs(self, config) -> str:
-        return config.mcs
+    def mcs(self, send) -> str:
+        return send.mcs
 
     def transmit(self, ctx, plans, images):
         import phy
         import semcodec
 
-        cfg = ctx.config
+        cfg = ctx.send
         channel = phy.assumed_channel(cfg.channel)
         out, failed, arrived = [], 0, []
         lost = {"budget": 0, "channel": 0}
@@ -224,7 +225,7 @@ class DigitalGenie(Digital):
     bound = "genie: knows each draw's channel and picks the MCS after seeing it"
     help = "bound: digital with the best MCS per draw, chosen after seeing the channel"
 
-    def mcs(self, config) -> str:
+    def mcs(self, send) -> str:
         return "genie"
 
 

@@ -117,7 +117,7 @@ def codec_use(ctx, sent: int, budget: int) -> dict:
     return {
         "codec": ctx.codec.name,
         "limits": codec_limits(ctx.codec).as_dict(),
-        "refinement": refinement_status(ctx.codec, ctx.config.refine_steps),
+        "refinement": refinement_status(ctx.codec, ctx.send.refine_steps),
         "symbols_sent": sent,
         "symbol_budget": budget,
         "symbols_unused": budget - sent,
@@ -157,18 +157,18 @@ def _encode(ctx, p, x, kw: dict):
 
     codec = ctx.codec
     if ctx.plan.static_link:  # the AWGN simulation holds: split for the fusing receiver
-        codec = for_fusion(codec, ctx.config.layer_fusion, "transmitter")
+        codec = for_fusion(codec, ctx.send.layer_fusion, "transmitter")
     with torch.no_grad():
         enc = encode_with_focus(codec, x, p.part.encoder_snr_db, p.part.cbr, **kw)
-    steps = int(ctx.config.refine_steps)
+    steps = int(ctx.send.refine_steps)
     if not refinement_status(codec, steps)["on"]:
         return enc  # a codec without a differentiable decode is sent as encoded (reported)
     # the SNR the transmitter simulates: the link's (as before), or its estimate when the run
     # sets the transmitters' belief apart from the channel
-    sim_snr = p.measured_snr_db if ctx.config.transmitter_estimates else p.snr_db
-    model = _Copies(refine_model_link(ctx.config.channel), sim_snr, p.part.repetitions)
+    sim_snr = p.measured_snr_db if ctx.send.transmitter_estimates else p.snr_db
+    model = _Copies(refine_model_link(ctx.send.channel), sim_snr, p.part.repetitions)
     gen = torch.Generator().manual_seed(
-        scheme_seed(ctx.config.seed, f"view {int(p.view)}", "refine")
+        scheme_seed(ctx.send.seed, f"view {int(p.view)}", "refine")
     )
     wts = None
     if kw:  # the demanded objects' pixels first (their weights), the rest of the box

@@ -19,6 +19,7 @@ from osnerf.scenes import (
     check_demand,
     get_scene,
 )
+from osnerf.scheme_types import NerfBudget, SendSettings
 from osnerf.schemes import DEFAULT_SCHEMES
 
 OTA = "ota"
@@ -347,6 +348,31 @@ class RunConfig:
             raise ValueError(
                 f"image_codec must be one of {', '.join(IMAGE_CODECS)}, got {self.image_codec!r}"
             )
+
+    def send_settings(self) -> SendSettings:
+        """What the run tells its transmitters and receivers."""
+        return SendSettings(
+            channel=self.channel,
+            snr_db=float(self.snr_db),
+            seed=int(self.seed),
+            mcs=self.mcs,
+            image_codec=self.image_codec,
+            refine_steps=int(self.refine_steps),
+            layer_fusion=float(self.layer_fusion),
+            digital_box=bool(self.digital_box),
+            snr_error_db=float(self.snr_error_db),
+            transmitter_estimates=self.transmitter_estimates,
+            symbol_rate_hz=float(self.symbol_rate_hz),
+        )
+
+    def nerf_budget(self) -> NerfBudget:
+        """Each scheme's radiance-field training budget."""
+        return NerfBudget(
+            max_seconds=float(self.max_seconds),
+            steps=self.nerf_steps,
+            clock=self.nerf_clock,
+            renderer_steps=int(self.renderer_steps),
+        )
 
     def render_config(self) -> RenderConfig:
         return RenderConfig(

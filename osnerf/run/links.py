@@ -80,8 +80,14 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     ota_cfg = OtaConfig()
     tx_args = getattr(cfg, "ota_tx_args", None)
     rx_args = getattr(cfg, "ota_rx_args", None)
-    ids = {"tx_serial": tx_args, "rx_serial": tx_args if rx_args is None else rx_args}
-    tx, rx, emu = open_radios(cfg.ota_device, cfg.snr_db, ota_cfg, seed=cfg.seed, **ids)
+    tx, rx, emu = open_radios(
+        cfg.ota_device,
+        cfg.snr_db,
+        ota_cfg,
+        seed=cfg.seed,
+        tx_serial=tx_args,
+        rx_serial=tx_args if rx_args is None else rx_args,
+    )
     link = OtaLink(tx, rx, float(cfg.snr_db), ota_cfg, emu)
     info = {
         "channel": OTA,

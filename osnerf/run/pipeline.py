@@ -26,7 +26,7 @@ from osnerf.run.config import RunConfig
 from osnerf.run.links import build_links
 from osnerf.run.reconstruct import Reconstruction, received_dataset, reconstruct, view_metrics
 from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
-from osnerf.scheme_types import RunContext, Scheme, Transmission, scheme_seed
+from osnerf.scheme_types import NerfBudget, RunContext, Scheme, Transmission, scheme_seed
 from osnerf.schemes import get_scheme
 from osnerf.scu import RatePolicy, SemanticControlUnit
 from semcodec import SemanticCodec
@@ -97,7 +97,8 @@ def transmit(
     cached = cache.load(f"{scheme.name}_tx")
     if cached is None:
         _log(
-            f"{scheme.name}: sending {len(plans)} views over {ctx.config.channel} at {ctx.config.snr_db:g} dB"
+            f"{scheme.name}: sending {len(plans)} views over {ctx.send.channel} at "
+            f"{ctx.send.snr_db:g} dB"
         )
         pixels = col.images if scheme.object_routed else views.images[[p.view for p in plans]]
         images = torch.from_numpy(np.ascontiguousarray(pixels)).permute(0, 3, 1, 2).float()
@@ -108,9 +109,18 @@ def transmit(
 
 
 def reconstruct_and_score(
-    scheme: Scheme, tx: Transmission, ctx: RunContext, prep: Prepared, views, col, cache, out_dir
+    scheme: Scheme,
+    tx: Transmission,
+    ctx: RunContext,
+    budget: NerfBudget,
+    prep: Prepared,
+    views,
+    col,
+    cache,
+    out_dir,
 ) -> tuple[SchemeReport, Reconstruction]:
-    """A radiance field on the views that arrived (in memory), scored on the held-out views."""
+    """A radiance field on the views that arrived (in memory), trained within ``budget`` and
+    scored on the held-out views."""
     plans = ctx.plan.for_scheme(scheme.object_routed)
     arrived = np.ones(len(plans), bool) if tx.received is None else np.asarray(tx.received, bool)
     ids = [p.view for p in plans]
@@ -127,12 +137,12 @@ def reconstruct_and_score(
     cached = cache.load(f"{scheme.name}_nerf")
     if cached is None:
         export_views(Path(out_dir) / "received" / scheme.name, ds)
-        _log(f"{scheme.name}: training the radiance field ({nerf_budget(ctx.config)})")
+        _log(f"{scheme.name}: training the radiance field ({budget.describe()})")
         union = np.stack([views.masks[o][views.indices("test")] for o in prep.demand.objects]).max(
             0
         )
-        seed = scheme_seed(ctx.config.seed, scheme.name, "nerf")
-        rec = reconstruct(ds, views, union, ctx.config, seed, scheme.object_routed)
+        seed = scheme_seed(ctx.send.seed, scheme.name, "nerf")
+        rec = reconstruct(ds, views, union, budget, seed, scheme.object_routed)
         cache.save(f"{scheme.name}_nerf", *rec.to_cache())
     else:
         rec = Reconstruction.from_cache(*cached)
@@ -140,7 +150,7 @@ def reconstruct_and_score(
     n_sym = int(np.sum(tx.symbols))
     seconds = {
         "encode": float(tx.seconds.get("encode", 0.0)),
-        "air": n_sym / ctx.config.symbol_rate_hz,
+        "air": n_sym / ctx.send.symbol_rate_hz,
         "decode": float(tx.seconds.get("decode", 0.0)),
         "nerf": float(m.pop("nerf_seconds")),
         **{
@@ -170,11 +180,6 @@ def reconstruct_and_score(
         **m,
     )
     return report, rec
-
-
-def nerf_budget(cfg: RunConfig) -> str:
-    """The NeRF budget as the log says it: the steps when they are the budget, else seconds."""
-    return f"{cfg.nerf_steps} steps" if cfg.nerf_steps else f"{cfg.max_seconds:g} s"
 
 
 def export_views(folder: Path, ds) -> None:
@@ -218,7 +223,7 @@ def run_pipeline(
     col = prep.scu.collect(views)
     links = build_links(cfg, views, col.candidates)
     try:
-        col = choose_views(cfg, prep, col, links.snr_db, views)
+        col = choose_views(prep, col, links.snr_db, views, cfg.view_selection, cfg.max_views)
         codec = prep.codec
         plan, col = prep.scu.plan_run(
             collection=col,
@@ -233,7 +238,7 @@ def run_pipeline(
             snr_error_db=cfg.snr_error_db,
         )
         ctx = RunContext(
-            cfg,
+            cfg.send_settings(),
             links.links,
             plan,
             prep.codec,
@@ -241,11 +246,12 @@ def run_pipeline(
             np.asarray(views.background, np.float32),
             prep.scu.feature_routing(col),
         )
+        budget = cfg.nerf_budget()
         results, received, renders = {}, {}, {}
         for name, scheme in prep.schemes.items():
             tx = transmit(scheme, ctx, views, col, cache)
             results[name], rec = reconstruct_and_score(
-                scheme, tx, ctx, prep, views, col, cache, out_dir
+                scheme, tx, ctx, budget, prep, views, col, cache, out_dir
             )
             received[name], renders[name] = tx.images.permute(0, 2, 3, 1).numpy(), rec.rgb
             _log(
@@ -257,12 +263,12 @@ def run_pipeline(
         links.close()
     test = views.indices("test")
     report = Report(
-        scene=scene_summary(cfg, folder, views, col),
+        scene=scene_summary(cfg.scene, cfg.ground_station_m, folder, views, col),
         demand={"objects": list(prep.demand.objects), "weights": list(prep.demand.weights)},
         link=links.info,
         snr_db=cfg.snr_db,
         symbol_rate_hz=cfg.symbol_rate_hz,
-        codec=None if prep.codec is None else codec_summary(prep, cfg),
+        codec=(None if prep.codec is None else codec_summary(prep, cfg.codec, cfg.receiver_codec)),
         views=views_summary(plan, col),
         schemes=results,
         comparisons=_flag(comparisons(results, prep.schemes)),
@@ -281,19 +287,19 @@ def run_pipeline(
 
 
 def choose_views(
-    cfg: RunConfig, prep: Prepared, col: Collection, snr_db: dict, views
+    prep: Prepared, col: Collection, snr_db: dict, views, selection: str, max_views: int | None
 ) -> Collection:
     """The SCU's choice among the collected views (``--view-selection``, ``--max-views``);
     the default (sight, no count) keeps every view untouched."""
-    if cfg.view_selection == "sight" and cfg.max_views is None:
+    if selection == "sight" and max_views is None:
         return col
     from osnerf.scu.selection import radio_tie
 
-    tie = radio_tie(cfg.view_selection, [snr_db[int(v)] for v in col.indices if int(v) in snr_db])
+    tie = radio_tie(selection, [snr_db[int(v)] for v in col.indices if int(v) in snr_db])
     if tie is not None:
         _log(f"warning: {tie}")
     directions = view_directions(views, prep.demand.objects)
-    return prep.scu.choose_views(col, snr_db, directions, cfg.view_selection, cfg.max_views)
+    return prep.scu.choose_views(col, snr_db, directions, selection, max_views)
 
 
 def view_directions(views: SceneViews, objects) -> dict[int, np.ndarray]:
@@ -303,17 +309,18 @@ def view_directions(views: SceneViews, objects) -> dict[int, np.ndarray]:
     return {k: p - centre for k, p in enumerate(views.drone_positions_m)}
 
 
-def scene_summary(cfg: RunConfig, folder, views: SceneViews, col: Collection) -> dict:
-    """The scene as the report shows it."""
+def scene_summary(scene: str, ground_station_m, folder, views: SceneViews, col: Collection) -> dict:
+    """The scene as the report shows it (``ground_station_m``: the run's, or None for the
+    scene's own)."""
     return {
-        "name": cfg.scene,
+        "name": scene,
         "folder": str(folder),
         "objects": list(views.objects),
         "num_train_views": int(len(col.candidates)),
         "num_test_views": int(len(views.indices("test"))),
         "resolution_px": [views.intrinsics.height, views.intrinsics.width],
         "render_seconds": views.meta.get("render_seconds"),
-        "ground_station_m": list(cfg.ground_station_m or views.meta["ground_station_m"]),
+        "ground_station_m": list(ground_station_m or views.meta["ground_station_m"]),
     }
 
 
@@ -322,19 +329,19 @@ def _range(pair) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def codec_summary(prep: Prepared, cfg: RunConfig) -> dict:
+def codec_summary(prep: Prepared, codec_spec: str | None, receiver_spec: str | None) -> dict:
     """The codec as the report shows it: its record (:func:`osnerf.provenance.codec_record`:
     knowledge-base identity, trained or not, a plugin's distribution), its ranges, and the
-    receiver's record when ``cfg.receiver_codec`` names one (None: the same codec)."""
+    receiver's record when ``receiver_spec`` names one (None: the same codec)."""
     from osnerf.provenance import codec_record
 
     codec = prep.codec
     assert codec is not None  # called for runs with a codec only
     receiver = None
-    if cfg.receiver_codec is not None:
-        receiver = codec_record(prep.rx_codec, cfg.receiver_codec)
+    if receiver_spec is not None:
+        receiver = codec_record(prep.rx_codec, receiver_spec)
     return {
-        **codec_record(codec, cfg.codec),
+        **codec_record(codec, codec_spec),
         "cbr_range": list(codec.cbr_range),
         "snr_range_db": list(codec.snr_range_db),
         "receiver": receiver,

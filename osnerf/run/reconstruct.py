@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 import renderer
+from osnerf.scheme_types import NerfBudget
 
 
 @dataclass
@@ -70,7 +71,7 @@ def lpips_mean(pred: np.ndarray, ref: np.ndarray) -> float | None:
 
 
 def reconstruct(
-    ds, views, union: np.ndarray, config, seed: int, object_routed: bool
+    ds, views, union: np.ndarray, budget: NerfBudget, seed: int, object_routed: bool
 ) -> Reconstruction:
     """Train the renderer on ``ds`` and score it on the held-out views of ``views``.
 
@@ -91,7 +92,7 @@ def reconstruct(
         training = {"nerf_steps": 0, "nerf_curve": [], "nerf_seconds": 0.0}
         training |= {"nerf_wall_seconds": 0.0, "renderers": None}
     else:
-        rgb, op, training = _train_and_render(ds, views, held_out, config, seed, object_routed)
+        rgb, op, training = _train_and_render(ds, views, held_out, budget, seed, object_routed)
     metrics = _scores(rgb, op, gt, ref, union, seen, object_routed) | training
     return Reconstruction(metrics, rgb, op)
 
@@ -111,27 +112,27 @@ def _held_out_dataset(ds, views, test, union: np.ndarray, seen: list[int]) -> re
     )
 
 
-def _train_config(config, num_test: int) -> renderer.TrainConfig:
-    """The radiance field's training settings of the run ``config``."""
+def _train_config(budget: NerfBudget, num_test: int) -> renderer.TrainConfig:
+    """The radiance field's training settings of the run's ``budget``."""
     return renderer.TrainConfig(
-        max_seconds=float(config.max_seconds),
-        max_steps=config.nerf_steps,
-        clock=config.nerf_clock,
+        max_seconds=float(budget.max_seconds),
+        max_steps=budget.steps,
+        clock=budget.clock,
         progress=False,
-        eval_every_seconds=max(float(config.max_seconds) / 12, 0.5),
-        eval_every_steps=max(config.nerf_steps // 12, 1) if config.nerf_steps else None,
+        eval_every_seconds=max(float(budget.max_seconds) / 12, 0.5),
+        eval_every_steps=max(budget.steps // 12, 1) if budget.steps else None,
         eval_views=num_test,
     )
 
 
-def _train_and_render(ds, views, held_out, config, seed: int, object_routed: bool):
+def _train_and_render(ds, views, held_out, budget: NerfBudget, seed: int, object_routed: bool):
     """Train the field on ``ds`` and render the held-out views. Returns (rgb [n, h, w, 3],
     opacity [n, h, w], the training's metrics: steps, curve, seconds, renderers)."""
     torch.set_num_threads(min(2, torch.get_num_threads()))
     t = time.perf_counter()
     result = renderer.train(
         ds,
-        _train_config(config, held_out.num_views),
+        _train_config(budget, held_out.num_views),
         generator=torch.Generator().manual_seed(seed),
         eval_dataset=held_out,
     )
@@ -145,8 +146,8 @@ def _train_and_render(ds, views, held_out, config, seed: int, object_routed: boo
             views.intrinsics.width,
         )
     renderers = None
-    if config.renderer_steps > 0:
-        renderers = score_renderers(result.model, held_out, ds, config, seed, object_routed)
+    if budget.renderer_steps > 0:
+        renderers = score_renderers(result.model, held_out, ds, budget, seed, object_routed)
     rgb = np.asarray(out["rgb"].detach().cpu(), np.float32)
     op = np.asarray(out["opacity"].detach().cpu(), np.float32).reshape(rgb.shape[:3])
     training = {
@@ -189,14 +190,16 @@ def _scores(rgb, op, gt, ref, union, seen: list[int], object_routed: bool) -> di
     }
 
 
-def score_renderers(model, held_out, ds, config, seed: int, object_routed: bool) -> dict:
+def score_renderers(
+    model, held_out, ds, budget: NerfBudget, seed: int, object_routed: bool
+) -> dict:
     """The full render and the learned renderer (``features``, distilled for
-    ``config.renderer_steps`` steps from renders of the received views' cameras and
+    ``budget.renderer_steps`` steps from renders of the received views' cameras and
     jittered copies) on the held-out views, in their order: psnr_object exactly as the
     scheme's (against the ground-truth views over the objects' pixels of the views showing
     them), and for whole-scene schemes psnr and ssim of the whole view. One thread: times
     per view and setup CPU seconds are single-threaded."""
-    configs = {"features": learned_renderer_config(config.renderer_steps)}
+    configs = {"features": learned_renderer_config(budget.renderer_steps)}
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # small operations: a second thread costs CPU, saves little time
     try:

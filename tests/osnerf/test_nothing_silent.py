@@ -118,10 +118,9 @@ def test_eval_codec_refuses_an_mcs_that_is_not_used(image_dir, tmp_path, capsys,
 
 def test_the_log_names_the_nerf_budget_that_applies():
     from osnerf.run import RunConfig
-    from osnerf.run.pipeline import nerf_budget
 
-    assert nerf_budget(RunConfig(nerf_steps=50)) == "50 steps"
-    assert nerf_budget(RunConfig(nerf_steps=None, max_seconds=600.0)) == "600 s"
+    assert RunConfig(nerf_steps=50).nerf_budget().describe() == "50 steps"
+    assert RunConfig(nerf_steps=None, max_seconds=600.0).nerf_budget().describe() == "600 s"
 
 
 # --- M2: a ground station where no antenna can be ------------------------------------------

@@ -7,7 +7,6 @@ import re
 import sys
 import textwrap
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,7 +15,7 @@ import torch
 import phy
 from osnerf.cli import main
 from osnerf.plan import Allocation, RunPlan, ViewSend
-from osnerf.schemes import SCHEMES, RunContext, Scheme, get_scheme, scheme_seed
+from osnerf.schemes import SCHEMES, RunContext, Scheme, SendSettings, get_scheme, scheme_seed
 
 TINY = ["--scene", "tiny", "--resolution", "32", "--views", "4", "--test-views", "2"]
 TINY += ["--renderer-steps", "0"]
@@ -57,7 +56,9 @@ def test_a_views_channel_draws_depend_on_the_run_seed_and_the_view_only():
     # block Rayleigh: view 7's fade and noise are the same whether or not view 3 went first,
     # whatever it sent, and whichever scheme sends
     link = phy.FlatLink(phy.CHANNELS["rayleigh"]())
-    ctx = RunContext(SimpleNamespace(seed=5), {3: link, 7: link}, None, None, None, np.zeros(3))
+    ctx = RunContext(
+        SendSettings("awgn", 0.0, seed=5), {3: link, 7: link}, None, None, None, np.zeros(3)
+    )
     images = torch.rand(2, 3, 16, 16, generator=torch.Generator().manual_seed(0))
 
     def plan(view, budget):
@@ -69,7 +70,7 @@ def test_a_views_channel_draws_depend_on_the_run_seed_and_the_view_only():
     both = analog.transmit(ctx, [plan(3, 300), plan(7, 200)], images)
     alone = analog.transmit(ctx, [plan(7, 200)], images[1:])
     assert torch.equal(both.images[1], alone.images[0])
-    other = RunContext(SimpleNamespace(seed=6), ctx.links, None, None, None, np.zeros(3))
+    other = RunContext(SendSettings("awgn", 0.0, seed=6), ctx.links, None, None, None, np.zeros(3))
     assert not torch.equal(
         analog.transmit(other, [plan(7, 200)], images[1:]).images[0],
         alone.images[0],
@@ -221,7 +222,7 @@ def test_focus_view_is_composited_on_the_background_before_it_is_averaged_down(e
     objects = torch.zeros(1, 1, h, w)
     objects[:, :, 25:39, 27:37] = 1.0
     ctx = RunContext(
-        SimpleNamespace(seed=0, refine_steps=0),
+        SendSettings("awgn", 20.0, seed=0, refine_steps=0),
         {0: phy.FlatLink(phy.CHANNELS["awgn"]())},
         RunPlan((), (), oversampling=3, height=h, width=w, static_link=False),
         codec,
@@ -257,9 +258,7 @@ def test_refined_views_cost_the_same_symbols_and_arrive_better(env):
     plans = [ViewSend(v, 5.0, part) for v in range(4)]
     out = {}
     for steps in (0, 30):
-        cfg = SimpleNamespace(
-            seed=0, channel="awgn", refine_steps=steps, transmitter_estimates=False
-        )
+        cfg = SendSettings("awgn", 5.0, seed=0, refine_steps=steps)
         run_plan = RunPlan((), (), oversampling=1, height=48, width=48, static_link=False)
         ctx = RunContext(cfg, dict.fromkeys(range(4), link), run_plan, codec, codec, np.ones(3))
         out[steps] = SCHEMES["full"]().transmit(ctx, plans, images)
