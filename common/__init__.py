@@ -9,6 +9,7 @@
 * ``common.quality``: the one PSNR (peak 1.0).
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
 * ``common.jit``: ``lazy_njit``, the one numba wrapper (numba loaded on a kernel's first call).
+* ``common.checks``: ``bound``, a field's range declared once, read by configs and CLIs.
 * ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
 * ``common.threads``: ``one_blas_thread``, a receive path's bound on numpy's BLAS pool.
@@ -17,6 +18,7 @@ Imports nothing else of ours, so ``phy``, ``semcodec``, ``renderer``, ``hil`` an
 may all import it.
 """
 
+from common.checks import MAX_BUDGET_S, SEED_RANGE, Bound, bound, bound_of, check_bounds
 from common.errors import InputError
 from common.files import (
     atomic_path,
@@ -41,6 +43,12 @@ from common.registry import Registry
 from common.threads import one_blas_thread
 
 __all__ = [
+    "MAX_BUDGET_S",
+    "SEED_RANGE",
+    "Bound",
+    "bound",
+    "bound_of",
+    "check_bounds",
     "InputError",
     "one_blas_thread",
     "json_default",

@@ -20,23 +20,33 @@ import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from common import MAX_BUDGET_S, SEED_RANGE, Bound
 from osnerf.cli import UsageError
 
-SEED_RANGE = (0, 2**63 - 1)  # what torch.Generator.manual_seed and numpy accept alike
 THREADS_RANGE = (1, 256)
 RESOLUTION_PX_RANGE = (16, 512)  # the same as osnerf.scenes.RenderConfig.resolution_px
-MAX_BUDGET_S = 7 * 24 * 3600.0  # the longest training or time budget a flag takes: a week
 MAX_VIEWS = 10_000  # the most views a command renders or captures
+
+
+def checked(b: Bound, name: str = "number") -> Callable:
+    """An argparse type from a :class:`common.Bound` (a config field's declared range): the
+    same check the config makes, refused while the command line is parsed."""
+
+    def parse(text: str):
+        if b.optional and str(text).strip().lower() in ("none", ""):
+            return None
+        try:
+            return b.parse(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+
+    parse.__name__ = name
+    return parse
 
 
 def count(lo: int, hi: int) -> Callable:
     """An argparse type: an integer in [lo, hi] (counts and sizes always have an upper bound)."""
-
-    def parse(text: str) -> int:
-        return int_in(text, lo, hi)
-
-    parse.__name__ = "count"
-    return parse
+    return checked(Bound(lo, hi, integer=True), "count")
 
 
 def names_from(known: Sequence[str], flag: str) -> Callable:
@@ -65,14 +75,11 @@ def seconds(text: str) -> float:
 def int_in(text: str, lo: int, hi: int, what: str = "") -> int:
     """An argparse type's body: ``text`` as an integer in [lo, hi], else ArgumentTypeError."""
     try:
-        value = int(str(text).strip())
+        return Bound(lo, hi, integer=True).parse(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"must be an integer {what}in [{lo}, {hi}], got {text!r}"
         ) from None
-    if not lo <= value <= hi:
-        raise argparse.ArgumentTypeError(f"must be an integer {what}in [{lo}, {hi}], got {text!r}")
-    return value
 
 
 def seed(text: str) -> int:
@@ -107,19 +114,7 @@ def boolean(text: str) -> bool:
 
 def number(lo: float, hi: float, unit: str = "", *, low_open: bool = False) -> Callable:
     """An argparse type: a finite float in [lo, hi] (``(lo, hi]`` with ``low_open``)."""
-    span = f"{'(' if low_open else '['}{lo:g}, {hi:g}]{' ' + unit if unit else ''}"
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not math.isfinite(value) or not (lo < value if low_open else lo <= value) or value > hi:
-            raise argparse.ArgumentTypeError(f"must be a number in {span}, got {text!r}")
-        return value
-
-    parse.__name__ = "number"
-    return parse
+    return checked(Bound(lo, hi, unit, low_open=low_open))
 
 
 def ground_station(text: str) -> tuple[float, float, float] | None:

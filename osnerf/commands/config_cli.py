@@ -51,6 +51,10 @@ def finite(text: str) -> float:
 
 
 def _type_of(f: dataclasses.Field) -> Callable | None:
+    """The field's argparse type: its declared range (``common.bound`` metadata) when it has
+    one, so the command line refuses what the config would; else by its annotation."""
+    if "bound" in f.metadata:
+        return checks.checked(f.metadata["bound"])
     ann = str(f.type)
     if ann.startswith("float"):
         return finite
@@ -79,8 +83,9 @@ def add_config_arguments(
     Args:
         flags: field -> option where the option is not ``--field-name`` (``num_train_views``
             -> ``--views``).
-        types: field -> argparse type (bounds); default: finite float for ``float`` fields,
-            ``int`` for ``int`` fields, text otherwise.
+        types: field -> argparse type; default: the field's declared range
+            (``common.bound``), else a finite float for ``float`` fields, ``int`` for ``int``
+            fields, text otherwise.
         choices: field -> allowed values.
         defaults: field -> a default other than the class's (a shipped file's path, say).
     """

@@ -64,7 +64,6 @@ FLAGS = {
     "ota_tx_args": "--tx-args",
     "ota_rx_args": "--rx-args",
 }
-MAX_NERF_STEPS = 10_000_000
 
 
 def _demand(text: str) -> str:
@@ -93,11 +92,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.ota_link import OTA_AIRS
     from osnerf.run.config import (
-        DRONE_SPEED_RANGE_M_S,
         RUN_CHANNELS,
         RunConfig,
     )
-    from osnerf.scenes import RADIUS_SCALE_RANGE
     from osnerf.schemes import SCHEMES, parse_schemes
     from osnerf.scu import VIEW_SELECTIONS
     from phy.digital import MCS_TABLE
@@ -110,24 +107,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         flags=FLAGS,
         types={
             "demand": _demand,
-            "snr_db": checks.snr_db,
             "schemes": lambda text: _schemes(text, parse_schemes),
-            "seed": checks.seed,
-            "max_seconds": checks.seconds,
-            "resolution_px": checks.resolution,
-            "num_train_views": checks.count(2, 512),
-            "num_test_views": checks.count(1, 256),
-            "symbol_rate_hz": checks.number(0.0, 1e12, "Hz", low_open=True),
-            "nerf_steps": checks.count(1, MAX_NERF_STEPS),
-            "renderer_steps": checks.count(0, 100_000),
-            "refine_steps": checks.refine_steps,
-            "layer_fusion": checks.number(1.0, 1000.0),
-            "drone_speed_m_s": checks.number(*DRONE_SPEED_RANGE_M_S, "m/s"),
             "ground_station_m": checks.ground_station,
-            "ring_scale": checks.number(*RADIUS_SCALE_RANGE),
-            "max_views": checks.count(1, 512),
-            "plan_snr_db": checks.snr_db,
-            "snr_error_db": checks.number(0.0, 20.0, "dB"),
             "digital_box": checks.boolean,
         },
         choices={

@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from functools import cached_property
 
 import phy
+from common import MAX_BUDGET_S, SEED_RANGE, bound, bound_of, check_bounds
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
 from osnerf.ota_link import OTA_AIRS
 from osnerf.scenes import (
     DEFAULT_SCENE,
-    RADIUS_SCALE_RANGE,
     RenderConfig,
     check_demand,
     get_scene,
@@ -29,6 +28,15 @@ raytraced per drone position) plus the over-the-air link."""
 DRONE_SPEED_RANGE_M_S = (0.0, 100.0)
 GROUND_STATION_RANGE_M = (-10_000.0, 10_000.0)
 """Each coordinate of ``--ground-station``, metres in the scene's frame."""
+MAX_NERF_STEPS = 10_000_000
+"""The most NeRF optimiser steps a run takes."""
+
+
+def _render_bound(name: str) -> dict:
+    """A scene setting's range, as the scene's :class:`RenderConfig` declares it."""
+    return {"bound": bound_of(RenderConfig, name)}
+
+
 CACHE_VERSION = 17
 """Part of every cache key: bumped whenever a cached stage's format changes (15: the plan's
 whole-view and on-demand parts; 16: a semantic scheme's transmission records what it did
@@ -154,37 +162,45 @@ class RunConfig:
     scene: str = DEFAULT_SCENE
     demand: str | None = None
     channel: str = "rayleigh"
-    snr_db: float = 0.0
+    snr_db: float = field(default=0.0, metadata=bound(*phy.SNR_DB_RANGE, "dB"))
     schemes: tuple[str, ...] = DEFAULT_SCHEMES
-    seed: int = 0
-    max_seconds: float = 600.0
-    resolution_px: int = 80
-    num_train_views: int = 24
-    num_test_views: int = 8
-    symbol_rate_hz: float = 1e6
+    seed: int = field(default=0, metadata=bound(*SEED_RANGE, integer=True))
+    max_seconds: float = field(default=600.0, metadata=bound(0, MAX_BUDGET_S, "s", low_open=True))
+    resolution_px: int = field(default=80, metadata=_render_bound("resolution_px"))
+    num_train_views: int = field(default=24, metadata=_render_bound("num_train_views"))
+    num_test_views: int = field(default=8, metadata=_render_bound("num_test_views"))
+    symbol_rate_hz: float = field(default=1e6, metadata=bound(0, 1e12, "Hz", low_open=True))
     codec: str | None = None
     receiver_codec: str | None = None
     allow_untrained: bool = False
     mcs: str = "auto"
     image_codec: str = "avif"
-    render_spp: int = 32
+    render_spp: int = field(default=32, metadata=_render_bound("spp"))
     nerf_clock: str = "cpu"
     ota_device: str = "emulated"
-    nerf_steps: int | None = 1000
-    renderer_steps: int = 1200
-    refine_steps: int = 30
-    layer_fusion: float = 4.0
-    drone_speed_m_s: float = 0.0
+    nerf_steps: int | None = field(
+        default=1000, metadata=bound(1, MAX_NERF_STEPS, integer=True, optional=True)
+    )
+    renderer_steps: int = field(default=1200, metadata=bound(0, 100_000, integer=True))
+    refine_steps: int = field(default=30, metadata=bound(0, 10_000, integer=True))
+    layer_fusion: float = field(default=4.0, metadata=bound(1, 1000))
+    drone_speed_m_s: float = field(default=0.0, metadata=bound(*DRONE_SPEED_RANGE_M_S, "m/s"))
     ground_station_m: tuple[float, float, float] | None = None
-    ring_scale: float = RenderConfig.radius_scale
+    ring_scale: float = field(
+        default=RenderConfig.radius_scale, metadata=_render_bound("radius_scale")
+    )
     view_selection: str = "sight"
-    max_views: int | None = None
+    max_views: int | None = field(
+        default=None, metadata=bound(1, 512, integer=True, optional=True)
+    )
     csi: str | None = None
     ota_air: str = "fixed"
     ota_tx_args: str | None = None
     ota_rx_args: str | None = None
-    plan_snr_db: float | None = None
-    snr_error_db: float = 0.0
+    plan_snr_db: float | None = field(
+        default=None, metadata=bound(*phy.SNR_DB_RANGE, "dB", optional=True)
+    )
+    snr_error_db: float = field(default=0.0, metadata=bound(0, 20, "dB"))
     digital_box: bool = False
 
     @property
@@ -210,33 +226,7 @@ class RunConfig:
                 raise ValueError(f"schemes must be a subset of {','.join(known)}, got {s!r}{why}")
         if len(set(self.schemes)) != len(self.schemes):
             raise ValueError(f"schemes must not repeat a name, got {','.join(self.schemes)}")
-        if not math.isfinite(self.snr_db):
-            raise ValueError(f"snr_db must be finite, got {self.snr_db!r}")
-        if self.plan_snr_db is not None and not math.isfinite(self.plan_snr_db):
-            raise ValueError(f"plan_snr_db must be finite or None, got {self.plan_snr_db!r}")
-        if not (math.isfinite(self.snr_error_db) and 0 <= self.snr_error_db <= 20):
-            raise ValueError(f"snr_error_db must be in [0, 20] dB, got {self.snr_error_db!r}")
-        if not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
-            raise ValueError(f"max_seconds must be > 0, got {self.max_seconds!r}")
-        if self.nerf_steps is not None and not (
-            isinstance(self.nerf_steps, int) and self.nerf_steps >= 1
-        ):
-            raise ValueError(f"nerf_steps must be an integer >= 1, got {self.nerf_steps!r}")
-        if not (isinstance(self.refine_steps, int) and 0 <= self.refine_steps <= 10_000):
-            raise ValueError(
-                f"refine_steps must be an integer in [0, 10000], got {self.refine_steps!r}"
-            )
-        if not (
-            isinstance(self.layer_fusion, (int, float))
-            and math.isfinite(self.layer_fusion)
-            and 1 <= self.layer_fusion <= 1000
-        ):
-            raise ValueError(f"layer_fusion must be in [1, 1000], got {self.layer_fusion!r}")
-        if not (isinstance(self.renderer_steps, int) and 0 <= self.renderer_steps <= 100_000):
-            raise ValueError(
-                f"renderer_steps must be an integer in [0, 100000] (0: skip), "
-                f"got {self.renderer_steps!r}"
-            )
+        check_bounds(self)
         self._check_speed()
         self._check_positions()
         self._check_csi()
@@ -255,17 +245,12 @@ class RunConfig:
             raise ValueError("ota_device zmq needs ota_tx_args and ota_rx_args (ZMQ addresses)")
         if self.nerf_clock not in ("wall", "cpu"):
             raise ValueError(f"nerf_clock must be 'wall' or 'cpu', got {self.nerf_clock!r}")
-        if not self.symbol_rate_hz > 0:
-            raise ValueError(f"symbol_rate_hz must be > 0, got {self.symbol_rate_hz!r}")
         self._check_selection()
         self._check_digital()
         self.render_config()  # validates the view settings
 
     def _check_speed(self) -> None:
         v = self.drone_speed_m_s
-        lo, hi = DRONE_SPEED_RANGE_M_S
-        if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
-            raise ValueError(f"drone_speed_m_s must be in [{lo:g}, {hi:g}] m/s, got {v!r}")
         if self.ota_air not in OTA_AIRS:
             raise ValueError(f"ota_air must be one of {', '.join(OTA_AIRS)}, got {self.ota_air!r}")
         traced_air = self.channel == OTA and self.ota_air == "raytraced"
@@ -303,10 +288,6 @@ class RunConfig:
                     f"got {gs!r} with channel {self.channel!r}"
                 )
             object.__setattr__(self, "ground_station_m", xyz)  # (8, -6, 1.5): the same run
-        v = self.ring_scale
-        lo, hi = RADIUS_SCALE_RANGE
-        if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
-            raise ValueError(f"ring_scale must be in [{lo:g}, {hi:g}], got {v!r}")
 
     def _check_csi(self) -> None:
         if self.csi is None:
@@ -327,10 +308,7 @@ class RunConfig:
                 f"view_selection must be one of {', '.join(VIEW_SELECTIONS)}, "
                 f"got {self.view_selection!r}"
             )
-        m = self.max_views
-        if m is not None and (isinstance(m, bool) or not isinstance(m, int) or not 1 <= m <= 512):
-            raise ValueError(f"max_views must be an integer in [1, 512], got {m!r}")
-        if m is None and self.view_selection != "sight":
+        if self.max_views is None and self.view_selection != "sight":
             raise ValueError(
                 f"view_selection {self.view_selection!r} chooses among the visible views: "
                 "give max_views"

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import read_image, write_png
+from common import bound, check_bounds, read_image, write_png
 from osnerf.provenance import write_json_atomic
 from osnerf.scenes.cameras import Intrinsics, intrinsics_from_fov, look_at, ring_positions
 from osnerf.scenes.registry import get_scene
@@ -60,27 +60,15 @@ class RenderConfig:
             (:data:`RADIUS_SCALE_RANGE`).
     """
 
-    resolution_px: int = 80
-    num_train_views: int = 24
-    num_test_views: int = 8
-    spp: int = 32
-    mask_spp: int = 4
-    radius_scale: float = 1.25
+    resolution_px: int = field(default=80, metadata=bound(16, 512, "px", integer=True))
+    num_train_views: int = field(default=24, metadata=bound(2, 512, integer=True))
+    num_test_views: int = field(default=8, metadata=bound(1, 256, integer=True))
+    spp: int = field(default=32, metadata=bound(1, 1024, integer=True))
+    mask_spp: int = field(default=4, metadata=bound(1, 64, integer=True))
+    radius_scale: float = field(default=1.25, metadata=bound(*RADIUS_SCALE_RANGE))
 
     def __post_init__(self):
-        for name, lo, hi in (
-            ("resolution_px", 16, 512),
-            ("num_train_views", 2, 512),
-            ("num_test_views", 1, 256),
-            ("spp", 1, 1024),
-            ("mask_spp", 1, 64),
-        ):
-            v = getattr(self, name)
-            if not isinstance(v, int) or not lo <= v <= hi:
-                raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {v!r}")
-        lo, hi = RADIUS_SCALE_RANGE
-        if not lo <= self.radius_scale <= hi:
-            raise ValueError(f"radius_scale must be in [{lo:g}, {hi:g}], got {self.radius_scale!r}")
+        check_bounds(self)
 
 
 @dataclass

@@ -85,7 +85,7 @@ def test_bad_values_are_refused_while_parsing(tmp_path, capsys, command, extra):
     [
         (["--mcs", "foo"], "argument --mcs: invalid choice: 'foo'"),
         (["--image-codec", "bmp"], "argument --image-codec: invalid choice: 'bmp'"),
-        (["--resolution", "30000"], "argument --resolution: must be an integer of pixels"),
+        (["--resolution", "30000"], "argument --resolution: must be an integer in [16, 512] px"),
     ],
 )
 def test_run_refuses_bad_flags_before_any_stage(tmp_path, capsys, extra, match):

@@ -176,9 +176,9 @@ def test_a_ground_station_on_a_channel_without_one_is_refused(tmp_path, capsys):
     assert not out.exists()
     with pytest.raises(ValueError, match=r"ground_station_m must be \(x, y, z\) metres"):
         RunConfig(channel="raytraced", ground_station_m=(0.0, 0.0))
-    with pytest.raises(ValueError, match=r"ring_scale must be in \[1, 10\]"):
+    with pytest.raises(ValueError, match=r"ring_scale must be a number in \[1, 10\]"):
         RunConfig(ring_scale=0.9)
-    with pytest.raises(ValueError, match=r"radius_scale must be in \[1, 10\]"):
+    with pytest.raises(ValueError, match=r"radius_scale must be a number in \[1, 10\]"):
         RenderConfig(radius_scale=10.5)
     assert RunConfig().render_config().radius_scale == RenderConfig().radius_scale
     same = RunConfig(channel="raytraced", ground_station_m=(8, -6, 1.5))
