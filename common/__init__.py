@@ -6,7 +6,7 @@
   failed write (a full disk) raises one ``OSError`` naming the file and leaves nothing behind.
 * ``common.images``: the one image loader (8- and 16-bit, grayscale, palette, alpha, EXIF
   orientation) and the one list of image file suffixes.
-* ``common.quality``: the one PSNR (peak 1.0).
+* ``common.quality``: the one PSNR (peak 1.0) and the one MS-SSIM.
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
 * ``common.jit``: ``lazy_njit``, the one numba wrapper (numba loaded on a kernel's first call).
 * ``common.checks``: ``bound``, a field's range declared once, read by configs and CLIs.
@@ -38,7 +38,7 @@ from common.images import IMAGE_SUFFIXES, list_images, load_square_images, read_
 from common.jit import lazy_njit
 from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
-from common.quality import PSNR_MAX_DB, psnr
+from common.quality import MS_SSIM_MIN_SIDE_PX, PSNR_MAX_DB, ms_ssim, psnr
 from common.registry import Registry
 from common.threads import one_blas_thread
 
@@ -56,6 +56,8 @@ __all__ = [
     "load_plugins",
     "IMAGE_SUFFIXES",
     "PSNR_MAX_DB",
+    "MS_SSIM_MIN_SIDE_PX",
+    "ms_ssim",
     "Registry",
     "atomic_path",
     "check_replaceable",

@@ -1,4 +1,4 @@
-"""The one PSNR of the project (peak 1.0), for every package and command.
+"""The one PSNR (peak 1.0) and the one MS-SSIM of the project, for every package and command.
 
 Edge cases, decided once:
 
@@ -53,3 +53,31 @@ def psnr(x, y, mask=None) -> float:
     if math.isnan(mse):
         return math.nan
     return -10.0 * math.log10(max(mse, _MSE_FLOOR))
+
+
+MS_SSIM_MIN_SIDE_PX = 161
+"""The smallest side MS-SSIM's five scales with an 11-px window accept (pytorch-msssim:
+more than (11 - 1) * 2^4 px)."""
+
+
+def ms_ssim(x, y) -> float | None:
+    """MS-SSIM of one image pair (pytorch-msssim: five scales, 11-px Gaussian window, data
+    range 1.0; ``x`` clipped to [0, 1] as :func:`psnr` does).
+
+    Args:
+        x, y: [3, height, width] or [1, 3, height, width], numpy arrays or torch tensors.
+    Returns:
+        MS-SSIM in [0, 1], or None when a side is under :data:`MS_SSIM_MIN_SIDE_PX`.
+    """
+    import torch
+    from pytorch_msssim import ms_ssim as _ms_ssim
+
+    a = torch.as_tensor(np.asarray(x) if not hasattr(x, "detach") else x.detach().cpu())
+    b = torch.as_tensor(np.asarray(y) if not hasattr(y, "detach") else y.detach().cpu())
+    if a.shape != b.shape or a.dim() not in (3, 4) or a.shape[-3] != 3:
+        raise ValueError(f"ms_ssim: need [1, 3, H, W] or [3, H, W] pairs, got {a.shape}, {b.shape}")
+    if min(b.shape[-2:]) < MS_SSIM_MIN_SIDE_PX:
+        return None
+    a, b = (a[None] if a.dim() == 3 else a), (b[None] if b.dim() == 3 else b)
+    with torch.no_grad():
+        return float(_ms_ssim(a.clamp(0, 1).float(), b.float(), data_range=1.0, size_average=True))

@@ -73,7 +73,7 @@ from renderer.feature_renderer import FeatureRenderer
 from renderer.features import train_features
 from renderer.fields import GridField, MLPField, positional_encoding
 from renderer.lpips_weights import lpips_weights_path
-from renderer.metrics import image_metrics, masked_psnr, ms_ssim, psnr, ssim, to_uint8
+from renderer.metrics import image_metrics, masked_psnr, psnr, ssim, to_uint8
 from renderer.model import RadianceField, load_model, render_views, save_model
 from renderer.perceptual import LPIPS_MIN_SIDE_PX, alexnet_features, lpips, lpips_weights
 from renderer.renderers import RENDERERS, FullRenderer, make_renderer, score_renderers
@@ -144,7 +144,6 @@ __all__ = [
     "save_model",
     "score_renderers",
     "ssim",
-    "ms_ssim",
     "stored_cameras",
     "to_uint8",
     "write_transforms",

@@ -25,26 +25,6 @@ def ssim(pred, target) -> float:
     return float(structural_similarity(p, t, data_range=1.0, channel_axis=-1))
 
 
-MS_SSIM_MIN_SIDE_PX = 161
-"""The smallest side MS-SSIM's five scales accept (pytorch-msssim, 11-px window)."""
-
-
-def ms_ssim(pred, target) -> float | None:
-    """MS-SSIM of one image pair [height, width, 3] in [0, 1] (pytorch-msssim: five scales,
-    11-px Gaussian window, data_range 1.0); None when a side is under
-    :data:`MS_SSIM_MIN_SIDE_PX`."""
-    import torch
-    from pytorch_msssim import ms_ssim as _ms_ssim
-
-    p, t = _np(pred).astype(np.float32), _np(target).astype(np.float32)
-    if min(t.shape[:2]) < MS_SSIM_MIN_SIDE_PX:
-        return None
-    x = torch.from_numpy(np.ascontiguousarray(p.transpose(2, 0, 1)))[None].clamp(0, 1)
-    y = torch.from_numpy(np.ascontiguousarray(t.transpose(2, 0, 1)))[None]
-    with torch.no_grad():
-        return float(_ms_ssim(x, y, data_range=1.0, size_average=True))
-
-
 def masked_psnr(pred, target, mask) -> float:
     """PSNR (:func:`common.psnr`) over the pixels where mask > 0.5: pred, target
     [height, width, 3], mask [height, width]. NaN when the mask is empty."""

@@ -414,10 +414,10 @@ def _point(
     """One (scheme, SNR) row of the result: every image over ``args.draws`` draws."""
     import torch
 
-    from common import psnr
+    from common import ms_ssim, psnr
     from renderer import lpips
     from semcodec import LINK_SCHEMES
-    from semcodec.links import ms_ssim, ssim
+    from semcodec.links import ssim
 
     ps, ss, ms, ls, t0 = [], [], [], [], time.perf_counter()
     beliefs: list[list[float]] = []

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 import renderer
+from common import ms_ssim
 from osnerf.scheme_types import NerfBudget
 
 
@@ -163,6 +164,11 @@ def _train_and_render(ds, views, held_out, budget: NerfBudget, seed: int, object
     return rgb, op, training
 
 
+def chw(image: np.ndarray) -> np.ndarray:
+    """[height, width, 3] -> [3, height, width] (the renderer's views, for common's metrics)."""
+    return np.ascontiguousarray(np.asarray(image).transpose(2, 0, 1))
+
+
 def _mean_or_none(values: list) -> float | None:
     """The mean, or None when a value is missing (views too small for MS-SSIM)."""
     return None if not values or any(v is None for v in values) else float(np.mean(values))
@@ -175,7 +181,7 @@ def _scores(rgb, op, gt, ref, union, seen: list[int], object_routed: bool) -> di
     return {
         "psnr": float(np.mean([renderer.psnr(rgb[k], ref[k]) for k in range(n)])),
         "ssim": float(np.mean([renderer.ssim(rgb[k], ref[k]) for k in range(n)])),
-        "ms_ssim": _mean_or_none([renderer.ms_ssim(rgb[k], ref[k]) for k in range(n)]),
+        "ms_ssim": _mean_or_none([ms_ssim(chw(rgb[k]), chw(ref[k])) for k in range(n)]),
         "lpips": lpips_mean(rgb, ref),
         "psnr_object": float(
             np.mean([renderer.masked_psnr(rgb[k], gt[k], union[k] > 0.5) for k in seen])

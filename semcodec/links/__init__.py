@@ -20,7 +20,6 @@ from semcodec.links.schemes import (
     EvalContext,
     eval_channels,
     load_image_folder,
-    ms_ssim,
     schemes_help,
     ssim,
 )
@@ -44,7 +43,6 @@ __all__ = [
     "eval_channels",
     "frame_payload_bytes",
     "load_image_folder",
-    "ms_ssim",
     "schemes_help",
     "ssim",
     "transmit_analog",

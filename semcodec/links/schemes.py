@@ -330,17 +330,3 @@ def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
     )
 
 
-MS_SSIM_MIN_SIDE_PX = 161
-"""The smallest side MS-SSIM's five scales with an 11-px window accept (pytorch-msssim:
-more than (11 - 1) * 2^4 px)."""
-
-
-def ms_ssim(x: torch.Tensor, y: torch.Tensor) -> float | None:
-    """MS-SSIM (pytorch-msssim, five scales, 11-px Gaussian window, RGB in [0, 1]) of one
-    image pair [1, 3, H, W]; None when a side is under :data:`MS_SSIM_MIN_SIDE_PX`."""
-    if min(y.shape[-2:]) < MS_SSIM_MIN_SIDE_PX:
-        return None
-    from pytorch_msssim import ms_ssim as _ms_ssim
-
-    with torch.no_grad():
-        return float(_ms_ssim(x.clamp(0, 1).float(), y.float(), data_range=1.0, size_average=True))
