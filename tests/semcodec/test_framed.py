@@ -37,7 +37,7 @@ def decode_image_as_sent(data: bytes) -> np.ndarray:
 
 def test_every_over_the_air_scheme_has_a_framed_pair():
     air = [k for k, v in LINK_SCHEMES.items() if v.over_the_air]
-    assert sorted(air) == ["digital", "jscc"]
+    assert sorted(air) == ["digital", "jscc", "softcast"]
     assert all(LINK_SCHEMES[k].framed is not None for k in air)
 
 
