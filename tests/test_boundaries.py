@@ -244,4 +244,6 @@ def test_cycle_walker_sees_a_circle_through_a_package_init(tmp_path):
     (run / "x.py").write_text("from osnerf.run import config\n")
     graph = import_graph(tmp_path, tops=("osnerf",))
     assert "osnerf.run" not in graph["osnerf.run.x"]  # its own package is already running
-    assert import_cycles(graph) == [["osnerf.run", "osnerf.run.config", "osnerf.run.x", "osnerf.schemes"]]
+    assert import_cycles(graph) == [
+        ["osnerf.run", "osnerf.run.config", "osnerf.run.x", "osnerf.schemes"]
+    ]

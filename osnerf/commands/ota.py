@@ -369,5 +369,3 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(out, record)
     print(f"ota: wrote {out}", file=sys.stderr)
     return 0
-
-
