@@ -4,8 +4,8 @@
   (96 px crops, batch 12), with the shipped checkpoint; timings on a shared 2-core machine
   are noisy.
 * The codec table: Kodak x channels (awgn; rayleigh = block fading, 4 draws per image;
-  rayleigh_fast) x SNR -10, -5, -2, 0, 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
-  checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital
+  rayleigh_fast) x SNR -10, -5, -2, 0, 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc
+  (each checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital
   (honest: MCS from the calibration table), digital_genie and ideal (bounds), mean and 95 %
   interval, with the published anchors beside each row and checks (jscc above digital,
   genie never below digital); the same on other photos (BSDS500's

@@ -62,8 +62,8 @@ def _bound_in_init(package: str) -> set[str]:
 
 
 def _module_of_another_package(name: str) -> bool:
-    """``name`` is a module file inside one of our packages (``hil.emulation.air``), not the package or
-    one of its subpackages (``phy.digital``), whose ``__init__`` is the public surface."""
+    """``name`` is a module file inside one of our packages (``hil.emulation.air``), not the package
+    or one of its subpackages (``phy.digital``), whose ``__init__`` is the public surface."""
     parts = name.split(".")
     path = ROOT.joinpath(*parts)
     if len(parts) == 1 or (path / "__init__.py").is_file():

@@ -503,7 +503,8 @@ def _point(
     )
     msl = f", MS-SSIM {r['ms_ssim']:.4f}" if r["ms_ssim"] is not None else ""
     print(
-        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM {np.mean(ss):.4f}{msl}{lp}",
+        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM "
+        f"{np.mean(ss):.4f}{msl}{lp}",
         file=sys.stderr,
     )
     return r

@@ -1,6 +1,7 @@
 """`osnerf ota`: send images over the air (HackRF One or ADALM-Pluto; real, emulated or loopback).
 
-    osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 --images DIR --out ota.json
+    osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 \\
+        --images DIR --out ota.json
 
 Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
 receiver (``LinkScheme.framed``, :mod:`semcodec.links.framed`): ``digital`` (image codec bytes ->

@@ -212,7 +212,9 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
 
     # the decoder's one-off set-up before the stream: the first view is as quick as the rest
     first = pick[0]
-    scheme.receive(received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings)  # fmt: skip
+    scheme.receive(
+        received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings
+    )
     stopped = None
     with _sigterm_as_interrupt():
         tx, rx, emu = _open_radios(args, cfg)
@@ -378,7 +380,9 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
     result = BurstResult(blocks, reports, empty, empty)
     per_view = [recs[v.index] for v in done]
     done_names = [view_names[v.index] for v in done]
-    record = ota_record(args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0)  # fmt: skip
+    record = ota_record(
+        args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0
+    )
     start = min((v.sent_at for v in views if v.sent_at is not None), default=0.0)
     rows = []
     for v in views:

@@ -255,7 +255,8 @@ def run_pipeline(
             )
             received[name], renders[name] = tx.images.permute(0, 2, 3, 1).numpy(), rec.rgb
             _log(
-                f"{name}: psnr_object {results[name].psnr_object}, symbols {results[name].symbols_sent}"
+                f"{name}: psnr_object {results[name].psnr_object}, symbols "
+                f"{results[name].symbols_sent}"
             )
             if (use := results[name].codec_use) is not None:
                 _log(codec_use_line(name, use))
@@ -391,7 +392,8 @@ def unequal_budgets(results: dict[str, SchemeReport]) -> list[str]:
             lo, hi = sorted((steps[a], steps[b]))
             if hi > (1 + BUDGET_TOLERANCE) * lo:
                 out.append(
-                    f"{a} ({steps[a]} NeRF steps) vs {b} ({steps[b]} NeRF steps): budgets differ by "
+                    f"{a} ({steps[a]} NeRF steps) vs {b} ({steps[b]} NeRF steps): "
+                    "budgets differ by "
                     f"{hi / lo - 1:.0%}, their comparison is not fair"
                 )
     return out

@@ -28,7 +28,8 @@ class RatePolicy:
     """Below this measured SNR every view costs twice its CBR, sent as two MRC-combined copies.
     On-demand views send copies only where they fade independently (``phy.CopyFading``);
     otherwise the second copy's symbols are spent as rate: on a static channel a copy buys
-    only the 3 dB combining gain, which the codec's rate beats (docs/design-notes.md, "End to end")."""
+    only the 3 dB combining gain, which the codec's rate beats (docs/design-notes.md, "End to
+    end")."""
     copy_spread_db: float = 1.0
     """Copies can fade independently only where the per-symbol SNR spreads (std about each
     view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""

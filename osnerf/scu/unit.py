@@ -1,8 +1,8 @@
 """The semantic control unit (SCU): it decides, and the pipeline carries out what it
 decides. It turns the demand into collector and encoder settings, measures each link with
 pilots, and returns one typed :class:`osnerf.plan.ViewPlan` per view with a propagation path
-(measured link, whole-view and on-demand parts); it checks the knowledge base (both ends hold the same codec) and
-routes each scheme's views to the renderer. It owns its decision log
+(measured link, whole-view and on-demand parts); it checks the knowledge base (both ends hold the
+same codec) and routes each scheme's views to the renderer. It owns its decision log
 (``SemanticControlUnit.decisions``), cached with the plan, which ends up in the report.
 """
 
@@ -91,7 +91,8 @@ class SemanticControlUnit:
             )
             raise KnowledgeBaseError(
                 f"knowledge-base mismatch: transmitter codec sha256 {transmitter_sha256[:12]} != "
-                f"receiver codec sha256 {receiver_sha256[:12]}; load the same checkpoint on both ends"
+                f"receiver codec sha256 {receiver_sha256[:12]}; load the same checkpoint on both "
+                "ends"
             )
         self.log("knowledge_base", "agreed", sha256=transmitter_sha256)
 
@@ -138,7 +139,8 @@ class SemanticControlUnit:
             out.append(c)
             self.log(
                 "rate",
-                f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the demand)",
+                f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the "
+                "demand)",
                 view=int(v),
                 coverage=float(cov),
                 cbr=c,

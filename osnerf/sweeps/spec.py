@@ -98,11 +98,13 @@ class SweepSpec:
             )
         if not isinstance(self.fixed, dict):
             raise ValueError(
-                f"spec field 'fixed' must be a mapping option -> value, got {type(self.fixed).__name__}"
+                "spec field 'fixed' must be a mapping option -> value, got "
+                f"{type(self.fixed).__name__}"
             )
         if not isinstance(self.axes, dict):
             raise ValueError(
-                f"spec field 'axes' must be a mapping option -> list of values, got {type(self.axes).__name__}"
+                "spec field 'axes' must be a mapping option -> list of values, got "
+                f"{type(self.axes).__name__}"
             )
         for name, values in self.axes.items():
             if not isinstance(values, list | tuple):

@@ -86,7 +86,8 @@ HOW = (
     "ZF, a fade per symbol) at E = 3840. Block fading = the awgn curve averaged over the fade. "
     "rate_distortion[codec][scale]: mean bpp (wire bytes, container stripped, per pixel of the "
     "full image) and mean PSNR (upscaled with Lanczos against the full image) over the Kodak "
-    "images per quality, the image sent downscaled by scale. lost_psnr_db: mean PSNR of mid-grey against Kodak. Recompute: "
+    "images per quality, the image sent downscaled by scale. lost_psnr_db: mean PSNR of mid-grey "
+    "against Kodak. Recompute: "
     "python -m semcodec.digital.calibration --kodak KODAK --out FILE (about 30 CPU minutes)."
 )
 

@@ -13,8 +13,8 @@ codec at capacity.
   bits, error free.
 
 Both send the best file of the image that fits the budget over quality and scale
-(:func:`semcodec.digital.image_codecs.encode_scaled_to_budget`: below some budget a downscaled image,
-upscaled at the receiver); each image's scale is in the stats.
+(:func:`semcodec.digital.image_codecs.encode_scaled_to_budget`: below some budget a downscaled
+image, upscaled at the receiver); each image's scale is in the stats.
 """
 
 from __future__ import annotations
