@@ -73,10 +73,8 @@ class Pluto:
         kernel_buffers: int = 4,
         configure: bool = True,
     ):
-        for name, v in (
-            ("rx_chunk_samples", rx_chunk_samples),
-            ("tx_chunk_samples", tx_chunk_samples),
-        ):
+        chunks = {"rx_chunk_samples": rx_chunk_samples, "tx_chunk_samples": tx_chunk_samples}
+        for name, v in chunks.items():
             if int(v) <= 0:
                 raise ValueError(f"{name} must be > 0, got {v!r}")
         self._sdr = sdr

@@ -37,6 +37,15 @@ from typing import Any
 import yaml
 
 from osnerf.sweeps.exclude import check_exclude, matches
+from osnerf.sweeps.options import (
+    _args_check,
+    _args_for,
+    _format_value,
+    _norm,
+    _ParseError,
+    command_options,
+    command_parser,
+)
 
 RESERVED = ("out", "seed")  # set by the sweep itself, per point
 OUTPUT_OPTIONS = ("plot", "sigmf_dir", "keep_outputs")  # files every point would write alike
@@ -145,10 +154,6 @@ class SweepSpec:
         """Hash of the canonical spec: a results file belongs to exactly one spec."""
         blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), default=str)
         return hashlib.sha256(blob.encode()).hexdigest()
-
-
-def _norm(name: str) -> str:
-    return str(name).replace("-", "_")
 
 
 def count_points(d: dict[str, Any]) -> int:
@@ -266,70 +271,7 @@ def _syntax_error(e: Exception) -> str:
     return text  # tomllib says "... (at line 3, column 7)" itself
 
 
-# --- checking against the command's own argparse options ----------------------------------
-
-
-class _ParseError(ValueError):
-    pass
-
-
-def _raise(msg: str):
-    raise _ParseError(msg)
-
-
-def command_parser(command: str) -> argparse.ArgumentParser:
-    """The argparse sub-parser of ``osnerf <command>`` (errors raise instead of exiting)."""
-    from osnerf.cli import COMMANDS, build_parser
-
-    if command not in COMMANDS:
-        raise KeyError(
-            f"unknown command {command!r} in spec field 'command'; known: {sorted(COMMANDS)}"
-        )
-    top = build_parser(command)
-    sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
-    if command not in sub.choices:
-        raise ValueError(
-            f"command {command!r} is not available in this checkout (its module "
-            f"{COMMANDS[command][0]} is missing)"
-        )
-    p = sub.choices[command]
-    p.error = _raise  # one-line ValueError instead of printing usage and exiting
-    return p
-
-
-def command_options(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
-    """dest name (underscores) -> action, for every long option of the parser."""
-    out = {}
-    for a in parser._actions:
-        longs = [s for s in a.option_strings if s.startswith("--")]
-        if not longs or isinstance(a, argparse._HelpAction):
-            continue
-        for s in longs:
-            out[_norm(s[2:])] = a
-        out.setdefault(_norm(a.dest), a)
-    return out
-
-
-def _format_value(name: str, value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list | tuple):
-        return ",".join(_format_value(name, v) for v in value)
-    if isinstance(value, dict) or value is None:
-        raise ValueError(f"option {name!r}: value {value!r} is not a scalar or a list of scalars")
-    return str(value)
-
-
-def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
-    flag = next(s for s in action.option_strings if s.startswith("--"))
-    if action.nargs == 0:  # store_true / store_false / store_const flags
-        if not isinstance(value, bool):
-            raise ValueError(
-                f"option {name!r} is a flag: its value must be true or false, got {value!r}"
-            )
-        wanted = value if not isinstance(action, argparse._StoreFalseAction) else not value
-        return [flag] if wanted else []
-    return [flag, _format_value(name, value)]
+# --- checking against the command's own argparse options (osnerf.sweeps.options) ----------
 
 
 def _check_table_values(spec: SweepSpec, opts: dict[str, argparse.Action]) -> None:
@@ -416,17 +358,6 @@ def expand(spec: SweepSpec) -> list[Point]:
     if not points:
         raise ValueError("empty sweep: the spec expands to no points")
     return points
-
-
-def _args_check(command: str):
-    """The command's ``check_args(args)`` (its module's: builds and validates the config
-    of parsed arguments, raising ValueError on a combination its parser cannot see), or
-    None."""
-    import importlib
-
-    from osnerf.cli import COMMANDS
-
-    return getattr(importlib.import_module(COMMANDS[command][0]), "check_args", None)
 
 
 def _parse_point(command: str, parser, point: Point, has_out: bool, check_args) -> str:
