@@ -17,7 +17,7 @@ import phy
 from osnerf.collect import Collection, CollectorConfig, Demand
 from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan
 from osnerf.scheme_types import scheme_seed
-from osnerf.scu.policy import RatePolicy, combined_snr_db
+from osnerf.scu.policy import RatePolicy, combined_snr_db, transmitter_estimate
 from semcodec import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
 from semcodec.contract import box_side_symbols
 from semcodec.jscc import BLOCK_PX, focus_coverage, full_rate_symbols
@@ -429,25 +429,3 @@ def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
     b = np.asarray(bounds, np.float64)
     pad = pad_fraction * float((b[1] - b[0]).max())
     return np.stack([b[0] - pad, b[1] + pad])
-
-
-def transmitter_estimate(
-    measured_snr_db: np.ndarray, plan_snr_db: float | None, snr_error_db: float, seed: int
-) -> np.ndarray:
-    """Each view's SNR as its transmitter believes it: the pilot measurement (or
-    ``plan_snr_db`` for every view) plus a zero-mean Gaussian error of ``snr_error_db`` drawn
-    from the run seed (its own stream), the same for every scheme. Unchanged with neither.
-
-    Args:
-        measured_snr_db: [num_views] the SCU's measurements.
-    Returns:
-        [num_views] float64.
-    """
-    est = np.asarray(measured_snr_db, dtype=np.float64)
-    if plan_snr_db is not None:
-        est = np.full_like(est, float(plan_snr_db))
-    if snr_error_db:
-        gen = torch.Generator().manual_seed(scheme_seed(seed, "scu", "estimate error"))
-        z = torch.randn(est.shape, generator=gen, dtype=torch.float64).numpy()
-        est = est + float(snr_error_db) * z
-    return est
