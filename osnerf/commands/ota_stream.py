@@ -243,6 +243,12 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     if stopped is not None:
         return _write_stopped(args, cfg, out, record, stopped, len(recs), len(views))
     write_json_atomic(out, record)
+    return _tell_finished(args, out, record, run)
+
+
+def _tell_finished(args, out, record: dict, run) -> int:
+    """A finished stream's lines on stderr (counts, warnings, lost samples); 1 when it lost
+    more overruns than ``--max-rx-overruns`` allows."""
     stream, lat = record["stream"], record["stream"]["latency_s"]
     print(
         f"ota: stream: {stream['samples_received']} samples, {stream['dropped_samples']} "
