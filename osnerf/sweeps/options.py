@@ -7,16 +7,17 @@ import argparse
 from typing import Any
 
 
-def _norm(name: str) -> str:
+def option_name(name: str) -> str:
+    """A spec's option name as argparse's dest (``snr-db`` and ``snr_db`` both ``snr_db``)."""
     return str(name).replace("-", "_")
 
 
-class _ParseError(ValueError):
-    pass
+class ParseError(ValueError):
+    """The command's parser refused a point's command line."""
 
 
 def _raise(msg: str):
-    raise _ParseError(msg)
+    raise ParseError(msg)
 
 
 def command_parser(command: str) -> argparse.ArgumentParser:
@@ -47,22 +48,22 @@ def command_options(parser: argparse.ArgumentParser) -> dict[str, argparse.Actio
         if not longs or isinstance(a, argparse._HelpAction):
             continue
         for s in longs:
-            out[_norm(s[2:])] = a
-        out.setdefault(_norm(a.dest), a)
+            out[option_name(s[2:])] = a
+        out.setdefault(option_name(a.dest), a)
     return out
 
 
-def _format_value(name: str, value: Any) -> str:
+def value_text(name: str, value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, list | tuple):
-        return ",".join(_format_value(name, v) for v in value)
+        return ",".join(value_text(name, v) for v in value)
     if isinstance(value, dict) or value is None:
         raise ValueError(f"option {name!r}: value {value!r} is not a scalar or a list of scalars")
     return str(value)
 
 
-def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
+def option_args(name: str, value: Any, action: argparse.Action) -> list[str]:
     flag = next(s for s in action.option_strings if s.startswith("--"))
     if action.nargs == 0:  # store_true / store_false / store_const flags
         if not isinstance(value, bool):
@@ -71,10 +72,10 @@ def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
             )
         wanted = value if not isinstance(action, argparse._StoreFalseAction) else not value
         return [flag] if wanted else []
-    return [flag, _format_value(name, value)]
+    return [flag, value_text(name, value)]
 
 
-def _args_check(command: str):
+def command_check(command: str):
     """The command's ``check_args(args)`` (its module's: builds and validates the config
     of parsed arguments, raising ValueError on a combination its parser cannot see), or
     None."""

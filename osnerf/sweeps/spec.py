@@ -38,13 +38,13 @@ import yaml
 
 from osnerf.sweeps.exclude import check_exclude, matches
 from osnerf.sweeps.options import (
-    _args_check,
-    _args_for,
-    _format_value,
-    _norm,
-    _ParseError,
+    ParseError,
+    command_check,
     command_options,
     command_parser,
+    option_args,
+    option_name,
+    value_text,
 )
 
 RESERVED = ("out", "seed")  # set by the sweep itself, per point
@@ -126,8 +126,8 @@ class SweepSpec:
             if s is not None and (isinstance(s, bool) or not isinstance(s, int)):
                 raise ValueError(f"spec field 'seeds' must hold integers, got {s!r}")
         check_exclude(self.exclude, list(self.axes))
-        both = sorted(_norm(k) for k in self.fixed)
-        dup = sorted(set(both) & {_norm(k) for k in self.axes})
+        both = sorted(option_name(k) for k in self.fixed)
+        dup = sorted(set(both) & {option_name(k) for k in self.axes})
         if dup:
             raise ValueError(f"option(s) {dup} appear in both 'fixed' and 'axes'; put each in one")
 
@@ -282,11 +282,11 @@ def _check_table_values(spec: SweepSpec, opts: dict[str, argparse.Action]) -> No
     options = {}
     for kind, table in (("fixed option", spec.fixed), ("axis", spec.axes)):
         for name, values in table.items():
-            action = opts[_norm(name)]
+            action = opts[option_name(name)]
             if action.nargs == 0:  # a flag: true or false, nothing to look up
                 continue
             values = values if kind == "axis" else [values]
-            options[action.dest] = (f"{kind} {name!r}", [_format_value(name, v) for v in values])
+            options[action.dest] = (f"{kind} {name!r}", [value_text(name, v) for v in values])
     check_values(spec.command, options)
 
 
@@ -298,10 +298,10 @@ def expand(spec: SweepSpec) -> list[Point]:
     """
     parser = command_parser(spec.command)
     opts = command_options(parser)
-    allowed = sorted({_norm(a.dest) for a in opts.values()} - set(RESERVED))
+    allowed = sorted({option_name(a.dest) for a in opts.values()} - set(RESERVED))
     for kind, names in (("fixed", spec.fixed), ("axes", spec.axes)):
         for name in names:
-            n = _norm(name)
+            n = option_name(name)
             if n in RESERVED:
                 raise ValueError(
                     f"option {name!r} in '{kind}' is set by the sweep itself "
@@ -326,12 +326,12 @@ def expand(spec: SweepSpec) -> list[Point]:
 
     fixed_argv: list[str] = []
     for name, value in spec.fixed.items():
-        fixed_argv += _args_for(name, value, opts[_norm(name)])
+        fixed_argv += option_args(name, value, opts[option_name(name)])
     names = list(spec.axes)
     points: list[Point] = []
     seen: dict[str, Point] = {}  # parsed options -> point
     used = [False] * len(spec.exclude)
-    check_args = _args_check(spec.command)
+    check_args = command_check(spec.command)
     for combo in itertools.product(*(spec.axes[n] for n in names)):
         values = dict(zip(names, combo))
         hits = [matches(e, values) for e in spec.exclude]
@@ -340,7 +340,7 @@ def expand(spec: SweepSpec) -> list[Point]:
             continue
         argv = list(fixed_argv)
         for name, value in zip(names, combo):
-            argv += _args_for(name, value, opts[_norm(name)])
+            argv += option_args(name, value, opts[option_name(name)])
         for seed in seeds:
             full = argv + (["--seed", str(seed)] if seed is not None else [])
             point = Point(values=values, seed=seed, argv=tuple(full))
@@ -366,7 +366,7 @@ def _parse_point(command: str, parser, point: Point, has_out: bool, check_args) 
     check = list(point.argv) + (["--out", "__sweep_check__"] if has_out else [])
     try:
         args = parser.parse_args(check)
-    except _ParseError as e:
+    except ParseError as e:
         raise ValueError(
             f"point {point.values} of the spec is not a valid `osnerf {command}` command line: {e}"
         ) from None
