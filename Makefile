@@ -108,8 +108,11 @@ test: setup
 bench: setup
 	$(PY) -m benchmarks
 
+LINTED = common phy semcodec renderer hil osnerf campaign tests benchmarks
+
 lint: setup
-	$(VENV)/bin/ruff check common phy semcodec renderer hil osnerf campaign tests benchmarks
+	$(VENV)/bin/ruff format --check $(LINTED)
+	$(VENV)/bin/ruff check $(LINTED)
 	$(VENV)/bin/mypy common phy hil semcodec/contract osnerf/run osnerf/plan.py osnerf/scheme_types.py
 
 clean:

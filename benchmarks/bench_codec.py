@@ -4,8 +4,8 @@
   (96 px crops, batch 12), with the shipped checkpoint; timings on a shared 2-core machine
   are noisy.
 * The codec table: Kodak x channels (awgn; rayleigh = block fading, 4 draws per image;
-  rayleigh_fast) x SNR -10, -5, -2, 0, 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc (each
-  checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital
+  rayleigh_fast) x SNR -10, -5, -2, 0, 1, 4, 10 dB at CBR 1/16, through ``osnerf eval-codec``: jscc
+  (each checkpoint; on block fading also jscc_refined, :data:`REFINED_CHANNELS`), digital
   (honest: MCS from the calibration table), digital_genie and ideal (bounds), mean and 95 %
   interval, with the published anchors beside each row and checks (jscc above digital,
   genie never below digital); the same on other photos (BSDS500's
@@ -136,7 +136,6 @@ def _codec_table(
     digital, digital_genie, ideal, with the anchors beside each row. ``photos``: a folder
     of the shared data instead; ``prefix`` keeps its eval-codec result files apart."""
     from osnerf.paths import shared_data_dir
-    from semcodec import load_codec
 
     n = int(os.environ.get("OSNERF_BENCH_CODEC_IMAGES", "24"))
     ckpts = [p for p in os.environ.get("OSNERF_BENCH_CODEC_CHECKPOINTS", "").split(os.pathsep) if p]
@@ -177,38 +176,9 @@ def _codec_table(
                 )
             )
         if only != "separate":
-            for ck in ckpts:
-                codec = load_codec(ck)
-                label = f"jscc[{codec.name}]"
-                codecs[label] = {"path": ck or "shipped default", "sha256": codec.sha256}
-                args = [*base, "--schemes", "jscc"] + (["--codec", ck] if ck else [])
-                doc = _eval(out_dir, f"{prefix}{channel}_jscc_{codec.sha256[:12]}", args)
-                for r in doc["results"]:
-                    r["scheme"] = label
-                docs.append(doc)
-                if channel in REFINED_CHANNELS:
-                    label = f"jscc_refined[{codec.name}]"
-                    codecs[label] = codecs[f"jscc[{codec.name}]"]
-                    args[args.index("jscc")] = "jscc_refined"
-                    tag = f"{prefix}{channel}_jscc_refined_{codec.sha256[:12]}"
-                    doc = _eval(out_dir, tag, args)
-                    for r in doc["results"]:
-                        r["scheme"] = label
-                    docs.append(doc)
+            docs += _jscc_docs(out_dir, f"{prefix}{channel}", channel, base, ckpts, codecs)
         for doc in docs:
-            for r in doc["results"]:
-                row = rows.setdefault(
-                    (channel, r["snr_db"]),
-                    {"channel": channel, "snr_db": r["snr_db"], "draws": draws, "schemes": {}},
-                )
-                row["schemes"][r["scheme"]] = {
-                    "psnr": round(r["psnr"], 2),
-                    "psnr_ci95": [None if v is None else round(v, 2) for v in r["psnr_ci95"]],
-                    "ssim": round(r["ssim"], 4),
-                    **({"views_lost": r["views_lost"]} if "views_lost" in r else {}),
-                    **({"mcs_used": r["mcs_used"]} if "mcs_used" in r else {}),
-                    **({"bound": r["bound"]} if r.get("bound") else {}),
-                }
+            _add_rows(rows, channel, draws, doc)
     table = sorted(
         rows.values(), key=lambda r: ([c for c, _ in channels].index(r["channel"]), r["snr_db"])
     )
@@ -217,6 +187,64 @@ def _codec_table(
         own = {k: v for k, v in KODAK.get(row["channel"], {}).items() if at_own_snr(v)}
         if own:
             row["anchors_at_own_snr"] = own
+    return {
+        "images": folder,
+        "num_images": n,
+        "cbr": "1/16",
+        "checkpoints": codecs,
+        "metric": "mean of per-image PSNR over images x draws; 95% percentile bootstrap interval",
+        "ideal": "AVIF at the AWGN capacity of the average SNR, error free (a bound)",
+        "table": table,
+        "checks": _checks(table, codecs),
+    }
+
+
+def _jscc_docs(out_dir: Path, tag: str, channel: str, base: list[str], ckpts, codecs: dict):
+    """The eval-codec results of jscc for each checkpoint (and jscc_refined on
+    :data:`REFINED_CHANNELS`), each row's scheme named by its codec; ``codecs`` gets each
+    label's checkpoint."""
+    from semcodec import load_codec
+
+    docs = []
+    for ck in ckpts:
+        codec = load_codec(ck)
+        label = f"jscc[{codec.name}]"
+        codecs[label] = {"path": ck or "shipped default", "sha256": codec.sha256}
+        args = [*base, "--schemes", "jscc"] + (["--codec", ck] if ck else [])
+        doc = _eval(out_dir, f"{tag}_jscc_{codec.sha256[:12]}", args)
+        for r in doc["results"]:
+            r["scheme"] = label
+        docs.append(doc)
+        if channel in REFINED_CHANNELS:
+            label = f"jscc_refined[{codec.name}]"
+            codecs[label] = codecs[f"jscc[{codec.name}]"]
+            args[args.index("jscc")] = "jscc_refined"
+            doc = _eval(out_dir, f"{tag}_jscc_refined_{codec.sha256[:12]}", args)
+            for r in doc["results"]:
+                r["scheme"] = label
+            docs.append(doc)
+    return docs
+
+
+def _add_rows(rows: dict, channel: str, draws: int, doc: dict) -> None:
+    """Each result of ``doc`` into its (channel, SNR) row of the table, rounded."""
+    for r in doc["results"]:
+        row = rows.setdefault(
+            (channel, r["snr_db"]),
+            {"channel": channel, "snr_db": r["snr_db"], "draws": draws, "schemes": {}},
+        )
+        row["schemes"][r["scheme"]] = {
+            "psnr": round(r["psnr"], 2),
+            "psnr_ci95": [None if v is None else round(v, 2) for v in r["psnr_ci95"]],
+            "ssim": round(r["ssim"], 4),
+            **({"views_lost": r["views_lost"]} if "views_lost" in r else {}),
+            **({"mcs_used": r["mcs_used"]} if "mcs_used" in r else {}),
+            **({"bound": r["bound"]} if r.get("bound") else {}),
+        }
+
+
+def _checks(table: list[dict], codecs: dict) -> dict[str, bool]:
+    """Per row: the genie digital is not below digital, and each jscc is above digital."""
     checks = {}
     for row in table:
         sch = row["schemes"]
@@ -228,16 +256,7 @@ def _codec_table(
         for label in codecs:
             if label in sch and "digital" in sch:
                 checks[f"{label}_above_digital_{key}"] = sch[label]["psnr"] > sch["digital"]["psnr"]
-    return {
-        "images": folder,
-        "num_images": n,
-        "cbr": "1/16",
-        "checkpoints": codecs,
-        "metric": "mean of per-image PSNR over images x draws; 95% percentile bootstrap interval",
-        "ideal": "AVIF at the AWGN capacity of the average SNR, error free (a bound)",
-        "table": table,
-        "checks": checks,
-    }
+    return checks
 
 
 RATE_CBRS = ("1/48", "1/16", "1/6", "1/4", "1/3")

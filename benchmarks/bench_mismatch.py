@@ -28,8 +28,9 @@ digital's staircase and envelope in PSNR and MS-SSIM, the outage CDF on block Ra
 to ``mismatch/`` beside them.
 ``OSNERF_BENCH_MISMATCH_PARTS``: comma-separated subset of ``panel,staircase,estimate,
 forecast``; ``OSNERF_BENCH_MISMATCH_REUSE=any``: reuse a file with the same arguments
-whatever commit made it (each keeps its own ``git_commit``). On a shared 2-core CPU the whole benchmark on 24 images takes hours: the
-digital chain (AVIF at many qualities, LDPC decoding) dominates.
+whatever commit made it (each keeps its own ``git_commit``). On a shared 2-core CPU the whole
+benchmark on 24 images takes hours: the digital chain (AVIF at many qualities, LDPC decoding)
+dominates.
 """
 
 from __future__ import annotations

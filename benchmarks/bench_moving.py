@@ -8,8 +8,8 @@ default), and ``--csi ls`` / ``--csi lmmse``: the symbols on the run's OFDM grid
 receiver each scheme's object PSNR, symbols sent and views lost, and the report's drone
 speed, maximum Doppler, median and largest RMS Doppler spread over the views, how many
 views have a spread (more than one traced path), the grid's pilot pattern, and the median
-SNR the SCU measured through the links with its pilots (what it plans rates and copies on). Each run's
-folder is ``moving_<V>ms`` (perfect CSI) or ``moving_<V>ms_<CSI>``; a report from the same
+SNR the SCU measured through the links with its pilots (what it plans rates and copies on). Each
+run's folder is ``moving_<V>ms`` (perfect CSI) or ``moving_<V>ms_<CSI>``; a report from the same
 clean commit and arguments is reused.
 
     OMP_NUM_THREADS=1 /work/res/heavy python -m benchmarks moving --out bench-results

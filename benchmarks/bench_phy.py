@@ -140,7 +140,10 @@ def run(out_dir: Path) -> dict:
     torch.set_num_threads(1)  # the real-time target is per core
     gen = torch.Generator().manual_seed(0)
     return {
-        "note": "wall-clock medians on a shared 2-core machine; realtime_factor > 1 means faster than real time",
+        "note": (
+            "wall-clock medians on a shared 2-core machine; realtime_factor > 1 means faster than "
+            "real time"
+        ),
         "torch_threads": torch.get_num_threads(),
         "channels": _channels(gen),
         "links": _links(gen),

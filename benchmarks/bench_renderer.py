@@ -13,10 +13,11 @@ are watched.
   px (:data:`GOALS`: speed-up, dB under, setup CPU seconds, break-even views, peak memory);
   each entry records the bounds it misses. Each learned renderer is built as ``osnerf
   render`` builds it (the size's settings, distilled around the cameras the field stores),
-  and records its break-even view count (``renderer.break_even_views``: setup seconds over the seconds it saves per view).
-  At 100 px (and at every size, for the record) it is compared with the two cheap alternatives at its own time per view:
-  the full render marched at a coarser step, and a half-resolution full render upsampled
-  bicubically (each a sweep of marching steps, PSNR interpolated in time per view).
+  and records its break-even view count (``renderer.break_even_views``: setup seconds over the
+  seconds it saves per view). At 100 px (and at every size, for the record) it is compared with the
+  two cheap alternatives at its own time per view: the full render marched at a coarser step, and a
+  half-resolution full render upsampled bicubically (each a sweep of marching steps, PSNR
+  interpolated in time per view).
 
 The machine is shared: the fields' budget clock is ``cpu`` (process CPU seconds over the
 threads) unless OSNERF_BENCH_CLOCK=wall. Environment: OSNERF_BENCH_SECONDS (the 100 px

@@ -35,12 +35,24 @@ BURNER_SECONDS = 10.0
 VIEW_INTERVAL_S = 0.1
 CODE = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
 SUMMARY = (
-    "samples_received", "dropped_samples", "overruns", "device_overruns",
-    "emulator_overrun_samples", "emulator_lost_buffers", "ring_dropped_samples",
-    "frames_sent", "frames_found", "frames_decoded", "frames_lost", "views_sent",
-    "views_complete", "header_errors", "latency_s", "receiver_realtime_factor",
+    "samples_received",
+    "dropped_samples",
+    "overruns",
+    "device_overruns",
+    "emulator_overrun_samples",
+    "emulator_lost_buffers",
+    "ring_dropped_samples",
+    "frames_sent",
+    "frames_found",
+    "frames_decoded",
+    "frames_lost",
+    "views_sent",
+    "views_complete",
+    "header_errors",
+    "latency_s",
+    "receiver_realtime_factor",
     "emulator_late_max_s",
-)  # fmt: skip
+)
 
 
 def _cpus() -> tuple[int, int]:

@@ -1,6 +1,6 @@
 """The over-the-air receiver chain stage by stage, beside its reference implementation
-(benchmarks.reference_receiver.receiver, benchmarks.reference_receiver.detection) in the same run: real-time factors at
-several sample rates, and a profile of where the time goes.
+(benchmarks.reference_receiver.receiver, benchmarks.reference_receiver.detection) in the same run:
+real-time factors at several sample rates, and a profile of where the time goes.
 
 Both implementations are timed alternately, call by call, so that load on a shared machine
 hits them alike; the ratio reference / new is the number to read. Real-time factors come
@@ -201,8 +201,11 @@ def run_all(rng: np.random.Generator) -> dict:
     """Every rate and the profile with numpy's BLAS pool at one thread, as the chain runs its
     stages (``phy.receive_frame`` bounds it): both sides alike, whatever the environment."""
     return {
-        "note": "new beside reference (benchmarks.reference_receiver.receiver), alternating calls, one BLAS "
-        "thread; realtime factor > 1 is faster than real time; speedup = reference / new",
+        "note": (
+            "new beside reference (benchmarks.reference_receiver.receiver), alternating calls, "
+            "one BLAS thread; realtime factor > 1 is faster than real time; "
+            "speedup = reference / new"
+        ),
         "rates": {f"{rate / 1e6:g} MS/s": rate_run(rate, rng) for rate in RATES_HZ},
         "profile_at_20msps": profile(20e6, rng),
     }

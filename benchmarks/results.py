@@ -20,13 +20,24 @@ from __future__ import annotations
 import argparse
 import re
 import sys
-from collections.abc import Iterable
-from fractions import Fraction
 from pathlib import Path
 from statistics import mean
 
 from benchmarks import results_channels, results_mismatch
 from benchmarks.results_channels import ResultsError, load_json
+from benchmarks.results_codec import (
+    CHANNEL_LABELS,
+    CODEC_SCHEMES,
+    cbr_text,
+    codec_results,
+    codec_section,
+    commit_of,
+    lost_count,
+    markdown_table,
+    psnr_text,
+    scheme_label,
+    shipped_sha,
+)
 from common import write_files
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,67 +47,11 @@ DOC = ROOT / "docs" / "results.md"
 CARDS = ROOT / "semcodec" / "checkpoints"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 
-CHANNEL_LABELS = {"awgn": "AWGN", "rayleigh": "block Rayleigh", "rayleigh_fast": "fast Rayleigh"}
-CODEC_SCHEMES = ("jscc", "digital", "digital_genie", "ideal")
-BOUNDS = ("digital_genie", "ideal", "gt")
 HEADLINE_SNRS = (-10.0, 1.0, 10.0)
 OTA_DIR = re.compile(r"pipeline_tiny_ota_(?P<snr>-?\d+)dB_seed(?P<seed>\d+)$")
 
 
-def _commit(doc: dict) -> str:
-    sha = doc.get("git_commit", "unknown")
-    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
-
-
-def _label(scheme: str) -> str:
-    return f"{scheme} (bound)" if scheme in BOUNDS else scheme
-
-
-def _lost(entry: dict | None) -> int:
-    """Views or images lost to the budget or the channel (0 when the scheme cannot lose any)."""
-    lost = (entry or {}).get("views_lost") or {}
-    return int(sum(lost.values())) if isinstance(lost, dict) else int(lost)
-
-
-def _table(header: Iterable[str], rows: Iterable[Iterable[object]]) -> list[str]:
-    header = list(header)
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return out
-
-
 # --- loading -------------------------------------------------------------------------------
-
-
-def shipped_sha(cards_dir: Path = CARDS) -> str:
-    """The sha256 of the shipped default checkpoint (its ``default.card.json``)."""
-    path = cards_dir / "default.card.json"
-    if not path.is_file():
-        raise ResultsError(f"{path} not found: the shipped default's card")
-    sha = load_json(path).get("sha256")
-    if not isinstance(sha, str) or not re.fullmatch(r"[0-9a-f]{64}", sha):
-        raise ResultsError(f"{path} has no sha256")
-    return sha
-
-
-def codec_results(folder: Path = RESULTS, default_sha: str | None = None) -> dict:
-    """channel -> {"rows": {(scheme, snr_db): result row}, "docs": [eval-codec files]}; jscc
-    results only of the checkpoint whose sha256 starts ``default_sha`` (default: the shipped
-    one's)."""
-    sha12 = (default_sha or shipped_sha())[:12]
-    out: dict = {}
-    for path in sorted(folder.glob("codec_*.json")):
-        m = re.fullmatch(r"codec_(?P<ch>.+?)_(separate|jscc_(?P<sha>[0-9a-f]{12}))", path.stem)
-        if not m or m["ch"] not in CHANNEL_LABELS:  # Kodak's table only
-            continue
-        if m["sha"] and m["sha"] != sha12:  # another checkpoint's: not the shipped codec
-            continue
-        doc = load_json(path)
-        entry = out.setdefault(m["ch"], {"rows": {}, "docs": []})
-        entry["docs"].append((path.name, doc))
-        for r in doc["results"]:
-            entry["rows"][(r["scheme"], float(r["snr_db"]))] = r
-    return out
 
 
 def run_report(path: Path) -> dict | None:
@@ -124,21 +79,13 @@ def cards(folder: Path = CARDS) -> list[tuple[str, dict]]:
 # --- tables --------------------------------------------------------------------------------
 
 
-def _psnr(x: float | None) -> str:
-    return "–" if x is None else f"{x:.2f}"
-
-
 def _seeds(docs: list[dict]) -> str:
     seeds = ", ".join(str(d["seed"]) for d in docs)
     return f"seed {seeds}" if len(docs) == 1 else f"mean of seeds {seeds}"
 
 
-def _cbr(cbr: float) -> str:
-    return str(Fraction(cbr).limit_denominator(64))
-
-
 def _lost_of(r: dict) -> str:
-    lost = _lost(r)
+    lost = lost_count(r)
     return f" ({lost} of {r['num_images'] * r['draws']} lost)" if lost else ""
 
 
@@ -160,28 +107,28 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
             [
                 "demo: firefighter scene, hydrant, object PSNR of the field",
                 f"block Rayleigh {demo['snr_db']:g} dB",
-                _psnr(s.get("jscc", {}).get("psnr_object")),
-                _psnr(s.get("digital", {}).get("psnr_object"))
+                psnr_text(s.get("jscc", {}).get("psnr_object")),
+                psnr_text(s.get("digital", {}).get("psnr_object"))
                 + (
-                    f" ({_lost(s.get('digital'))} of {s['digital']['views_sent']} lost)"
+                    f" ({lost_count(s.get('digital'))} of {s['digital']['views_sent']} lost)"
                     if "digital" in s
                     else ""
                 ),
-                "gt " + _psnr(s.get("gt", {}).get("psnr_object")),
-                _commit(demo),
+                "gt " + psnr_text(s.get("gt", {}).get("psnr_object")),
+                commit_of(demo),
             ]
         )
     for snr, docs in ota.items():
-        lost = [_lost(d["schemes"].get("digital")) for d in docs if "digital" in d["schemes"]]
+        lost = [lost_count(d["schemes"].get("digital")) for d in docs if "digital" in d["schemes"]]
         rows.append(
             [
                 "over the air: tiny scene, emulated HackRFs, " + _seeds(docs),
                 f"{snr:g} dB",
-                _psnr(_mean_object(docs, "jscc")),
-                _psnr(_mean_object(docs, "digital"))
+                psnr_text(_mean_object(docs, "jscc")),
+                psnr_text(_mean_object(docs, "digital"))
                 + (f" ({sum(lost)} of {len(lost) * _views(docs)} lost)" if any(lost) else ""),
-                "gt " + _psnr(_mean_object(docs, "gt")),
-                ", ".join(sorted({_commit(d) for d in docs})),
+                "gt " + psnr_text(_mean_object(docs, "gt")),
+                ", ".join(sorted({commit_of(d) for d in docs})),
             ]
         )
     for channel in (c for c in CHANNEL_LABELS if c in codec):
@@ -190,110 +137,21 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
             r = {k: entry["rows"].get((k, snr)) for k in CODEC_SCHEMES}
             if not r["jscc"] or not r["digital"]:
                 continue
-            commits = sorted({_commit(doc) for _, doc in entry["docs"]})
+            commits = sorted({commit_of(doc) for _, doc in entry["docs"]})
             rows.append(
                 [
-                    f"Kodak-{r['jscc']['num_images']}, CBR {_cbr(r['jscc']['cbr'])}, image PSNR",
+                    f"Kodak-{r['jscc']['num_images']}, CBR {cbr_text(r['jscc']['cbr'])}, "
+                    "image PSNR",
                     f"{CHANNEL_LABELS.get(channel, channel)} {snr:g} dB",
-                    _psnr(r["jscc"]["psnr"]),
-                    _psnr(r["digital"]["psnr"]) + _lost_of(r["digital"]),
-                    "ideal " + _psnr((r["ideal"] or {}).get("psnr")),
+                    psnr_text(r["jscc"]["psnr"]),
+                    psnr_text(r["digital"]["psnr"]) + _lost_of(r["digital"]),
+                    "ideal " + psnr_text((r["ideal"] or {}).get("psnr")),
                     ", ".join(commits),
                 ]
             )
     rows += results_mismatch.headline_rows(results_mismatch.load(RESULTS))
     header = ["experiment", "link", "jscc (dB)", "digital (dB)", "bound (dB)", "commit"]
-    return _table(header, rows)
-
-
-def _eval_command(doc: dict) -> str:
-    """The eval-codec command line that made ``doc`` (rebuilt from its config if not stored)."""
-    argv = doc.get("argv")
-    if not argv:
-        c = doc["config"]
-        argv = [
-            *("--images", c["images"], "--max-images", str(len(c["image_names"]))),
-            *("--channel", c["channel"], "--draws", str(c["draws"])),
-            "--snr-db=" + ",".join(f"{x:g}" for x in c["snr_db"]),
-            *("--cbr", _cbr(c["cbr"]), "--schemes", ",".join(c["schemes"])),
-            *("--seed", str(doc["seed"])),
-            *([] if c.get("lpips", True) else ["--no-lpips"]),
-        ]
-    text = "osnerf eval-codec " + " ".join(argv)
-    return re.sub(r"\S*/shared/data/", "../shared/data/", text)
-
-
-OUTAGE_CHANNELS = ("rayleigh",)
-"""Block fading: where the tail of per-image PSNR (outage) is shown beside the mean."""
-
-
-def _percentile(values: list[float], q: float) -> float:
-    """The q-th percentile, linear between order statistics (numpy's default)."""
-    v = sorted(values)
-    k = (len(v) - 1) * q / 100.0
-    lo = int(k)
-    hi = min(lo + 1, len(v) - 1)
-    return v[lo] + (v[hi] - v[lo]) * (k - lo)
-
-
-def _outage_table(entry: dict, schemes: list[str], snrs: list[float]) -> list[str]:
-    """5th and 10th percentile of per-image PSNR over images x draws, per scheme and SNR
-    (from each row's ``psnr_per_draw``)."""
-    rows = []
-    for scheme in schemes:
-        cells = []
-        for snr in snrs:
-            r = entry["rows"].get((scheme, snr))
-            per = [v for row in (r or {}).get("psnr_per_draw") or [] for v in row]
-            cells.append(f"{_percentile(per, 5):.2f} / {_percentile(per, 10):.2f}" if per else "–")
-        rows.append([_label(scheme), *cells])
-    return [
-        "The tail: 5th / 10th percentile of per-image PSNR over images x draws (dB).",
-        "",
-        *_table(["scheme", *(f"{s:g} dB" for s in snrs)], rows),
-        "",
-    ]
-
-
-def codec_section(codec: dict) -> list[str]:
-    lines = ["## The codec against the digital link", ""]
-    if not codec:
-        return lines + ["No `codec_*.json` in bench-results/ (`python -m benchmarks codec`).", ""]
-    for channel in (c for c in CHANNEL_LABELS if c in codec):
-        entry = codec[channel]
-        lines.append(f"### {CHANNEL_LABELS.get(channel, channel)}")
-        lines.append("")
-        for name, doc in entry["docs"]:
-            lines.append(f"- `{name}`: `{_eval_command(doc)}`, commit {_commit(doc)}")
-        lines.append("")
-        snrs = sorted({s for _, s in entry["rows"]})
-        schemes = [
-            s
-            for s in (*CODEC_SCHEMES, "jscc_refined")
-            if any((s, x) in entry["rows"] for x in snrs)
-        ]
-        rows = []
-        for scheme in schemes:
-            cells = []
-            for snr in snrs:
-                r = entry["rows"].get((scheme, snr))
-                if r is None:
-                    cells.append("–")
-                    continue
-                total = r["num_images"] * r["draws"]
-                lost = _lost(r)
-                cells.append(_psnr(r["psnr"]) + (f" ({lost}/{total} lost)" if lost else ""))
-            rows.append([_label(scheme), *cells])
-        lines += _table(["scheme", *(f"{s:g} dB" for s in snrs)], rows)
-        lines.append("")
-        if channel in OUTAGE_CHANNELS:
-            lines += _outage_table(entry, schemes, snrs)
-    lines.append(
-        "Mean of per-image PSNR over images x draws (peak 1.0); `lost` counts images that "
-        "did not arrive (the digital link shows them mid-grey). `digital_genie` knows each "
-        "draw's fade and `ideal` sends at the AWGN capacity: both are bounds, not systems."
-    )
-    return lines + [""]
+    return markdown_table(header, rows)
 
 
 def demo_section(demo: dict | None) -> list[str]:
@@ -304,7 +162,7 @@ def demo_section(demo: dict | None) -> list[str]:
     lines.append(
         f"`osnerf demo` = `osnerf run --channel {cfg['channel']} --snr-db {cfg['snr_db']:g} "
         f"--seed {demo['seed']}` (scene `{cfg['scene']}`, {cfg['nerf_steps']} NeRF steps per "
-        f"scheme), commit {_commit(demo)}. Object PSNR of each scheme's field on the held-out "
+        f"scheme), commit {commit_of(demo)}. Object PSNR of each scheme's field on the held-out "
         "views (the demanded object's pixels), whole-view PSNR, views that did not arrive:"
     )
     lines.append("")
@@ -312,16 +170,16 @@ def demo_section(demo: dict | None) -> list[str]:
     for name, s in demo["schemes"].items():
         rows.append(
             [
-                _label(name) if s.get("bound") else name,
-                _psnr(s["psnr_object"]),
-                _psnr(s["psnr"]),
+                scheme_label(name) if s.get("bound") else name,
+                psnr_text(s["psnr_object"]),
+                psnr_text(s["psnr"]),
                 f"{s['ssim']:.3f}",
-                f"{_lost(s)} of {s['views_sent']}",
+                f"{lost_count(s)} of {s['views_sent']}",
                 f"{s['symbols_sent']:,}",
                 s["nerf_steps"],
             ]
         )
-    lines += _table(
+    lines += markdown_table(
         ["scheme", "object PSNR", "PSNR", "SSIM", "lost", "symbols", "NeRF steps"], rows
     )
     return lines + [""]
@@ -346,15 +204,17 @@ def ota_section(ota: dict[float, list[dict]]) -> list[str]:
                 [
                     f"{snr:g} dB",
                     d["seed"],
-                    _psnr(s.get("jscc", {}).get("psnr_object")),
-                    _psnr((dig or {}).get("psnr_object"))
-                    + (f" ({_lost(dig)} of {dig['views_sent']} lost)" if dig else ""),
-                    _psnr(s.get("gt", {}).get("psnr_object")),
+                    psnr_text(s.get("jscc", {}).get("psnr_object")),
+                    psnr_text((dig or {}).get("psnr_object"))
+                    + (f" ({lost_count(dig)} of {dig['views_sent']} lost)" if dig else ""),
+                    psnr_text(s.get("gt", {}).get("psnr_object")),
                     f"{d['link'].get('frames_lost', 0)} of {d['link'].get('frames_sent', 0)}",
-                    _commit(d),
+                    commit_of(d),
                 ]
             )
-    lines += _table(["SNR", "seed", "jscc", "digital", "gt (bound)", "frames lost", "commit"], rows)
+    lines += markdown_table(
+        ["SNR", "seed", "jscc", "digital", "gt (bound)", "frames lost", "commit"], rows
+    )
     return lines + [""]
 
 
@@ -370,7 +230,7 @@ def checkpoint_section(cards_dir: Path = CARDS) -> list[str]:
                 f"`{card['sha256'][:12]}`",
             ]
         )
-    lines += _table(["file", "name", "version", "sha256"], rows)
+    lines += markdown_table(["file", "name", "version", "sha256"], rows)
     lines.append("")
     lines.append(
         "`default.safetensors` is what every command uses without `--codec`; the others load "

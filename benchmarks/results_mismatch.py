@@ -92,85 +92,100 @@ def section(folder: Path = RESULTS) -> list[str]:
     )
     lines.append("")
     if "panel" in res:
-        by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
-        snrs = sorted({r["snr_db"] for r in res["panel"]})
-        lines.append(
-            f"### Every transmitter planned at {res['plan_snr_db']:g} dB, AWGN at the truth"
-        )
-        lines.append("")
-        rows = [
-            [
-                s + (" (bound, true SNR)" if _bound(s) else ""),
-                *(_psnr(by.get((s, x))) for x in snrs),
-            ]
-            for s in PANEL_SCHEMES
-            if any((s, x) in by for x in snrs)
-        ]
-        stairs: dict[str, dict] = {}
-        for r in res.get("staircase", []):
-            stairs.setdefault(r.get("mcs") or "?", {})[r["snr_db"]] = r
-        rows += [
-            [f"digital_fixed {m}", *(_psnr(v.get(x)) for x in snrs)] for m, v in stairs.items()
-        ]
-        lines += _table(["scheme", *(f"{x:g} dB" for x in snrs)], rows)
-        lines.append("")
-        lines += [f"- {f}" for f in res.get("findings", [])]
-        lines.append("")
+        lines += _panel(res)
     if "estimate" in res:
-        lines.append("### A 2 dB Gaussian error on each image's SNR estimate")
-        lines.append("")
-        rows = []
-        for r in res["estimate"]:
-            err = r.get("snr_error_db") or 0.0
-            p5 = f"{r['psnr_p5']:.2f}" if r.get("psnr_p5") is not None else "–"
-            ms = f"{r['ms_ssim']:.4f}" if r.get("ms_ssim") is not None else "–"
-            rows.append(
-                [r["channel"], f"{err:g}", r["scheme"], f"{r['snr_db']:g}", _psnr(r), ms, p5]
-            )
-        header = ["channel", "error (dB)", "scheme", "SNR (dB)", "PSNR", "MS-SSIM", "5th pct"]
-        lines += _table(header, rows)
-        lines.append("")
-        lines.append(
-            "`digital` plans its MCS over the estimate's error; `digital_naive` plans as if the "
-            "estimate were exact; jscc is told the same estimate; softcast plans nothing."
-        )
-        lines.append("")
+        lines += _estimate(res["estimate"])
     if "forecast" in res:
-        f = res["forecast"]
-        lines.append("### The digital planner's own forecast (AWGN, exact knowledge)")
-        lines.append("")
-        rows = [
-            [
-                f"{r['snr_db']:g}",
-                f"{r['forecast_lost_images']:.2f}",
-                r["lost_images"],
-                r["num_images"],
-            ]
-            for r in f["rows"]
-        ]
-        lines += _table(["SNR (dB)", "forecast lost", "lost", "images"], rows)
-        lines.append("")
-        lines.append(
-            f"Over all {f['sends']} sends: {f['forecast_total']:.2f} images forecast lost, "
-            f"{f['lost_total']} lost."
-        )
-        lines.append("")
+        lines += _forecast(res["forecast"])
     if "blocks" in res:
-        lines.append("Whole Kodak-sized blocks of random payload at the planner's MCS (AWGN):")
-        lines.append("")
-        rows = [
-            [
-                b["mcs"],
-                f"{b['snr_db']:g}",
-                b["codewords"],
-                f"{b['lost']}/{b['blocks']}",
-                f"{b['forecast_loss'] * b['blocks']:.2f}",
-            ]
-            for b in res["blocks"]
-        ]
-        lines += _table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
-        lines.append("")
+        lines += _blocks(res["blocks"])
     for name in res.get("figures", []):
         if (folder / name).is_file():
             lines.append(f"![{Path(name).stem}](../bench-results/{name})")
     return lines + [""]
+
+
+def _panel(res: dict) -> list[str]:
+    """Every transmitter planned at one SNR, and the fixed-MCS staircase, across the truth."""
+    lines = []
+    by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
+    snrs = sorted({r["snr_db"] for r in res["panel"]})
+    lines.append(f"### Every transmitter planned at {res['plan_snr_db']:g} dB, AWGN at the truth")
+    lines.append("")
+    rows = [
+        [
+            s + (" (bound, true SNR)" if _bound(s) else ""),
+            *(_psnr(by.get((s, x))) for x in snrs),
+        ]
+        for s in PANEL_SCHEMES
+        if any((s, x) in by for x in snrs)
+    ]
+    stairs: dict[str, dict] = {}
+    for r in res.get("staircase", []):
+        stairs.setdefault(r.get("mcs") or "?", {})[r["snr_db"]] = r
+    rows += [[f"digital_fixed {m}", *(_psnr(v.get(x)) for x in snrs)] for m, v in stairs.items()]
+    lines += _table(["scheme", *(f"{x:g} dB" for x in snrs)], rows)
+    lines.append("")
+    lines += [f"- {f}" for f in res.get("findings", [])]
+    lines.append("")
+    return lines
+
+
+def _estimate(estimate: list[dict]) -> list[str]:
+    """Each scheme under a Gaussian error on each image's SNR estimate."""
+    lines = ["### A 2 dB Gaussian error on each image's SNR estimate", ""]
+    rows = []
+    for r in estimate:
+        err = r.get("snr_error_db") or 0.0
+        p5 = f"{r['psnr_p5']:.2f}" if r.get("psnr_p5") is not None else "–"
+        ms = f"{r['ms_ssim']:.4f}" if r.get("ms_ssim") is not None else "–"
+        rows.append([r["channel"], f"{err:g}", r["scheme"], f"{r['snr_db']:g}", _psnr(r), ms, p5])
+    header = ["channel", "error (dB)", "scheme", "SNR (dB)", "PSNR", "MS-SSIM", "5th pct"]
+    lines += _table(header, rows)
+    lines.append("")
+    lines.append(
+        "`digital` plans its MCS over the estimate's error; `digital_naive` plans as if the "
+        "estimate were exact; jscc is told the same estimate; softcast plans nothing."
+    )
+    lines.append("")
+    return lines
+
+
+def _forecast(f: dict) -> list[str]:
+    """The digital planner's forecast of lost images beside the count."""
+    lines = ["### The digital planner's own forecast (AWGN, exact knowledge)", ""]
+    rows = [
+        [
+            f"{r['snr_db']:g}",
+            f"{r['forecast_lost_images']:.2f}",
+            r["lost_images"],
+            r["num_images"],
+        ]
+        for r in f["rows"]
+    ]
+    lines += _table(["SNR (dB)", "forecast lost", "lost", "images"], rows)
+    lines.append("")
+    lines.append(
+        f"Over all {f['sends']} sends: {f['forecast_total']:.2f} images forecast lost, "
+        f"{f['lost_total']} lost."
+    )
+    lines.append("")
+    return lines
+
+
+def _blocks(blocks: list[dict]) -> list[str]:
+    """Kodak-sized blocks of random payload at the planner's MCS."""
+    lines = ["Whole Kodak-sized blocks of random payload at the planner's MCS (AWGN):", ""]
+    rows = [
+        [
+            b["mcs"],
+            f"{b['snr_db']:g}",
+            b["codewords"],
+            f"{b['lost']}/{b['blocks']}",
+            f"{b['forecast_loss'] * b['blocks']:.2f}",
+        ]
+        for b in blocks
+    ]
+    lines += _table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
+    lines.append("")
+    return lines

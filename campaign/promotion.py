@@ -22,7 +22,8 @@ import tempfile
 from pathlib import Path
 from statistics import mean
 
-from common import InputError, write_bytes
+from campaign.swap import swap
+from common import InputError
 
 ROOT = Path(__file__).resolve().parent.parent
 RULE = {"max_loss_db": 0.1, "min_mean_gain_db": 0.2, "ota_max_loss_db": 0.1}
@@ -418,48 +419,6 @@ def _staged_view(at: Path, files: dict[Path, bytes | None]) -> Path:
             if p.parent == src and data is not None:
                 (dst / p.name).write_bytes(data)
     return at
-
-
-def swap(files: dict[Path, bytes | None]) -> None:
-    """Put a set of files in place as one step that is undone on any failure or interrupt:
-    every new file is written beside its target first (nothing replaced yet), then each target
-    is moved aside and the new one renamed in (None: the target removed); an error or Ctrl-C
-    midway moves every old file back. A file that is the set's record goes last."""
-    import contextlib
-    import os
-
-    staged: list[tuple[Path, Path | None]] = []
-    moved: list[tuple[Path, Path | None]] = []  # (target, its old file moved aside)
-    try:
-        for target, data in files.items():
-            tmp = None
-            if data is not None:
-                target.parent.mkdir(parents=True, exist_ok=True)
-                tmp = target.with_name(f".{target.name}.promoting")
-                write_bytes(tmp, data)
-            staged.append((target, tmp))
-        for target, tmp in staged:
-            aside = None
-            if target.exists():
-                aside = target.with_name(f".{target.name}.before-promotion")
-                os.replace(target, aside)
-            moved.append((target, aside))
-            if tmp is not None:
-                os.replace(tmp, target)
-    except BaseException:
-        for target, aside in reversed(moved):
-            with contextlib.suppress(FileNotFoundError):
-                if aside is None:
-                    target.unlink()
-                else:
-                    os.replace(aside, target)
-        for _, tmp in staged:
-            if tmp is not None:
-                tmp.unlink(missing_ok=True)
-        raise
-    for _, aside in moved:
-        if aside is not None:
-            aside.unlink(missing_ok=True)
 
 
 def _codec_table(images: int, codec: Path, folder: Path, new_sha: str) -> dict[str, str]:

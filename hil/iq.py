@@ -12,7 +12,8 @@ def from_int8_iq(raw: np.ndarray) -> np.ndarray:
 
 
 def to_int8_iq(samples: np.ndarray) -> np.ndarray:
-    """[num_samples] complex in full scale [-1, 1] -> [2 * num_samples] int8 (round, clip at 127)."""
+    """[num_samples] complex in full scale [-1, 1] -> [2 * num_samples] int8 (round, clip at
+    127)."""
     x = np.asarray(samples, dtype=np.complex64)
     inter = x.view(np.float32).astype(np.float64) * 128.0
     return np.clip(np.round(inter), -128, 127).astype(np.int8)
@@ -44,7 +45,8 @@ def full_scale_samples(samples) -> np.ndarray:
 
 
 def quantize_ci8(y: np.ndarray) -> np.ndarray:
-    """[num_samples] complex, full scale 1.0 -> [2 * num_samples] int8 (round, clip to [-128, 127])."""
+    """[num_samples] complex, full scale 1.0 -> [2 * num_samples] int8 (round, clip to [-128,
+    127])."""
     inter = np.empty(2 * len(y), np.float32)
     inter[0::2] = y.real
     inter[1::2] = y.imag

@@ -270,4 +270,7 @@ class SigmfReplay:
 
     def __repr__(self) -> str:
         r = self.recording
-        return f"SigmfReplay({str(r.path)!r}, {r.datatype}, sample_rate_hz={r.sample_rate_hz}, position={self.position})"
+        return (
+            f"SigmfReplay({str(r.path)!r}, {r.datatype}, sample_rate_hz={r.sample_rate_hz}, "
+            f"position={self.position})"
+        )

@@ -172,7 +172,8 @@ def collect(
     if not keep:
         raise InputError(
             f"no drone camera sees the demanded object(s) {','.join(demand.objects)} well enough "
-            f"(min_visible_fraction={config.min_visible_fraction}, min_pixel_fraction={config.min_pixel_fraction})"
+            f"(min_visible_fraction={config.min_visible_fraction}, "
+            f"min_pixel_fraction={config.min_pixel_fraction})"
         )
     idx = np.asarray(keep, np.int64)
     per_obj = np.stack(

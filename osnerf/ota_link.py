@@ -117,7 +117,9 @@ def open_radios(
     tx, rx = HARDWARE[device].open_pair(tx_serial, rx_serial)
     if snr_db is not None and getattr(tx, "air_settable", False) and rx is tx:
         try:
-            tx.set_air(air_channel(device, snr_db, ota_cfg, delay_s, multipath), ppm=ppm[0], seed=seed)  # fmt: skip
+            tx.set_air(
+                air_channel(device, snr_db, ota_cfg, delay_s, multipath), ppm=ppm[0], seed=seed
+            )
         except BaseException:
             tx.close()
             raise
@@ -155,8 +157,9 @@ class OtaLink:
         Args:
             blocks: one [num_symbols] complex64 array per image, unit mean power each.
         Returns:
-            ``hil.ota.BurstResult``: per block ``(x_hat, noise_var)`` and one ``hil.ota.FrameReport``
-            per frame (``hil.HilError`` and subclasses propagate, with what was captured).
+            ``hil.ota.BurstResult``: per block ``(x_hat, noise_var)`` and one
+            ``hil.ota.FrameReport`` per frame (``hil.HilError`` and subclasses propagate, with what
+            was captured).
         """
         from hil import send_blocks
 

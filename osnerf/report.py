@@ -12,16 +12,14 @@ from __future__ import annotations
 import base64
 import dataclasses
 import html
-import io
 import statistics
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from common import path_kind, to_json, write_files
 from osnerf.plan import ViewPlan
 from osnerf.provenance import result_header
+from osnerf.report_figures import picture_grid, plots, received_grid
 
 QUALITY_METRICS = ("psnr", "ssim", "ms_ssim", "lpips", "psnr_object")
 """Per-scheme quality metrics of a run (LPIPS: lower is better)."""
@@ -51,7 +49,8 @@ class SchemeReport:
             why), symbols sent against the plan's budget (``osnerf.semantic_send.codec_use``).
         renderers: None (skipped), or for the full render and the learned renderer
             ("full", "features" of ``renderer.RENDERERS``) on the held-out views in order:
-            psnr_object (as above), seconds_per_view (one thread), setup_seconds and setup_cpu_seconds
+            psnr_object (as above), seconds_per_view (one thread), setup_seconds and
+            setup_cpu_seconds
             (distilling the learned renderer), setup_stats (its steps and teachers),
             speedup_vs_full, settings; psnr and ssim (against the ground-truth views) for
             whole-scene schemes only.
@@ -184,133 +183,9 @@ class Report:
         return cls(**body)
 
 
-def _fig_png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    return buf.getvalue()
-
-
-def picture_grid(pictures: dict, schemes: list[str], max_views: int = 4) -> bytes:
-    """PNG: rows = held-out views; columns = ground truth | novel view of each scheme."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    gt = pictures["gt"]
-    n = min(max_views, len(gt))
-    cols = ["ground truth"] + [s for s in schemes if s in pictures["renders"]]
-    fig, axes = plt.subplots(n, len(cols), figsize=(1.6 * len(cols), 1.6 * n), squeeze=False)
-    for r in range(n):
-        for c, name in enumerate(cols):
-            img = gt[r] if c == 0 else pictures["renders"][name][r]
-            axes[r, c].imshow(np.clip(img, 0, 1))
-            axes[r, c].set_xticks([])
-            axes[r, c].set_yticks([])
-            if r == 0:
-                axes[r, c].set_title(name if c == 0 else f"{name} (novel)", fontsize=8)
-    fig.tight_layout()
-    data = _fig_png(fig)
-    plt.close(fig)
-    return data
-
-
-def received_grid(pictures: dict, schemes: list[str], max_views: int = 6) -> bytes:
-    """PNG: rows = schemes; columns = the first received views."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = [s for s in schemes if s in pictures["received"]]
-    n = max(1, min(max_views, max(len(pictures["received"][s]) for s in rows)))
-    fig, axes = plt.subplots(len(rows), n, figsize=(1.4 * n, 1.5 * len(rows)), squeeze=False)
-    for r, s in enumerate(rows):
-        rec = pictures["received"][s]
-        for c in range(n):
-            ax = axes[r, c]
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if c < len(rec):
-                ax.imshow(np.clip(rec[c], 0, 1))
-            if c == 0:
-                ax.set_ylabel(f"{s} (received)", fontsize=8)
-    fig.tight_layout()
-    data = _fig_png(fig)
-    plt.close(fig)
-    return data
-
-
-TIME_PARTS = ("encode + decode", "nerf", "air")
-"""The names every scheme's time is drawn under (:func:`time_parts`)."""
-
-
-def time_parts(seconds: dict) -> dict[str, float]:
-    """A scheme's seconds under :data:`TIME_PARTS`: its coding (the codec's encode and decode,
-    or a separate scheme's image codec and LDPC, ``codec_and_ldpc``), the NeRF and the air
-    time. The first two add up to its ``processing_seconds``."""
-    coding = sum(float(seconds.get(k, 0.0)) for k in ("encode", "decode", "codec_and_ldpc"))
-    return {
-        "encode + decode": coding,
-        "nerf": float(seconds.get("nerf", 0.0)),
-        "air": float(seconds.get("air", 0.0)),
-    }
-
-
-def plots(report: Report) -> dict[str, bytes]:
-    """PNG plots: object PSNR and symbols per scheme; measured SNR and CBR per view."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = {}
-    schemes = report.schemes
-    names = list(schemes)
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(11, 3))
-    a1.bar(names, [schemes[s].psnr_object or 0 for s in names], color="tab:blue")
-    a1.set_ylabel("object PSNR (dB)")
-    a2.bar(names, [schemes[s].symbols_sent for s in names], color="tab:orange")
-    a2.set_ylabel("channel symbols sent")
-    bottom = np.zeros(len(names))
-    parts = {s: time_parts(schemes[s].seconds) for s in names}
-    for key, col in zip(TIME_PARTS, ("tab:green", "tab:purple", "tab:gray")):
-        vals = np.asarray([parts[s][key] for s in names])
-        a3.bar(names, vals, bottom=bottom, color=col, label=key)
-        bottom += vals
-    a3.set_ylabel("seconds")
-    a3.legend(fontsize=7)
-    fig.suptitle(f"{report.scene['name']}, {report.link['channel']}, SNR {report.snr_db:g} dB")
-    fig.tight_layout()
-    out["schemes"] = _fig_png(fig)
-    plt.close(fig)
-    v = report.views
-    ids = list(v.measured_snr_db)
-    if ids:
-        fig, ax = plt.subplots(figsize=(7, 2.8))
-        ax.plot(ids, list(v.link_snr_db.values()), "o-", label="link SNR (dB)")
-        ax.plot(ids, list(v.measured_snr_db.values()), "s--", label="measured SNR (dB)")
-        ax.set_xlabel("drone view")
-        ax.set_ylabel("dB")
-        sent = set(v.sent_on_demand)
-        ax.plot(
-            [i for i in ids if i in sent],
-            [v.measured_snr_db[i] for i in ids if i in sent],
-            "k*",
-            label="sent on demand",
-        )
-        ax2 = ax.twinx()
-        ax2.step(ids, list(v.cbr.values()), "g-", where="mid", label="CBR")
-        ax2.set_ylabel("CBR")
-        ax.legend(fontsize=7, loc="lower left")
-        fig.tight_layout()
-        out["views"] = _fig_png(fig)
-        plt.close(fig)
-    return out
-
-
 def _img(data: bytes, alt: str) -> str:
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(data).decode()}"/>'
+    src = base64.b64encode(data).decode()
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{src}"/>'
 
 
 def codec_use_line(scheme: str, use: dict) -> str:
@@ -349,21 +224,24 @@ def position_summary(link: dict) -> str:
     )
 
 
-def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
-    """A self-contained HTML page (pictures as base64 data URIs)."""
+HTML_COLUMNS = (
+    "psnr",
+    "psnr_object",
+    "ssim",
+    "ms_ssim",
+    "lpips",
+    "mask_iou",
+    "symbols_sent",
+    "views_sent",
+    "processing_seconds",
+)
+"""The schemes' columns of ``report.html``, in order (then the seconds of each part)."""
+
+
+def _scheme_rows(report: Report) -> tuple[str, str]:
+    """(the header row's cells, one table row per scheme) of ``report.html``."""
     s = {n: asdict(r) for n, r in report.schemes.items()}
-    motion = "; ".join(t for t in (motion_summary(report.link), position_summary(report.link)) if t)
-    keys = [
-        "psnr",
-        "psnr_object",
-        "ssim",
-        "ms_ssim",
-        "lpips",
-        "mask_iou",
-        "symbols_sent",
-        "views_sent",
-        "processing_seconds",
-    ]
+    keys = list(HTML_COLUMNS)
     rows = "".join(
         "<tr><td>"
         + html.escape(n + (" (bound)" if s[n]["bound"] else ""))
@@ -384,6 +262,13 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     head = "".join(
         f"<th>{k}</th>" for k in ["scheme", *keys, "encode s", "air s", "decode s", "nerf s"]
     )
+    return head, rows
+
+
+def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
+    """A self-contained HTML page (pictures as base64 data URIs)."""
+    motion = "; ".join(t for t in (motion_summary(report.link), position_summary(report.link)) if t)
+    head, rows = _scheme_rows(report)
     comp = (
         "".join(
             f"<li>{html.escape(k)}: {'n/a' if v is None else f'{v:.3f}'}</li>"
@@ -414,13 +299,21 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
         for d in report.scu_decisions
     )
     pics = "".join(f"<h3>{html.escape(k)}</h3>{_img(v, k)}" for k, v in images.items())
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>osnerf run: {html.escape(report.scene["name"])}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 6px;font-size:13px}}img{{max-width:100%}}</style></head><body>
-<h1>osnerf run: {html.escape(report.scene["name"])}</h1>
-<p>demand {html.escape(", ".join(report.demand["objects"]))}; channel {html.escape(str(report.link["channel"]))};
-SNR {report.snr_db:g} dB; seed {header.get("seed")}; commit {html.escape(str(header.get("git_commit")))};
-symbol rate {report.symbol_rate_hz:g} Hz{"; " + html.escape(motion) if motion else ""}.</p>
+    name = html.escape(report.scene["name"])
+    demand = html.escape(", ".join(report.demand["objects"]))
+    channel = html.escape(str(report.link["channel"]))
+    commit = html.escape(str(header.get("git_commit")))
+    moving = "; " + html.escape(motion) if motion else ""
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}"
+        "\ntd,th{border:1px solid #ccc;padding:3px 6px;font-size:13px}img{max-width:100%}"
+    )
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>osnerf run: {name}</title>
+<style>{style}</style></head><body>
+<h1>osnerf run: {name}</h1>
+<p>demand {demand}; channel {channel};
+SNR {report.snr_db:g} dB; seed {header.get("seed")}; commit {commit};
+symbol rate {report.symbol_rate_hz:g} Hz{moving}.</p>
 <table><tr>{head}</tr>{rows}</table><ul>{bounds}</ul><ul>{comp}</ul>
 <p>{html.escape(report.metric_notes)}</p>{pics}
 <h2>Semantic control unit decisions</h2><ol>{dec}</ol></body></html>

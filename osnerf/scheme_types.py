@@ -96,7 +96,8 @@ class SendSettings:
         mcs: the digital scheme's MCS ("auto": from the average SNR).
         image_codec: the digital schemes' image codec.
         refine_steps: the semantic transmitter's refinement steps per view (0: none).
-        layer_fusion: the semantic receiver's refinement-layer fusion (``semcodec.jscc.for_fusion``).
+        layer_fusion: the semantic receiver's refinement-layer fusion
+            (``semcodec.jscc.for_fusion``).
         digital_box: the object-routed digital schemes send the objects' box.
         snr_error_db: the Gaussian error (dB) of each view's SNR estimate.
         transmitter_estimates: transmitters plan from the SCU's estimate apart from the truth.

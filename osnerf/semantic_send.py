@@ -167,9 +167,7 @@ def _encode(ctx, p, x, kw: dict):
     # sets the transmitters' belief apart from the channel
     sim_snr = p.measured_snr_db if ctx.send.transmitter_estimates else p.snr_db
     model = _Copies(refine_model_link(ctx.send.channel), sim_snr, p.part.repetitions)
-    gen = torch.Generator().manual_seed(
-        scheme_seed(ctx.send.seed, f"view {int(p.view)}", "refine")
-    )
+    gen = torch.Generator().manual_seed(scheme_seed(ctx.send.seed, f"view {int(p.view)}", "refine"))
     wts = None
     if kw:  # the demanded objects' pixels first (their weights), the rest of the box
         lam = torch.as_tensor(kw["demand_weights"], dtype=torch.float32)

@@ -3,12 +3,15 @@
 Imports nothing else of osnerf. See ``phy.conventions`` for power and SNR definitions.
 sionna is imported lazily (only by the blocks that need it), so ``import phy`` is cheap.
 
-* channels (``phy.CHANNELS``, ``phy.make_channel``): ``channel(x, snr_db, generator) -> ChannelOutput``
-* links (``FlatLink``, ``OFDMLink``): ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``;
+* channels (``phy.CHANNELS``, ``phy.make_channel``):
+  ``channel(x, snr_db, generator) -> ChannelOutput``
+* links (``FlatLink``, ``OFDMLink``):
+  ``link(x, snr_db, generator) -> LinkOutput(x_hat, noise_var)``;
   ``phy.models``: which link each channel runs on and what a transmitter assumes;
   ``phy.measure``: pilot measurements of a link's SNR and of its copies' fading
 * OFDM (``phy.ofdm``): ``ResourceGrid``, (de)modulation, LS estimation, ZF/MMSE equalisation
-* over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``, ``receive_frame``, ``receive_frames``
+* over the air (``phy.frame``, ``phy.receiver``, ``phy.sync``): ``build_frame``, ``find_frames``,
+  ``receive_frame``, ``receive_frames``
 * theory (``phy.theory``, ``phy.modulation``): uncoded BER/SER closed forms, Gray constellations
 * ``phy.digital`` (CRC + 5G LDPC + QAM) and ``phy.raytrace`` (sionna-rt channels) are subpackages.
 """

@@ -61,6 +61,7 @@ def require_llvm() -> str:
     major = _major_version(path)
     if major is not None and major < MIN_LLVM_MAJOR:
         raise RuntimeError(
-            f"DRJIT_LIBLLVM_PATH={path} is LLVM {major}; Dr.Jit needs LLVM >= {MIN_LLVM_MAJOR}: {INSTALL_HINT}"
+            f"DRJIT_LIBLLVM_PATH={path} is LLVM {major}; Dr.Jit needs LLVM >= {MIN_LLVM_MAJOR}: "
+            f"{INSTALL_HINT}"
         )
     return path

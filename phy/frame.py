@@ -110,7 +110,8 @@ class FrameConfig:
             or not 2 <= self.pilot_subcarrier_spacing <= 16
         ):
             raise ValueError(
-                f"pilot_subcarrier_spacing must be an integer in [2, 16], got {self.pilot_subcarrier_spacing!r}"
+                "pilot_subcarrier_spacing must be an integer in [2, 16], got "
+                f"{self.pilot_subcarrier_spacing!r}"
             )
         if not math.isfinite(self.sample_rate_hz) or self.sample_rate_hz <= 0:
             raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz!r}")
@@ -119,7 +120,8 @@ class FrameConfig:
         seg = self.sync_segment_length
         if not isinstance(seg, int) or not 2 <= seg <= self.fft_size or self.fft_size % seg:
             raise ValueError(
-                f"sync_segment_length must be an integer in [2, {self.fft_size}] dividing fft_size, got {seg!r}"
+                f"sync_segment_length must be an integer in [2, {self.fft_size}] dividing "
+                f"fft_size, got {seg!r}"
             )
         if (
             not isinstance(self.sync_length, int)
@@ -127,7 +129,8 @@ class FrameConfig:
             or not 8 <= self.sync_length // seg <= 512
         ):
             raise ValueError(
-                f"sync_length must be a multiple of sync_segment_length ({seg}) with 8..512 segments, got {self.sync_length!r}"
+                f"sync_length must be a multiple of sync_segment_length ({seg}) with 8..512 "
+                f"segments, got {self.sync_length!r}"
             )
         if not 0 < self.detection_threshold < 1:
             raise ValueError(
@@ -135,14 +138,16 @@ class FrameConfig:
             )
         if not 0 < self.max_cfo_subcarriers <= self.fft_size / (2 * seg):
             raise ValueError(
-                f"max_cfo_subcarriers must be in (0, {self.fft_size / (2 * seg):g}] (fft_size / (2 sync_segment_length)), got {self.max_cfo_subcarriers!r}"
+                f"max_cfo_subcarriers must be in (0, {self.fft_size / (2 * seg):g}] (fft_size / (2 "
+                f"sync_segment_length)), got {self.max_cfo_subcarriers!r}"
             )
         if self.timing_backoff is not None and (
             not isinstance(self.timing_backoff, int)
             or not 0 <= self.timing_backoff < self.cp_length
         ):
             raise ValueError(
-                f"timing_backoff must be None or an integer in [0, {self.cp_length - 1}], got {self.timing_backoff!r}"
+                f"timing_backoff must be None or an integer in [0, {self.cp_length - 1}], got "
+                f"{self.timing_backoff!r}"
             )
         if self.carrier_freq_hz is not None and not (
             math.isfinite(self.carrier_freq_hz) and self.carrier_freq_hz > 0
@@ -272,7 +277,8 @@ def as_complex_1d(x, name: str) -> np.ndarray:
     x = np.asarray(x)
     if x.ndim != 1 or not np.iscomplexobj(x):
         raise ValueError(
-            f"{name} must be a 1-D complex64 array [num_samples], got shape {x.shape} dtype {x.dtype}"
+            f"{name} must be a 1-D complex64 array [num_samples], got shape {x.shape} dtype "
+            f"{x.dtype}"
         )
     x = np.ascontiguousarray(x, dtype=np.complex64)
     if not np.isfinite(x.view(np.float32)).all():  # on the real view: fast

@@ -26,7 +26,8 @@ def bits_per_symbol(modulation: str) -> int:
 
 
 def _pam_gray(bits: np.ndarray) -> np.ndarray:
-    """3GPP 38.211 amplitude of Gray-labelled PAM: (1 - 2 b0) (2**(n-1) - pam(b1..)), [..., n] -> [...]."""
+    """3GPP 38.211 amplitude of Gray-labelled PAM: (1 - 2 b0) (2**(n-1) - pam(b1..)), [..., n] ->
+    [...]."""
     n = bits.shape[-1]
     if n == 1:
         return 1.0 - 2.0 * bits[..., 0]
@@ -48,7 +49,8 @@ def _points(modulation: str) -> Tensor:
 
 
 def constellation(modulation: str) -> Tensor:
-    """[2**bits_per_symbol] complex64 points, unit mean energy; index i carries bits(i) MSB first."""
+    """[2**bits_per_symbol] complex64 points, unit mean energy; index i carries bits(i) MSB
+    first."""
     return _points(modulation).clone()
 
 

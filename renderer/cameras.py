@@ -77,7 +77,10 @@ def pose_problem(pose) -> str | None:
         return "has non-finite entries"
     det = float(torch.linalg.det(p[:3, :3]))
     if not abs(det) > 1e-9:
-        return f"is singular (its 3x3 rotation part has determinant {det:.3g}; a pose needs a rotation)"
+        return (
+            f"is singular (its 3x3 rotation part has determinant {det:.3g}; "
+            "a pose needs a rotation)"
+        )
     return None
 
 

@@ -167,7 +167,8 @@ def _intrinsics(meta: dict, width: int, height: int, path: Path) -> Intrinsics:
         )
     if not (math.isfinite(fx) and math.isfinite(fy) and fx > 0 and fy > 0):
         raise ValueError(
-            f"{path}: focal length fl_x/fl_y/camera_angle_x gives {fx}, {fy}; must be finite and > 0"
+            f"{path}: focal length fl_x/fl_y/camera_angle_x gives {fx}, {fy}; must be finite and > "
+            "0"
         )
     cx = _number(meta, "cx", path, w / 2.0)
     cy = _number(meta, "cy", path, h / 2.0)
@@ -220,7 +221,8 @@ def _aabb(meta: dict, path: Path) -> Tensor | None:
         raise ValueError(f"{path}: field 'aabb' must be [[xmin,ymin,zmin],[xmax,ymax,zmax]]") from e
     if a.shape != (2, 3) or not torch.isfinite(a).all() or not (a[1] > a[0]).all():
         raise ValueError(
-            f"{path}: field 'aabb' must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] finite with max > min, got {meta['aabb']}"
+            f"{path}: field 'aabb' must be [[xmin,ymin,zmin],[xmax,ymax,zmax]] finite with max > "
+            f"min, got {meta['aabb']}"
         )
     return a
 

@@ -47,7 +47,8 @@ LIN_CHANNELS = (64, 192, 384, 256, 256)
 
 
 def lpips_weights_path() -> Path:
-    """``$OSNERF_LPIPS_WEIGHTS``, else ``${XDG_CACHE_HOME:-~/.cache}/osnerf/lpips_alex.safetensors``."""
+    """``$OSNERF_LPIPS_WEIGHTS``, else
+    ``${XDG_CACHE_HOME:-~/.cache}/osnerf/lpips_alex.safetensors``."""
     env = os.environ.get(ENV_VAR)
     if env:
         return Path(env).expanduser()

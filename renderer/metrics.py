@@ -1,6 +1,7 @@
-"""Image quality of rendered views: PSNR (peak 1.0, :func:`common.psnr`), SSIM (scikit-image, data_range=1.0),
-PSNR inside an object mask, and (on request) LPIPS-AlexNet (:mod:`renderer.perceptual`, weights
-converted at setup). Multi-view results are means of per-view values.
+"""Image quality of rendered views: PSNR (peak 1.0, :func:`common.psnr`), SSIM (scikit-image,
+data_range=1.0), PSNR inside an object mask, and (on request) LPIPS-AlexNet
+(:mod:`renderer.perceptual`, weights converted at setup); MS-SSIM is :func:`common.ms_ssim`.
+Multi-view results are means of per-view values.
 """
 
 from __future__ import annotations

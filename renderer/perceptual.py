@@ -127,7 +127,8 @@ def lpips(a, b, weights_path: str | Path | None = None):
         a, b = np.asarray(a), np.asarray(b)
         if a.ndim not in (3, 4) or a.shape[-1] != 3:
             raise ValueError(
-                f"lpips: numpy input must be [height, width, 3] or [num_views, height, width, 3], got {a.shape}"
+                "lpips: numpy input must be [height, width, 3] or [num_views, height, width, 3], "
+                f"got {a.shape}"
             )
         ta = torch.from_numpy(np.ascontiguousarray(a, np.float32)).reshape(-1, *a.shape[-3:])
         tb = torch.from_numpy(np.ascontiguousarray(b, np.float32)).reshape(-1, *b.shape[-3:])

@@ -73,8 +73,9 @@ class DemoCodec:
         if expected_sha256 not in (None, self.sha256) or meta.codec_sha256 != self.sha256:
             raise KnowledgeBaseMismatch(f"{expected_sha256} != {self.sha256}")
         b = x_hat.shape[0]
-        nv = 10 ** (-torch.as_tensor(snr_db, dtype=torch.float32) / 10) if noise_var is None else noise_var
-        nv = torch.as_tensor(nv, dtype=torch.float32)
+        if noise_var is None:
+            noise_var = 10 ** (-torch.as_tensor(snr_db, dtype=torch.float32) / 10)
+        nv = torch.as_tensor(noise_var, dtype=torch.float32)
         nv = nv.reshape(-1, 1) if nv.dim() <= 1 else nv
         z = x_hat / (1 + nv) * meta.scale[:, None]
         pos = (meta.height // 4) * (meta.width // 4)

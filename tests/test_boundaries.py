@@ -62,8 +62,8 @@ def _bound_in_init(package: str) -> set[str]:
 
 
 def _module_of_another_package(name: str) -> bool:
-    """``name`` is a module file inside one of our packages (``hil.emulation.air``), not the package or
-    one of its subpackages (``phy.digital``), whose ``__init__`` is the public surface."""
+    """``name`` is a module file inside one of our packages (``hil.emulation.air``), not the package
+    or one of its subpackages (``phy.digital``), whose ``__init__`` is the public surface."""
     parts = name.split(".")
     path = ROOT.joinpath(*parts)
     if len(parts) == 1 or (path / "__init__.py").is_file():
@@ -244,4 +244,51 @@ def test_cycle_walker_sees_a_circle_through_a_package_init(tmp_path):
     (run / "x.py").write_text("from osnerf.run import config\n")
     graph = import_graph(tmp_path, tops=("osnerf",))
     assert "osnerf.run" not in graph["osnerf.run.x"]  # its own package is already running
-    assert import_cycles(graph) == [["osnerf.run", "osnerf.run.config", "osnerf.run.x", "osnerf.schemes"]]
+    assert import_cycles(graph) == [
+        ["osnerf.run", "osnerf.run.config", "osnerf.run.x", "osnerf.schemes"]
+    ]
+
+
+# ----------------------------------------------------------------- sizes a reader can hold
+SIZED = ("common", "phy", "semcodec", "renderer", "hil", "osnerf", "campaign", "benchmarks")
+MAX_FUNCTION_LINES = 80
+MAX_MODULE_LINES = 450
+
+
+def oversized(root: Path, tops=SIZED) -> list[str]:
+    """``path: N lines`` for each module over :data:`MAX_MODULE_LINES` and ``path:line name: N
+    lines`` for each function or method (nested ones too, decorators not counted) over
+    :data:`MAX_FUNCTION_LINES`, under the folders ``tops`` of ``root``."""
+    out = []
+    for top in tops:
+        for path in sorted((root / top).rglob("*.py")):
+            rel = path.relative_to(root).as_posix()
+            text = path.read_text()
+            if (n := len(text.splitlines())) > MAX_MODULE_LINES:
+                out.append(f"{rel}: {n} lines")
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                    n = node.end_lineno - node.lineno + 1
+                    if n > MAX_FUNCTION_LINES:
+                        out.append(f"{rel}:{node.lineno} {node.name}: {n} lines")
+    return out
+
+
+def test_no_function_over_80_lines_and_no_module_over_450():
+    found = oversized(ROOT)
+    assert not found, "split by concept:\n" + "\n".join(found)
+
+
+def test_size_check_sees_a_long_function_and_a_long_module(tmp_path):
+    pkg = tmp_path / "phy"
+    pkg.mkdir()
+    body = "".join(f"    x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    (pkg / "long.py").write_text(f"def f():\n{body}")
+    last = body.index(f"    x{MAX_FUNCTION_LINES - 1} ")
+    (pkg / "short.py").write_text(f"def g():\n{body[:last]}")  # 80 lines: allowed
+    (pkg / "big.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
+    (pkg / "full.py").write_text("x = 1\n" * MAX_MODULE_LINES)  # 450 lines: allowed
+    assert oversized(tmp_path, ("phy",)) == [
+        f"phy/big.py: {MAX_MODULE_LINES + 1} lines",
+        f"phy/long.py:1 f: {MAX_FUNCTION_LINES + 1} lines",
+    ]

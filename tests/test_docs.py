@@ -37,7 +37,9 @@ def test_docs_links_resolve():
 def test_version_is_declared_once_and_reported():
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert "version" in meta["project"]["dynamic"]
-    assert meta["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "osnerf.version.__version__"}
+    assert meta["tool"]["setuptools"]["dynamic"]["version"] == {
+        "attr": "osnerf.version.__version__"
+    }
     out = subprocess.run(
         [
             sys.executable,

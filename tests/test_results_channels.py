@@ -53,12 +53,12 @@ def test_moving_section_shows_speed_doppler_psnr_per_receiver(tmp_path):
     (tmp_path / "moving.json").write_text(json.dumps(_header(doc)))
     text = "\n".join(results_channels.moving_section(tmp_path))
     assert (
-        "| 15 | perfect CSI | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 19.27 | 18.50 | 21,924 | 26,000 | – |"
-        in text
+        "| 15 | perfect CSI | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 19.27 | 18.50 | 21,924 | 26,000 "
+        "| – |" in text
     )
     assert (
-        "| 15 | LS pilots | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 18.00 | 12.25 | 21,924 | 26,000 | 4 |"
-        in text
+        "| 15 | LS pilots | 120 | 3.25 | 82.5 | 3 of 32 | 5.0 | 18.00 | 12.25 | 21,924 | 26,000 | "
+        "4 |" in text
     )
     assert "pilots on every used subcarrier of OFDM symbols [2, 11] of 14" in text
     assert "at most 375 us apart" in text and "41.7 us" in text

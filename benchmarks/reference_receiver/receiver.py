@@ -1,6 +1,6 @@
 """The previous implementation of the receiver chain: the reference search
-(:mod:`benchmarks.reference_receiver.detection`) and demodulation, kept unchanged for the benchmark's
-side-by-side timing and the equivalence test (the same frames, the same decoded bits).
+(:mod:`benchmarks.reference_receiver.detection`) and demodulation, kept unchanged for the
+benchmark's side-by-side timing and the equivalence test (the same frames, the same decoded bits).
 
 Every function of the chain is a copy, so that changes to :mod:`phy.receiver` leave it as it
 was; only the result type (:class:`phy.receiver.FrameResult`), the frame definition

@@ -9,8 +9,8 @@ M0's 32 KiB buffer); a host that reads later than that loses the samples that no
 (an overrun: the oldest ones). Transmitting, a synchronous bulk write completes once its
 last bytes are in the M0's :data:`TX_BUFFER_BYTES`, so the writer runs at most that far
 ahead of the DAC; a host that writes later than the buffer lasts lets the DAC run dry (an
-underrun: silence goes out). Each is counted as one shortfall of the M0 state, with its length in bytes, as
-the firmware counts them; the samples lost are counted exactly.
+underrun: silence goes out). Each is counted as one shortfall of the M0 state, with its length in
+bytes, as the firmware counts them; the samples lost are counted exactly.
 
 An emulated board delivers a transfer later than a real one would: it renders the air only
 once the samples are due, in Python, on a host it may share. That delay is the emulator's,
@@ -161,7 +161,9 @@ class BlockQueue:
         clock=time.monotonic,
     ):
         if block_samples <= 0 or num_blocks <= 0:
-            raise ValueError(f"need block_samples > 0 and num_blocks > 0, got {block_samples}, {num_blocks}")  # fmt: skip
+            raise ValueError(
+                f"need block_samples > 0 and num_blocks > 0, got {block_samples}, {num_blocks}"
+            )
         self.sample_rate_hz = float(sample_rate_hz)
         self.block_samples = int(block_samples)
         self.num_blocks = int(num_blocks)

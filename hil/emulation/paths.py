@@ -70,7 +70,8 @@ class AirPath:
         f = _real("path doppler_hz", self.doppler_hz)
         if abs(f) > MAX_DOPPLER_HZ:
             raise ValueError(
-                f"path doppler_hz must be in [{-MAX_DOPPLER_HZ:g}, {MAX_DOPPLER_HZ:g}] Hz, got {f!r}"
+                f"path doppler_hz must be in [{-MAX_DOPPLER_HZ:g}, {MAX_DOPPLER_HZ:g}] Hz, got "
+                f"{f!r}"
             )
         object.__setattr__(self, "delay_s", d)
         object.__setattr__(self, "gain", g)
@@ -138,7 +139,11 @@ def segments_from_arrays(a, tau_s, doppler_hz=None, start_s=None) -> tuple[PathS
     """
     a = np.atleast_2d(np.asarray(a, np.complex128))
     tau = np.atleast_2d(np.asarray(tau_s, np.float64))
-    fd = np.zeros_like(tau) if doppler_hz is None else np.atleast_2d(np.asarray(doppler_hz, np.float64))  # fmt: skip
+    fd = (
+        np.zeros_like(tau)
+        if doppler_hz is None
+        else np.atleast_2d(np.asarray(doppler_hz, np.float64))
+    )
     starts = np.zeros(1) if start_s is None else np.asarray(start_s, np.float64).reshape(-1)
     if not (a.shape == tau.shape == fd.shape and a.ndim == 2 and len(starts) == a.shape[0]):
         raise ValueError(
@@ -149,7 +154,10 @@ def segments_from_arrays(a, tau_s, doppler_hz=None, start_s=None) -> tuple[PathS
     segs = []
     for k in range(a.shape[0]):
         live = a[k] != 0
-        paths = [AirPath(float(t), complex(g), float(f)) for g, t, f in zip(a[k][live], tau[k][live], fd[k][live])]  # fmt: skip
+        paths = [
+            AirPath(float(t), complex(g), float(f))
+            for g, t, f in zip(a[k][live], tau[k][live], fd[k][live])
+        ]
         segs.append(PathSegment(float(starts[k]), tuple(paths) or (AirPath(0.0, 0j),)))
     return check_segments(segs)
 
@@ -206,9 +214,12 @@ class TimeVaryingFir:
         self.lead = max(0, max(-g.l0 for g in every))  # samples of the future a sample needs
         self.span = max(g.l0 + len(g.taps) for g in every)  # samples of the past it needs
         self.identity = (
-            len(every) == 1 and every[0].doppler_hz == 0 and every[0].l0 == 0
-            and len(every[0].taps) == 1 and every[0].taps[0] == 1
-        )  # fmt: skip
+            len(every) == 1
+            and every[0].doppler_hz == 0
+            and every[0].l0 == 0
+            and len(every[0].taps) == 1
+            and every[0].taps[0] == 1
+        )
 
     @classmethod
     def static(cls, taps: np.ndarray, sample_rate_hz: float = 1.0) -> TimeVaryingFir:

@@ -288,7 +288,9 @@ class EmulatedPluto(PlutoAttributes):
             # silence) and what it writes later goes out later, as on a board
             self.tx_underruns += 1
             self.medium.idle_until(self.rx_cursor + num_samples + RESAMPLER_TAPS, underrun=True)
-            y = self.medium.render_iq(self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open)  # fmt: skip
+            y = self.medium.render_iq(
+                self.rx_port, self.rx_cursor, num_samples, lambda: self.rx_open
+            )
         if y is None:
             raise iio_errno(errno.ETIMEDOUT, "no samples: the receive wait timed out")
         self.rx_cursor += num_samples
@@ -336,7 +338,7 @@ class EmulatedPluto(PlutoAttributes):
             return
         m = self.medium
         fs = self.sample_rate_hz
-        need = int((self.rx_cursor + num_samples) + m.channel.delay_s * fs) + 4096 + m.fir(fs).span  # fmt: skip
+        need = int((self.rx_cursor + num_samples) + m.channel.delay_s * fs) + 4096 + m.fir(fs).span
         while m.tx_len < need:
             m.append_tx_iq(self.tx_port, cyc)
 

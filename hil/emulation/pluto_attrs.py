@@ -120,7 +120,15 @@ class PlutoAttributes:
             return f"{self.sample_rate_hz} {self.sample_rate_hz // 8}"
         if kind == "BUFFER":
             return {"data_available": "0", "length_align_bytes": "8", "watermark": "2048"}[attr]
-        defaults = {"ensm_mode": "fdd", "calib_mode": "auto", "trx_rate_governor": "nominal", "scale": "0.000000", "calibscale": "1.000000", "frequency": "9279985", "sampling_frequency": str(self.sample_rate_hz)}  # fmt: skip
+        defaults = {
+            "ensm_mode": "fdd",
+            "calib_mode": "auto",
+            "trx_rate_governor": "nominal",
+            "scale": "0.000000",
+            "calibscale": "1.000000",
+            "frequency": "9279985",
+            "sampling_frequency": str(self.sample_rate_hz),
+        }
         return self.store.get(key, defaults.get(attr, "0"))
 
     def _read_phy(self, chan_id, output, attr, key) -> str | None:
@@ -147,7 +155,11 @@ class PlutoAttributes:
         if attr == "sampling_frequency":
             return str(self.sample_rate_hz)
         if attr == "sampling_frequency_available":
-            lo = ad9361.FIR_SAMPLE_RATE_MIN_HZ if self.fir_decimation == 4 else ad9361.SAMPLE_RATE_RANGE_HZ[0]  # fmt: skip
+            lo = (
+                ad9361.FIR_SAMPLE_RATE_MIN_HZ
+                if self.fir_decimation == 4
+                else ad9361.SAMPLE_RATE_RANGE_HZ[0]
+            )
             return f"[{lo} 1 {ad9361.SAMPLE_RATE_RANGE_HZ[1]}]"
         if attr == "rf_bandwidth":
             return str(self.tx_bandwidth_hz if output else self.rx_bandwidth_hz)
@@ -170,7 +182,12 @@ class PlutoAttributes:
         if attr == "rssi":
             return "0.00 dB" if output else f"{100.0 - self.rx_gain_db:.2f} dB"
         if attr == "rf_port_select_available":
-            return "A B" if output else "A_BALANCED B_BALANCED C_BALANCED A_N A_P B_N B_P C_N C_P TX_MONITOR1 TX_MONITOR2 TX_MONITOR1_2"  # fmt: skip
+            return (
+                "A B"
+                if output
+                else "A_BALANCED B_BALANCED C_BALANCED A_N A_P B_N B_P C_N C_P "
+                "TX_MONITOR1 TX_MONITOR2 TX_MONITOR1_2"
+            )
         if attr == "rf_port_select":
             return self.store.get(key, "A" if output else "A_BALANCED")
         return None
@@ -207,7 +224,14 @@ class PlutoAttributes:
             self._write(dev, chan_id, output, kind, attr, value)
 
     def _write(self, dev, chan_id, output, kind, attr, value) -> None:
-        if attr.endswith("_available") or attr in ("rssi", "input", "rx_path_rates", "tx_path_rates", "data_available", "length_align_bytes"):  # fmt: skip
+        if attr.endswith("_available") or attr in (
+            "rssi",
+            "input",
+            "rx_path_rates",
+            "tx_path_rates",
+            "data_available",
+            "length_align_bytes",
+        ):
             raise iio_errno(errno.EACCES, f"{attr} is read-only")
         try:
             if dev == PHY and kind == "":
@@ -220,7 +244,9 @@ class PlutoAttributes:
                     return
                 if chan_id == "voltage0" and attr == "sampling_frequency":
                     rate = _integer(value)
-                    self.chain = ad9361.clock_chain(rate, self.fir_decimation if self.fir_enabled else 1)  # fmt: skip
+                    self.chain = ad9361.clock_chain(
+                        rate, self.fir_decimation if self.fir_enabled else 1
+                    )
                     self.requested_rate_hz = rate
                     return
                 if chan_id == "voltage0" and attr == "rf_bandwidth":
@@ -234,13 +260,18 @@ class PlutoAttributes:
                     if output:
                         self.tx_gain_db = ad9361.tx_gain_db(_number(value))
                     elif self.gain_control_mode != "manual":
-                        raise ValueError("hardwaregain can be written only in manual gain control mode")  # fmt: skip
+                        raise ValueError(
+                            "hardwaregain can be written only in manual gain control mode"
+                        )
                     else:
                         self.manual_rx_gain_db = ad9361.rx_gain_db(_number(value), self.rx_lo_hz)
                     return
                 if chan_id == "voltage0" and attr == "gain_control_mode":
                     if value not in ad9361.GAIN_CONTROL_MODES:
-                        raise ValueError(f"gain_control_mode must be one of {', '.join(ad9361.GAIN_CONTROL_MODES)}")  # fmt: skip
+                        raise ValueError(
+                            "gain_control_mode must be one of "
+                            f"{', '.join(ad9361.GAIN_CONTROL_MODES)}"
+                        )
                     if value == "manual" and self.gain_control_mode != "manual":
                         self.manual_rx_gain_db = self.rx_gain_db  # manual keeps the AGC's gain
                     self.gain_control_mode = value

@@ -90,8 +90,8 @@ def _serve(options: dict) -> None:
 
 
 class _RemoteRadio:
-    """A board in the child as :class:`hil.emulation.EmulatorBackend` sees it: identity and USB state
-    here, requests and transfers there."""
+    """A board in the child as :class:`hil.emulation.EmulatorBackend` sees it: identity and USB
+    state here, requests and transfers there."""
 
     def __init__(self, owner: EmulatorProcess, spec: RadioSpec, index: int):
         self.owner, self.spec, self.index = owner, spec, index
@@ -104,7 +104,9 @@ class _RemoteRadio:
         return self.spec.serial
 
     def control(self, request_type, request, value, index, data_or_length):
-        return self.owner.call("control", self.index, request_type, request, value, index, data_or_length)  # fmt: skip
+        return self.owner.call(
+            "control", self.index, request_type, request, value, index, data_or_length
+        )
 
     def bulk_read(self, num_bytes: int) -> bytes:
         return self.owner.call("bulk_read", self.index, num_bytes)
@@ -160,7 +162,10 @@ class EmulatorProcess:
             "key": self._key.hex(),
         }
         root = str(Path(__file__).resolve().parents[2])  # this checkout, whatever the cwd
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}  # fmt: skip
+        env = {
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])),
+        }
         self.process = subprocess.Popen(
             [sys.executable, "-c", "from hil.emulation.process import main; main()"],
             stdin=subprocess.PIPE,

@@ -141,16 +141,30 @@ class SoapyRemoteServer:
             conn.close()
 
     def _handle(self, u: Unpacker, p: Packer, conn, streams: dict) -> bool:
+        """Answer one call; False once the client hangs up."""
         call = u.call()
-        dev = self.device
-        if call == Call.FIND:
-            u.kwargs()
-            p.kwargs_list(dev.enumerate())
-        elif call in (Call.MAKE, Call.UNMAKE, Call.HANGUP):
+        if call in (Call.MAKE, Call.UNMAKE, Call.HANGUP):
             if call == Call.MAKE:
                 u.kwargs()
             p.void()
             return call != Call.HANGUP
+        if call in (
+            Call.SETUP_STREAM,
+            Call.ACTIVATE_STREAM,
+            Call.DEACTIVATE_STREAM,
+            Call.CLOSE_STREAM,
+        ):
+            self._handle_stream(call, u, p, conn, streams)
+        elif not (self._handle_device(call, u, p) or self._handle_channel(call, u, p)):
+            raise NotImplementedError(f"call {call} is not supported by the emulated device")
+        return True
+
+    def _handle_device(self, call, u: Unpacker, p: Packer) -> bool:
+        """The device's identity, stream formats and settings; False: not such a call."""
+        dev = self.device
+        if call == Call.FIND:
+            u.kwargs()
+            p.kwargs_list(dev.enumerate())
         elif call == Call.GET_SERVER_ID:
             p.string(self.server_id)
         elif call in (Call.START_LOG_FORWARDING, Call.STOP_LOG_FORWARDING):
@@ -176,7 +190,21 @@ class SoapyRemoteServer:
         elif call == Call.GET_STREAM_ARGS_INFO:
             u.char(), u.int32()
             p.arg_info_list([])
-        elif call == Call.LIST_ANTENNAS:
+        elif call == Call.GET_SETTING_INFO:
+            p.arg_info_list(dev.setting_info())
+        elif call == Call.WRITE_SETTING:
+            dev.write_setting(u.string(), u.string())
+            p.void()
+        elif call == Call.READ_SETTING:
+            p.string(dev.read_setting(u.string()))
+        else:
+            return False
+        return True
+
+    def _handle_channel(self, call, u: Unpacker, p: Packer) -> bool:
+        """A channel's antenna, gain, frequency and sample rate; False: not such a call."""
+        dev = self.device
+        if call == Call.LIST_ANTENNAS:
             direction, _ = u.char(), u.int32()
             p.string_list(["A" if direction == TX else "A_BALANCED"])
         elif call == Call.GET_ANTENNA:
@@ -225,14 +253,12 @@ class SoapyRemoteServer:
         elif call == Call.GET_SAMPLE_RATE:
             direction, _ = u.char(), u.int32()
             p.float64(dev.sample_rate(direction))
-        elif call == Call.GET_SETTING_INFO:
-            p.arg_info_list(dev.setting_info())
-        elif call == Call.WRITE_SETTING:
-            dev.write_setting(u.string(), u.string())
-            p.void()
-        elif call == Call.READ_SETTING:
-            p.string(dev.read_setting(u.string()))
-        elif call == Call.SETUP_STREAM:
+        else:
+            return False
+        return True
+
+    def _handle_stream(self, call, u: Unpacker, p: Packer, conn, streams: dict) -> None:
+        if call == Call.SETUP_STREAM:
             self._setup_stream(u, p, conn, streams)
         elif call in (Call.ACTIVATE_STREAM, Call.DEACTIVATE_STREAM, Call.CLOSE_STREAM):
             stream_id = u.int32()
@@ -246,9 +272,6 @@ class SoapyRemoteServer:
             else:
                 (stream.activate if call == Call.ACTIVATE_STREAM else stream.deactivate)()
                 p.int32(0)
-        else:
-            raise NotImplementedError(f"call {call} is not supported by the emulated device")
-        return True
 
     def _setup_stream(self, u: Unpacker, p: Packer, conn, streams: dict) -> None:
         direction = u.char()

@@ -5,8 +5,8 @@ system libusb, or :class:`hil.emulation.EmulatorBackend` for tests), claims inte
 its identity. Its knobs (one property each) are those of
 :class:`hil.hackrf.settings.HackRFSettings`; the transport and discovery are in
 :mod:`hil.hackrf.usb_transport`. ``rx`` receives on a dedicated thread in 256 KiB transfers and
-discards the first (stale) buffer; ``tx`` pads to 512 bytes, writes the 32 KiB end-of-burst flush and waits
-for play-out before switching the radio off. Overruns and underruns are read from the M0
+discards the first (stale) buffer; ``tx`` pads to 512 bytes, writes the 32 KiB end-of-burst flush
+and waits for play-out before switching the radio off. Overruns and underruns are read from the M0
 state after each stream.
 """
 
@@ -151,7 +151,8 @@ class HackRF(HackRFSettings):
         amp_enabled: bool = False,
         bias_tee_enabled: bool = False,
     ) -> None:
-        """Put the radio in a known state, in hackrf_transfer's order (rate, filter, sync, freq, amp, bias)."""
+        """Put the radio in a known state, in hackrf_transfer's order (rate, filter, sync, freq,
+        amp, bias)."""
         self._control(p.set_transceiver_mode(p.MODE_OFF), "set mode off")
         self.sample_rate_hz = sample_rate_hz
         self._control(p.set_hw_sync_mode(False), "hardware sync off")
@@ -184,9 +185,11 @@ class HackRF(HackRFSettings):
 
     def __repr__(self) -> str:
         return (
-            f"HackRF(serial={self.serial_number!r}, board={p.BOARD_IDS.get(self.board_id, self.board_id)!r}, "
+            f"HackRF(serial={self.serial_number!r}, "
+            f"board={p.BOARD_IDS.get(self.board_id, self.board_id)!r}, "
             f"firmware={self.firmware_version!r}, sample_rate_hz={self._sample_rate_hz}, "
-            f"baseband_filter_hz={self._baseband_filter_hz}, center_freq_hz={self._center_freq_hz}, "
+            f"baseband_filter_hz={self._baseband_filter_hz}, "
+            f"center_freq_hz={self._center_freq_hz}, "
             f"lna_gain_db={self._lna_gain_db}, vga_gain_db={self._vga_gain_db}, "
             f"txvga_gain_db={self._txvga_gain_db}, amp_enabled={self._amp_enabled}, "
             f"bias_tee_enabled={self._bias_tee_enabled})"

@@ -148,7 +148,8 @@ def set_baseband_filter(bandwidth_hz: int) -> ControlRequest:
     bw = int(bandwidth_hz)
     if bw not in BASEBAND_FILTERS_HZ:
         raise ValueError(
-            f"baseband_filter_hz must be one of {[b / 1e6 for b in BASEBAND_FILTERS_HZ]} MHz, got {bandwidth_hz!r}"
+            f"baseband_filter_hz must be one of {[b / 1e6 for b in BASEBAND_FILTERS_HZ]} MHz, got "
+            f"{bandwidth_hz!r}"
         )
     return _out(BASEBAND_FILTER_BANDWIDTH_SET, value=bw & 0xFFFF, index=bw >> 16)
 

@@ -62,5 +62,6 @@ def find_hackrfs(backend=None) -> list:
         return [d for d in found if d.idProduct in p.PRODUCT_IDS]
     except usb.core.NoBackendError as e:
         raise DeviceNotFoundError(
-            "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0, or pip install libusb-package)"
+            "no libusb backend: install libusb-1.0 (Debian libusb-1.0-0, or pip install "
+            "libusb-package)"
         ) from e

@@ -36,8 +36,8 @@ class RingBuffer:
 
     A block that does not fit behind what the consumer still holds (positions map to
     slots modulo ``capacity``, so dropped samples take room too until the consumer passes
-    them) is dropped whole and counted (``dropped_samples``, ``drop_events``); its interval is kept in ``gaps`` so the
-    consumer never joins samples across it.
+    them) is dropped whole and counted (``dropped_samples``, ``drop_events``); its interval is kept
+    in ``gaps`` so the consumer never joins samples across it.
 
     Args:
         capacity: samples held at most.
@@ -314,7 +314,9 @@ class StreamReceiver:
         cut off by dropped samples or the end (only when ``own_to`` comes that near ``hi``)
         are counted from ``find`` on the block's last frame length."""
         iq = self.ring.read(lo, hi)
-        for res in self.frames.receive_all(iq, self.cfg.header_symbols + self.cfg.symbols_per_frame):  # fmt: skip
+        for res in self.frames.receive_all(
+            iq, self.cfg.header_symbols + self.cfg.symbols_per_frame
+        ):
             start = lo + int(res.start_index)
             if own_from <= start < own_to and start + self.frame_len <= hi:
                 self.counts.frames_found += 1

@@ -165,12 +165,7 @@ def stream_over_the_air(
     frames = frames or _default_frames(cfg)
     fs = cfg.sample_rate_hz
     block = stream_block_samples(cfg)
-    need = StreamReceiver.ring_samples_needed(views, cfg, block)
-    if int(ring_s * fs) < need:
-        raise ValueError(
-            f"ring_s {ring_s:g} s holds {int(ring_s * fs)} samples, less than one frame with "
-            f"its search window ({need} samples, {need / fs:.4g} s)"
-        )
+    _check_ring(ring_s, views, cfg, block)
     for dev in (tx, rx) if rx is not tx else (tx,):
         _configure(dev, cfg)
     ring = RingBuffer(max(int(ring_s * fs), 1))
@@ -183,13 +178,7 @@ def stream_over_the_air(
     stop = threading.Event()
     rx_out: dict = {}
     tx_out: dict = {}
-    producer = threading.Thread(
-        target=_produce, args=(rx, ring, block, stop, rx_out), name="ota-stream-rx", daemon=True
-    )
-    producer.start()
-    deadline = time.monotonic() + 5.0  # the receiver streams before the first view goes out
-    while not rx.receiving and producer.is_alive() and time.monotonic() < deadline:
-        time.sleep(0.001)
+    producer = _start_producer(rx, ring, block, stop, rx_out)
     sender = threading.Thread(
         target=_transmit,
         args=(tx, views, interval_s, time.monotonic() + cfg.rx_lead_s, tx_out, stop),
@@ -197,19 +186,12 @@ def stream_over_the_air(
         daemon=True,
     )
     sender.start()
-
-    def stop_after_last_view():
-        sender.join()
-        # the last frame, then what the board and the driver still hold, reach the ring
-        tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
-        transfer = transfer_samples(rx, block)
-        deadline = time.monotonic() + (tail + transfer + 4 * block) / fs + 0.05
-        while time.monotonic() < deadline and receiver.next_view < len(views):
-            if stop.wait(0.005):  # ends early once the last view is decoded, or on a stop
-                return
-        stop.set()
-
-    stopper = threading.Thread(target=stop_after_last_view, name="ota-stream-stop", daemon=True)
+    stopper = threading.Thread(
+        target=_stop_after_last_view,
+        args=(sender, views, cfg, rx, block, receiver, stop),
+        name="ota-stream-stop",
+        daemon=True,
+    )
     stopper.start()
     stopped: BaseException | None = None
     try:
@@ -224,14 +206,58 @@ def stream_over_the_air(
     stopped = stopped or rx_out.get("error") or tx_out.get("error")
     if stopped is None:
         return _run_record(rx, ring, receiver.counts, emulator, rx_out.get("warnings", []))
+    raise _with_what_it_got(stopped, rx, ring, receiver.counts, emulator, rx_out)
+
+
+def _check_ring(ring_s: float, views: list[StreamView], cfg: OtaConfig, block: int) -> None:
+    """ValueError unless ``ring_s`` holds one frame with its search window."""
+    fs = cfg.sample_rate_hz
+    need = StreamReceiver.ring_samples_needed(views, cfg, block)
+    if int(ring_s * fs) < need:
+        raise ValueError(
+            f"ring_s {ring_s:g} s holds {int(ring_s * fs)} samples, less than one frame with "
+            f"its search window ({need} samples, {need / fs:.4g} s)"
+        )
+
+
+def _start_producer(rx, ring: RingBuffer, block: int, stop: threading.Event, out: dict):
+    """The receiver's thread, started; returns once ``rx`` streams (or the thread ended, or
+    after 5 s), before the first view goes out."""
+    producer = threading.Thread(
+        target=_produce, args=(rx, ring, block, stop, out), name="ota-stream-rx", daemon=True
+    )
+    producer.start()
+    deadline = time.monotonic() + 5.0  # the receiver streams before the first view goes out
+    while not rx.receiving and producer.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return producer
+
+
+def _stop_after_last_view(sender, views, cfg: OtaConfig, rx, block: int, receiver, stop) -> None:
+    """The stopper's thread: once the last view is sent, wait for it (and what the board and
+    the driver still hold) to reach the ring, then stop the stream."""
+    sender.join()
+    # the last frame, then what the board and the driver still hold, reach the ring
+    tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
+    transfer = transfer_samples(rx, block)
+    deadline = time.monotonic() + (tail + transfer + 4 * block) / cfg.sample_rate_hz + 0.05
+    while time.monotonic() < deadline and receiver.next_view < len(views):
+        if stop.wait(0.005):  # ends early once the last view is decoded, or on a stop
+            return
+    stop.set()
+
+
+def _with_what_it_got(stopped: BaseException, rx, ring: RingBuffer, counts, emulator, rx_out):
+    """``stopped`` with ``stream_run`` (what the stream got until then) and ``capture`` (the
+    ring's last samples) attached."""
     try:
-        run = _run_record(rx, ring, receiver.counts, emulator, rx_out.get("warnings", []))
+        run = _run_record(rx, ring, counts, emulator, rx_out.get("warnings", []))
     except Exception:  # noqa: BLE001 - a board gone: what the receiver counted
-        run = StreamRun(samples_received=ring.received_samples, counts=receiver.counts)
-    stopped.stream_run = run  # type: ignore[union-attr]
+        run = StreamRun(samples_received=ring.received_samples, counts=counts)
+    stopped.stream_run = run  # type: ignore[attr-defined]
     if getattr(stopped, "capture", None) is None:
-        stopped.capture = ring.held()  # type: ignore[union-attr]
-    raise stopped
+        stopped.capture = ring.held()  # type: ignore[attr-defined]
+    return stopped
 
 
 STOP_S = 1.0

@@ -49,7 +49,15 @@ DEFAULT_RX_GAIN_DB = 30
 DEFAULT_TX_GAIN_DB = -10.0
 
 # (ADC divider, R2, R1, RF half-band decimations), fastest oversampling first
-_CLOCK_DIVIDERS = ((12, 3, 2, 2), (8, 2, 2, 2), (6, 3, 1, 2), (4, 2, 2, 1), (3, 3, 1, 1), (2, 2, 1, 1), (1, 1, 1, 1))  # fmt: skip
+_CLOCK_DIVIDERS = (
+    (12, 3, 2, 2),
+    (8, 2, 2, 2),
+    (6, 3, 1, 2),
+    (4, 2, 2, 1),
+    (3, 3, 1, 1),
+    (2, 2, 1, 1),
+    (1, 1, 1, 1),
+)
 
 
 def lo_frequency_hz(value_hz: int) -> int:

@@ -27,11 +27,66 @@ class Channel:
     scan_format: str | None = None
 
 
-_PHY_RX = ("bb_dc_offset_tracking_en", "filter_fir_en", "gain_control_mode", "gain_control_mode_available", "hardwaregain", "hardwaregain_available", "quadrature_tracking_en", "rf_bandwidth", "rf_bandwidth_available", "rf_dc_offset_tracking_en", "rf_port_select", "rf_port_select_available", "rssi", "sampling_frequency", "sampling_frequency_available")  # fmt: skip
-_PHY_TX = ("filter_fir_en", "hardwaregain", "hardwaregain_available", "rf_bandwidth", "rf_bandwidth_available", "rf_port_select", "rf_port_select_available", "rssi", "sampling_frequency", "sampling_frequency_available")  # fmt: skip
-_LO = ("external", "fastlock_load", "fastlock_recall", "fastlock_save", "fastlock_store", "frequency", "frequency_available", "powerdown")  # fmt: skip
-_PHY_DEV = ("calib_mode", "calib_mode_available", "ensm_mode", "ensm_mode_available", "filter_fir_config", "rx_path_rates", "trx_rate_governor", "trx_rate_governor_available", "tx_path_rates", "xo_correction", "xo_correction_available")  # fmt: skip
-_ADC = ("calibbias", "calibphase", "calibscale", "samples_pscaled", "sampling_frequency", "sampling_frequency_available")  # fmt: skip
+_PHY_RX = (
+    "bb_dc_offset_tracking_en",
+    "filter_fir_en",
+    "gain_control_mode",
+    "gain_control_mode_available",
+    "hardwaregain",
+    "hardwaregain_available",
+    "quadrature_tracking_en",
+    "rf_bandwidth",
+    "rf_bandwidth_available",
+    "rf_dc_offset_tracking_en",
+    "rf_port_select",
+    "rf_port_select_available",
+    "rssi",
+    "sampling_frequency",
+    "sampling_frequency_available",
+)
+_PHY_TX = (
+    "filter_fir_en",
+    "hardwaregain",
+    "hardwaregain_available",
+    "rf_bandwidth",
+    "rf_bandwidth_available",
+    "rf_port_select",
+    "rf_port_select_available",
+    "rssi",
+    "sampling_frequency",
+    "sampling_frequency_available",
+)
+_LO = (
+    "external",
+    "fastlock_load",
+    "fastlock_recall",
+    "fastlock_save",
+    "fastlock_store",
+    "frequency",
+    "frequency_available",
+    "powerdown",
+)
+_PHY_DEV = (
+    "calib_mode",
+    "calib_mode_available",
+    "ensm_mode",
+    "ensm_mode_available",
+    "filter_fir_config",
+    "rx_path_rates",
+    "trx_rate_governor",
+    "trx_rate_governor_available",
+    "tx_path_rates",
+    "xo_correction",
+    "xo_correction_available",
+)
+_ADC = (
+    "calibbias",
+    "calibphase",
+    "calibscale",
+    "samples_pscaled",
+    "sampling_frequency",
+    "sampling_frequency_available",
+)
 _DAC = ("calibphase", "calibscale", "sampling_frequency", "sampling_frequency_available")
 _DDS = ("frequency", "phase", "raw", "sampling_frequency", "scale")
 
@@ -118,7 +173,10 @@ def context_xml(
         _DTD,
         f'<context name="xml" description={quoteattr(description)} >',
     ]
-    out += [f"<context-attribute name={quoteattr(k)} value={quoteattr(v)} />" for k, v in context_attrs.items()]  # fmt: skip
+    out += [
+        f"<context-attribute name={quoteattr(k)} value={quoteattr(v)} />"
+        for k, v in context_attrs.items()
+    ]
     for dev, name in DEVICE_NAMES.items():
         out.append(f'<device id="{dev}" name="{name}" >')
         for ch in CHANNELS[dev]:

@@ -20,7 +20,7 @@ import numpy as np
 from hil.errors import DeviceNotFoundError, HilError, StreamError
 from hil.hackrf.stream import StreamStats
 from hil.iq import full_scale_samples
-from hil.pluto.ad9361 import RX_FULL_SCALE, TX_FULL_SCALE
+from hil.pluto.ad9361 import GAIN_CONTROL_MODES, RX_FULL_SCALE, TX_FULL_SCALE
 from hil.pluto.iio_access import (
     air_attribute,
     find_plutos,
@@ -29,8 +29,6 @@ from hil.pluto.iio_access import (
     receive_error,
     release_frames,
 )
-
-GAIN_CONTROL_MODES = ("manual", "fast_attack", "slow_attack", "hybrid")
 
 
 class Pluto:
@@ -73,7 +71,8 @@ class Pluto:
         kernel_buffers: int = 4,
         configure: bool = True,
     ):
-        for name, v in (("rx_chunk_samples", rx_chunk_samples), ("tx_chunk_samples", tx_chunk_samples)):  # fmt: skip
+        chunks = {"rx_chunk_samples": rx_chunk_samples, "tx_chunk_samples": tx_chunk_samples}
+        for name, v in chunks.items():
             if int(v) <= 0:
                 raise ValueError(f"{name} must be > 0, got {v!r}")
         self._sdr = sdr

@@ -14,7 +14,15 @@ from hil.errors import (
     TimedOutError,
 )
 
-_GONE = {errno.EPIPE, errno.ECONNRESET, errno.ENOTCONN, errno.ECONNABORTED, errno.ENODEV, errno.EBADF, errno.ESHUTDOWN}  # fmt: skip
+_GONE = {
+    errno.EPIPE,
+    errno.ECONNRESET,
+    errno.ENOTCONN,
+    errno.ECONNABORTED,
+    errno.ENODEV,
+    errno.EBADF,
+    errno.ESHUTDOWN,
+}
 
 
 def iio_error_to_hil(exc: BaseException, what: str) -> HilError:

@@ -185,7 +185,8 @@ def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help=f"replace {what} when it already exists; without it an existing one is refused (exit 2, nothing written)",
+        help=f"replace {what} when it already exists; without it an existing one is refused "
+        "(exit 2, nothing written)",
     )
 
 
@@ -314,7 +315,8 @@ def distinct_outputs(**paths) -> None:
 
 
 def flag_error(e: ValueError, flags: dict[str, str] | None = None) -> UsageError:
-    """A config's ``ValueError("max_papr_db must be ...")`` as the flag's: ``--max-papr-db must ...``.
+    """A config's ``ValueError("max_papr_db must be ...")`` as the flag's
+    (``--max-papr-db must ...``).
 
     Args:
         flags: field -> option where they differ (``{"num_train_views": "--views"}``); other

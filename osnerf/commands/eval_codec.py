@@ -12,7 +12,7 @@ where psnr/ssim/lpips are the mean over images x draws of per-image values (PSNR
 1.0; LPIPS-AlexNet v0.1 from :func:`renderer.lpips`, null with ``--no-lpips`` or when an
 image is smaller than 31x31 px) and ``psnr_ci95`` the 95 % percentile bootstrap interval
 of that mean over the images x draws values (``[null, null]`` with fewer than
-:data:`CI_MIN_VALUES` of them: too few for an interval).
+:data:`~osnerf.commands.eval_stats.CI_MIN_VALUES` of them: too few for an interval).
 MS-SSIM (pytorch-msssim) is null for images under 161 px a side.
 
 What the transmitter knows is apart from the channel: ``--plan-snr-db`` and
@@ -42,13 +42,20 @@ import numpy as np
 
 from common import write_figure
 from osnerf.commands import args as checks
-from osnerf.commands.eval_partial import check_partial_kind, partial_path, resumable
+from osnerf.commands.eval_inputs import checked_inputs
+from osnerf.commands.eval_partial import partial_path, resumable
+from osnerf.commands.eval_stats import (
+    INTERVAL_TEXT,
+    DrawTally,
+    draw_seed,
+    mean_ci95,
+    outage_stats,
+    snr_belief,
+)
 
 MAX_DRAWS = 10_000
 MAX_IMAGES = 100_000
 MAX_SNR_ERROR_DB = 20.0
-ESTIMATE_STREAM = 0x5E57
-"""Tag of the SNR-estimate error's random stream (apart from every channel draw)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -171,75 +178,12 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def draw_seed(seed: int, snr_index: int, image_index: int, draw: int) -> int:
-    """Seed of one draw, the same in every scheme (common random numbers)."""
-    return ((seed * 1_000_003 + snr_index) * 100_003 + image_index) * 1_009 + draw
-
-
-CI_MIN_VALUES = 5
-"""Fewer images x draws than this give no interval: with so few a bootstrap only repeats
-the values (its interval would claim what they cannot show)."""
-CI_RESAMPLES = 10_000
-INTERVAL_TEXT = (
-    f"95% percentile bootstrap interval of the mean over images x draws ({CI_RESAMPLES} "
-    f"resamples, seed 0); none (null) with fewer than {CI_MIN_VALUES} values"
-)
-
-
-def snr_belief(
-    snr_db: float,
-    plan_snr_db: float | None,
-    snr_error_db: float,
-    seed: int,
-    snr_index: int,
-    image_index: int,
-    draw: int,
-) -> float | None:
-    """What the transmitter believes the average SNR of one draw is: ``plan_snr_db`` (else
-    the truth) plus ``snr_error_db`` times a standard normal from the run's seed, the same
-    for every scheme (its own stream: the channel's draws are untouched). None when it
-    knows the truth exactly (no plan, no error)."""
-    if plan_snr_db is None and not snr_error_db:
-        return None
-    believed = float(snr_db if plan_snr_db is None else plan_snr_db)
-    if snr_error_db:
-        rng = np.random.default_rng([ESTIMATE_STREAM, seed, snr_index, image_index, draw])
-        believed += float(snr_error_db) * float(rng.standard_normal())
-    return believed
-
-
-def outage_stats(psnrs, lost: int, total: int) -> dict:
-    """Per-image outage statistics over images x draws: the 5th and 10th percentile of PSNR
-    and the fraction of images lost (received as nothing)."""
-    v = np.asarray(psnrs, dtype=np.float64)
-    return {
-        "psnr_p5": float(np.percentile(v, 5)),
-        "psnr_p10": float(np.percentile(v, 10)),
-        "lost_fraction": lost / total if total else 0.0,
-    }
-
-
-def mean_ci95(values) -> tuple[float, float | None, float | None]:
-    """(mean, low, high): the 95 % percentile bootstrap interval of the mean, resampling
-    the values with replacement (a fixed seed: the same values give the same interval). It
-    lies within the values' range, so within what a PSNR can be; (mean, None, None) with
-    fewer than :data:`CI_MIN_VALUES` values."""
-    v = np.asarray(values, dtype=np.float64).reshape(-1)
-    m = float(v.mean())
-    if v.size < CI_MIN_VALUES:
-        return m, None, None
-    rng = np.random.default_rng(0)
-    means = v[rng.integers(0, v.size, size=(CI_RESAMPLES, v.size))].mean(axis=1)
-    lo, hi = np.quantile(means, [0.025, 0.975])
-    return m, float(lo), float(hi)
-
-
 def run(args: argparse.Namespace) -> int:
     from osnerf.cli import inputs_checked
     from osnerf.provenance import codec_record, result_header, write_json_atomic
     from semcodec import LINK_SCHEMES, EvalContext, capability_record
 
-    out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = _inputs(args)
+    out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = checked_inputs(args)
     ctx = EvalContext(
         channel=args.channel,
         codec=codec,
@@ -324,111 +268,15 @@ def _knowledge(plan_snr_db, snr_error_db) -> str:
     return f"{base} plus a Gaussian error of {snr_error_db:g} dB per image and draw"
 
 
-def _inputs(args: argparse.Namespace):
-    """Every input checked before any work: (out path, schemes, SNRs, CBR, fixed MCS, codec or
-    None, image names, images, whether LPIPS is scored)."""
-    import torch
-
-    from osnerf.schemes import parse_schemes
-    from phy import num_symbols_for_cbr, parse_cbr
-    from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
-    from semcodec import LINK_SCHEMES, require_capabilities
-    from semcodec.links import DEFAULT_FIXED_MCS, eval_channels, load_image_folder
-
-    inputs = {"--images": args.images}
-    out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
-    if args.plot:
-        checks.output_file(args.plot, "--plot", overwrite=args.overwrite, inputs=inputs)
-    checks.distinct_outputs(out=args.out, plot=args.plot)
-    check_partial_kind(out)  # a folder or FIFO there is refused before any work
-    torch.set_num_threads(args.threads)
-    channels = eval_channels()
-    if args.channel not in channels:
-        raise KeyError(f"--channel: unknown channel {args.channel!r}; known: {channels}")
-    try:
-        schemes = parse_schemes(args.schemes, LINK_SCHEMES)
-    except ValueError as e:
-        raise ValueError(f"--schemes {e}") from None
-    snrs = list(args.snr_db)
-    try:
-        cbr = parse_cbr(args.cbr)
-    except ValueError as e:
-        raise ValueError(f"--{e}") from None
-    mcs = DEFAULT_FIXED_MCS if args.mcs is None else args.mcs
-    fixed = [s for s in schemes if LINK_SCHEMES[s].mcs == "fixed"]
-    if args.mcs is not None and not fixed:
-        known = ", ".join(n for n, s in LINK_SCHEMES.items() if s.mcs == "fixed")
-        raise ValueError(
-            f"--mcs applies to the fixed-MCS schemes ({known}), not to --schemes "
-            f"{','.join(schemes)}: add one or leave --mcs out"
-        )
-    if fixed:
-        from phy.digital import MCS_TABLE
-
-        if mcs not in MCS_TABLE:
-            raise KeyError(f"--mcs must be one of {', '.join(MCS_TABLE)}, got {mcs!r}")
-    codec = None
-    if any(LINK_SCHEMES[s].needs_codec for s in schemes):
-        from osnerf.provenance import open_codec
-
-        codec = open_codec(args.codec, args.allow_untrained)
-        refine = [s for s in schemes if LINK_SCHEMES[s].refines]
-        limits = require_capabilities(codec, bool(refine), f"--schemes {','.join(refine)}")
-        if limits.line():
-            print(f"eval-codec: {limits.line()}", file=sys.stderr)
-        lo, hi = codec.cbr_range
-        if not lo * 0.999 <= cbr <= hi * 1.001:
-            raise ValueError(
-                f"--cbr {args.cbr} is outside the codec's range [{lo:.4g}, {hi:.4g}] ({codec.name})"
-            )
-        slo, shi = codec.snr_range_db
-        if not slo <= min(snrs) <= max(snrs) <= shi:
-            raise ValueError(
-                f"--snr-db [{min(snrs):g}, {max(snrs):g}] dB is not covered by codec "
-                f"{codec.name!r}, trained for SNR [{slo:g}, {shi:g}] dB"
-            )
-    names, images = load_image_folder(args.images)
-    if args.max_images is not None:
-        names, images = names[: args.max_images], images[: args.max_images]
-    for name, img in zip(names, images):
-        if num_symbols_for_cbr(cbr, *img.shape[-2:]) < 1:
-            raise ValueError(
-                f"--cbr {args.cbr} gives {name} ({img.shape[-1]}x{img.shape[-2]} px) no channel "
-                "symbol; give a larger --cbr"
-            )
-    score_lpips = not args.no_lpips and all(
-        min(img.shape[-2:]) >= LPIPS_MIN_SIDE_PX for img in images
-    )
-    if score_lpips:
-        try:
-            lpips_weights()  # checked before any work
-        except FileNotFoundError as e:
-            raise FileNotFoundError(f"{e}, or pass --no-lpips") from None
-
-    return out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips
-
-
 def _point(
     ctx, scheme: str, ki: int, snr: float, cbr: float, images, args, score_lpips, bar
 ) -> dict:
     """One (scheme, SNR) row of the result: every image over ``args.draws`` draws."""
     import torch
 
-    from common import ms_ssim, psnr
-    from renderer import lpips
     from semcodec import LINK_SCHEMES
-    from semcodec.links import ssim
 
-    ps, ss, ms, ls, t0 = [], [], [], [], time.perf_counter()
-    beliefs: list[list[float]] = []
-    forecast = None  # the digital planner's expected number of lost images
-    extra = {"failed_codewords": 0, "lost_images": 0, "num_symbols": 0}
-    lost = {"budget": 0, "channel": 0}
-    mcs_used: dict[str, int] = {}
-    scales_used: dict[str, int] = {}  # images sent downscaled by each factor (1: whole)
-    stats_keys = {}
-    separate = False  # the scheme reported views lost (a separate source-channel code)
-    budget = None  # the codec's symbol budget over images x draws (semantic schemes)
+    tally, t0 = DrawTally(score_lpips), time.perf_counter()
     for ii, img in enumerate(images):
         row, believed = [], []
         for d in range(args.draws):
@@ -437,30 +285,20 @@ def _point(
             plan = _within_codec(ctx, scheme, plan)
             res = LINK_SCHEMES[scheme](ctx, img, snr, cbr, gen, plan)
             believed.append(snr if plan is None else plan)
-            row.append(psnr(res.images, img))
-            ss.append(ssim(res.images, img))
-            ms.append(ms_ssim(res.images, img))
-            if res.stats.get("forecast_loss") is not None:
-                forecast = (forecast or 0.0) + sum(res.stats["forecast_loss"])
-            if score_lpips:
-                ls.append(float(lpips(res.images.clamp(0, 1), img)[0]))
-            for k in extra:
-                extra[k] += int(res.stats.get(k, 0) or 0)
-            if "symbol_budget" in res.stats:  # the semantic codec's: sent against asked
-                budget = (budget or 0) + int(res.stats["symbol_budget"])
-            separate = separate or "views_lost" in res.stats
-            for k, v in (res.stats.get("views_lost") or {}).items():
-                lost[k] += int(v)
-            for m in res.stats.get("mcs") or []:
-                mcs_used[str(m)] = mcs_used.get(str(m), 0) + 1
-            for sc in res.stats.get("scale") or []:
-                scales_used[str(sc)] = scales_used.get(str(sc), 0) + 1
-            for k in ("mcs_choice", "calibration", "resample_filter"):
-                if k in res.stats:
-                    stats_keys[k] = res.stats[k]
+            row.append(tally.add(res, img))
             bar.update(1)
-        ps.append(row)
-        beliefs.append(believed)
+        tally.psnr.append(row)
+        tally.beliefs.append(believed)
+    return _result_row(tally, scheme, snr, cbr, len(images), args, t0)
+
+
+def _result_row(
+    tally: DrawTally, scheme: str, snr: float, cbr: float, num_images: int, args, t0: float
+) -> dict:
+    """The result row of a tallied point, and its line on stderr."""
+    from semcodec import LINK_SCHEMES
+
+    ps, ss, ms, ls, extra = tally.psnr, tally.ssim, tally.ms_ssim, tally.lpips, tally.extra
     flat = [v for row in ps for v in row]
     mean, lo, hi = mean_ci95(flat)
     r = {
@@ -472,7 +310,7 @@ def _point(
         "ssim": float(np.mean(ss)),
         "ms_ssim": None if any(v is None for v in ms) else float(np.mean(ms)),
         "lpips": float(np.mean(ls)) if ls else None,
-        "num_images": len(images),
+        "num_images": num_images,
         "draws": args.draws,
         "psnr_per_image": [float(np.mean(row)) for row in ps],
         "psnr_per_draw": ps,
@@ -483,18 +321,18 @@ def _point(
     if args.plan_snr_db is not None or args.snr_error_db:  # what it believed, by the truth
         r["plan_snr_db"] = args.plan_snr_db
         r["snr_error_db"] = args.snr_error_db
-        r["snr_believed_db"] = beliefs
-    if forecast is not None:  # the planner's forecast of lost images, beside the count
-        r["forecast_lost_images"] = forecast
-    if budget is not None:
-        r["symbol_budget"] = budget
-        r["symbols_unused"] = budget - extra["num_symbols"]
-    if separate:
-        r["views_lost"] = lost
-        r["mcs_used"] = mcs_used
-    if scales_used:
-        r["scales_used"] = scales_used
-    r.update(stats_keys)
+        r["snr_believed_db"] = tally.beliefs
+    if tally.forecast is not None:  # the planner's forecast of lost images, beside the count
+        r["forecast_lost_images"] = tally.forecast
+    if tally.budget is not None:
+        r["symbol_budget"] = tally.budget
+        r["symbols_unused"] = tally.budget - extra["num_symbols"]
+    if tally.separate:
+        r["views_lost"] = tally.lost
+        r["mcs_used"] = tally.mcs_used
+    if tally.scales_used:
+        r["scales_used"] = tally.scales_used
+    r.update(tally.stats_keys)
     if LINK_SCHEMES[scheme].bound:
         r["bound"] = LINK_SCHEMES[scheme].bound
     lp = f", LPIPS {np.mean(ls):.4f}" if ls else ""
@@ -503,7 +341,8 @@ def _point(
     )
     msl = f", MS-SSIM {r['ms_ssim']:.4f}" if r["ms_ssim"] is not None else ""
     print(
-        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM {np.mean(ss):.4f}{msl}{lp}",
+        f"eval-codec: {scheme} {snr:g} dB: PSNR {mean:.2f} dB {ci}, SSIM "
+        f"{np.mean(ss):.4f}{msl}{lp}",
         file=sys.stderr,
     )
     return r

@@ -173,7 +173,8 @@ def _info_lines(index: int, dev) -> list[str]:
         f"Index: {index}",
         f"Serial number: {dev.serial_number}",
         f"Board ID Number: {dev.board_id} ({board})",
-        f"Firmware Version: {dev.firmware_version} (API:{usb_api_version_string(dev.usb_api_version)})",
+        f"Firmware Version: {dev.firmware_version} "
+        f"(API:{usb_api_version_string(dev.usb_api_version)})",
         f"Part ID Number: 0x{dev.part_id[0]:08x} 0x{dev.part_id[1]:08x}",
     ]
 

@@ -1,6 +1,7 @@
 """`osnerf ota`: send images over the air (HackRF One or ADALM-Pluto; real, emulated or loopback).
 
-    osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 --images DIR --out ota.json
+    osnerf ota --tx emulated --rx emulated --schemes digital,jscc --snr-db 15 \\
+        --images DIR --out ota.json
 
 Schemes: the link schemes of ``semcodec.LINK_SCHEMES`` with a framed transmitter and
 receiver (``LinkScheme.framed``, :mod:`semcodec.links.framed`): ``digital`` (image codec bytes ->
@@ -89,33 +90,12 @@ def check_codec_snr(codec, snr_db: float) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from hil import OtaConfig
-    from hil.emulation import AIR_SNR_DB_RANGE, FAULT_NAMES
-    from hil.hackrf import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
+    """The options, in ``--help`` order: the radios, what is sent, the emulated air, the
+    images, each scheme's settings, the radio configuration, the stream."""
+    from hil.emulation import AIR_SNR_DB_RANGE
     from semcodec import LINK_SCHEMES
 
-    dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
-    p.add_argument(
-        "--uri",
-        default=None,
-        type=parse_uri,
-        help=f"pluto: libiio URI of the board, {URI_FORMATS} (default: the first found; one "
-        "Pluto is both ends of the link)",
-    )
-    p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
-    p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
-    p.add_argument(
-        "--tx-args",
-        default=None,
-        help="soapy: the transmitter's SoapySDR device string, e.g. 'driver=uhd,type=b200' or "
-        "'driver=remote,remote=tcp://127.0.0.1:55132' (default: the first device found)",
-    )
-    p.add_argument(
-        "--rx-args",
-        default=None,
-        help="soapy: the receiver's device string (default --tx-args: one full-duplex device "
-        "is both ends)",
-    )
+    _add_radio_arguments(p)
     framed = [k for k, v in LINK_SCHEMES.items() if v.over_the_air]
     p.add_argument(
         "--schemes",
@@ -155,6 +135,42 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"send at most this many images, 1..{MAX_IMAGES} (default 4)",
     )
     _add_scheme_arguments(p)
+    _add_ota_config_arguments(p)
+    add_stream_arguments(p)
+
+
+def _add_radio_arguments(p: argparse.ArgumentParser) -> None:
+    """Which radios are the two ends of the link."""
+    dev = f"one of {', '.join(DEVICE_KINDS)}; 'hackrf:SERIAL' picks a board by serial (tail)"
+    p.add_argument(
+        "--uri",
+        default=None,
+        type=parse_uri,
+        help=f"pluto: libiio URI of the board, {URI_FORMATS} (default: the first found; one "
+        "Pluto is both ends of the link)",
+    )
+    p.add_argument("--tx", default="emulated", help=f"transmitter: {dev} (default emulated)")
+    p.add_argument("--rx", default="emulated", help=f"receiver: {dev} (default emulated)")
+    p.add_argument(
+        "--tx-args",
+        default=None,
+        help="soapy: the transmitter's SoapySDR device string, e.g. 'driver=uhd,type=b200' or "
+        "'driver=remote,remote=tcp://127.0.0.1:55132' (default: the first device found)",
+    )
+    p.add_argument(
+        "--rx-args",
+        default=None,
+        help="soapy: the receiver's device string (default --tx-args: one full-duplex device "
+        "is both ends)",
+    )
+
+
+def _add_ota_config_arguments(p: argparse.ArgumentParser) -> None:
+    """The radio configuration (:class:`hil.OtaConfig`'s fields) and an emulated fault."""
+    from hil import OtaConfig
+    from hil.emulation import FAULT_NAMES
+    from hil.hackrf import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
+
     add_config_arguments(
         p,
         OtaConfig,
@@ -180,7 +196,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="emulated boards: inject this USB fault into the receiver, to see how a run "
         "reports it (exit 1; the capture so far is saved as SigMF)",
     )
-    add_stream_arguments(p)
 
 
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
@@ -369,5 +384,3 @@ def run(args: argparse.Namespace) -> int:
     write_json_atomic(out, record)
     print(f"ota: wrote {out}", file=sys.stderr)
     return 0
-
-

@@ -197,6 +197,7 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
     import numpy as np
 
     from hil import HilError, save_sigmf
+
     bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
     block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
     result, hw = send_over_the_air(args, cfg, [block], sigmf_dir, "ota_probe")

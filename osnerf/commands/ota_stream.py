@@ -212,7 +212,9 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
 
     # the decoder's one-off set-up before the stream: the first view is as quick as the rest
     first = pick[0]
-    scheme.receive(received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings)  # fmt: skip
+    scheme.receive(
+        received_blocks(views[0].result()), encoded[0][1], images[first : first + 1], settings
+    )
     stopped = None
     with _sigterm_as_interrupt():
         tx, rx, emu = _open_radios(args, cfg)
@@ -241,6 +243,12 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     if stopped is not None:
         return _write_stopped(args, cfg, out, record, stopped, len(recs), len(views))
     write_json_atomic(out, record)
+    return _tell_finished(args, out, record, run)
+
+
+def _tell_finished(args, out, record: dict, run) -> int:
+    """A finished stream's lines on stderr (counts, warnings, lost samples); 1 when it lost
+    more overruns than ``--max-rx-overruns`` allows."""
     stream, lat = record["stream"], record["stream"]["latency_s"]
     print(
         f"ota: stream: {stream['samples_received']} samples, {stream['dropped_samples']} "
@@ -378,7 +386,9 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
     result = BurstResult(blocks, reports, empty, empty)
     per_view = [recs[v.index] for v in done]
     done_names = [view_names[v.index] for v in done]
-    record = ota_record(args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0)  # fmt: skip
+    record = ota_record(
+        args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0
+    )
     start = min((v.sent_at for v in views if v.sent_at is not None), default=0.0)
     rows = []
     for v in views:

@@ -32,7 +32,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="write into an --out folder that already holds files; without it such a folder is refused (exit 2)",
+        help=(
+            "write into an --out folder that already holds files; without it such a folder is "
+            "refused (exit 2)"
+        ),
     )
 
 

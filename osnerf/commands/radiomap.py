@@ -211,7 +211,8 @@ def run(args: argparse.Namespace) -> int:
     )
     shadowed = [c["view"] for c in body["candidates"] if not c["los"]]
     print(
-        f"radio map {m.path_gain_db.shape} at z = {', '.join(f'{z:.2f}' for z in m.altitudes_m)} m; "
+        f"radio map {m.path_gain_db.shape} at z = "
+        f"{', '.join(f'{z:.2f}' for z in m.altitudes_m)} m; "
         f"{len(shadowed)} of {len(rm.candidates_m)} candidates without line of sight "
         f"{shadowed}; wrote {out}/radiomap.png, .npz, .json",
         file=sys.stderr,

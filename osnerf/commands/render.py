@@ -28,6 +28,8 @@ VIDEOS = ("mp4", "gif", "none")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options, in ``--help`` order: the field and the output, the camera path, the
+    renderer, the video."""
     p.add_argument(
         "--run",
         required=True,
@@ -35,6 +37,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", required=True, help="output folder (frames/, video, render.json)")
     checks.add_overwrite(p, "the frames, video and render.json of an --out folder")
+    _add_path_arguments(p)
+    _add_renderer_arguments(p)
+    p.add_argument(
+        "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
+    )
+    p.add_argument(
+        "--fps",
+        type=checks.number(0.0, 240.0, "frames/s", low_open=True),
+        default=24.0,
+        help="video frame rate, (0, 240] (default 24)",
+    )
+    p.add_argument(
+        "--threads", type=checks.threads, default=2, help="torch CPU threads (default 2)"
+    )
+
+
+def _add_path_arguments(p: argparse.ArgumentParser) -> None:
+    """The camera path: an orbit (views, size, elevation, radius, arc) or a JSON file."""
     p.add_argument(
         "--num-views",
         type=checks.count(1, checks.MAX_VIEWS),
@@ -70,6 +90,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="JSON with frames[].transform_matrix to render instead of an orbit",
     )
+
+
+def _add_renderer_arguments(p: argparse.ArgumentParser) -> None:
+    """Which renderer, and a learned renderer's setup: steps, budget, refinement, seed."""
     p.add_argument(
         "--renderer",
         default="full",
@@ -106,18 +130,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="learned renderers' seed (default 0); the full renderer draws nothing and records "
         "no seed",
     )
-    p.add_argument(
-        "--video", default="mp4", help=f"video format: {' | '.join(VIDEOS)} (default mp4)"
-    )
-    p.add_argument(
-        "--fps",
-        type=checks.number(0.0, 240.0, "frames/s", low_open=True),
-        default=24.0,
-        help="video frame rate, (0, 240] (default 24)",
-    )
-    p.add_argument(
-        "--threads", type=checks.threads, default=2, help="torch CPU threads (default 2)"
-    )
 
 
 def _path_poses(path: Path):
@@ -148,30 +160,9 @@ def run(args: argparse.Namespace) -> int:
 
     from osnerf.cli import inputs_checked
     from osnerf.provenance import result_header, write_json_atomic
-    from renderer import RENDERERS, load_model, make_renderer, to_uint8
+    from renderer import make_renderer
 
-    if args.renderer not in RENDERERS:
-        raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
-    if args.video not in VIDEOS:
-        raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
-    for flag in ("renderer_steps", "renderer_cpu_seconds", "renderer_refine"):
-        if not _learned(args.renderer) and getattr(args, flag) is not None:
-            raise UsageError(
-                f"--{flag.replace('_', '-')} applies only to a learned renderer (features): "
-                f"--renderer {args.renderer} renders the field directly, with no setup"
-            )
-    run_path = Path(args.run)
-    model_path = run_path / "model.pt" if run_path.is_dir() else run_path
-    if not model_path.is_file():
-        raise FileNotFoundError(
-            f"--run {run_path}: no model.pt (train one with `osnerf train-nerf`)"
-        )
-    out_dir = checks.output_dir(args.out, "--out", overwrite=args.overwrite)
-    torch.set_num_threads(args.threads)
-    try:
-        model = load_model(model_path)
-    except ValueError as e:
-        raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
+    model_path, model = _checked_model(args)
     intr, poses = _camera_path(args, model)
 
     config = renderer_config(args, intr.width)
@@ -192,17 +183,7 @@ def run(args: argparse.Namespace) -> int:
     payoff = _payoff(rend, model, poses, intr, rendered["seconds_per_view"], setup_seconds)
 
     out_dir = Path(args.out)
-    for old in sorted((out_dir / "frames").glob("[0-9][0-9][0-9].png")):
-        old.unlink()  # --overwrite: no frame of an earlier render stays beside the new ones
-    frames = []
-    for i, rgb in enumerate(rendered["rgb"]):
-        if not torch.isfinite(rgb).all():
-            raise RuntimeError(
-                f"view {i} rendered non-finite colours: the model {model_path} is broken"
-            )
-        frame = to_uint8(rgb)
-        write_png(out_dir / "frames" / f"{i:03d}.png", frame)
-        frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
+    frames = _write_frames(out_dir, rendered["rgb"], model_path)
     video = _write_video(frames, out_dir, args.video, args.fps, intr.width, intr.height)
     cfg = {k: v for k, v in vars(args).items() if k != "func"}
     if not _learned(args.renderer):
@@ -232,6 +213,58 @@ def run(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _checked_model(args: argparse.Namespace):
+    """(model path, model): every option and the field checked before any work."""
+    import torch
+
+    from renderer import RENDERERS, load_model
+
+    if args.renderer not in RENDERERS:
+        raise UsageError(f"--renderer must be one of {', '.join(RENDERERS)}, got {args.renderer!r}")
+    if args.video not in VIDEOS:
+        raise UsageError(f"--video must be one of {', '.join(VIDEOS)}, got {args.video!r}")
+    for flag in ("renderer_steps", "renderer_cpu_seconds", "renderer_refine"):
+        if not _learned(args.renderer) and getattr(args, flag) is not None:
+            raise UsageError(
+                f"--{flag.replace('_', '-')} applies only to a learned renderer (features): "
+                f"--renderer {args.renderer} renders the field directly, with no setup"
+            )
+    run_path = Path(args.run)
+    model_path = run_path / "model.pt" if run_path.is_dir() else run_path
+    if not model_path.is_file():
+        raise FileNotFoundError(
+            f"--run {run_path}: no model.pt (train one with `osnerf train-nerf`)"
+        )
+    checks.output_dir(args.out, "--out", overwrite=args.overwrite)  # refused before any work
+    torch.set_num_threads(args.threads)
+    try:
+        model = load_model(model_path)
+    except ValueError as e:
+        raise UsageError(f"--run: {e}; train it again with `osnerf train-nerf`") from None
+    return model_path, model
+
+
+def _write_frames(out_dir: Path, rgbs, model_path: Path) -> list:
+    """``OUT/frames/NNN.png`` of each view (an earlier render's frames removed); returns the
+    frames in BGR for OpenCV's video writers."""
+    import torch
+
+    from renderer import to_uint8
+
+    for old in sorted((out_dir / "frames").glob("[0-9][0-9][0-9].png")):
+        old.unlink()  # --overwrite: no frame of an earlier render stays beside the new ones
+    frames = []
+    for i, rgb in enumerate(rgbs):
+        if not torch.isfinite(rgb).all():
+            raise RuntimeError(
+                f"view {i} rendered non-finite colours: the model {model_path} is broken"
+            )
+        frame = to_uint8(rgb)
+        write_png(out_dir / "frames" / f"{i:03d}.png", frame)
+        frames.append(frame[..., ::-1])  # BGR for OpenCV's video writers
+    return frames
 
 
 PAYOFF_VIEWS = 4

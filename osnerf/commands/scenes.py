@@ -32,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
         mark = " (default)" if r["default"] else ""
         print(f"{r['name']}{mark}: {r['description']}")
         print(
-            f"    objects: {', '.join(r['objects'])}; default demand: {', '.join(r['default_demand'])}"
+            f"    objects: {', '.join(r['objects'])}; default demand: "
+            f"{', '.join(r['default_demand'])}"
         )
     return 0

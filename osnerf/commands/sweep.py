@@ -57,7 +57,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--keep-outputs",
         default=None,
         metavar="DIR",
-        help="keep each point's own output (JSON, or run folder with views) in DIR (default: deleted)",
+        help=(
+            "keep each point's own output (JSON, or run folder with views) in DIR (default: "
+            "deleted)"
+        ),
     )
     p.add_argument(
         "--max-points",

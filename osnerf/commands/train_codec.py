@@ -186,7 +186,8 @@ def _resumable(args, cfg, data, init, out: Path) -> bool:
 
     Raises:
         UsageError: the state is unreadable, or resuming would change a field that may not
-            change (``semcodec.training.RESUMABLE_FIELDS``), named with its flag, without --overwrite.
+            change (``semcodec.training.RESUMABLE_FIELDS``), named with its flag, without
+            --overwrite.
     """
     from semcodec.training import (
         ResumeRefused,

@@ -160,7 +160,10 @@ def _write_run(run_dir: Path, args, data: Path, train_set, config, result, out, 
         "aabb": train_set.aabb.tolist(),
         "num_train_views": train_set.num_views,
         "train": config.as_dict(),
-        "metric_note": "psnr/ssim are means of per-view values; psnr peak 1.0; ssim scikit-image data_range=1.0",
+        "metric_note": (
+            "psnr/ssim are means of per-view values; psnr peak 1.0; ssim scikit-image "
+            "data_range=1.0"
+        ),
     }
     record = result_header(cfg, args.seed)
     record.update(

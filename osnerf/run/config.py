@@ -154,9 +154,9 @@ class RunConfig:
             not the link's true average SNR.
         digital_box: the object-routed digital schemes (digital, digital_genie) send the
             demanded objects' bounding box of each on-demand view (its position charged to
-            the view's budget, ``semcodec.contract.box_side_symbols``), as codecs that cannot focus do
-            (``semcodec.encode_with_focus``), instead of the whole masked view: the framing of
-            jscc's on-demand region, so the end-to-end gap measures the link.
+            the view's budget, ``semcodec.contract.box_side_symbols``), as codecs that cannot
+            focus do (``semcodec.encode_with_focus``), instead of the whole masked view: the
+            framing of jscc's on-demand region, so the end-to-end gap measures the link.
     """
 
     scene: str = DEFAULT_SCENE
@@ -190,9 +190,7 @@ class RunConfig:
         default=RenderConfig.radius_scale, metadata=_render_bound("radius_scale")
     )
     view_selection: str = "sight"
-    max_views: int | None = field(
-        default=None, metadata=bound(1, 512, integer=True, optional=True)
-    )
+    max_views: int | None = field(default=None, metadata=bound(1, 512, integer=True, optional=True))
     csi: str | None = None
     ota_air: str = "fixed"
     ota_tx_args: str | None = None

@@ -122,9 +122,16 @@ def raytraced_air_links(cfg, views, idx: list[int], ota, device: str) -> tuple:
             "snr_db": snrs[i],
         }
         links[i] = ViewAirLink(
-            ota, i, snrs[i], ch.movers[k], 10 ** (-ref / 20), device, float(cfg.snr_db),
-            int(cfg.seed), per_view[i],
-        )  # fmt: skip
+            ota,
+            i,
+            snrs[i],
+            ch.movers[k],
+            10 ** (-ref / 20),
+            device,
+            float(cfg.snr_db),
+            int(cfg.seed),
+            per_view[i],
+        )
     fc = float(views.meta["carrier_frequency_hz"])
     spread = np.asarray(ch.stats["rms_doppler_spread_hz"], np.float64)[~ch.outage]
     info = {

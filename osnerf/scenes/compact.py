@@ -165,8 +165,8 @@ def build_firefighter_shadow() -> SceneGeometry:
 
 
 def build_tiny() -> SceneGeometry:
-    """A minimal test scene: a box (the "crate"), a cylinder (the "post") and a "cable" hidden inside
-    the crate (an object no camera can see)."""
+    """A minimal test scene: a box (the "crate"), a cylinder (the "post") and a "cable" hidden
+    inside the crate (an object no camera can see)."""
     return SceneGeometry(
         name="tiny",
         parts=(

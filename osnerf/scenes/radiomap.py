@@ -121,7 +121,8 @@ def scene_radio_map(
     if float(size.max()) / cell > MAX_CELLS_PER_SIDE:  # refused before any tracing
         raise InputError(
             f"cell_size_m {cell:g} gives more than {MAX_CELLS_PER_SIDE} cells along the map's "
-            f"{float(size.max()):g} m side: give at least {float(size.max()) / MAX_CELLS_PER_SIDE:.3g}"
+            f"{float(size.max()):g} m side: give at least "
+            f"{float(size.max()) / MAX_CELLS_PER_SIDE:.3g}"
         )
     altitudes = np.unique(np.round(train[:, 2], 6))
     with tempfile.TemporaryDirectory(prefix="osnerf-radiomap-") as tmp:

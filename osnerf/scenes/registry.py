@@ -25,7 +25,9 @@ DEFAULT_SCENE = "firefighter"
 register(
     SceneInfo(
         name="firefighter",
-        description="fire hydrant beside a small brick building, a tree, paved plot (Mitsuba primitives)",
+        description=(
+            "fire hydrant beside a small brick building, a tree, paved plot (Mitsuba primitives)"
+        ),
         objects=("hydrant", "building", "tree"),
         default_demand=("hydrant",),
         build=build_firefighter,
@@ -62,8 +64,10 @@ register(
 register(
     SceneInfo(
         name="munich",
-        description="the Frauenkirche and its neighbours from sionna-rt's Munich, textured via planar UVs; "
-        "channels ray-traced in the full city",
+        description=(
+            "the Frauenkirche and its neighbours from sionna-rt's Munich, textured via planar "
+            "UVs; channels ray-traced in the full city"
+        ),
         objects=("frauenkirche", "neighbours"),
         default_demand=("frauenkirche",),
         build=build_munich,

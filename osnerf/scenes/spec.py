@@ -42,7 +42,8 @@ class Part:
         t = self.texture
         if t.ndim != 3 or t.shape[2] != 3 or t.dtype != np.float32:
             raise ValueError(
-                f"texture of {self.name} must be [height, width, 3] float32, got {t.shape} {t.dtype}"
+                f"texture of {self.name} must be [height, width, 3] float32, got {t.shape} "
+                f"{t.dtype}"
             )
 
 

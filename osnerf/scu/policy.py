@@ -1,5 +1,6 @@
 """The SCU's rate policy: CBR per measured SNR, when to send copies, how far to oversample
-the demanded objects, and the SNR the codec is told after the copies are combined."""
+the demanded objects, the SNR the codec is told after the copies are combined, and the SNR
+each transmitter believes (:func:`transmitter_estimate`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import torch
+
+from osnerf.scheme_types import scheme_seed
 
 
 @dataclass(frozen=True)
@@ -28,7 +32,8 @@ class RatePolicy:
     """Below this measured SNR every view costs twice its CBR, sent as two MRC-combined copies.
     On-demand views send copies only where they fade independently (``phy.CopyFading``);
     otherwise the second copy's symbols are spent as rate: on a static channel a copy buys
-    only the 3 dB combining gain, which the codec's rate beats (docs/design-notes.md, "End to end")."""
+    only the 3 dB combining gain, which the codec's rate beats (docs/design-notes.md, "End to
+    end")."""
     copy_spread_db: float = 1.0
     """Copies can fade independently only where the per-symbol SNR spreads (std about each
     view's mean, dB) by at least this: a flat static channel (AWGN) has no fades to escape."""
@@ -94,3 +99,25 @@ def combined_snr_db(measured_snr_db: float, repetitions: int, snr_range_db) -> f
     codec's range: what the encoder is told and the decoder's AF modules see."""
     snr = float(measured_snr_db) + 10.0 * math.log10(max(int(repetitions), 1))
     return float(np.clip(snr, *snr_range_db))
+
+
+def transmitter_estimate(
+    measured_snr_db: np.ndarray, plan_snr_db: float | None, snr_error_db: float, seed: int
+) -> np.ndarray:
+    """Each view's SNR as its transmitter believes it: the pilot measurement (or
+    ``plan_snr_db`` for every view) plus a zero-mean Gaussian error of ``snr_error_db`` drawn
+    from the run seed (its own stream), the same for every scheme. Unchanged with neither.
+
+    Args:
+        measured_snr_db: [num_views] the SCU's measurements.
+    Returns:
+        [num_views] float64.
+    """
+    est = np.asarray(measured_snr_db, dtype=np.float64)
+    if plan_snr_db is not None:
+        est = np.full_like(est, float(plan_snr_db))
+    if snr_error_db:
+        gen = torch.Generator().manual_seed(scheme_seed(seed, "scu", "estimate error"))
+        z = torch.randn(est.shape, generator=gen, dtype=torch.float64).numpy()
+        est = est + float(snr_error_db) * z
+    return est

@@ -1,8 +1,8 @@
 """The semantic control unit (SCU): it decides, and the pipeline carries out what it
 decides. It turns the demand into collector and encoder settings, measures each link with
 pilots, and returns one typed :class:`osnerf.plan.ViewPlan` per view with a propagation path
-(measured link, whole-view and on-demand parts); it checks the knowledge base (both ends hold the same codec) and
-routes each scheme's views to the renderer. It owns its decision log
+(measured link, whole-view and on-demand parts); it checks the knowledge base (both ends hold the
+same codec) and routes each scheme's views to the renderer. It owns its decision log
 (``SemanticControlUnit.decisions``), cached with the plan, which ends up in the report.
 """
 
@@ -17,7 +17,7 @@ import phy
 from osnerf.collect import Collection, CollectorConfig, Demand
 from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan
 from osnerf.scheme_types import scheme_seed
-from osnerf.scu.policy import RatePolicy, combined_snr_db
+from osnerf.scu.policy import RatePolicy, combined_snr_db, transmitter_estimate
 from semcodec import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
 from semcodec.contract import box_side_symbols
 from semcodec.jscc import BLOCK_PX, focus_coverage, full_rate_symbols
@@ -91,7 +91,8 @@ class SemanticControlUnit:
             )
             raise KnowledgeBaseError(
                 f"knowledge-base mismatch: transmitter codec sha256 {transmitter_sha256[:12]} != "
-                f"receiver codec sha256 {receiver_sha256[:12]}; load the same checkpoint on both ends"
+                f"receiver codec sha256 {receiver_sha256[:12]}; load the same checkpoint on both "
+                "ends"
             )
         self.log("knowledge_base", "agreed", sha256=transmitter_sha256)
 
@@ -138,7 +139,8 @@ class SemanticControlUnit:
             out.append(c)
             self.log(
                 "rate",
-                f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the demand)",
+                f"view {int(v)}: focus cbr {c:.4f} ({cov:.0%} of feature positions hold the "
+                "demand)",
                 view=int(v),
                 coverage=float(cov),
                 cbr=c,
@@ -427,25 +429,3 @@ def padded_aabb(bounds: np.ndarray, pad_fraction: float = 0.1) -> np.ndarray:
     b = np.asarray(bounds, np.float64)
     pad = pad_fraction * float((b[1] - b[0]).max())
     return np.stack([b[0] - pad, b[1] + pad])
-
-
-def transmitter_estimate(
-    measured_snr_db: np.ndarray, plan_snr_db: float | None, snr_error_db: float, seed: int
-) -> np.ndarray:
-    """Each view's SNR as its transmitter believes it: the pilot measurement (or
-    ``plan_snr_db`` for every view) plus a zero-mean Gaussian error of ``snr_error_db`` drawn
-    from the run seed (its own stream), the same for every scheme. Unchanged with neither.
-
-    Args:
-        measured_snr_db: [num_views] the SCU's measurements.
-    Returns:
-        [num_views] float64.
-    """
-    est = np.asarray(measured_snr_db, dtype=np.float64)
-    if plan_snr_db is not None:
-        est = np.full_like(est, float(plan_snr_db))
-    if snr_error_db:
-        gen = torch.Generator().manual_seed(scheme_seed(seed, "scu", "estimate error"))
-        z = torch.randn(est.shape, generator=gen, dtype=torch.float64).numpy()
-        est = est + float(snr_error_db) * z
-    return est

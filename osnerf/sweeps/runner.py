@@ -236,7 +236,9 @@ def _record(run: _Sweep, p: Point, outcome: Outcome, out, errors, summary, bar) 
             outcome = {
                 **outcome,
                 "ok": False,
-                "error": f"result of `osnerf {spec.command}` lacks the field {e} its metric rule reads",
+                "error": (
+                    f"result of `osnerf {spec.command}` lacks the field {e} its metric rule reads"
+                ),
             }
     if outcome["ok"]:
         append_record(

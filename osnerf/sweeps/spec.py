@@ -37,6 +37,15 @@ from typing import Any
 import yaml
 
 from osnerf.sweeps.exclude import check_exclude, matches
+from osnerf.sweeps.options import (
+    ParseError,
+    command_check,
+    command_options,
+    command_parser,
+    option_args,
+    option_name,
+    value_text,
+)
 
 RESERVED = ("out", "seed")  # set by the sweep itself, per point
 OUTPUT_OPTIONS = ("plot", "sigmf_dir", "keep_outputs")  # files every point would write alike
@@ -98,11 +107,13 @@ class SweepSpec:
             )
         if not isinstance(self.fixed, dict):
             raise ValueError(
-                f"spec field 'fixed' must be a mapping option -> value, got {type(self.fixed).__name__}"
+                "spec field 'fixed' must be a mapping option -> value, got "
+                f"{type(self.fixed).__name__}"
             )
         if not isinstance(self.axes, dict):
             raise ValueError(
-                f"spec field 'axes' must be a mapping option -> list of values, got {type(self.axes).__name__}"
+                "spec field 'axes' must be a mapping option -> list of values, got "
+                f"{type(self.axes).__name__}"
             )
         for name, values in self.axes.items():
             if not isinstance(values, list | tuple):
@@ -115,8 +126,8 @@ class SweepSpec:
             if s is not None and (isinstance(s, bool) or not isinstance(s, int)):
                 raise ValueError(f"spec field 'seeds' must hold integers, got {s!r}")
         check_exclude(self.exclude, list(self.axes))
-        both = sorted(_norm(k) for k in self.fixed)
-        dup = sorted(set(both) & {_norm(k) for k in self.axes})
+        both = sorted(option_name(k) for k in self.fixed)
+        dup = sorted(set(both) & {option_name(k) for k in self.axes})
         if dup:
             raise ValueError(f"option(s) {dup} appear in both 'fixed' and 'axes'; put each in one")
 
@@ -143,10 +154,6 @@ class SweepSpec:
         """Hash of the canonical spec: a results file belongs to exactly one spec."""
         blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"), default=str)
         return hashlib.sha256(blob.encode()).hexdigest()
-
-
-def _norm(name: str) -> str:
-    return str(name).replace("-", "_")
 
 
 def count_points(d: dict[str, Any]) -> int:
@@ -264,70 +271,7 @@ def _syntax_error(e: Exception) -> str:
     return text  # tomllib says "... (at line 3, column 7)" itself
 
 
-# --- checking against the command's own argparse options ----------------------------------
-
-
-class _ParseError(ValueError):
-    pass
-
-
-def _raise(msg: str):
-    raise _ParseError(msg)
-
-
-def command_parser(command: str) -> argparse.ArgumentParser:
-    """The argparse sub-parser of ``osnerf <command>`` (errors raise instead of exiting)."""
-    from osnerf.cli import COMMANDS, build_parser
-
-    if command not in COMMANDS:
-        raise KeyError(
-            f"unknown command {command!r} in spec field 'command'; known: {sorted(COMMANDS)}"
-        )
-    top = build_parser(command)
-    sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
-    if command not in sub.choices:
-        raise ValueError(
-            f"command {command!r} is not available in this checkout (its module "
-            f"{COMMANDS[command][0]} is missing)"
-        )
-    p = sub.choices[command]
-    p.error = _raise  # one-line ValueError instead of printing usage and exiting
-    return p
-
-
-def command_options(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
-    """dest name (underscores) -> action, for every long option of the parser."""
-    out = {}
-    for a in parser._actions:
-        longs = [s for s in a.option_strings if s.startswith("--")]
-        if not longs or isinstance(a, argparse._HelpAction):
-            continue
-        for s in longs:
-            out[_norm(s[2:])] = a
-        out.setdefault(_norm(a.dest), a)
-    return out
-
-
-def _format_value(name: str, value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list | tuple):
-        return ",".join(_format_value(name, v) for v in value)
-    if isinstance(value, dict) or value is None:
-        raise ValueError(f"option {name!r}: value {value!r} is not a scalar or a list of scalars")
-    return str(value)
-
-
-def _args_for(name: str, value: Any, action: argparse.Action) -> list[str]:
-    flag = next(s for s in action.option_strings if s.startswith("--"))
-    if action.nargs == 0:  # store_true / store_false / store_const flags
-        if not isinstance(value, bool):
-            raise ValueError(
-                f"option {name!r} is a flag: its value must be true or false, got {value!r}"
-            )
-        wanted = value if not isinstance(action, argparse._StoreFalseAction) else not value
-        return [flag] if wanted else []
-    return [flag, _format_value(name, value)]
+# --- checking against the command's own argparse options (osnerf.sweeps.options) ----------
 
 
 def _check_table_values(spec: SweepSpec, opts: dict[str, argparse.Action]) -> None:
@@ -338,11 +282,11 @@ def _check_table_values(spec: SweepSpec, opts: dict[str, argparse.Action]) -> No
     options = {}
     for kind, table in (("fixed option", spec.fixed), ("axis", spec.axes)):
         for name, values in table.items():
-            action = opts[_norm(name)]
+            action = opts[option_name(name)]
             if action.nargs == 0:  # a flag: true or false, nothing to look up
                 continue
             values = values if kind == "axis" else [values]
-            options[action.dest] = (f"{kind} {name!r}", [_format_value(name, v) for v in values])
+            options[action.dest] = (f"{kind} {name!r}", [value_text(name, v) for v in values])
     check_values(spec.command, options)
 
 
@@ -354,10 +298,10 @@ def expand(spec: SweepSpec) -> list[Point]:
     """
     parser = command_parser(spec.command)
     opts = command_options(parser)
-    allowed = sorted({_norm(a.dest) for a in opts.values()} - set(RESERVED))
+    allowed = sorted({option_name(a.dest) for a in opts.values()} - set(RESERVED))
     for kind, names in (("fixed", spec.fixed), ("axes", spec.axes)):
         for name in names:
-            n = _norm(name)
+            n = option_name(name)
             if n in RESERVED:
                 raise ValueError(
                     f"option {name!r} in '{kind}' is set by the sweep itself "
@@ -382,12 +326,12 @@ def expand(spec: SweepSpec) -> list[Point]:
 
     fixed_argv: list[str] = []
     for name, value in spec.fixed.items():
-        fixed_argv += _args_for(name, value, opts[_norm(name)])
+        fixed_argv += option_args(name, value, opts[option_name(name)])
     names = list(spec.axes)
     points: list[Point] = []
     seen: dict[str, Point] = {}  # parsed options -> point
     used = [False] * len(spec.exclude)
-    check_args = _args_check(spec.command)
+    check_args = command_check(spec.command)
     for combo in itertools.product(*(spec.axes[n] for n in names)):
         values = dict(zip(names, combo))
         hits = [matches(e, values) for e in spec.exclude]
@@ -396,7 +340,7 @@ def expand(spec: SweepSpec) -> list[Point]:
             continue
         argv = list(fixed_argv)
         for name, value in zip(names, combo):
-            argv += _args_for(name, value, opts[_norm(name)])
+            argv += option_args(name, value, opts[option_name(name)])
         for seed in seeds:
             full = argv + (["--seed", str(seed)] if seed is not None else [])
             point = Point(values=values, seed=seed, argv=tuple(full))
@@ -416,24 +360,13 @@ def expand(spec: SweepSpec) -> list[Point]:
     return points
 
 
-def _args_check(command: str):
-    """The command's ``check_args(args)`` (its module's: builds and validates the config
-    of parsed arguments, raising ValueError on a combination its parser cannot see), or
-    None."""
-    import importlib
-
-    from osnerf.cli import COMMANDS
-
-    return getattr(importlib.import_module(COMMANDS[command][0]), "check_args", None)
-
-
 def _parse_point(command: str, parser, point: Point, has_out: bool, check_args) -> str:
     """``point``'s command line parsed by the command's parser and checked by its
     ``check_args``; returns the parsed options (canonical text). ValueError names the point."""
     check = list(point.argv) + (["--out", "__sweep_check__"] if has_out else [])
     try:
         args = parser.parse_args(check)
-    except _ParseError as e:
+    except ParseError as e:
         raise ValueError(
             f"point {point.values} of the spec is not a valid `osnerf {command}` command line: {e}"
         ) from None

@@ -32,7 +32,8 @@ def check_mode(mode: str) -> str:
 
 
 def noise_var_per_batch(snr_db, batch: int, device=None) -> Tensor:
-    """[batch] float32 noise variance per complex sample from Es/N0 ``snr_db`` (float or [batch])."""
+    """[batch] float32 noise variance per complex sample from Es/N0 ``snr_db`` (float or
+    [batch])."""
     validate_snr_db(snr_db)
     if isinstance(snr_db, Tensor):
         s = snr_db.detach().to(dtype=torch.float32, device=device).flatten()

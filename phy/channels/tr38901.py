@@ -212,7 +212,8 @@ class _TR38901Channel(Channel):
         return self._sionna_model
 
     def frequency_response(self, batch: int, num_ofdm_symbols: int, generator=None) -> Tensor:
-        """[batch, num_ofdm_symbols, fft_size] complex64 channel per resource element, E|H|^2 = 1."""
+        """[batch, num_ofdm_symbols, fft_size] complex64 channel per resource element, E|H|^2 =
+        1."""
         from sionna.phy.channel import cir_to_ofdm_channel, subcarrier_frequencies
 
         with sionna_generator(generator):
@@ -243,7 +244,8 @@ class _TR38901Channel(Channel):
             g = x
         else:
             raise ValueError(
-                f"x must be [batch, num_symbols] or [batch, num_ofdm_symbols, {self.fft_size}], got {tuple(x.shape)}"
+                f"x must be [batch, num_symbols] or [batch, num_ofdm_symbols, {self.fft_size}], "
+                f"got {tuple(x.shape)}"
             )
         h = self.frequency_response(g.shape[0], g.shape[1], generator).to(x.device, x.dtype)
         y = add_noise(h * g, nv, generator)

@@ -22,7 +22,8 @@ def equalize(y: Tensor, h_hat: Tensor, noise_var, mode: str = "mmse", estimation
     """Equalise ``y = h x + n`` with a channel estimate ``h_hat``.
 
     Treats the estimation error ``(h - h_hat) x`` (unit-power x) as extra noise of variance
-    ``estimation_error_var``; with perfect CSI it is 0. Let ``s = noise_var + estimation_error_var``:
+    ``estimation_error_var``; with perfect CSI it is 0. Let
+    ``s = noise_var + estimation_error_var``:
 
     * ``"zf"``: ``x_hat = y / h_hat`` (unbiased); ``noise_var_eff = s / |h_hat|^2``.
     * ``"mmse"``: ``x_hat = conj(h_hat) y / (|h_hat|^2 + s)`` (biased towards 0, bounded in

@@ -20,7 +20,8 @@ def ofdm_modulate(grid_symbols: Tensor, cp_length: int) -> Tensor:
     """
     if grid_symbols.dim() != 3 or not grid_symbols.is_complex():
         raise ValueError(
-            f"grid_symbols must be [batch, num_ofdm_symbols, fft_size] complex64, got {tuple(grid_symbols.shape)}"
+            "grid_symbols must be [batch, num_ofdm_symbols, fft_size] complex64, got "
+            f"{tuple(grid_symbols.shape)}"
         )
     fft_size = grid_symbols.shape[-1]
     if not 0 <= cp_length <= fft_size:
@@ -54,7 +55,8 @@ def ofdm_demodulate(
     sym_len = fft_size + cp_length
     if samples.shape[1] % sym_len:
         raise ValueError(
-            f"samples: num_samples ({samples.shape[1]}) must be a multiple of fft_size + cp_length ({sym_len})"
+            f"samples: num_samples ({samples.shape[1]}) must be a multiple of fft_size + cp_length "
+            f"({sym_len})"
         )
     off = cp_length if cp_offset is None else int(cp_offset)
     if not 0 <= off <= cp_length:

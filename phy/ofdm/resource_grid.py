@@ -51,7 +51,8 @@ class ResourceGrid:
             raise ValueError(f"fft_size must be an integer in [8, 4096], got {self.fft_size!r}")
         if not isinstance(self.cp_length, int) or not 0 <= self.cp_length <= self.fft_size:
             raise ValueError(
-                f"cp_length must be an integer in [0, fft_size={self.fft_size}], got {self.cp_length!r}"
+                f"cp_length must be an integer in [0, fft_size={self.fft_size}], got "
+                f"{self.cp_length!r}"
             )
         if not isinstance(self.num_ofdm_symbols, int) or not 1 <= self.num_ofdm_symbols <= 100_000:
             raise ValueError(
@@ -64,18 +65,21 @@ class ResourceGrid:
             or sum(g) + 2 > self.fft_size
         ):
             raise ValueError(
-                f"num_guard_carriers must be two integers >= 0 leaving >= 2 used carriers, got {self.num_guard_carriers!r}"
+                "num_guard_carriers must be two integers >= 0 leaving >= 2 used carriers, got "
+                f"{self.num_guard_carriers!r}"
             )
         object.__setattr__(self, "num_guard_carriers", g)
         p = tuple(sorted(set(self.pilot_ofdm_symbols)))
         if any(not isinstance(v, int) or not 0 <= v < self.num_ofdm_symbols for v in p):
             raise ValueError(
-                f"pilot_ofdm_symbols must be indices in [0, {self.num_ofdm_symbols - 1}], got {self.pilot_ofdm_symbols!r}"
+                f"pilot_ofdm_symbols must be indices in [0, {self.num_ofdm_symbols - 1}], got "
+                f"{self.pilot_ofdm_symbols!r}"
             )
         object.__setattr__(self, "pilot_ofdm_symbols", p)
         if not isinstance(self.pilot_subcarrier_spacing, int) or self.pilot_subcarrier_spacing < 1:
             raise ValueError(
-                f"pilot_subcarrier_spacing must be an integer >= 1, got {self.pilot_subcarrier_spacing!r}"
+                "pilot_subcarrier_spacing must be an integer >= 1, got "
+                f"{self.pilot_subcarrier_spacing!r}"
             )
         if not math.isfinite(self.subcarrier_spacing_hz) or self.subcarrier_spacing_hz <= 0:
             raise ValueError(
@@ -179,7 +183,8 @@ def map_to_grid(x: Tensor, grid: ResourceGrid) -> Tensor:
     b, n = x.shape
     if n % grid.num_data_symbols:
         raise ValueError(
-            f"x: num_symbols ({n}) must be a multiple of grid.num_data_symbols ({grid.num_data_symbols})"
+            f"x: num_symbols ({n}) must be a multiple of grid.num_data_symbols "
+            f"({grid.num_data_symbols})"
         )
     slots = n // grid.num_data_symbols
     out = torch.zeros(

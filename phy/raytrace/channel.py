@@ -54,7 +54,8 @@ def _movers(tracer: RayTracer, positions: np.ndarray, velocities) -> list[Moving
     v = check_positions(velocities, "tx_velocities_m_s", "m/s")
     if v.shape[0] not in (1, len(positions)):
         raise ValueError(
-            f"tx_velocities_m_s must be [3] or [num_positions={len(positions)}, 3], got shape {v.shape}"
+            f"tx_velocities_m_s must be [3] or [num_positions={len(positions)}, 3], got shape "
+            f"{v.shape}"
         )
     v = np.broadcast_to(v, positions.shape)
     if not v.any():
@@ -109,13 +110,15 @@ class RayTracedChannel(Channel):
         super().__init__()
         if gain_normalization not in GAIN_NORMALIZATIONS:
             raise ValueError(
-                f"gain_normalization must be one of {list(GAIN_NORMALIZATIONS)}, got {gain_normalization!r}"
+                f"gain_normalization must be one of {list(GAIN_NORMALIZATIONS)}, got "
+                f"{gain_normalization!r}"
             )
         if gain_normalization == "absolute":
             r = reference_path_gain_db
             if isinstance(r, bool) or not isinstance(r, int | float) or not math.isfinite(r):
                 raise ValueError(
-                    f"reference_path_gain_db must be a finite number (dB) with gain_normalization='absolute', got {r!r}"
+                    "reference_path_gain_db must be a finite number (dB) with "
+                    f"gain_normalization='absolute', got {r!r}"
                 )
         if subcarrier_frequencies_hz is None:
             if (
@@ -180,7 +183,8 @@ class RayTracedChannel(Channel):
             )
         if x.dim() not in (2, 3):
             raise ValueError(
-                f"x must be [batch, num_symbols] or [batch, num_ofdm_symbols, fft_size], got shape {tuple(x.shape)}"
+                "x must be [batch, num_symbols] or [batch, num_ofdm_symbols, fft_size], got shape "
+                f"{tuple(x.shape)}"
             )
         batch = x.shape[0]
         if self.num_positions not in (1, batch):

@@ -1,9 +1,9 @@
 """Focus for any codec: a codec without ``supports_focus`` sends the demanded objects'
 bounding box, as an image of its own, at the view's symbol budget (:func:`focus_by_box`,
 :func:`decode_box`); :func:`encode_with_focus` / :func:`decode_received` pick that or the
-codec's own focus. Built only on :mod:`semcodec.contract.protocol` (and :mod:`semcodec.contract.fitting`,
-which tiles and pads for a codec that declares an input size): the codec sees only its own
-meta, never :class:`BoxMeta`.
+codec's own focus. Built only on :mod:`semcodec.contract.protocol` (and
+:mod:`semcodec.contract.fitting`, which tiles and pads for a codec that declares an input size): the
+codec sees only its own meta, never :class:`BoxMeta`.
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ class BoxMeta:
             it encoded.
         height, width: the full image's size in pixels.
         crop: (top, left, height, width) in pixels of the box in the full image.
-        num_symbols, cbr, codec_sha256: as :class:`semcodec.contract.protocol.CodecMeta` (``cbr`` over
-            the full image).
+        num_symbols, cbr, codec_sha256: as :class:`semcodec.contract.protocol.CodecMeta`
+            (``cbr`` over the full image).
     """
 
     inner: CodecMeta
@@ -88,8 +88,8 @@ def focus_by_box(codec, images: Tensor, mask: Tensor, budget_symbols: int, snr_d
 
     The box (:func:`mask_box`) is encoded as an image of its own at CBR
     ``(budget_symbols - box) / (3 * rows * cols)``, where ``box`` is what the box's side
-    information costs (:func:`semcodec.contract.protocol.box_side_symbols`; a box edge on the image's
-    border is coded as the border), capped at the codec's largest CBR. A budget below the
+    information costs (:func:`semcodec.contract.protocol.box_side_symbols`; a box edge on the
+    image's border is coded as the border), capped at the codec's largest CBR. A budget below the
     codec's smallest CBR over the box sends the box downscaled (area) until it fits (at least
     8 px a side; a smaller budget is a ValueError); the receiver upsamples it back.
     :func:`decode_box` pastes it on a mid-grey canvas.

@@ -150,6 +150,7 @@ def read_checkpoint(path: str | os.PathLike, codec: str, config_type) -> tuple[d
     sha = weights_sha256(state, cfg)
     if card.get("sha256") != sha:
         raise ValueError(
-            f"checkpoint {path} is corrupt: weights hash {sha[:12]} != card {str(card.get('sha256'))[:12]}"
+            f"checkpoint {path} is corrupt: weights hash {sha[:12]} != card "
+            f"{str(card.get('sha256'))[:12]}"
         )
     return state, card, cfg

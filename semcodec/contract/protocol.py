@@ -11,7 +11,8 @@ back, with the SNR and the rate as inputs:
   Returns :class:`Encoded`: ``symbols`` ``[batch, num_symbols]`` complex64 with
   mean ``|x|^2 = 1`` per image, ``meta`` the side information: any :class:`CodecMeta`
   (``height``, ``width``, ``num_symbols``, ``cbr`` (num_symbols / (3 * height * width)),
-  ``codec_sha256`` and ``side_info_bits()``, bits per image), e.g. :class:`semcodec.jscc.EncodedMeta`.
+  ``codec_sha256`` and ``side_info_bits()``, bits per image),
+  e.g. :class:`semcodec.jscc.EncodedMeta`.
 * ``decode(x_hat, meta, snr_db, expected_sha256=None, noise_var=None) -> images``:
   ``x_hat`` ``[batch, num_symbols]`` complex64 *unbiased* equalised symbols (``x + e``),
   ``noise_var`` the effective variance of ``e`` (None: ``10**(-snr_db/10)``; a float,
@@ -161,7 +162,8 @@ class TrainableCodec(SemanticCodec, Protocol):
         ...
 
     def load_compatible(self, init: TrainableCodec) -> None:
-        """Start from ``init``'s weights; ValueError naming both architectures if they do not fit."""
+        """Start from ``init``'s weights; ValueError naming both architectures if they do not
+        fit."""
         ...
 
 
@@ -230,7 +232,8 @@ def check_images(images, name: str = "images") -> Tensor:
     """Raise ValueError unless ``images`` is [batch, 3, height, width] float in [0, 1]."""
     if not isinstance(images, Tensor):
         raise ValueError(
-            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got {type(images).__name__}"
+            f"{name} must be a float32 torch.Tensor [batch, 3, height, width], got "
+            f"{type(images).__name__}"
         )
     if images.dim() != 4 or images.shape[1] != 3:
         raise ValueError(

@@ -24,7 +24,8 @@ LOST_IMAGE_VALUE = 0.5
 
 @dataclass
 class TransmitResult:
-    """Received images [batch, 3, height, width] float32 and stats (sums over the batch, and lists per image)."""
+    """Received images [batch, 3, height, width] float32 and stats (sums over the batch, and lists
+    per image)."""
 
     images: Tensor
     stats: dict = field(default_factory=dict)

@@ -13,8 +13,8 @@ codec at capacity.
   bits, error free.
 
 Both send the best file of the image that fits the budget over quality and scale
-(:func:`semcodec.digital.image_codecs.encode_scaled_to_budget`: below some budget a downscaled image,
-upscaled at the receiver); each image's scale is in the stats.
+(:func:`semcodec.digital.image_codecs.encode_scaled_to_budget`: below some budget a downscaled
+image, upscaled at the receiver); each image's scale is in the stats.
 """
 
 from __future__ import annotations
@@ -223,21 +223,15 @@ def transmit_digital(
         TransmitResult; stats: bits, num_symbols, failed_codewords, lost_images,
         views_lost {"budget", "channel"}, mcs / quality / scale / expected_psnr /
         forecast_loss (the planner's probability that the image is lost) per image,
-        resample_filter,
-        mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how the channel is
-        calibrated).
+        resample_filter, mcs_choice ("auto", "genie (bound)" or "fixed"), calibration (how
+        the channel is calibrated).
     """
     x = check_images(images)
     n = check_num_symbols(num_symbols)
     _check_codec(image_codec)
     mode = _mcs_mode(mcs)
     kind = _calibrated_channel(mode, link, channel)
-    table = calibration = None
-    if kind is not None:
-        from semcodec.digital.calibration import load_calibration
-
-        table = load_calibration()
-        calibration = table.source(kind)
+    table, calibration = _calibration_of(kind)
     if not snr_error_db >= 0:
         raise ValueError(f"snr_error_db must be >= 0, got {snr_error_db}")
     plans = _per_image(snr_db if plan_snr_db is None else plan_snr_db, len(x))
@@ -248,18 +242,25 @@ def transmit_digital(
         rec, ok, info = _send_image(
             img, mode, kind, table, link, snr_db, n, image_codec, seed, plan, snr_error_db
         )
-        info["ok"] = ok
         out.append(rec)
-        infos.append(info)
+        infos.append({**info, "ok": ok})
     stats = _digital_stats(infos, n * len(x), mode)
     if kind is not None:
-        stats["channel"] = kind
-        stats["calibration"] = calibration
-        stats["expected_psnr"] = [i["expected_psnr"] for i in infos]
-        stats["forecast_loss"] = [i["forecast_loss"] for i in infos]
+        stats.update(channel=kind, calibration=calibration)
+        stats.update({k: [i[k] for i in infos] for k in ("expected_psnr", "forecast_loss")})
     if mode == GENIE:
         stats["tries"] = sum(i["tries"] for i in infos)
     return TransmitResult(torch.stack(out), stats)
+
+
+def _calibration_of(kind: str | None):
+    """(the calibration table, how ``kind`` is calibrated), or (None, None) without a kind."""
+    if kind is None:
+        return None, None
+    from semcodec.digital.calibration import load_calibration
+
+    table = load_calibration()
+    return table, table.source(kind)
 
 
 def _per_image(snr_db, batch: int) -> list[float]:

@@ -191,7 +191,8 @@ class AnalogSide:
         return cls(height, width, num_symbols, full.to(torch.int16), power_scale)
 
     def sent_coefficients(self) -> tuple[Tensor, Tensor, Tensor]:
-        """(coefficient order [b, 2n] int64, prior energy [b, 2n], gain [b, 2n]) of the sent reals."""
+        """(coefficient order [b, 2n] int64, prior energy [b, 2n], gain [b, 2n]) of the sent
+        reals."""
         return self._plan
 
     @cached_property

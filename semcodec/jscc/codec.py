@@ -70,8 +70,8 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
     """Architectures :meth:`untrained` builds; the first is the default."""
 
     def untrained(self, architecture: str | None = None) -> Codec:
-        """A fresh JSCC of ``architecture`` (a :data:`semcodec.jscc.JSCC_ARCHITECTURES` name; None = the first
-        of :attr:`architectures`)."""
+        """A fresh JSCC of ``architecture`` (a :data:`semcodec.jscc.JSCC_ARCHITECTURES` name; None =
+        the first of :attr:`architectures`)."""
         model = make_model(architecture or self.architectures[0])
         name = model.cfg.name
         return Codec(model, {"name": name, "sha256": weights_sha256(model.state_dict(), model.cfg)})
@@ -260,7 +260,8 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
         self.check_knowledge_base(expected_sha256, meta.codec_sha256)
         if not isinstance(x_hat, Tensor) or not x_hat.is_complex() or x_hat.dim() != 2:
             raise ValueError(
-                f"x_hat must be [batch, num_symbols] complex64, got {getattr(x_hat, 'shape', type(x_hat))}"
+                "x_hat must be [batch, num_symbols] complex64, got "
+                f"{getattr(x_hat, 'shape', type(x_hat))}"
             )
         if x_hat.shape[1] != meta.num_symbols:
             raise ValueError(
@@ -299,7 +300,8 @@ class Codec(LayerPlanner, ChannelTruncationCodec):
             x_hat, rel = lmmse_input(x_hat.to(torch.complex64), nv)
         except RuntimeError:
             raise ValueError(
-                f"noise_var must be a float, [batch] or [batch, num_symbols] = [{b}, {meta.num_symbols}]"
+                f"noise_var must be a float, [batch] or [batch, num_symbols] = [{b}, "
+                f"{meta.num_symbols}]"
             ) from None
         side = side_info(snr, m, c, b)
         if meta.crop is not None:

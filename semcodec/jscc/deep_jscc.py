@@ -69,7 +69,8 @@ class DeepJSCCConfig:
             )
         if not -30.0 <= self.snr_min_db < self.snr_max_db <= 60.0:
             raise ValueError(
-                f"snr_min_db < snr_max_db must lie in [-30, 60] dB, got {self.snr_min_db}, {self.snr_max_db}"
+                f"snr_min_db < snr_max_db must lie in [-30, 60] dB, got {self.snr_min_db}, "
+                f"{self.snr_max_db}"
             )
 
     @property
@@ -187,7 +188,8 @@ class DeepJSCC(ChannelTruncationCodec):
         other = getattr(getattr(init, "model", None), "cfg", None)
         if other != self.model.cfg:
             raise ValueError(
-                f"init codec {getattr(init, 'name', '?')} ({getattr(other, 'name', type(init).__name__)}) "
+                f"init codec {getattr(init, 'name', '?')} "
+                f"({getattr(other, 'name', type(init).__name__)}) "
                 f"does not fit {self.model.cfg.name}"
             )
         self.model.load_state_dict(init.model.state_dict())

@@ -64,7 +64,8 @@ class JSCCConfig:
             raise ValueError(f"af_hidden must be in [1, 512], got {self.af_hidden}")
         if not -30.0 <= self.snr_min_db < self.snr_max_db <= 60.0:
             raise ValueError(
-                f"snr_min_db < snr_max_db must lie in [-30, 60] dB, got {self.snr_min_db}, {self.snr_max_db}"
+                f"snr_min_db < snr_max_db must lie in [-30, 60] dB, got {self.snr_min_db}, "
+                f"{self.snr_max_db}"
             )
 
     @property
@@ -235,13 +236,15 @@ def lmmse_input(x_hat: Tensor, noise_var) -> tuple[Tensor, Tensor]:
 def reliability_to_features(
     w: Tensor, m: int, num_complex_channels: int, h: int, wd: int
 ) -> Tensor:
-    """Per-symbol reliability [batch, m*h*wd] -> [batch, num_complex_channels, h, wd] (dropped: 0)."""
+    """Per-symbol reliability [batch, m*h*wd] -> [batch, num_complex_channels, h, wd] (dropped:
+    0)."""
     b = w.shape[0]
     return F.pad(w.reshape(b, m, h, wd).float(), (0, 0, 0, 0, 0, num_complex_channels - m))
 
 
 def awgn_reliability(snr_db, shape: tuple[int, int, int, int]) -> Tensor:
-    """[batch, C, h, w] reliability ``1 / (1 + 10**(-snr_db/10))`` of an AWGN link (snr_db float or [batch])."""
+    """[batch, C, h, w] reliability ``1 / (1 + 10**(-snr_db/10))`` of an AWGN link (snr_db float or
+    [batch])."""
     snr = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
     w = 1.0 / (1.0 + 10.0 ** (-snr / 10.0))
     return torch.broadcast_to(w.reshape(-1, 1, 1, 1), shape).contiguous()
@@ -257,7 +260,8 @@ def side_info(snr_db: Tensor, m: Tensor | int, num_complex_channels: int, batch:
 
 
 class JSCCModel(nn.Module):
-    """Encoder + decoder of one architecture; the channel sits between them (see ``semcodec.jscc.codec``)."""
+    """Encoder + decoder of one architecture; the channel sits between them (see
+    ``semcodec.jscc.codec``)."""
 
     def __init__(self, cfg: JSCCConfig):
         super().__init__()

@@ -61,7 +61,10 @@ class ChannelTruncationCodec:
         return tuple(k * self.model.cfg.cbr_per_channel for k in range(1, c + 1))
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(name={self.name!r}, sha256={self.sha256[:12]}, cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
+        return (
+            f"{type(self).__name__}(name={self.name!r}, sha256={self.sha256[:12]}, "
+            f"cbr_range={self.cbr_range}, snr_range_db={self.snr_range_db})"
+        )
 
     def check_knowledge_base(self, expected_sha256: str | None, meta_sha256: str | None) -> None:
         """Raise :class:`KnowledgeBaseMismatch` unless both hashes (where given) are ours."""
@@ -71,11 +74,13 @@ class ChannelTruncationCodec:
         ):
             if sha is not None and sha != self.sha256:
                 raise KnowledgeBaseMismatch(
-                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
+                    f"knowledge base mismatch: transmitter codec {str(sha)[:12]} ({label}) != "
+                    f"receiver codec {self.sha256[:12]}; load the same checkpoint on both ends"
                 )
 
     def channels_for_cbr(self, cbr: float) -> int:
-        """Kept complex channels m for a CBR (nearest multiple of 1/48); ValueError outside the range."""
+        """Kept complex channels m for a CBR (nearest multiple of 1/48); ValueError outside the
+        range."""
         lo, hi = self.cbr_range
         try:
             c = float(cbr)
@@ -83,7 +88,8 @@ class ChannelTruncationCodec:
             raise ValueError(f"cbr must be a number in [{lo:.4g}, {hi:.4g}], got {cbr!r}") from None
         if not math.isfinite(c) or not lo * 0.999 <= c <= hi * 1.001:
             raise ValueError(
-                f"cbr must be in the codec's range [1/48, {round(hi * 48)}/48] = [{lo:.4g}, {hi:.4g}], got {cbr!r}"
+                f"cbr must be in the codec's range [1/48, {round(hi * 48)}/48] = [{lo:.4g}, "
+                f"{hi:.4g}], got {cbr!r}"
             )
         return int(
             min(

@@ -58,7 +58,7 @@ class EvalContext:
     links: dict = field(default_factory=dict)
     encodings: dict = field(default_factory=dict)  # (id, snr, cbr) -> (image, Encoded), latest
     refine_steps: int = REFINE_STEPS
-    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc.link.refine_symbols`)."""
+    """``jscc_refined``'s Adam steps per image and SNR (:func:`semcodec.jscc.refine_symbols`)."""
     refine_seed: int = 0
     """Seed of the channel draws ``jscc_refined``'s transmitter simulates (its own stream)."""
     snr_error_db: float = 0.0
@@ -328,5 +328,3 @@ def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
             use_sample_covariance=False,
         )
     )
-
-

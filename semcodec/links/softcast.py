@@ -15,8 +15,8 @@ Transmitter, per image:
 
 Metadata: the kept-chunk bitmap (one bit per chunk), each kept chunk's variance quantised to
 :data:`VARIANCE_BITS` bits on a log scale (both ends use the quantised value), the plane
-means and the power scale ``c``; sent with a robust digital code at :data:`METADATA_BITS_PER_SYMBOL` bits per complex
-symbol, charged to the symbol budget, and assumed received intact.
+means and the power scale ``c``; sent with a robust digital code at :data:`METADATA_BITS_PER_SYMBOL`
+bits per complex symbol, charged to the symbol budget, and assumed received intact.
 
 Receiver: the LLSE estimate of each coefficient from its unbiased (ZF) symbol and that
 symbol's measured noise variance ``nv`` (``nv / 2`` per real dimension):

@@ -51,8 +51,9 @@ def random_crops(
 
 
 def load_data(crop_px: int, train_dirs: list[Path], val_dir: Path | None):
-    """Training images ([3, height, width] uint8, those at least ``crop_px`` a side), their paths and hash, and up to 8
-    validation images cropped to one square side (<= 256 px, multiple of 4) or None."""
+    """Training images ([3, height, width] uint8, those at least ``crop_px`` a side), their paths
+    and hash, and up to 8 validation images cropped to one square side (<= 256 px, multiple of 4)
+    or None."""
     paths = [p for d in train_dirs for p in list_images(d, "--data")]
     images = [im for im in load_uint8_images(paths) if min(im.shape[1:]) >= crop_px]
     if not images:

@@ -221,7 +221,8 @@ def train(
     place = distributed.setup(cfg.device, cfg.ddp_backend)
     if cfg.batch_size % place.world_size:
         raise ValueError(
-            f"batch_size must be a multiple of the world size {place.world_size}, got {cfg.batch_size}"
+            f"batch_size must be a multiple of the world size {place.world_size}, "
+            f"got {cfg.batch_size}"
         )
     cfg = with_architecture(cfg)
     torch.set_num_threads(cfg.num_threads)

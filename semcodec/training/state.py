@@ -172,7 +172,8 @@ def resume_changes(state: dict, cfg, inputs: dict) -> dict[str, list]:
     if "data" in changed:  # the folders as typed, beside their files' hash
         was = recorded.get("data_dirs")
         changed["data"] = [
-            f"{', '.join(was) if was else 'the earlier folders'} (sha256 {_short(recorded['data'])})",
+            f"{', '.join(was) if was else 'the earlier folders'} (sha256 "
+            f"{_short(recorded['data'])})",
             f"{', '.join(inputs.get('data_dirs') or ['?'])} (sha256 {_short(inputs['data'])})",
         ]
     return changed

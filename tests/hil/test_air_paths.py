@@ -147,7 +147,10 @@ def test_the_emulated_hackrf_and_pluto_see_the_same_fading():
     x = (s * x0).astype(np.complex64)
     paths = [(0.0, 0.7 + 0.2j, 180.0), (0.83e-6, -0.4 + 0.3j, -120.0)]
     ch = paths_channel(paths, delay_s=1e-6)
-    ref = sum(g * np.exp(2j * np.pi * f * (t - 1e-6)) * s * tones(t - 1e-6 - d, seed=1) for d, g, f in paths)  # fmt: skip
+    ref = sum(
+        g * np.exp(2j * np.pi * f * (t - 1e-6)) * s * tones(t - 1e-6 - d, seed=1)
+        for d, g, f in paths
+    )
     y_hackrf, y_pluto = _hackrf_capture(ch, x, n), _pluto_capture(ch, x, n)
     inner = slice(200, n - 200)
     assert nmse_db(y_hackrf[inner], ref[inner]) < -30
@@ -165,9 +168,12 @@ def test_a_segment_switch_keeps_the_carrier_phase():
     a = 0.9 * np.exp(0.4j)
     whole = through_medium(paths_channel([(0.5e-6, a, fd)]), x, n)
     carried = AirChannel.from_paths(
-        [[a], [a * np.exp(2j * np.pi * fd * t1)]], [[0.5e-6], [0.5e-6]], [[fd], [fd]], [0.0, t1],
+        [[a], [a * np.exp(2j * np.pi * fd * t1)]],
+        [[0.5e-6], [0.5e-6]],
+        [[fd], [fd]],
+        [0.0, t1],
         snr_db=100,
-    )  # fmt: skip
+    )
     assert np.max(np.abs(through_medium(carried, x, n) - whole)) < 1e-6
     broken = dataclasses.replace(
         carried,
@@ -205,9 +211,13 @@ def test_setting_the_channel_restarts_its_time_at_the_next_burst():
 
 def test_path_air_round_trips_through_json_and_the_pluto_attribute():
     ch = AirChannel.from_paths(
-        [[0.1 + 0.2j, 0.3j], [0.2, 0]], [[0.0, 1e-7], [0.0, 0.0]], [[5.0, -5.0], [7.0, 0.0]],
-        [0.0, 0.01], snr_db=12.0, delay_s=1e-6,
-    )  # fmt: skip
+        [[0.1 + 0.2j, 0.3j], [0.2, 0]],
+        [[0.0, 1e-7], [0.0, 0.0]],
+        [[5.0, -5.0], [7.0, 0.0]],
+        [0.0, 0.01],
+        snr_db=12.0,
+        delay_s=1e-6,
+    )
     assert [len(s.paths) for s in ch.path_segments] == [2, 1]  # zero gains are padding
     assert AirChannel.from_json(ch.to_json()) == ch
     assert parse_air_setting(air_setting(ch, 1.5, 4)) == (ch, 1.5, 4)

@@ -115,7 +115,9 @@ def test_radios_pluto_refuses_ppm_apart(tmp_path, images, capsys):
 
 
 def test_radios_emulated_hackrfs_record_requested_beside_measured(tmp_path, images):
-    rc, out = ota(tmp_path, images, "--schemes", "digital", "--snr-db", "12", radios=("emulated",) * 2)  # fmt: skip
+    rc, out = ota(
+        tmp_path, images, "--schemes", "digital", "--snr-db", "12", radios=("emulated",) * 2
+    )
     assert rc == 0
     d = json.loads(out.read_text())
     r = d["results"][0]
@@ -132,7 +134,7 @@ def test_radios_emulated_hackrfs_record_requested_beside_measured(tmp_path, imag
         ("--multipath", "none"),
         ("--delay-us", "1"),
         ("--seed", "3"),
-    ],  # fmt: skip
+    ],
 )
 def test_radios_real_pluto_refuses_air_flags(tmp_path, images, capsys, flag, value):
     with serve(15.0, air_settable=False) as srv:
@@ -165,7 +167,8 @@ def test_radios_real_pluto_jscc_encodes_at_the_measured_snr(tmp_path, images):
 # ----------------------------------------------------------------- ranges and URIs
 @pytest.mark.parametrize("freq", ["6e9", "300e6"])
 def test_radios_pluto_lo_range_at_the_command_line(tmp_path, images, capsys, freq):
-    rc, out = ota(tmp_path, images, "--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--center-freq-hz", freq)  # fmt: skip
+    argv = ["--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--center-freq-hz", freq]
+    rc, out = ota(tmp_path, images, *argv)
     assert rc == 2 and not out.exists()
     one_line_error(capsys, "--center-freq-hz", "ADALM-Pluto", "[3.25e+08, 3.8e+09] Hz")
 
@@ -236,7 +239,9 @@ def test_accept_unused_scheme_flags_are_recorded_as_null(tmp_path, images):
 
 
 def test_radios_pluto_refuses_max_overruns_it_cannot_count(tmp_path, images, capsys):
-    rc, out = ota(tmp_path, images, "--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--max-overruns", "5")  # fmt: skip
+    rc, out = ota(
+        tmp_path, images, "--uri", "ip:127.0.0.1:1", "--schemes", "digital", "--max-overruns", "5"
+    )
     assert rc == 2 and not out.exists()
     one_line_error(capsys, "--max-overruns", "Pluto")
 

@@ -208,7 +208,9 @@ def test_a_frame_whose_header_does_not_match_is_lost_with_the_reason(tamper):
     burst, reports, layout = build_burst(blocks, cfg, TamperedHeader(1, header))
     rng = np.random.default_rng(4)
     capture = np.concatenate([np.zeros(500, np.complex64), burst, np.zeros(500, np.complex64)])
-    capture = capture + 0.003 * (rng.standard_normal(capture.size) + 1j * rng.standard_normal(capture.size))  # fmt: skip
+    capture = capture + 0.003 * (
+        rng.standard_normal(capture.size) + 1j * rng.standard_normal(capture.size)
+    )
     ((x_hat, nv),) = receive_burst(
         capture.astype(np.complex64), reports, layout, [768], cfg, ToyFrames()
     )

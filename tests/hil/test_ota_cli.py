@@ -245,7 +245,9 @@ def test_the_framed_jscc_receiver_hands_the_noise_variance_to_the_codec():
     noise = 0.7 * torch.randn(blocks[0].shape, generator=g, dtype=torch.complex64)
     y = blocks[0] + noise.numpy()
     nv = np.ones(y.shape[0], np.float32)  # 0 dB
-    (rec,) = framed.receive([semcodec.links.ReceivedBlock(y, nv, [True], 0.0)], encoded, images, settings)
+    (rec,) = framed.receive(
+        [semcodec.links.ReceivedBlock(y, nv, [True], 0.0)], encoded, images, settings
+    )
     expected = codec.decode(
         torch.from_numpy(y)[None], encoded[0].meta, 0.0, noise_var=torch.from_numpy(nv)[None]
     )

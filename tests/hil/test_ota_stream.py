@@ -183,7 +183,14 @@ def test_a_transmitter_that_starts_while_the_receiver_streams_is_heard_after_the
     from hil import AirChannel, Medium
 
     def radio(index):
-        return SimpleNamespace(index=index, ppm=0.0, sample_rate_hz=4e6, center_freq_hz=2.4e9, rx_gain_db=40.0, tx_gain_db=30.0)  # fmt: skip
+        return SimpleNamespace(
+            index=index,
+            ppm=0.0,
+            sample_rate_hz=4e6,
+            center_freq_hz=2.4e9,
+            rx_gain_db=40.0,
+            tx_gain_db=30.0,
+        )
 
     medium, tx, rx = Medium(AirChannel(snr_db=100), seed=0), radio(0), radio(1)
     silence = medium.render_iq(rx, 0, 40_000, lambda: True)  # no transmitter yet
@@ -248,16 +255,25 @@ def _air(views, rng, pause=(700, 3000)):
 @pytest.mark.parametrize("block", [1500, 4999, 20000])
 def test_each_frame_is_found_exactly_once_across_block_boundaries(block):
     rng = np.random.default_rng(block)
-    sent = [np.exp(2j * np.pi * rng.integers(0, 4, n) / 4).astype(np.complex64) for n in (300, 700, 256, 520)]  # fmt: skip
+    sent = [
+        np.exp(2j * np.pi * rng.integers(0, 4, n) / 4).astype(np.complex64)
+        for n in (300, 700, 256, 520)
+    ]
     views = build_views(sent, CFG)
     air = _air(views, rng)
     ring, handed = RingBuffer(len(air) + 1), []
     for k in range(0, len(air), block):  # the driver's blocks, cutting through frames
         ring.push(air[k : k + block])
     ring.close()
-    counts = StreamReceiver(ring, views, CFG, PhyFrames(sample_rate_hz=2e6), handed.append, block).run()  # fmt: skip
+    counts = StreamReceiver(
+        ring, views, CFG, PhyFrames(sample_rate_hz=2e6), handed.append, block
+    ).run()
     frames_sent = sum(len(v.reports) for v in views)
-    assert (counts.frames_found, counts.frames_decoded, counts.duplicates) == (frames_sent, frames_sent, 0)  # fmt: skip
+    assert (counts.frames_found, counts.frames_decoded, counts.duplicates) == (
+        frames_sent,
+        frames_sent,
+        0,
+    )
     assert [v.index for v in handed] == [0, 1, 2, 3] and all(v.complete for v in handed)
     for v, x in zip(views, sent):
         assert np.mean(np.abs(v.x_hat - x) ** 2) < 0.05
@@ -266,7 +282,9 @@ def test_each_frame_is_found_exactly_once_across_block_boundaries(block):
 def test_frame_numbers_carry_on_across_the_headers_12_bit_wrap():
     rng = np.random.default_rng(3)
     frames = PhyFrames(sample_rate_hz=2e6)
-    sent = [np.exp(2j * np.pi * rng.integers(0, 4, 2 * 256) / 4).astype(np.complex64) for _ in range(2)]  # fmt: skip
+    sent = [
+        np.exp(2j * np.pi * rng.integers(0, 4, 2 * 256) / 4).astype(np.complex64) for _ in range(2)
+    ]
     views, number = [], MAX_FRAMES - 3  # headers 4093, 4094 | 4095, 0
     for v, block in enumerate(sent):
         burst, reports, layout = build_burst([block], CFG, frames, first_number=number % MAX_FRAMES)
@@ -298,7 +316,11 @@ def test_a_block_of_frames_is_decoded_by_one_receive_frames_call_with_the_per_fr
     calls = {"receive_frames": 0, "receive_frame": 0}
     for name in calls:
         real = getattr(phy, name)
-        monkeypatch.setattr(phy, name, lambda *a, _f=real, _n=name, **k: calls.update({_n: calls[_n] + 1}) or _f(*a, **k))  # fmt: skip
+        monkeypatch.setattr(
+            phy,
+            name,
+            lambda *a, _f=real, _n=name, **k: calls.update({_n: calls[_n] + 1}) or _f(*a, **k),
+        )
     ring, handed = RingBuffer(len(air)), []
     ring.push(air)
     ring.close()
@@ -315,7 +337,7 @@ def test_a_block_of_frames_is_decoded_by_one_receive_frames_call_with_the_per_fr
 
 def test_dropped_samples_lose_their_frames_and_nothing_joins_across_them():
     rng = np.random.default_rng(7)
-    sent = [np.exp(2j * np.pi * rng.integers(0, 4, 256) / 4).astype(np.complex64) for _ in range(6)]  # fmt: skip
+    sent = [np.exp(2j * np.pi * rng.integers(0, 4, 256) / 4).astype(np.complex64) for _ in range(6)]
     views = build_views(sent, CFG)
     air = _air(views, rng, pause=(3000, 3001))
     block = 2000
@@ -328,7 +350,9 @@ def test_dropped_samples_lose_their_frames_and_nothing_joins_across_them():
         else:
             ring.push(air[k : k + block])
     ring.close()
-    counts = StreamReceiver(ring, views, CFG, PhyFrames(sample_rate_hz=2e6), handed.append, block).run()  # fmt: skip
+    counts = StreamReceiver(
+        ring, views, CFG, PhyFrames(sample_rate_hz=2e6), handed.append, block
+    ).run()
     assert ring.dropped_samples == block * len(hole)
     assert [v.complete for v in handed] == [True, True, False, False, True, True]
     assert counts.frames_decoded == 4 and counts.duplicates == 0
@@ -390,7 +414,7 @@ def test_a_decoder_that_falls_behind_drops_samples_and_says_so(
         return receive_all(self, iq, num_symbols)
 
     monkeypatch.setattr(PhyFrames, "receive_all", slow_receive_all)
-    rc, d = stream(tmp_path, images, "--views", "6", "--view-interval-s", "0.05", "--ring-s", "0.1")  # fmt: skip
+    rc, d = stream(tmp_path, images, "--views", "6", "--view-interval-s", "0.05", "--ring-s", "0.1")
     assert rc == 1  # the result is written, and the run fails
     s = d["stream"]
     assert s["ring_dropped_samples"] > 0 and s["ring_drop_events"] > 0
@@ -452,10 +476,15 @@ def pluto_process(port: int) -> subprocess.Popen:
     """``osnerf hil emulate pluto`` in its own process (this checkout's code), as a board
     is: its rendering does not compete with the decoder."""
     root = Path(__file__).resolve().parents[2]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}  # fmt: skip
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+    }
     code = "import sys; from osnerf.cli import main; sys.exit(main(sys.argv[1:]))"
     argv = ["hil", "emulate", "pluto", "--address", "127.0.0.9", "--port", str(port)]
-    emu = subprocess.Popen([sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True, env=env)  # fmt: skip
+    emu = subprocess.Popen(
+        [sys.executable, "-c", code, *argv], stderr=subprocess.PIPE, text=True, env=env
+    )
     assert "osnerf hil emulate: pluto at" in emu.stderr.readline()
     return emu
 
@@ -470,7 +499,16 @@ def pluto_stream(tmp_path, images, *extra):
     emu = pluto_process(port)
     try:
         out = tmp_path / "pluto.json"
-        argv = ["ota", "--stream", "--tx", "pluto", "--rx", "pluto", "--uri", f"ip:127.0.0.9:{port}"]  # fmt: skip
+        argv = [
+            "ota",
+            "--stream",
+            "--tx",
+            "pluto",
+            "--rx",
+            "pluto",
+            "--uri",
+            f"ip:127.0.0.9:{port}",
+        ]
         argv += ["--schemes", "jscc", "--snr-db", "10", "--images", str(images), "--out"]
         argv += [str(out), "--size", "48", "--max-images", "1", "--symbols-per-frame", "1024"]
         argv += ["--sample-rate-hz", "4e6", *extra]

@@ -108,9 +108,15 @@ def test_jscc_matches_the_simulated_link(tmp_path, images, snr_db, tolerance_db)
     enc = codec.encode(torch.from_numpy(imgs), r["snr_db_measured"], phy.parse_cbr("1/16"))
     g = torch.Generator().manual_seed(0)
     rx = phy.FlatLink(phy.make_channel("awgn"))(enc.symbols, r["snr_db_measured"], generator=g)
-    ref = psnr(codec.decode(rx.x_hat, enc.meta, r["snr_db_measured"], noise_var=rx.noise_var)[0].numpy(), imgs[0])  # fmt: skip
+    ref = psnr(
+        codec.decode(rx.x_hat, enc.meta, r["snr_db_measured"], noise_var=rx.noise_var)[0].numpy(),
+        imgs[0],
+    )
     assert r["psnr"] == pytest.approx(ref, abs=tolerance_db)
-    assert d["config"]["uri"] == srv.uri and "ADALM-Pluto" in open(d["sigmf"][1][: -len("data")] + "meta").read()  # fmt: skip
+    assert (
+        d["config"]["uri"] == srv.uri
+        and "ADALM-Pluto" in open(d["sigmf"][1][: -len("data")] + "meta").read()
+    )
 
 
 def test_digital_at_0_db_reports_its_lost_codewords(tmp_path, images):

@@ -101,7 +101,9 @@ def test_a_config_error_keeps_the_paths_it_names():
     renamed."""
     from osnerf.commands.args import flag_error
 
-    msg = "data folder /work/data/train and C:\\data\\val hold no images; data.png, ./data; see data."
+    msg = (
+        "data folder /work/data/train and C:\\data\\val hold no images; data.png, ./data; see data."
+    )
     e = flag_error(ValueError(msg), {"data": "--data"})
     assert str(e) == msg.replace("data folder", "--data folder").replace("see data.", "see --data.")
 

@@ -177,7 +177,9 @@ def test_refinement_reaches_the_codec_in_its_own_terms():
     mask = torch.zeros(1, 1, 40, 40)
     mask[..., 4:28, 8:30] = 1.0
     enc = semcodec.encode_with_focus(codec, x, 10.0, 1 / 8, mask)
-    assert isinstance(enc.meta, semcodec.contract.BoxMeta) and isinstance(enc.meta.inner, semcodec.contract.TiledMeta)
+    assert isinstance(enc.meta, semcodec.contract.BoxMeta) and isinstance(
+        enc.meta.inner, semcodec.contract.TiledMeta
+    )
     import phy
 
     ref = semcodec.jscc.refine_symbols(

@@ -181,8 +181,8 @@ def test_on_demand_copies_only_where_they_fade_independently():
     """The same 8 x 8 object as above in 3 views, each sent twice as a whole view; one copy
     of the three at full rate costs 96 / 384 / 864 symbols at s = 1 / 2 / 3. Budget 540 (2/3
     of 810): with independent fades the copies stay (s = 3 would give 540 / 1728 of its full
-    rate, 0.05 CBR per position, so s = 2 at 540 / 768); on a static channel one copy each buys s = 3 at
-    540 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
+    rate, 0.05 CBR per position, so s = 2 at 540 / 768); on a static channel one copy each buys
+    s = 3 at 540 / 864. A view measured below ``static_repeat_below_db`` keeps its copies there; a
     budget one copy at s = 3 cannot take (beyond 864) keeps them all."""
     m = np.zeros((3, 16, 16), np.float32)
     m[:, 4:12, 4:12] = 1.0

@@ -200,7 +200,7 @@ def test_radiomap_too_fine_a_cell_is_refused_naming_the_flag(tmp_path, capsys):
 
 
 def test_the_time_chart_draws_every_second_under_one_set_of_names():
-    from osnerf.report import TIME_PARTS, time_parts
+    from osnerf.report_figures import TIME_PARTS, time_parts
 
     digital = {"encode": 0.0, "decode": 0.0, "nerf": 6.5, "codec_and_ldpc": 7.4, "air": 0.1}
     jscc = {"encode": 0.3, "decode": 0.2, "nerf": 6.4, "air": 0.1}

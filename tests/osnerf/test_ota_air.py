@@ -149,8 +149,12 @@ def test_the_tiny_scene_views_fly_over_their_traced_air(tmp_path_factory):
     )
     views = load_scene_views(folder)
     idx = [int(i) for i in views.indices("train")]
-    cfg = RunConfig(scene="tiny", channel="ota", ota_air="raytraced", drone_speed_m_s=15.0, snr_db=10.0)  # fmt: skip
-    traced = build_links(RunConfig(scene="tiny", channel="raytraced", drone_speed_m_s=15.0, snr_db=10.0), views, idx)  # fmt: skip
+    cfg = RunConfig(
+        scene="tiny", channel="ota", ota_air="raytraced", drone_speed_m_s=15.0, snr_db=10.0
+    )
+    traced = build_links(
+        RunConfig(scene="tiny", channel="raytraced", drone_speed_m_s=15.0, snr_db=10.0), views, idx
+    )
     links = build_links(cfg, views, idx)
     try:
         assert links.snr_db == pytest.approx(traced.snr_db)  # the same SNR convention

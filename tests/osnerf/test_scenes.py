@@ -1,4 +1,5 @@
-"""Scenes: renders, exact masks and poses agree; cache; registry; the radio XML of the same meshes."""
+"""Scenes: renders, exact masks and poses agree; cache; registry; the radio XML of the same
+meshes."""
 
 import json
 

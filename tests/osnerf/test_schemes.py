@@ -112,7 +112,9 @@ def test_a_scheme_from_another_package_runs_beside_the_builtins(env, tmp_path, m
                 def transmit(self, ctx, plans, images):
                     import torch.nn.functional as F
                     tx = super().transmit(ctx, plans, images)
-                    tx.images = F.avg_pool2d(tx.images, 3, stride=1, padding=1, count_include_pad=False)
+                    tx.images = F.avg_pool2d(
+                        tx.images, 3, stride=1, padding=1, count_include_pad=False
+                    )
                     return tx
             '''
         )

@@ -156,8 +156,8 @@ def test_a_raytraced_run_sends_the_views_the_rule_chose(tmp_path):
     small += ["--resolution", "24", "--views", "8", "--test-views", "1", "--nerf-steps", "5"]
     small += ["--renderer-steps", "0", "--cache-dir", str(tmp_path / "cache")]
     assert main(["run", *small, "--out", str(tmp_path / "sight")]) == 0
-    assert main(["run", *small, "--view-selection", "radio", "--max-views", "2",
-                 "--out", str(tmp_path / "radio")]) == 0  # fmt: skip
+    by_radio = ["--view-selection", "radio", "--max-views", "2", "--out", str(tmp_path / "radio")]
+    assert main(["run", *small, *by_radio]) == 0
     sight = json.loads((tmp_path / "sight" / "report.json").read_text())
     radio = json.loads((tmp_path / "radio" / "report.json").read_text())
     visible = [v for v in sight["views"]["candidates"] if str(v) not in sight["views"]["not_sent"]]

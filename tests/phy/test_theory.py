@@ -1,4 +1,5 @@
-"""Uncoded BER/SER against closed forms (within 4 sigma, >= 1000 errors) and the forms themselves."""
+"""Uncoded BER/SER against closed forms (within 4 sigma, >= 1000 errors) and the forms
+themselves."""
 
 import math
 
@@ -26,7 +27,8 @@ def test_bpsk_and_qpsk_closed_forms_by_hand():
 
 
 def test_16qam_ber_matches_the_textbook_gray_expression():
-    # Gray 16-QAM exact BER (per-dimension 4-PAM, Gray): (3 Q(d) + 2 Q(3d) - Q(5d)) / 4, d = sqrt(g/5)
+    # Gray 16-QAM exact BER (per-dimension 4-PAM, Gray): (3 Q(d) + 2 Q(3d) - Q(5d)) / 4, d =
+    # sqrt(g/5)
     for s in (0.0, 8.0, 14.0):
         d = math.sqrt(10 ** (s / 10) / 5)
         ref = (3 * norm.sf(d) + 2 * norm.sf(3 * d) - norm.sf(5 * d)) / 4

@@ -20,8 +20,8 @@ def _rays(model, train_set, downsample=2):
 
 def test_early_termination_keeps_the_image_and_drops_samples_per_ray(sphere_model):
     """Ending rays once their transmittance is below 1e-3 changes a rendered image by less
-    than 2e-3 (and the opacity by less than 1e-3), keeps the same weighted samples (their weights equal up to the
-    rounding of their t), and
+    than 2e-3 (and the opacity by less than 1e-3), keeps the same weighted samples (their weights
+    equal up to the rounding of their t), and
     evaluates the density at fewer than 60 % of the samples: never more on any ray,
     fewer on every ray that hits the sphere (segments of four samples)."""
     model, train_set = sphere_model

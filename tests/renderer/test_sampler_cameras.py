@@ -198,12 +198,16 @@ def test_trilinear_gathers_equal_grid_sample_in_value_and_gradient():
         pts[:2] = aabb  # the two corners
         a = grid.clone().requires_grad_(True)
         b = grid.clone().requires_grad_(True)
-        ref = torch.nn.functional.grid_sample(
-            a,
-            ((pts - aabb[0]) / (aabb[1] - aabb[0]) * 2 - 1).reshape(1, 1, 1, -1, 3),
-            align_corners=True,
-            padding_mode="border",
-        ).reshape(4, -1).t()
+        ref = (
+            torch.nn.functional.grid_sample(
+                a,
+                ((pts - aabb[0]) / (aabb[1] - aabb[0]) * 2 - 1).reshape(1, 1, 1, -1, 3),
+                align_corners=True,
+                padding_mode="border",
+            )
+            .reshape(4, -1)
+            .t()
+        )
         out = trilinear(b, aabb, pts)
         assert torch.allclose(out, ref, atol=1e-5)
         upstream = torch.randn(out.shape, generator=g)

@@ -1,4 +1,5 @@
-"""On-demand focus: the demand map, the box and its densest part, and that the heat map follows the object."""
+"""On-demand focus: the demand map, the box and its densest part, and that the heat map follows the
+object."""
 
 import pytest
 import torch

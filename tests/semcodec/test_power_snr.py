@@ -27,7 +27,8 @@ def test_encoded_power_is_one_per_image(tiny_codec):
 
 
 def test_masked_normalisation_equals_phy_power_normalize():
-    """The per-image variable-rate normalisation used in training == phy.power_normalize of the kept symbols."""
+    """The per-image variable-rate normalisation used in training == phy.power_normalize of the kept
+    symbols."""
     g = torch.Generator().manual_seed(2)
     feat = (
         torch.randn(3, 16, 5, 7, generator=g) * torch.tensor([1.0, 3.0, 0.2])[:, None, None, None]

@@ -1,4 +1,5 @@
-"""The four notebooks: stored without outputs, and each executed (small settings) making its figures.
+"""The four notebooks: stored without outputs, and each executed (small settings) making its
+figures.
 
 Each notebook reads OSNERF_NOTEBOOK_SMALL=1 (a few points) and OSNERF_NOTEBOOK_OUT (where its
 results and figures go). A notebook whose package or command is not in the checkout yet is

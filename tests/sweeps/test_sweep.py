@@ -377,10 +377,12 @@ def test_cli_reports_failed_points_with_exit_1(tmp_path, capsys):
 
 
 def _sweep_process(yml: Path, out: Path, *extra: str, stderr=subprocess.DEVNULL):
-    """`osnerf sweep YML --out OUT --no-progress EXTRA...` with the fake command, in a new process."""
+    """`osnerf sweep YML --out OUT --no-progress EXTRA...` with the fake command, in a new
+    process."""
     argv = ["sweep", str(yml), "--out", str(out), "--no-progress", *extra]
     driver = (
-        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS.register(f.NAME, f.ENTRY); "
+        "import sys, osnerf.cli, sweep_fake_command as f; osnerf.cli.COMMANDS.register(f.NAME, "
+        "f.ENTRY); "
         f"sys.exit(osnerf.cli.main({argv!r}))"
     )
     env = dict(
