@@ -109,7 +109,7 @@ def test_speed_on_a_channel_without_drones_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--drone-speed" in err and "raytraced" in err
     assert not out.exists()
-    with pytest.raises(ValueError, match=r"drone_speed_m_s must be in \[0, 100\] m/s"):
+    with pytest.raises(ValueError, match=r"drone_speed_m_s must be a number in \[0, 100\] m/s"):
         RunConfig(channel="raytraced", drone_speed_m_s=101.0)
 
 
