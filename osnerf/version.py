@@ -1,4 +1,4 @@
 """The project's version, declared here only: pyproject reads it, ``osnerf --version`` prints it
 and every result file records it."""
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
