@@ -24,27 +24,30 @@ from pathlib import Path
 from statistics import mean
 
 from benchmarks import results_channels, results_mismatch
-from benchmarks.results_channels import ResultsError, load_json
 from benchmarks.results_codec import (
     CHANNEL_LABELS,
     CODEC_SCHEMES,
     cbr_text,
     codec_results,
     codec_section,
-    commit_of,
     lost_count,
-    markdown_table,
     psnr_text,
     scheme_label,
     shipped_sha,
 )
+from benchmarks.results_common import (
+    CARDS,
+    RESULTS,
+    ROOT,
+    ResultsError,
+    commit_of,
+    load_json,
+    markdown_table,
+)
 from common import write_files
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "bench-results"
 README = ROOT / "README.md"
 DOC = ROOT / "docs" / "results.md"
-CARDS = ROOT / "semcodec" / "checkpoints"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 
 HEADLINE_SNRS = (-10.0, 1.0, 10.0)
@@ -98,8 +101,11 @@ def _views(docs: list[dict]) -> int:
     return docs[0]["schemes"]["digital"]["views_sent"]
 
 
-def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> list[str]:
-    """The README's one table: the demo, over the air, and the codec against digital."""
+def headline(
+    codec: dict, demo: dict | None, ota: dict[float, list[dict]], mismatch: dict | None
+) -> list[str]:
+    """The README's one table: the demo, over the air, the codec against digital, and the
+    transmitter planned at a wrong SNR (``mismatch``: ``mismatch.json``, or None)."""
     rows = []
     if demo:
         s = demo["schemes"]
@@ -149,7 +155,7 @@ def headline(codec: dict, demo: dict | None, ota: dict[float, list[dict]]) -> li
                     ", ".join(commits),
                 ]
             )
-    rows += results_mismatch.headline_rows(results_mismatch.load(RESULTS))
+    rows += results_mismatch.headline_rows(mismatch)
     header = ["experiment", "link", "jscc (dB)", "digital (dB)", "bound (dB)", "commit"]
     return markdown_table(header, rows)
 
@@ -249,7 +255,8 @@ def render(results: Path | None = None, cards_dir: Path | None = None) -> tuple[
     codec = codec_results(results, shipped_sha(cards_dir))
     demo = run_report(results / "pipeline_demo" / "report.json")
     ota = ota_reports(results)
-    head = headline(codec, demo, ota)
+    mismatch = results_mismatch.load(results)
+    head = headline(codec, demo, ota, mismatch)
     doc = [
         "# Results",
         "",
@@ -267,7 +274,7 @@ def render(results: Path | None = None, cards_dir: Path | None = None) -> tuple[
         *demo_section(demo),
         *ota_section(ota),
         *codec_section(codec),
-        *results_mismatch.section(results),
+        *results_mismatch.section(mismatch, results),
         *results_channels.sections(results),
         *checkpoint_section(cards_dir),
     ]

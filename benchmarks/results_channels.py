@@ -8,10 +8,10 @@ naming the command that makes it.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent.parent / "bench-results"
+from benchmarks.results_common import RESULTS, commit_of, load_json, markdown_table
+
 # BER columns of the Doppler benchmark: (pilot grid, receiver) -> the row's key
 BER_COLUMNS = {
     ("sparse", "perfect CSI"): "ber_sparse_perfect",
@@ -22,38 +22,9 @@ BER_COLUMNS = {
 }
 
 
-class ResultsError(ValueError):
-    """A file the pages are made from that cannot be read; the message names it."""
-
-
-def load_json(path: Path) -> dict:
-    """A benchmark's JSON (``ResultsError`` naming the file when it is empty, truncated or not
-    an object)."""
-    try:
-        doc = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        what = "empty" if not path.read_text().strip() else f"not JSON ({e.msg}, line {e.lineno})"
-        raise ResultsError(f"{path} is {what}: rerun the benchmark that writes it") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ResultsError(f"{path} cannot be read ({e})") from None
-    if not isinstance(doc, dict):
-        raise ResultsError(f"{path} holds a {type(doc).__name__}, not a result object")
-    return doc
-
-
 def _doc(folder: Path, name: str) -> dict | None:
     path = folder / f"{name}.json"
     return load_json(path) if path.is_file() else None
-
-
-def _commit(doc: dict) -> str:
-    sha = doc.get("git_commit", "unknown")
-    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
-
-
-def _table(header: list[str], rows: list[list[object]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return out + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
 
 
 def _missing(title: str, name: str) -> list[str]:
@@ -79,7 +50,7 @@ def doppler_section(folder: Path = RESULTS) -> list[str]:
     lines = [
         title,
         "",
-        f"`python -m benchmarks doppler`, commit {_commit(doc)}: uncoded {r['modulation']} on "
+        f"`python -m benchmarks doppler`, commit {commit_of(doc)}: uncoded {r['modulation']} on "
         f"the OFDM link over drones' ray-traced channels in `{r['scene']}` at "
         f"{r['carrier_frequency_hz'] / 1e9:g} GHz, {r['slots_per_transmission']} slots per "
         f"transmission. Pilot grids: {spacing}. Interpolation: {r['interpolation']}.",
@@ -97,7 +68,7 @@ def doppler_section(folder: Path = RESULTS) -> list[str]:
         ]
         for row in r["rows"]
     ]
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     lines.append("")
     bits = sorted({row["bits_per_point"] for row in r["rows"]})
     lines.append(
@@ -131,7 +102,7 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
     lines = [
         title,
         "",
-        f"`{r['command']}` on the default scene, commit {_commit(doc)}; SNR "
+        f"`{r['command']}` on the default scene, commit {commit_of(doc)}; SNR "
         f"{r['snr_db_at_median_position']:g} dB at the median drone position. Receivers: "
         "perfect CSI of h at each symbol's time (the run's default), or `--csi ls` / "
         "`--csi lmmse`: the same symbols on an OFDM grid with pilots, h estimated from them "
@@ -169,7 +140,7 @@ def moving_section(folder: Path = RESULTS) -> list[str]:
     header += ["largest spread (Hz)", "views with a spread", "median measured SNR (dB)"]
     header += [f"{n} object PSNR" for n in schemes] + [f"{n} symbols" for n in schemes]
     header += [f"{n} views lost" for n in lossy]
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     carrier = r["rows"][0]["link"].get("carrier_frequency_hz")
     lines.append("")
     lines.append(
@@ -213,7 +184,7 @@ def view_selection_section(folder: Path = RESULTS) -> list[str]:
         "",
         f"`osnerf run --scene {r['scene']} --channel raytraced --view-selection sight|joint "
         f"--max-views {r['max_views']}` (48 px, 500 NeRF steps, no learned renderer), seeds "
-        f"{', '.join(str(s) for s in r['seeds'])}, commit {_commit(doc)}; the SNR is set at "
+        f"{', '.join(str(s) for s in r['seeds'])}, commit {commit_of(doc)}; the SNR is set at "
         "the median drone position, so a drone behind the shed receives less. Object PSNR, "
         "mean ± std over seeds, the views each rule chose and their mean expected SNR:",
         "",
@@ -233,7 +204,7 @@ def view_selection_section(folder: Path = RESULTS) -> list[str]:
             rows.append([f"{snr} dB", rule, *cells, views, f"{expected:.1f}"])
     schemes = list(next(iter(r["by_snr_db"].values()))["psnr_object_mean_std"]["sight"])
     header = ["SNR", "rule", *schemes, "views", "views' mean expected SNR (dB)"]
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     lines.append("")
     gaps = "; ".join(
         f"{snr} dB: "

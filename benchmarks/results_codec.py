@@ -1,18 +1,21 @@
 """The codec against the digital link on Kodak: the ``osnerf eval-codec`` files of
 ``bench-results/`` (jscc only of the shipped checkpoint) and their section of
-``docs/results.md``, with the table cells every section writes alike."""
+``docs/results.md``, with the cells the headline table writes alike."""
 
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
 from fractions import Fraction
 from pathlib import Path
 
-from benchmarks.results_channels import ResultsError, load_json
-
-RESULTS = Path(__file__).resolve().parent.parent / "bench-results"
-CARDS = Path(__file__).resolve().parent.parent / "semcodec" / "checkpoints"
+from benchmarks.results_common import (
+    CARDS,
+    RESULTS,
+    ResultsError,
+    commit_of,
+    load_json,
+    markdown_table,
+)
 
 CHANNEL_LABELS = {"awgn": "AWGN", "rayleigh": "block Rayleigh", "rayleigh_fast": "fast Rayleigh"}
 
@@ -23,11 +26,6 @@ CODEC_SCHEMES = ("jscc", "digital", "digital_genie", "ideal")
 BOUNDS = ("digital_genie", "ideal", "gt")
 
 
-def commit_of(doc: dict) -> str:
-    sha = doc.get("git_commit", "unknown")
-    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
-
-
 def scheme_label(scheme: str) -> str:
     return f"{scheme} (bound)" if scheme in BOUNDS else scheme
 
@@ -36,13 +34,6 @@ def lost_count(entry: dict | None) -> int:
     """Views or images lost to the budget or the channel (0 when the scheme cannot lose any)."""
     lost = (entry or {}).get("views_lost") or {}
     return int(sum(lost.values())) if isinstance(lost, dict) else int(lost)
-
-
-def markdown_table(header: Iterable[str], rows: Iterable[Iterable[object]]) -> list[str]:
-    header = list(header)
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-    return out
 
 
 def shipped_sha(cards_dir: Path = CARDS) -> str:

@@ -4,10 +4,10 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent.parent / "bench-results"
+from benchmarks.results_common import RESULTS, commit_of, load_json, markdown_table
+
 PANEL_SCHEMES = ("jscc", "digital", "softcast", "ideal")
 ESTIMATE_SCHEMES = ("digital_naive", "digital", "jscc", "softcast")
 HEADLINE_SNRS = (-2.0, 13.0)
@@ -15,18 +15,13 @@ HEADLINE_SNRS = (-2.0, 13.0)
 
 def load(folder: Path = RESULTS) -> dict | None:
     path = folder / "mismatch.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+    return load_json(path) if path.is_file() else None
 
 
 def _bound(scheme: str) -> bool:
     from semcodec import LINK_SCHEMES
 
     return scheme in LINK_SCHEMES and bool(LINK_SCHEMES[scheme].bound)
-
-
-def _commit(doc: dict) -> str:
-    sha = doc.get("git_commit", "unknown")
-    return sha[:7] + ("-dirty" if sha.endswith("-dirty") else "")
 
 
 def _psnr(r: dict | None) -> str:
@@ -37,13 +32,9 @@ def _psnr(r: dict | None) -> str:
     return f"{r['psnr']:.2f}" + (f" ({lost}/{total} lost)" if lost else "")
 
 
-def _table(header, rows) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return out + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
-
-
 def headline_rows(doc: dict | None) -> list[list[str]]:
-    """README rows: the panel's jscc and digital (planned at 4 dB) at the extremes."""
+    """README rows: the panel's jscc and digital (every transmitter at the plan's SNR) at the
+    lowest and highest channel SNR of :data:`HEADLINE_SNRS`."""
     if not doc or "panel" not in doc["results"]:
         return []
     res = doc["results"]
@@ -60,14 +51,15 @@ def headline_rows(doc: dict | None) -> list[list[str]]:
                 _psnr(by["jscc", snr]),
                 _psnr(by["digital", snr]),
                 "ideal " + _psnr(by.get(("ideal", snr))),
-                _commit(doc),
+                commit_of(doc),
             ]
         )
     return rows
 
 
-def section(folder: Path = RESULTS) -> list[str]:
-    doc = load(folder)
+def section(doc: dict | None, folder: Path = RESULTS) -> list[str]:
+    """The section from ``mismatch.json`` (``doc``, None when missing), its figures in
+    ``folder``."""
     lines = ["## When the transmitter's SNR is wrong", ""]
     if not doc:
         return lines + [
@@ -88,7 +80,7 @@ def section(folder: Path = RESULTS) -> list[str]:
     told = ", ".join(f"{p} {'/'.join(map(str, n))}" for p, n in counts.items())
     lines.append(
         f"`python -m benchmarks mismatch`, Kodak images per part: {told}; CBR 1/16, commit "
-        f"{_commit(doc)}. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
+        f"{commit_of(doc)}. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
     )
     lines.append("")
     if "panel" in res:
@@ -124,7 +116,7 @@ def _panel(res: dict) -> list[str]:
     for r in res.get("staircase", []):
         stairs.setdefault(r.get("mcs") or "?", {})[r["snr_db"]] = r
     rows += [[f"digital_fixed {m}", *(_psnr(v.get(x)) for x in snrs)] for m, v in stairs.items()]
-    lines += _table(["scheme", *(f"{x:g} dB" for x in snrs)], rows)
+    lines += markdown_table(["scheme", *(f"{x:g} dB" for x in snrs)], rows)
     lines.append("")
     lines += [f"- {f}" for f in res.get("findings", [])]
     lines.append("")
@@ -133,7 +125,9 @@ def _panel(res: dict) -> list[str]:
 
 def _estimate(estimate: list[dict]) -> list[str]:
     """Each scheme under a Gaussian error on each image's SNR estimate."""
-    lines = ["### A 2 dB Gaussian error on each image's SNR estimate", ""]
+    errors = sorted({r.get("snr_error_db") or 0.0 for r in estimate} - {0.0})
+    told = " / ".join(f"{e:g}" for e in errors) or "no"
+    lines = [f"### A {told} dB Gaussian error on each image's SNR estimate", ""]
     rows = []
     for r in estimate:
         err = r.get("snr_error_db") or 0.0
@@ -141,7 +135,7 @@ def _estimate(estimate: list[dict]) -> list[str]:
         ms = f"{r['ms_ssim']:.4f}" if r.get("ms_ssim") is not None else "–"
         rows.append([r["channel"], f"{err:g}", r["scheme"], f"{r['snr_db']:g}", _psnr(r), ms, p5])
     header = ["channel", "error (dB)", "scheme", "SNR (dB)", "PSNR", "MS-SSIM", "5th pct"]
-    lines += _table(header, rows)
+    lines += markdown_table(header, rows)
     lines.append("")
     lines.append(
         "`digital` plans its MCS over the estimate's error; `digital_naive` plans as if the "
@@ -163,7 +157,7 @@ def _forecast(f: dict) -> list[str]:
         ]
         for r in f["rows"]
     ]
-    lines += _table(["SNR (dB)", "forecast lost", "lost", "images"], rows)
+    lines += markdown_table(["SNR (dB)", "forecast lost", "lost", "images"], rows)
     lines.append("")
     lines.append(
         f"Over all {f['sends']} sends: {f['forecast_total']:.2f} images forecast lost, "
@@ -186,6 +180,6 @@ def _blocks(blocks: list[dict]) -> list[str]:
         ]
         for b in blocks
     ]
-    lines += _table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
+    lines += markdown_table(["MCS", "SNR (dB)", "codewords", "lost", "forecast lost"], rows)
     lines.append("")
     return lines
