@@ -241,24 +241,7 @@ class Analog(Scheme):
     def transmit(self, ctx, plans, images):
         import semcodec
 
-        out = []
-        t = time.perf_counter()
-        for k, p in enumerate(plans):
-            n = max(1, int(p.part.symbols) // max(p.part.repetitions, 1))
-            res = semcodec.links.transmit_analog(
-                images[k : k + 1],
-                ctx.links[p.view],
-                p.snr_db,
-                n,
-                generator=ctx.view_generator(p.view),
-            )
-            out.append(res.images[0])
-        return Transmission(
-            torch.stack(out),
-            np.asarray([p.part.symbols for p in plans], np.int64),
-            None,
-            {"encode": 0.0, "decode": time.perf_counter() - t},
-        )
+        return _linear_analog(semcodec.links.transmit_analog, ctx, plans, images)
 
 
 @register("softcast")
@@ -274,26 +257,33 @@ class SoftCast(Scheme):
     def transmit(self, ctx, plans, images):
         import semcodec
 
-        out, side = [], 0
-        t = time.perf_counter()
-        for k, p in enumerate(plans):
-            n = max(1, int(p.part.symbols) // max(p.part.repetitions, 1))
-            res = semcodec.links.transmit_softcast(
-                images[k : k + 1],
-                ctx.links[p.view],
-                p.snr_db,
-                n,
-                generator=ctx.view_generator(p.view),
-            )
-            out.append(res.images[0])
-            side += int(res.stats["side_info_bits"])
-        return Transmission(
-            torch.stack(out),
-            np.asarray([p.part.symbols for p in plans], np.int64),
-            None,
-            {"encode": 0.0, "decode": time.perf_counter() - t},
-            {"side_info_bits": side},
+        return _linear_analog(semcodec.links.transmit_softcast, ctx, plans, images)
+
+
+def _linear_analog(send, ctx, plans, images) -> Transmission:
+    """A linear analog scheme (``send``: ``semcodec.links.transmit_analog`` or
+    ``transmit_softcast``) over each on-demand view at the plan's budget per copy; its side
+    information, where it sends any, in ``side_info_bits``."""
+    out, side = [], 0
+    t = time.perf_counter()
+    for k, p in enumerate(plans):
+        n = max(1, int(p.part.symbols) // max(p.part.repetitions, 1))
+        res = send(
+            images[k : k + 1],
+            ctx.links[p.view],
+            p.snr_db,
+            n,
+            generator=ctx.view_generator(p.view),
         )
+        out.append(res.images[0])
+        side += int(res.stats.get("side_info_bits", 0))
+    return Transmission(
+        torch.stack(out),
+        np.asarray([p.part.symbols for p in plans], np.int64),
+        None,
+        {"encode": 0.0, "decode": time.perf_counter() - t},
+        side_info_bits=side,
+    )
 
 
 @register("full")

@@ -77,6 +77,16 @@ def test_a_views_channel_draws_depend_on_the_run_seed_and_the_view_only():
     )
 
 
+def test_softcast_sends_its_metadata_as_side_information_and_every_view_arrives():
+    link = phy.FlatLink(phy.CHANNELS["awgn"]())
+    ctx = RunContext(SendSettings("awgn", 10.0, seed=0), {0: link}, None, None, None, np.zeros(3))
+    images = torch.rand(1, 3, 48, 48, generator=torch.Generator().manual_seed(0))
+    part = Allocation(cbr=0.25, repetitions=1, encoder_snr_db=10.0, symbols=1728)
+    tx = SCHEMES["softcast"]().transmit(ctx, [ViewSend(0, 10.0, part)], images)
+    assert tx.received is None and tx.side_info_bits > 0
+    assert tx.images.shape == images.shape and tx.symbols.tolist() == [1728]
+
+
 def test_results_do_not_depend_on_the_other_schemes(env, tmp_path):
     common = ["--channel", "rayleigh", "--snr-db", "3", "--seed", "0", *STEPS]
     assert _run(env, tmp_path / "a", "--schemes", "jscc,gt", *common) == 0
