@@ -6,6 +6,7 @@ two stretches that end together both count; bad input is refused before any work
 
 import hashlib
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -20,14 +21,20 @@ from campaign.store import card_of
 ROOT = Path(__file__).resolve().parents[2]
 
 
+SKIPPED = {".git", ".venv", "__pycache__", ".pytest_cache", ".ruff_cache", ".mypy_cache"}
+"""Not the project's files: git, the virtual environment and the tools' caches."""
+
+
 def _tree(*folders: Path) -> dict[str, str]:
-    """Every file under ``folders`` (``.git`` and caches left out) -> its sha256."""
+    """Every file under ``folders`` (:data:`SKIPPED` and build metadata left out) -> its
+    sha256."""
     out = {}
     for folder in folders:
-        for p in sorted(folder.rglob("*")):
-            parts = set(p.relative_to(folder).parts)
-            if p.is_file() and not parts & {".git", "__pycache__", ".pytest_cache", ".ruff_cache"}:
-                out[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+        for here, dirs, files in os.walk(folder):
+            dirs[:] = [d for d in dirs if d not in SKIPPED and not d.endswith(".egg-info")]
+            for name in files:
+                path = Path(here) / name
+                out[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
     return out
 
 
