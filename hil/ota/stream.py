@@ -122,9 +122,9 @@ class RingBuffer:
         dropped ones as zeros): what a stream that stopped early keeps as its capture."""
         with self.cond:
             lo = max(0, self.write_pos - self.capacity)
-            out = np.zeros(self.write_pos - lo, np.complex64)
-            idx = np.arange(lo, self.write_pos) % self.capacity
-            out[:] = self._buf[idx]
+            i, n = lo % self.capacity, self.write_pos - lo
+            first = min(n, self.capacity - i)  # two slices of the ring, no index arrays
+            out = np.concatenate([self._buf[i : i + first], self._buf[: n - first]])
             for g0, g1 in self.gaps:
                 if g1 > lo:
                     out[max(g0, lo) - lo : g1 - lo] = 0
