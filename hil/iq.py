@@ -14,9 +14,7 @@ def from_int8_iq(raw: np.ndarray) -> np.ndarray:
 def to_int8_iq(samples: np.ndarray) -> np.ndarray:
     """[num_samples] complex in full scale [-1, 1] -> [2 * num_samples] int8 (round, clip at
     127)."""
-    x = np.asarray(samples, dtype=np.complex64)
-    inter = x.view(np.float32).astype(np.float64) * 128.0
-    return np.clip(np.round(inter), -128, 127).astype(np.int8)
+    return quantize_ci8(np.asarray(samples, dtype=np.complex64).reshape(-1))
 
 
 def full_scale_samples(samples) -> np.ndarray:

@@ -111,18 +111,20 @@ class Flowgraph:
             raise DeviceNotFoundError(INSTALL_HINT)
         self._dir = tempfile.TemporaryDirectory(prefix="osnerf-grc-")
         script = compile_flowgraph(self.grc, self._dir.name)
-        self.proc = subprocess.Popen(
-            self.argv(script),
-            stdin=subprocess.PIPE,  # a prompting flowgraph waits on it; never written
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")},
-        )
+        log = Path(self._dir.name) / "stderr.log"  # a file: a pipe nobody reads fills and stalls
+        with log.open("w") as err_file:
+            self.proc = subprocess.Popen(
+                self.argv(script),
+                stdin=subprocess.PIPE,  # a prompting flowgraph waits on it; never written
+                stdout=subprocess.DEVNULL,
+                stderr=err_file,
+                text=True,
+                env={k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")},
+            )
         deadline = time.monotonic() + settle_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                err = (self.proc.stderr.read() if self.proc.stderr else "").strip()
+                err = log.read_text(errors="replace").strip()
                 self.close()
                 raise HilError(f"flowgraph {self.grc.name} exited: {err.splitlines()[-1:]}")
             time.sleep(0.05)
@@ -149,9 +151,8 @@ class Flowgraph:
                     self.proc.kill()
                     self.proc.wait()
             rc = self.proc.returncode
-            for f in (self.proc.stdin, self.proc.stderr):
-                if f is not None:
-                    f.close()
+            if self.proc.stdin is not None:
+                self.proc.stdin.close()
         if self._dir is not None:
             self._dir.cleanup()
             self._dir = None

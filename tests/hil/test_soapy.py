@@ -5,6 +5,7 @@ streams, as they would reach ``SoapySDRServer`` on another host."""
 import json
 import math
 import struct
+import time
 
 import numpy as np
 import pytest
@@ -125,8 +126,9 @@ def test_a_tone_comes_back_through_the_emulated_air(server):
         got = {}
         t = threading.Thread(target=lambda: got.setdefault("y", radio.rx(600_000)))
         t.start()
-        while not radio.receiving:
-            pass
+        deadline = time.monotonic() + 10
+        while not radio.receiving and time.monotonic() < deadline:
+            time.sleep(0.001)
         stats = radio.tx(tone)
         t.join(30)
     y = got["y"][0]
