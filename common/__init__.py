@@ -10,6 +10,7 @@
 * ``common.memory``: glibc's heap, ``tune_malloc`` for reuse and ``trim_heap`` to give it back.
 * ``common.jit``: ``lazy_njit``, the one numba wrapper (numba loaded on a kernel's first call).
 * ``common.checks``: ``bound``, a field's range declared once, read by configs and CLIs.
+* ``common.timing``: ``median_seconds``, how a command times a call.
 * ``common.errors``: ``InputError``, input that cannot be served, wherever it is found.
 * ``common.registry``: ``Registry``, the one way a table of named things is declared.
 * ``common.threads``: ``one_blas_thread``, a receive path's bound on numpy's BLAS pool.
@@ -41,6 +42,7 @@ from common.plugins import load_plugins
 from common.quality import MS_SSIM_MIN_SIDE_PX, PSNR_MAX_DB, ms_ssim, psnr
 from common.registry import Registry
 from common.threads import one_blas_thread
+from common.timing import median_seconds
 
 __all__ = [
     "MAX_BUDGET_S",
@@ -54,6 +56,7 @@ __all__ = [
     "json_default",
     "lazy_njit",
     "load_plugins",
+    "median_seconds",
     "IMAGE_SUFFIXES",
     "PSNR_MAX_DB",
     "MS_SSIM_MIN_SIDE_PX",

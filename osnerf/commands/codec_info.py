@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 
+from common import median_seconds
 from osnerf.commands import args as checks
 
 MAX_REPEATS = 100
@@ -71,16 +70,6 @@ def count_parameters(codec) -> dict:
     return {"parameters": int(sum(seen_p.values())), "buffers": int(sum(seen_b.values()))}
 
 
-def _median_time(fn, repeats: int) -> float:
-    fn()  # warm-up (allocations, lazy inits)
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(statistics.median(times))
-
-
 def _macs(fn) -> int:
     from torch.utils.flop_counter import FlopCounterMode
 
@@ -107,7 +96,7 @@ def codec_complexity(codec, image, snr_db: float, cbr: float, repeats: int) -> d
             return decode_received(codec, enc.symbols, enc.meta, snr_db)
 
         enc_macs, dec_macs = _macs(encode), _macs(decode)
-        enc_s, dec_s = _median_time(encode, repeats), _median_time(decode, repeats)
+        enc_s, dec_s = median_seconds(encode, repeats), median_seconds(decode, repeats)
     return {
         **count_parameters(codec),
         "encode_macs_per_pixel": enc_macs / pixels,

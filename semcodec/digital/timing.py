@@ -3,22 +3,10 @@ LDPC chain's encoding and decoding of it (:func:`digital_timing`)."""
 
 from __future__ import annotations
 
-import statistics
-import time
-
 import torch
 from torch import Tensor
 
-
-def _median_time(fn, repeats: int, before=None) -> float:
-    times = []
-    for _ in range(repeats + 1):  # the first call warms up
-        if before is not None:
-            before()
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(statistics.median(times[1:]))
+from common import median_seconds
 
 
 def digital_timing(image: Tensor, snr_db: float, num_symbols: int, repeats: int = 5) -> dict:
@@ -50,7 +38,7 @@ def digital_timing(image: Tensor, snr_db: float, num_symbols: int, repeats: int 
         return image_codecs.encode_scaled_to_budget(img, budget, "avif")
 
     out = {"mcs": mcs, "num_symbols": int(num_symbols)}
-    out["avif_encode_seconds"] = _median_time(avif, repeats, before=fresh)
+    out["avif_encode_seconds"] = median_seconds(avif, repeats, before=fresh)
     data, _, _ = avif()
     if data is None:
         return out | {"note": "no AVIF file fits the budget"}
@@ -60,8 +48,10 @@ def digital_timing(image: Tensor, snr_db: float, num_symbols: int, repeats: int 
     noise = torch.complex(torch.randn(sym.shape, generator=g), torch.randn(sym.shape, generator=g))
     rx = sym + noise * (noise_var / 2) ** 0.5
     out["payload_bytes"] = len(data)
-    out["ldpc_encode_seconds"] = _median_time(lambda: encode_bytes(data, mcs, num_symbols), repeats)
-    out["ldpc_decode_seconds"] = _median_time(
+    out["ldpc_encode_seconds"] = median_seconds(
+        lambda: encode_bytes(data, mcs, num_symbols), repeats
+    )
+    out["ldpc_decode_seconds"] = median_seconds(
         lambda: decode_symbols(rx, noise_var, mcs, len(data)), repeats
     )
     return out

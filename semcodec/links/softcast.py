@@ -33,8 +33,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from semcodec.contract.protocol import check_images
+from common import psnr
+from semcodec.contract.protocol import check_images, symbol_budget
 from semcodec.contract.transmit import TransmitResult, check_num_symbols, run_link
+from semcodec.links.framed import FramedReception, FramedScheme
 
 COLOUR = np.array(
     [
@@ -332,8 +334,6 @@ def transmit_softcast(
 def _framed_transmit(images, settings):
     """Per image: the analog symbols at ``settings.cbr`` (its metadata inside that budget).
     The state is each image's plan (the metadata the receiver is sent)."""
-    from semcodec.contract.protocol import symbol_budget
-
     blocks, plans = [], []
     for img in np.asarray(images, np.float32):
         x = torch.from_numpy(img)
@@ -345,19 +345,12 @@ def _framed_transmit(images, settings):
 
 def _framed_receive(received, plans, images, settings):
     """LLSE of each block from its zero-forced symbols and their noise variance; a lost
-    frame's symbols (0, no information) shrink to the chunks' mean, 0."""
-    from common import psnr
-    from semcodec.contract.protocol import symbol_budget
-    from semcodec.links.framed import FramedReception
-
+    frame's symbols come back erased (0, ``semcodec.links.ReceivedBlock``), which the LLSE
+    maps to the chunks' mean, 0."""
     out = []
     for block, plan, img in zip(received, plans, np.asarray(images, np.float32)):
         x = torch.from_numpy(np.asarray(block.x_hat, np.complex64))
-        nv = np.asarray(block.noise_var, np.float64).copy()
-        spf = settings.symbols_per_frame
-        for i, ok in enumerate(block.frames_detected):
-            if not ok:
-                nv[i * spf : (i + 1) * spf] = np.inf  # nothing arrived: the prior mean
+        nv = np.asarray(block.noise_var, np.float64)
         rec = decode_chunks(x, torch.from_numpy(nv), plan).clamp(0, 1).numpy()
         stats = {
             "decoded": True,
@@ -372,6 +365,4 @@ def _framed_receive(received, plans, images, settings):
 def framed_softcast():
     """SoftCast's transmitter and receiver around a framed link (``osnerf ota``): the analog
     symbols framed, the metadata as side information (charged in ``num_symbols``)."""
-    from semcodec.links.framed import FramedScheme
-
     return FramedScheme(_framed_transmit, _framed_receive)
