@@ -43,6 +43,7 @@ import numpy as np
 import torch
 
 from common import write_text
+from osnerf.plots.rows import is_bound
 
 PLAN_SNR_DB = 4.0
 PANEL_SNRS = (-2.0, 0.0, 2.0, 4.0, 7.0, 10.0, 13.0)
@@ -74,7 +75,7 @@ def _blocks(trials: int) -> list[dict]:
     from semcodec.digital.calibration import load_calibration
 
     cal = load_calibration()
-    n = 512 * 768 * 3 // 16
+    n = phy.num_symbols_for_cbr(1 / 16, 512, 768)  # a Kodak image's budget
     link = phy.channel_link("awgn")
     out = []
     for mcs, snr in BLOCK_POINTS:
@@ -156,19 +157,13 @@ def _snrs(values) -> str:
     return ",".join(f"{v:g}" for v in values)
 
 
-def _bound(scheme: str) -> bool:
-    from semcodec import LINK_SCHEMES
-
-    return bool(LINK_SCHEMES[scheme].bound)
-
-
 def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
     """Where each scheme leads at each SNR; digital's losses below its plan and its gain
     above it."""
     by = {(r["scheme"], r["snr_db"]): r for r in panel}
     out = []
     for s in PANEL_SNRS:
-        real = {k: r["psnr"] for (k, x), r in by.items() if x == s and not _bound(k)}
+        real = {k: r["psnr"] for (k, x), r in by.items() if x == s and not is_bound(k)}
         if real:
             lead = max(real, key=real.get)
             out.append(
@@ -179,12 +174,14 @@ def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
     dig = [by["digital", s] for s in PANEL_SNRS if ("digital", s) in by]
     if dig:
         lost = [f"{r['snr_db']:g} dB: {r['lost_images']}/{r['num_images']}" for r in dig]
-        out.append("digital planned at 4 dB, images lost: " + ", ".join(lost))
+        out.append(f"digital planned at {PLAN_SNR_DB:g} dB, images lost: " + ", ".join(lost))
         above = [r["psnr"] for r in dig if r["snr_db"] >= PLAN_SNR_DB]
         if len(above) > 1:
+            gain = max(above) - above[0]
+            said = "no gain above its plan" if gain <= 0 else f"{gain:.2f} dB above its plan"
             out.append(
                 f"digital from {PLAN_SNR_DB:g} to {max(PANEL_SNRS):g} dB: "
-                f"{min(above):.2f} .. {max(above):.2f} dB (no gain above its plan)"
+                f"{min(above):.2f} .. {max(above):.2f} dB ({said})"
             )
     if staircase:
         env = {}

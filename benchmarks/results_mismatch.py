@@ -8,20 +8,10 @@ from pathlib import Path
 
 from benchmarks.results_common import RESULTS, commit_of, load_json, markdown_table
 
-PANEL_SCHEMES = ("jscc", "digital", "softcast", "ideal")
-ESTIMATE_SCHEMES = ("digital_naive", "digital", "jscc", "softcast")
-HEADLINE_SNRS = (-2.0, 13.0)
-
 
 def load(folder: Path = RESULTS) -> dict | None:
     path = folder / "mismatch.json"
     return load_json(path) if path.is_file() else None
-
-
-def _bound(scheme: str) -> bool:
-    from semcodec import LINK_SCHEMES
-
-    return scheme in LINK_SCHEMES and bool(LINK_SCHEMES[scheme].bound)
 
 
 def _psnr(r: dict | None) -> str:
@@ -34,13 +24,14 @@ def _psnr(r: dict | None) -> str:
 
 def headline_rows(doc: dict | None) -> list[list[str]]:
     """README rows: the panel's jscc and digital (every transmitter at the plan's SNR) at the
-    lowest and highest channel SNR of :data:`HEADLINE_SNRS`."""
+    panel's lowest and highest channel SNR."""
     if not doc or "panel" not in doc["results"]:
         return []
     res = doc["results"]
     by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
     rows = []
-    for snr in HEADLINE_SNRS:
+    snrs = sorted({r["snr_db"] for r in res["panel"]})
+    for snr in snrs[:1] + snrs[-1:] if len(snrs) > 1 else snrs:
         if ("jscc", snr) not in by or ("digital", snr) not in by:
             continue
         rows.append(
@@ -99,6 +90,8 @@ def section(doc: dict | None, folder: Path = RESULTS) -> list[str]:
 
 def _panel(res: dict) -> list[str]:
     """Every transmitter planned at one SNR, and the fixed-MCS staircase, across the truth."""
+    from osnerf.plots.rows import is_bound  # loads the scheme tables (torch): only here
+
     lines = []
     by = {(r["scheme"], r["snr_db"]): r for r in res["panel"]}
     snrs = sorted({r["snr_db"] for r in res["panel"]})
@@ -106,11 +99,10 @@ def _panel(res: dict) -> list[str]:
     lines.append("")
     rows = [
         [
-            s + (" (bound, true SNR)" if _bound(s) else ""),
+            s + (" (bound, true SNR)" if is_bound(s) else ""),
             *(_psnr(by.get((s, x))) for x in snrs),
         ]
-        for s in PANEL_SCHEMES
-        if any((s, x) in by for x in snrs)
+        for s in dict.fromkeys(r["scheme"] for r in res["panel"])  # as the benchmark ran them
     ]
     stairs: dict[str, dict] = {}
     for r in res.get("staircase", []):
