@@ -44,7 +44,7 @@ def plot_mismatch(rows: list[dict], metric: str = "psnr") -> Figure:
             ax.annotate(str(values[0]), (xs[-1], ys[-1]), fontsize=5, color="0.45")
     keys = ("scheme",) + varying_keys(planned, ("plan_snr_db", "channel", "cbr"))
     for i, (values, group) in enumerate(series_of(planned, keys).items()):
-        xs, ys, sd = mean_std(group, "snr_db", metric)
+        xs, ys, _ = mean_std(group, "snr_db", metric)
         style = "--" if is_bound(values[0]) else "-"
         ax.plot(
             xs, ys, style, marker="o", ms=4, color=f"C{i % 10}", label=series_label(keys, values)
