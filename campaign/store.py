@@ -126,12 +126,6 @@ class Campaign:
         files[self.folder / "campaign.json"] = (to_json(self.doc) + "\n").encode()
         write_files(files)
 
-    def append_log(self, records: list[dict]) -> None:
-        """Append records to ``log.jsonl`` (read back, re-written whole and atomically)."""
-        old = self.log_path.read_text() if self.log_path.is_file() else ""
-        new = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
-        write_files({self.log_path: (old + new).encode()})
-
     def log(self) -> list[dict]:
         if not self.log_path.is_file():
             return []
