@@ -39,6 +39,9 @@ CBRS = ("1/48", "1/16", "1/6", "1/4", "1/3")
 SNRS_DB = (1.0, 4.0, 10.0)
 OTA_SEEDS = (0, 1, 2, 3, 4)
 OTA_SNRS_DB = (1.0, 10.0)
+MAX_IMAGES = 12  # Kodak images of the comparison
+OTA_SIZE = 256  # over-the-air image side (px)
+TABLE_IMAGES = 24  # Kodak images of the README table
 
 
 def _csv(kind):
@@ -57,17 +60,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("candidate", help="a JSCC checkpoint, or a campaign line (its best)")
     p.add_argument("--baseline", default=None, help="default: the shipped default checkpoint")
     p.add_argument("--images", default=None, help="image folder (default: the shared Kodak)")
-    p.add_argument("--max-images", type=int, default=12, help="first N images (default 12)")
+    p.add_argument(
+        "--max-images", type=int, default=MAX_IMAGES, help=f"first N images (default {MAX_IMAGES})"
+    )
     p.add_argument("--channels", type=_csv(str), default=CHANNELS, help=",".join(CHANNELS))
     p.add_argument("--cbrs", type=_csv(str), default=CBRS, help=",".join(CBRS))
     p.add_argument("--snrs-db", type=_csv(float), default=SNRS_DB, help="default 1,4,10")
     p.add_argument("--ota-seeds", type=_csv(int), default=OTA_SEEDS, help="'none' for none")
     p.add_argument("--ota-snrs-db", type=_csv(float), default=OTA_SNRS_DB, help="default 1,10")
-    p.add_argument("--ota-size", type=int, default=256, help="over-the-air image side (px)")
+    p.add_argument("--ota-size", type=int, default=OTA_SIZE, help="over-the-air image side (px)")
     p.add_argument("--out", default=str(ROOT / "bench-results"), help="folder of the JSON")
     p.add_argument("--campaign", default=str(ROOT / "campaign"), help="campaign folder")
     p.add_argument("--dry-run", action="store_true", help="compare and write the JSON only")
-    p.add_argument("--table-images", type=int, default=24, help="Kodak images of the README table")
+    p.add_argument(
+        "--table-images", type=int, default=TABLE_IMAGES, help="Kodak images of the README table"
+    )
 
 
 def decide(kodak: list[dict], ota: list[dict], rule: dict = RULE) -> dict:
@@ -172,11 +179,11 @@ def narrowed(args) -> list[str]:
         "--channels": (args.channels, CHANNELS),
         "--cbrs": (args.cbrs, CBRS),
         "--snrs-db": (tuple(args.snrs_db), SNRS_DB),
-        "--max-images": (args.max_images, 12),
+        "--max-images": (args.max_images, MAX_IMAGES),
         "--ota-seeds": (tuple(args.ota_seeds), OTA_SEEDS),
         "--ota-snrs-db": (tuple(args.ota_snrs_db), OTA_SNRS_DB),
-        "--ota-size": (args.ota_size, 256),
-        "--table-images": (args.table_images, 24),
+        "--ota-size": (args.ota_size, OTA_SIZE),
+        "--table-images": (args.table_images, TABLE_IMAGES),
     }
     out = [flag for flag, (given, rule) in full.items() if given != rule]
     kodak = (shared_data_dir() / "kodak").resolve()

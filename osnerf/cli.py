@@ -165,8 +165,8 @@ def _first_line(e: BaseException) -> str:
 
 def entry() -> None:
     rc = main()
-    # the interpreter's last collection walks every object the libraries made (a second
-    # and more after a long run); nothing left needs it, so an interrupted run exits at once
+    # the interpreter's last collection walks every object the libraries made; nothing left
+    # needs it, so an interrupted run exits at once
     import gc
 
     gc.freeze()

@@ -103,8 +103,8 @@ def _matched_eval(shared_data, tmp_path, channel: str, *flags: str) -> dict:
 def test_exact_knowledge_is_todays_matched_evaluation(shared_data, tmp_path):
     """With the transmitter's belief equal to the channel's SNR (``--plan-snr-db`` at the
     channel SNR, or ``--snr-error-db 0``) every scheme's numbers are those of the matched
-    evaluation, to the bit; the matched numbers themselves match the reviewed ones (written
-    before the belief was apart from the channel) within 0.02 dB."""
+    evaluation, to the bit; the matched numbers themselves match the reviewed ones
+    (``tests/golden/eval_matched.json``) within 0.02 dB."""
     got = {}
     for ch in ("awgn", "rayleigh"):
         got.update(_matched_eval(shared_data, tmp_path, ch, "--snr-db", "1,10"))

@@ -78,8 +78,7 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     )
 
     ota_cfg = OtaConfig()
-    tx_args = getattr(cfg, "ota_tx_args", None)
-    rx_args = getattr(cfg, "ota_rx_args", None)
+    tx_args, rx_args = cfg.ota_tx_args, cfg.ota_rx_args
     tx, rx, emu = open_radios(
         cfg.ota_device,
         cfg.snr_db,

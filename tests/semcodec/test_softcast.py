@@ -35,9 +35,9 @@ def test_symbols_have_unit_power_and_the_metadata_is_charged(kodak_crop):
     assert float(sym.abs().pow(2).mean()) == pytest.approx(1.0, abs=1e-5)
     assert plan.metadata_bits == 3 * 64 + len(plan.kept) * VARIANCE_BITS + 3 * 16 + 32
     assert plan.metadata_bits == metadata_bits(3 * 64, len(plan.kept))
-    # the analog symbols and the metadata's share the budget; one more chunk would not fit
+    # the analog symbols and the metadata's share the budget
     assert sym.shape[0] + plan.metadata_symbols <= budget
-    assert plan.metadata_symbols >= plan.metadata_bits  # at most 1 bit per symbol, here 0.5
+    assert plan.metadata_symbols == math.ceil(plan.metadata_bits / 0.5)  # 0.5 bit per symbol
     res = transmit_softcast(kodak_crop, phy.AWGN(), 10.0, budget, chunks_per_side=8)
     assert res.stats["num_symbols"] == sym.shape[0] + plan.metadata_symbols
     assert res.stats["side_info_bits"] == plan.metadata_bits
