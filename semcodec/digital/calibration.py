@@ -170,6 +170,7 @@ class DigitalCalibration:
         self.rd = doc["rate_distortion"]
         self.lost_psnr_db = float(doc["lost_psnr_db"])
         self._choices: dict = {}
+        self._blers: dict = {}  # image_bler's values: a pure function of the table
 
     @property
     def channels(self) -> list[str]:
@@ -212,6 +213,14 @@ class DigitalCalibration:
         snr_error_db * z`` with z ~ N(0, 1), and the probability is averaged over z (one
         failed codeword still loses the whole image: ``1 - (1 - p)^C`` inside the average).
         """
+        key = (channel, mcs, float(snr_db), int(num_symbols), float(snr_error_db))
+        if key not in self._blers:
+            self._blers[key] = self._image_bler(*key)
+        return self._blers[key]
+
+    def _image_bler(
+        self, channel: str, mcs: str, snr_db: float, num_symbols: int, snr_error_db: float
+    ) -> float:
         from phy.digital import codeword_layout
 
         self.source(channel)
