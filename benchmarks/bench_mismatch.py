@@ -17,6 +17,8 @@ All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, throu
 * ``forecast``: the digital planner with exact knowledge on AWGN at :data:`FORECAST_SNRS`:
   the images it expected to lose (the sum of its per-image loss probabilities) against those
   lost.
+* ``cbr``: quality against the bandwidth ratio, every scheme with exact knowledge, AWGN at
+  :data:`CBR_SNR_DB` (where the published anchors are), at each of :data:`CBRS`.
 * ``blocks``: the same forecast tested where it is thin, without the image codec: whole
   Kodak-sized blocks (CBR 1/16) of random payload filling an MCS's capacity, sent
   ``OSNERF_BENCH_MISMATCH_BLOCKS`` times (default 60) over AWGN at :data:`BLOCK_POINTS`
@@ -24,10 +26,11 @@ All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, throu
 
 Each eval-codec run is written to ``mismatch_<part>.json`` in the output folder and reused
 when its arguments match and a clean tree of the same commit made it; the figures (the panel,
-digital's staircase and envelope in PSNR and MS-SSIM, the outage CDF on block Rayleigh) go
+digital's staircase and envelope in PSNR and MS-SSIM, PSNR against CBR, the outage CDF on
+block Rayleigh) go
 to ``mismatch/`` beside them.
 ``OSNERF_BENCH_MISMATCH_PARTS``: comma-separated subset of ``panel,staircase,estimate,
-forecast``; ``OSNERF_BENCH_MISMATCH_REUSE=any``: reuse a file with the same arguments
+forecast,cbr,blocks``; ``OSNERF_BENCH_MISMATCH_REUSE=any``: reuse a file with the same arguments
 whatever commit made it (each keeps its own ``git_commit``). On a shared 2-core CPU the whole
 benchmark on 24 images takes hours: the digital chain (AVIF at many qualities, LDPC decoding)
 dominates.
@@ -65,7 +68,11 @@ SNR_ERROR_DB = 2.0
 RAYLEIGH_DRAWS = 4
 FORECAST_SNRS = tuple(float(s) for s in range(-10, 14))
 BLOCK_POINTS = (("16qam-1/2", 7.0), ("qpsk-3/4", 5.0), ("qpsk-157/1024", -4.0))
-PARTS = ("panel", "staircase", "estimate", "forecast", "blocks")
+CBR_SNR_DB = 10.0
+CBRS = ("1/48", "1/16", "1/6", "1/3")
+"""The rates of the codec card's CBR sweep (within the shipped codec's ``cbr_range``)."""
+CBR_SCHEMES = "jscc,digital,softcast,ideal"
+PARTS = ("panel", "staircase", "estimate", "forecast", "cbr", "blocks")
 
 
 def _blocks(trials: int) -> list[dict]:
@@ -146,11 +153,11 @@ def _row(r: dict) -> dict:
     return out
 
 
-def _common(n: int) -> list[str]:
+def _common(n: int, cbr: str = "1/16") -> list[str]:
     from osnerf.paths import shared_data_dir
 
     folder = os.environ.get("OSNERF_BENCH_MISMATCH_FOLDER") or str(shared_data_dir() / "kodak")
-    return ["--images", folder, "--max-images", str(n), "--cbr", "1/16", "--no-lpips"]
+    return ["--images", folder, "--max-images", str(n), "--cbr", cbr, "--no-lpips"]
 
 
 def _snrs(values) -> str:
@@ -202,6 +209,7 @@ def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
         plot_digital_cliff,
         plot_mismatch,
         plot_outage_cdf,
+        plot_psnr_vs_cbr,
     )
     from osnerf.results import result_rows
 
@@ -215,6 +223,9 @@ def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
     if stairs:  # the fixed MCSs alone: their envelope is over the same images
         figs.append(("staircase_psnr", plot_digital_cliff(rows(*stairs), "psnr", anchors=True)))
         figs.append(("staircase_ms_ssim", plot_digital_cliff(rows(*stairs), "ms_ssim")))
+    rates = [t for t in docs if t.startswith("cbr_")]
+    if len(rates) > 1:
+        figs.append(("psnr_vs_cbr", plot_psnr_vs_cbr(rows(*rates))))
     fading = [eval_record(docs[t]) for t in docs if t.startswith("estimate_rayleigh")]
     if fading:
         figs.append(("outage_cdf", plot_outage_cdf(outage_entries(fading))))
@@ -285,6 +296,14 @@ def run(out_dir: Path) -> dict:
             "lost_total": int(m.sum()),
             "sends": int(sum(r["num_images"] for r in rows)),
         }
+    if "cbr" in parts:
+        rows = []
+        for cbr in CBRS:
+            argv = _common(n, cbr) + ["--channel", "awgn", "--snr-db", f"{CBR_SNR_DB:g}"]
+            tag = "cbr_" + cbr.replace("/", "_")
+            docs[tag] = _eval(out_dir, tag, argv + ["--schemes", CBR_SCHEMES])
+            rows += [{"cbr": cbr, **_row(r)} for r in docs[tag]["results"]]
+        result["cbr_sweep"] = rows
     if "blocks" in parts:
         result["blocks"] = _blocks(int(os.environ.get("OSNERF_BENCH_MISMATCH_BLOCKS", "60")))
     result["figures"] = _figures(out_dir, docs)

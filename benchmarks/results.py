@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from statistics import mean
 
-from benchmarks import results_channels, results_mismatch
+from benchmarks import results_channels, results_mismatch, results_variants
 from benchmarks.results_codec import (
     CHANNEL_LABELS,
     CODEC_SCHEMES,
@@ -273,6 +273,7 @@ def render(results: Path | None = None, cards_dir: Path | None = None) -> tuple[
         "",
         *demo_section(demo),
         *ota_section(ota),
+        *results_variants.section(results),
         *codec_section(codec),
         *results_mismatch.section(mismatch, results),
         *results_channels.sections(results),
