@@ -113,7 +113,7 @@ LINTED = common phy semcodec renderer hil osnerf campaign tests benchmarks
 lint: setup
 	$(VENV)/bin/ruff format --check $(LINTED)
 	$(VENV)/bin/ruff check $(LINTED)
-	$(VENV)/bin/mypy common phy hil semcodec/contract osnerf/run osnerf/plan.py osnerf/scheme_types.py
+	$(VENV)/bin/mypy common phy hil semcodec/contract osnerf/run osnerf/plan.py osnerf/link_report.py osnerf/scheme_types.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -61,16 +61,17 @@ def _one(out: Path, speed: float, csi: str) -> dict:
     argv = _argv(speed, csi)
     wall = _run(run_dir, argv)
     report = Report.from_dict(json.loads((run_dir / "report.json").read_text()))
-    spreads = list(report.link.get("rms_doppler_spread_hz", {}).values())
+    link = report.link.to_dict()
+    spreads = list(report.link.motion.rms_doppler_spread_hz.values()) if report.link.motion else []
     measured = report.views.measured_snr_db  # the SCU's pilot measurement through the link
     return {
         "drone_speed_m_s": speed,
         "csi": csi,
-        "receiver": report.link.get("csi"),
-        "grid": report.link.get("grid"),
+        "receiver": link.get("csi"),
+        "grid": link.get("grid"),
         "command": "osnerf " + " ".join(argv),
         "wall_seconds": wall or None,
-        "link": {k: report.link.get(k) for k in LINK_KEYS},
+        "link": {k: link.get(k) for k in LINK_KEYS},
         "max_rms_doppler_spread_hz": max(spreads, default=None),
         "views_with_doppler_spread": sum(x > SPREAD_FLOOR_HZ for x in spreads),
         "views_traced": len(spreads),

@@ -101,7 +101,7 @@ def _over_the_air(out_dir: Path, box: bool = False) -> dict:
                 "psnr_received_object": {n: r.psnr_received_object for n, r in sch.items()},
                 "jscc_minus_gt_db": gap,
                 "jscc_minus_digital_db": over_digital,
-                "frames_lost": report.link.get("frames_lost"),
+                "frames_lost": report.link.frames_lost,
                 "object_oversampling": report.views.object_oversampling,
                 "repetitions_on_demand": sorted(set(report.views.repetitions_on_demand.values())),
                 "met": gap >= -OTA_GOAL_DB if snr == OTA_GOAL_SNR_DB else None,

@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from common import path_kind, to_json, write_files
+from osnerf.link_report import LinkReport
 from osnerf.plan import ViewPlan
 from osnerf.provenance import result_header
 from osnerf.report_figures import picture_grid, plots, received_grid
@@ -148,7 +149,7 @@ class Report:
 
     scene: dict
     demand: dict
-    link: dict
+    link: LinkReport
     snr_db: float
     symbol_rate_hz: float
     codec: dict | None
@@ -164,6 +165,7 @@ class Report:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         d["schemes"] = {n: asdict(r) for n, r in self.schemes.items()}
         d["views"] = self.views.to_dict()
+        d["link"] = self.link.to_dict()
         return d
 
     @classmethod
@@ -180,6 +182,7 @@ class Report:
             for n, s in d["schemes"].items()
         }
         body["views"] = ViewsSummary.from_dict(d["views"])
+        body["link"] = LinkReport.from_dict(d["link"])
         return cls(**body)
 
 
@@ -199,27 +202,30 @@ def codec_use_line(scheme: str, use: dict) -> str:
     )
 
 
-def motion_summary(link: dict) -> str:
-    """The drones' speed and Doppler in words (a ray-traced run's link), else ``""``."""
-    if "drone_speed_m_s" not in link:
+def motion_summary(link: LinkReport) -> str:
+    """The drones' speed and Doppler in words (a ray-traced run's link, in the air or over
+    it), else ``""``."""
+    moving = link.motion or link.traced_air
+    if moving is None:
         return ""
-    spread = link.get("median_rms_doppler_spread_hz")
+    spread = moving.median_rms_doppler_spread_hz
     return (
-        f"drone speed {link['drone_speed_m_s']:g} m/s, max Doppler "
-        f"{link['max_doppler_hz']:.1f} Hz, median RMS Doppler spread "
+        f"drone speed {moving.drone_speed_m_s:g} m/s, max Doppler "
+        f"{moving.max_doppler_hz:.1f} Hz, median RMS Doppler spread "
         + ("n/a" if spread is None else f"{spread:.1f} Hz")
     )
 
 
-def position_summary(link: dict) -> str:
+def position_summary(link: LinkReport) -> str:
     """Where a ray-traced run's radio ends were, in words, else ``""``."""
-    if "ground_station_m" not in link:
+    at = link.positions
+    if at is None:
         return ""
-    gs = ", ".join(f"{v:g}" for v in link["ground_station_m"])
-    dist = list(link.get("distance_to_ground_station_m", {}).values())
+    gs = ", ".join(f"{v:g}" for v in at.ground_station_m)
+    dist = list(at.distance_to_ground_station_m.values())
     return (
-        f"ground station at ({gs}) m ({link['ground_station_from']}), drone ring radius "
-        f"{link['drone_ring']['radius_m']:.2f} m"
+        f"ground station at ({gs}) m ({at.ground_station_from}), drone ring radius "
+        f"{at.drone_ring['radius_m']:.2f} m"
         + (f", median drone distance {statistics.median(dist):.1f} m" if dist else "")
     )
 
@@ -301,7 +307,7 @@ def render_html(report: Report, header: dict, images: dict[str, bytes]) -> str:
     pics = "".join(f"<h3>{html.escape(k)}</h3>{_img(v, k)}" for k, v in images.items())
     name = html.escape(report.scene["name"])
     demand = html.escape(", ".join(report.demand["objects"]))
-    channel = html.escape(str(report.link["channel"]))
+    channel = html.escape(report.link.channel)
     commit = html.escape(str(header.get("git_commit")))
     moving = "; " + html.escape(motion) if motion else ""
     style = (

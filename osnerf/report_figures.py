@@ -108,7 +108,7 @@ def plots(report: Report) -> dict[str, bytes]:
         bottom += vals
     a3.set_ylabel("seconds")
     a3.legend(fontsize=7)
-    fig.suptitle(f"{report.scene['name']}, {report.link['channel']}, SNR {report.snr_db:g} dB")
+    fig.suptitle(f"{report.scene['name']}, {report.link.channel}, SNR {report.snr_db:g} dB")
     fig.tight_layout()
     out["schemes"] = _fig_png(fig)
     plt.close(fig)

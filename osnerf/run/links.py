@@ -17,6 +17,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import phy
+from osnerf.link_report import (
+    AirSnr,
+    FrameCounts,
+    LinkReport,
+    Motion,
+    Positions,
+    Radios,
+    Receiver,
+    Trace,
+)
 from osnerf.run.config import OTA, RunConfig
 
 if TYPE_CHECKING:  # annotations only
@@ -28,20 +38,20 @@ class RunLinks:
     """Attributes:
     links: view -> ``phy.Link``; snr_db: view -> the SNR its link runs at.
     outage: views without any propagation path (never sent).
-    info: what the report says about the channel.
+    report: what the report says about the channel (the frame counts come when it closes).
     ota: the over-the-air link (holds the radios, counts frames), else None.
     """
 
     links: dict[int, phy.Link]
     snr_db: dict[int, float]
+    report: LinkReport
     outage: set[int] = field(default_factory=set)
-    info: dict = field(default_factory=dict)
     ota: OtaLink | None = None
 
     def close(self) -> None:
         if self.ota is not None:
             measured = [float(v) for v in self.ota.snr_db_measured if v is not None]
-            self.info.update(
+            self.report.counts = FrameCounts(
                 frames_sent=int(self.ota.frames_sent),
                 frames_lost=int(self.ota.frames_lost),
                 snr_db_measured=round(float(np.mean(measured)), 3) if measured else None,
@@ -59,12 +69,11 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
         return _raytraced_links(cfg, views, idx)
     link = phy.channel_link(cfg.channel)
     if cfg.channel in phy.OFDM_CHANNELS:
-        info = {"channel": cfg.channel, "csi": "ls (pilots)", "ofdm": True}
+        receiver = Receiver(csi="ls (pilots)", ofdm=True)
     else:
-        info = {"channel": cfg.channel, "csi": "perfect"}
-    info["equalizer"] = "zf (unbiased) + per-symbol noise variance"
-    info["channel_params"] = phy.channel_record(link)
-    return RunLinks({i: link for i in idx}, snr, info=info)
+        receiver = Receiver(csi="perfect")
+    report = LinkReport(cfg.channel, receiver=receiver, channel_params=phy.channel_record(link))
+    return RunLinks({i: link for i in idx}, snr, report)
 
 
 def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
@@ -88,14 +97,16 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
         rx_serial=tx_args if rx_args is None else rx_args,
     )
     link = OtaLink(tx, rx, float(cfg.snr_db), ota_cfg, emu)
-    info = {
-        "channel": OTA,
-        "device": cfg.ota_device,
-        "frames": "phy OFDM frames, hil PAPR control, int8",
-        "sample_rate_hz": ota_cfg.sample_rate_hz,
-        "center_freq_hz": ota_cfg.center_freq_hz,
-        "symbols_per_frame": ota_cfg.symbols_per_frame,
-    }
+    radios = Radios(
+        device=cfg.ota_device,
+        frames="phy OFDM frames, hil PAPR control, int8",
+        sample_rate_hz=ota_cfg.sample_rate_hz,
+        center_freq_hz=ota_cfg.center_freq_hz,
+        symbols_per_frame=ota_cfg.symbols_per_frame,
+    )
+    report = LinkReport(OTA, radios=radios)
+    if emu is not None:
+        radios.ppm, radios.delay_s = list(DEFAULT_PPM), DEFAULT_DELAY_S
     if getattr(cfg, "ota_air", "fixed") == "raytraced":
         from osnerf.run.ota_air import raytraced_air_links
 
@@ -104,26 +115,21 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
         except BaseException:
             link.close()
             raise
-        if emu is not None:
-            info.update(ppm=list(DEFAULT_PPM), delay_s=DEFAULT_DELAY_S)
-        return RunLinks(links, snrs, outage, {**info, **air, "air_snr_db": float(cfg.snr_db)}, link)
+        report.traced_air, report.air = air, AirSnr(float(cfg.snr_db))
+        return RunLinks(links, snrs, report, outage, link)
     if emu is not None:
-        info.update(
-            ppm=list(DEFAULT_PPM),
-            multipath=[[d, str(g)] for d, g in DEFAULT_MULTIPATH],
-            delay_s=DEFAULT_DELAY_S,
-            air_snr_db=float(cfg.snr_db),
-        )
+        radios.multipath = [[d, str(g)] for d, g in DEFAULT_MULTIPATH]
+        report.air = AirSnr(float(cfg.snr_db))
     elif getattr(tx, "air_settable", False):  # an emulated Pluto: open_radios set its air
-        info.update(air_snr_db=float(cfg.snr_db))
+        report.air = AirSnr(float(cfg.snr_db))
     else:  # real boards: nobody sets the air; the codec assumes snr_db, the receiver measures
-        info.update(
+        report.air = AirSnr(
             air_snr_db=None,
             snr_db_assumed=float(cfg.snr_db),
             note="the air between real boards is not set: snr_db is the SNR the codec and "
             "the receiver assume, snr_db_measured the receiver's pilot estimate",
         )
-    return RunLinks({i: link for i in idx}, snr, info=info, ota=link)
+    return RunLinks({i: link for i in idx}, snr, report, ota=link)
 
 
 RAYTRACED_GRID = phy.ResourceGrid(fft_size=64, subcarrier_spacing_hz=30e3)
@@ -201,21 +207,24 @@ def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
         mover = None if ch.movers is None else ch.movers[k]
         links[i] = raytraced_link(cfg, ch.h[k], mover, estimator)
         snrs[i] = float(cfg.snr_db + gain[k] - ref)
-    info = {
-        "channel": "raytraced",
-        **_csi_info(cfg, ch.movers is not None),
-        "equalizer": "zf (unbiased) + per-symbol noise variance",
-        "path_gain_db": {i: float(g) for i, g in zip(idx, gain)},
-        "reference_path_gain_db": ref,
-        "outage_views": sorted(outage),
-        "num_subcarriers": int(ch.h.shape[1]),
-        "carrier_frequency_hz": fc,
-        "stats": ch.stats,
-        "ray_solver": ch.solver,
-        **_motion_info(cfg, meta, ch, idx),
-        **_position_info(cfg, meta, pos, idx),
-    }
-    return RunLinks(links, snrs, outage, info)
+    positions, params = _position_info(cfg, meta, pos, idx)
+    report = LinkReport(
+        "raytraced",
+        receiver=_csi_info(cfg, ch.movers is not None),
+        trace=Trace(
+            path_gain_db={i: float(g) for i, g in zip(idx, gain)},
+            reference_path_gain_db=ref,
+            outage_views=sorted(outage),
+            num_subcarriers=int(ch.h.shape[1]),
+            carrier_frequency_hz=fc,
+            stats=ch.stats,
+            ray_solver=ch.solver,
+        ),
+        motion=_motion_info(cfg, meta, ch, idx),
+        positions=positions,
+        channel_params=params,
+    )
+    return RunLinks(links, snrs, report, outage)
 
 
 def ground_station_warning(meta: dict, gs) -> str | None:
@@ -242,10 +251,12 @@ def ground_station_warning(meta: dict, gs) -> str | None:
     return None
 
 
-def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) -> dict:
+def _position_info(
+    cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]
+) -> tuple[Positions, dict]:
     """Where the radio ends were: the ground station (the scene's or ``--ground-station``),
-    the drones' ring and each view's drone; ``channel_params`` repeats the geometry that
-    fixes the ray-traced channel, so each sweep point records it."""
+    the drones' ring and each view's drone; and the channel's parameters, which repeat the
+    geometry that fixes the ray-traced channel, so each sweep point records it."""
     gs = np.asarray(meta["ground_station_m"], np.float64)
     dist = np.linalg.norm(pos - gs, axis=1)  # [num_views] metres
     ring = {
@@ -269,22 +280,22 @@ def _position_info(cfg: RunConfig, meta: dict, pos: np.ndarray, idx: list[int]) 
         import sys
 
         print(f"run: warning: {where}", file=sys.stderr)
-    return {
-        "ground_station_m": params["ground_station_m"],
-        "ground_station_from": params["ground_station_from"],
-        "ground_station_warning": where,
-        "drone_ring": ring,
-        "drone_positions_m": {i: [float(v) for v in p] for i, p in zip(idx, pos)},
-        "distance_to_ground_station_m": {i: float(d) for i, d in zip(idx, dist)},
-        "channel_params": params,
-    }
+    positions = Positions(
+        ground_station_m=params["ground_station_m"],
+        ground_station_from=params["ground_station_from"],
+        ground_station_warning=where,
+        drone_ring=ring,
+        drone_positions_m={i: [float(v) for v in p] for i, p in zip(idx, pos)},
+        distance_to_ground_station_m={i: float(d) for i, d in zip(idx, dist)},
+    )
+    return positions, params
 
 
-def _csi_info(cfg: RunConfig, moving: bool) -> dict:
+def _csi_info(cfg: RunConfig, moving: bool) -> Receiver:
     """What the report says about the ray-traced link's receiver: its CSI, and with
     estimates the grid, the pilot pattern and spacing, and the interpolation."""
     if cfg.csi in (None, "perfect"):
-        return {"csi": "perfect" if not moving else "perfect (h at each symbol's time)"}
+        return Receiver(csi="perfect" if not moving else "perfect (h at each symbol's time)")
     g = RAYTRACED_GRID
     t_sym = g.symbol_length / g.sample_rate_hz
     how = {
@@ -296,10 +307,10 @@ def _csi_info(cfg: RunConfig, moving: bool) -> dict:
         f"frequency then time, TDL-A covariance at {LMMSE_DELAY_SPREAD_S * 1e9:g} ns RMS "
         f"delay spread, Jakes time covariance at {cfg.drone_speed_m_s:g} m/s, slot by slot",
     }[cfg.csi]
-    return {
-        "csi": how,
-        "ofdm": True,
-        "grid": {
+    return Receiver(
+        csi=how,
+        ofdm=True,
+        grid={
             "fft_size": g.fft_size,
             "subcarrier_spacing_hz": g.subcarrier_spacing_hz,
             "cp_length": g.cp_length,
@@ -310,13 +321,13 @@ def _csi_info(cfg: RunConfig, moving: bool) -> dict:
             "max_pilot_spacing_s": float(np.diff(g.pilot_ofdm_symbols).max() * t_sym),
             "data_symbols_per_slot": g.num_data_symbols,
         },
-        "timing": "OFDM symbol l of a block is sent at l * ofdm_symbol_duration_s, the copies "
+        timing="OFDM symbol l of a block is sent at l * ofdm_symbol_duration_s, the copies "
         "of a block one after the other; air time in the report counts data symbols at "
         "symbol_rate_hz",
-    }
+    )
 
 
-def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:
+def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> Motion:
     """What the report says about the drones' motion: speed, Doppler, symbol timing."""
     from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
 
@@ -329,15 +340,15 @@ def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> dict:
     )
     spread = np.asarray(ch.stats["rms_doppler_spread_hz"], np.float64)
     live = ~np.asarray(ch.outage, bool)
-    return {
-        "drone_speed_m_s": float(cfg.drone_speed_m_s),
-        "max_doppler_hz": max_doppler_hz(cfg.drone_speed_m_s, meta["carrier_frequency_hz"]),
-        "rms_doppler_spread_hz": {i: float(s) for i, s, ok in zip(idx, spread, live) if ok},
-        "median_rms_doppler_spread_hz": float(np.median(spread[live])) if live.any() else None,
-        "motion": "drones fly level along their ring (counter-clockwise seen from above); "
+    return Motion(
+        drone_speed_m_s=float(cfg.drone_speed_m_s),
+        max_doppler_hz=max_doppler_hz(cfg.drone_speed_m_s, meta["carrier_frequency_hz"]),
+        rms_doppler_spread_hz={i: float(s) for i, s, ok in zip(idx, spread, live) if ok},
+        median_rms_doppler_spread_hz=float(np.median(spread[live])) if live.any() else None,
+        motion="drones fly level along their ring (counter-clockwise seen from above); "
         f"{when}; a view's copies are sent one after the other, so each later copy sees the "
         "channel further along the flight; each path's Doppler shift (sionna-rt) turns its "
         f"phase, re-traced every {RETRACE_WAVELENGTHS:g} wavelengths of flight"
         if cfg.drone_speed_m_s > 0
         else "drones at rest: one fixed response per position",
-    }
+    )

@@ -23,6 +23,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from osnerf.link_report import TracedAir
+
 if TYPE_CHECKING:  # annotations only
     from osnerf.ota_link import OtaLink
     from phy.raytrace import MovingTransmitter
@@ -89,7 +91,7 @@ def raytraced_air_links(cfg, views, idx: list[int], ota, device: str) -> tuple:
 
     Returns:
         (links: view -> link, snr_db: view -> its SNR, outage: views without any path,
-        info: what the report says about the air).
+        the report's section on the air).
     Raises:
         ValueError: ``ota``'s boards are real (their air is not ours to set).
     """
@@ -134,22 +136,21 @@ def raytraced_air_links(cfg, views, idx: list[int], ota, device: str) -> tuple:
         )
     fc = float(views.meta["carrier_frequency_hz"])
     spread = np.asarray(ch.stats["rms_doppler_spread_hz"], np.float64)[~ch.outage]
-    info = {
-        "ota_air": "raytraced",
-        "scene": cfg.scene,
-        "radio_scene": views.meta.get("radio_scene", "radio/scene.xml"),
-        "carrier_frequency_hz": fc,
-        "drone_speed_m_s": float(cfg.drone_speed_m_s),
-        "max_doppler_hz": max_doppler_hz(cfg.drone_speed_m_s, fc),
-        "median_rms_doppler_spread_hz": float(np.median(spread)) if spread.size else None,
-        "reference_path_gain_db": ref,
-        "outage_views": sorted(outage),
-        "air_views": per_view,
-        "ray_solver": ch.solver,
-        "air_note": "each view's emulated air is its drone's ray-traced paths (delay, gain, "
+    info = TracedAir(
+        scene=cfg.scene,
+        radio_scene=views.meta.get("radio_scene", "radio/scene.xml"),
+        carrier_frequency_hz=fc,
+        drone_speed_m_s=float(cfg.drone_speed_m_s),
+        max_doppler_hz=max_doppler_hz(cfg.drone_speed_m_s, fc),
+        median_rms_doppler_spread_hz=float(np.median(spread)) if spread.size else None,
+        reference_path_gain_db=ref,
+        outage_views=sorted(outage),
+        air_views=per_view,
+        ray_solver=ch.solver,
+        air_note="each view's emulated air is its drone's ray-traced paths (delay, gain, "
         "Doppler at the scene's carrier), gains over the median position's path gain, air "
         f"SNR {float(cfg.snr_db):g} dB there; re-traced every {RETRACE_WAVELENGTHS:g} "
         "wavelengths of flight within a burst (segments); every burst of a view starts at "
         "the drone's position",
-    }
+    )
     return links, snrs, outage, info

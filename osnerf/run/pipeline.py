@@ -256,7 +256,7 @@ def run_pipeline(
     report = Report(
         scene=scene_summary(cfg.scene, cfg.ground_station_m, folder, views, col),
         demand={"objects": list(prep.demand.objects), "weights": list(prep.demand.weights)},
-        link=links.info,
+        link=links.report,
         snr_db=cfg.snr_db,
         symbol_rate_hz=cfg.symbol_rate_hz,
         codec=(None if prep.codec is None else codec_summary(prep, cfg.codec, cfg.receiver_codec)),

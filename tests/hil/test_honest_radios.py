@@ -279,7 +279,7 @@ def test_radios_run_over_a_pluto_records_the_air_it_had(monkeypatch, settable, a
             links.links[0](x, 3.0)
         finally:
             links.close()
-    info = links.info
+    info = links.report.to_dict()
     assert info["air_snr_db"] == air and info["frames_lost"] == 0
     assert abs(info["snr_db_measured"] - (3.0 if settable else 12.0)) < 1.5
     assert ("note" in info) is (not settable)

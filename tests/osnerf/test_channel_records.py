@@ -26,11 +26,11 @@ def image_dir(tmp_path_factory, shared_data):
 @pytest.mark.parametrize("channel", ["tdl", "cdl", "tdla30-10"])
 def test_the_run_report_records_the_channel_and_its_spec_version(channel):
     links = build_links(RunConfig(channel=channel), None, [0, 1])
-    rec = links.info["channel_params"]
+    rec = links.report.to_dict()["channel_params"]
     assert rec["channel"] == channel and rec["spec_version"] == SPEC_VERSION
-    assert links.info["ofdm"] is True
+    assert links.report.to_dict()["ofdm"] is True
     flat = build_links(RunConfig(channel="rayleigh"), None, [0])
-    assert flat.info["channel_params"] == {"channel": "rayleigh"}
+    assert flat.report.to_dict()["channel_params"] == {"channel": "rayleigh"}
 
 
 def test_eval_codec_records_the_condition_it_ran_over(image_dir, tmp_path):

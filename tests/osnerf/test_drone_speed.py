@@ -31,7 +31,7 @@ def test_moving_drones_change_the_link_and_the_report_says_so(tiny_views):
     idx = tiny_views.indices("train")
     fc = float(tiny_views.meta["carrier_frequency_hz"])
     links = build_links(_cfg(15.0), tiny_views, idx)
-    info = links.info
+    info = links.report.to_dict()
     fd = 15.0 * fc / C
     assert info["drone_speed_m_s"] == 15.0 and info["max_doppler_hz"] == pytest.approx(fd)
     spreads = np.array(list(info["rms_doppler_spread_hz"].values()))
@@ -80,9 +80,11 @@ def test_at_rest_the_run_links_are_the_static_ones(tiny_views):
 
     idx = tiny_views.indices("train")
     links = build_links(_cfg(0.0), tiny_views, idx)
-    assert links.info["drone_speed_m_s"] == 0.0 and links.info["max_doppler_hz"] == 0.0
-    assert set(links.info["rms_doppler_spread_hz"].values()) == {0.0}
-    solver = links.info["ray_solver"]  # what makes the run's tracing repeatable is on record
+    motion, trace = links.report.motion, links.report.trace
+    assert motion is not None and trace is not None
+    assert motion.drone_speed_m_s == 0.0 and motion.max_doppler_hz == 0.0
+    assert set(motion.rms_doppler_spread_hz.values()) == {0.0}
+    solver = trace.ray_solver  # what makes the run's tracing repeatable is on record
     assert solver["deterministic"] is True and solver["seed"] == 42 and solver["max_depth"] == 2
     static = drone_channels(tiny_views.folder, tiny_views.meta, tiny_views.drone_positions_m[idx])
     x = torch.ones(1, 500, dtype=torch.complex64)
@@ -114,10 +116,11 @@ def test_speed_on_a_channel_without_drones_is_refused(tmp_path, capsys):
 
 
 def test_report_header_states_speed_and_doppler():
+    from osnerf.link_report import LinkReport, Motion
     from osnerf.report import motion_summary
 
-    link = {"drone_speed_m_s": 15.0, "max_doppler_hz": 175.12, "median_rms_doppler_spread_hz": 0.0}
-    text = motion_summary(link)
+    motion = Motion(15.0, 175.12, {0: 0.0}, 0.0, "drones fly")
+    text = motion_summary(LinkReport("raytraced", motion=motion))
     assert "drone speed 15 m/s" in text and "max Doppler 175.1 Hz" in text
     assert "RMS Doppler spread 0.0 Hz" in text
-    assert motion_summary({"channel": "awgn"}) == ""
+    assert motion_summary(LinkReport("awgn")) == ""

@@ -158,9 +158,10 @@ def test_the_tiny_scene_views_fly_over_their_traced_air(tmp_path_factory):
     links = build_links(cfg, views, idx)
     try:
         assert links.snr_db == pytest.approx(traced.snr_db)  # the same SNR convention
-        info = links.info
+        info = links.report.to_dict()
         assert info["ota_air"] == "raytraced" and info["scene"] == "tiny"
-        assert sorted(info["air_views"]) == idx and info["max_doppler_hz"] > 0
+        air_views = links.report.traced_air.air_views  # view -> what its air was
+        assert sorted(air_views) == idx and info["max_doppler_hz"] > 0
         v0 = idx[0]
         links.links[v0](_qpsk(torch.Generator().manual_seed(0), 1, 2000), links.snr_db[v0])
         paths = links.ota.emulator.medium.channel.path_segments[0].paths
@@ -171,7 +172,7 @@ def test_the_tiny_scene_views_fly_over_their_traced_air(tmp_path_factory):
         f_los = vel @ to_station / np.linalg.norm(to_station) * fc / C
         first = min(paths, key=lambda p: p.delay_s)
         assert first.doppler_hz == pytest.approx(f_los, rel=0.01)
-        assert info["air_views"][v0]["paths"] == len(paths)
+        assert air_views[v0]["paths"] == len(paths)
         assert links.ota.frames_lost == 0
         assert links.ota.snr_db_measured[0] == pytest.approx(links.snr_db[v0], abs=2.0)
     finally:

@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 from osnerf.cli import main
+from osnerf.link_report import LinkReport
 
 
 def _ber(out, *extra) -> int:
@@ -234,7 +235,7 @@ def _fake_report(psnr: float, views: bool):
     report = Report(
         scene={"name": "tiny"},
         demand={"objects": ["crate"]},
-        link={"channel": "awgn"},
+        link=LinkReport("awgn"),
         snr_db=10.0,
         symbol_rate_hz=1e6,
         codec=None,

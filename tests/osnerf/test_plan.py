@@ -4,6 +4,7 @@ view ids are ints everywhere but in JSON."""
 
 import json
 
+from osnerf.link_report import LinkReport
 from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan, ViewSend
 from osnerf.report import Report, SchemeReport, ViewsSummary
 
@@ -75,7 +76,7 @@ def test_report_views_have_int_keys_and_json_string_keys():
     report = Report(
         scene={"name": "tiny"},
         demand={"objects": ["crate"]},
-        link={"channel": "awgn"},
+        link=LinkReport("awgn"),
         snr_db=0.0,
         symbol_rate_hz=1e6,
         codec=None,

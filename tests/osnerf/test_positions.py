@@ -81,11 +81,13 @@ def test_two_ground_stations_give_different_channels_and_the_link_says_where(tin
     cfg = RunConfig(scene="tiny", channel="raytraced", ground_station_m=tuple(FAR))
     far = build_links(cfg, tiny_views, idx)
     for links, gs, source in ((own, [5.0, 3.0, 1.5], "scene"), (far, FAR, "--ground-station")):
-        info = links.info
+        info = links.report.to_dict()
         assert info["ground_station_m"] == gs and info["ground_station_from"] == source
         dist = np.linalg.norm(pos - np.asarray(gs), axis=1)
         np.testing.assert_allclose(list(info["distance_to_ground_station_m"].values()), dist)
-        assert info["drone_positions_m"] == {int(i): list(p) for i, p in zip(idx, pos)}
+        at = links.report.positions
+        assert at is not None
+        assert at.drone_positions_m == {int(i): list(p) for i, p in zip(idx, pos)}
         assert info["drone_ring"]["radius_m"] == pytest.approx(
             tiny_views.meta["trajectory_radius_m"]
         )
@@ -96,13 +98,13 @@ def test_two_ground_stations_give_different_channels_and_the_link_says_where(tin
     # strongest (power G K / (1 + K) of the traced paths), has Friis's gain at its new distance
     lam = C / float(tiny_views.meta["carrier_frequency_hz"])
     for links in (own, far):
-        st = links.info["stats"]
+        st = links.report.to_dict()["stats"]
         k = 10 ** (np.array(st["k_factor_db"]) / 10)
         assert all(st["los"]) and max(st["num_paths"]) >= 2
         direct_db = np.array(st["path_gain_db"]) - 10 * np.log10(1 + 1 / k)
-        dist = np.array(list(links.info["distance_to_ground_station_m"].values()))
+        dist = np.array(list(links.report.to_dict()["distance_to_ground_station_m"].values()))
         np.testing.assert_allclose(direct_db, 20 * np.log10(lam / (4 * np.pi * dist)), atol=0.05)
-    gains = [np.array(list(x.info["path_gain_db"].values())) for x in (own, far)]
+    gains = [np.array(list(x.report.to_dict()["path_gain_db"].values())) for x in (own, far)]
     assert np.abs(gains[0] - gains[1]).min() > 0.5  # every view's link moved
     for links, gain in zip((own, far), gains):  # each view's SNR follows its own gain
         snr = np.array([links.snr_db[int(i)] for i in idx])
@@ -199,7 +201,7 @@ def test_radiomap_draws_the_map_of_a_moved_ground_station(tmp_path, tiny_views):
     cand = np.array([c["position_m"] for c in doc["candidates"]])
     np.testing.assert_allclose(cand, tiny_views.drone_positions_m[idx], atol=1e-6)
     cfg = RunConfig(scene="tiny", channel="raytraced", ground_station_m=tuple(FAR))
-    run_gain = list(build_links(cfg, tiny_views, idx).info["path_gain_db"].values())
+    run_gain = list(build_links(cfg, tiny_views, idx).report.to_dict()["path_gain_db"].values())
     traced = [c["traced_path_gain_db"] for c in doc["candidates"]]
     np.testing.assert_allclose(traced, run_gain, atol=0.01)
 

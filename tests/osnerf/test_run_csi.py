@@ -52,11 +52,11 @@ def _cfg(csi, speed: float = 0.0) -> RunConfig:
 def test_ls_at_rest_matches_perfect_csi_within_the_estimation_noise(tiny_views):
     idx = tiny_views.indices("train")
     links = build_links(_cfg("ls"), tiny_views, idx)
-    grid = links.info["grid"]  # the pilot pattern and its spacing in time are on record
+    grid = links.report.to_dict()["grid"]  # the pilot pattern and its spacing in time are on record
     t_sym = 80 / (64 * 30e3)
     assert grid["pilot_ofdm_symbols"] == [2, 11] and grid["pilot_subcarrier_spacing"] == 1
     assert grid["max_pilot_spacing_s"] == pytest.approx(9 * t_sym)
-    assert "linear interpolation" in links.info["csi"]
+    assert "linear interpolation" in links.report.to_dict()["csi"]
     x = phy.qpsk_pilots(1, 4 * RAYTRACED_GRID.num_data_symbols, torch.Generator().manual_seed(0))
     snr_db, nv = 20.0, 10 ** (-20.0 / 10)
     ratios = []
