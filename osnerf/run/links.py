@@ -96,7 +96,7 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
         "center_freq_hz": ota_cfg.center_freq_hz,
         "symbols_per_frame": ota_cfg.symbols_per_frame,
     }
-    if getattr(cfg, "ota_air", "fixed") == "raytraced":
+    if cfg.ota_air == "raytraced":
         from osnerf.run.ota_air import raytraced_air_links
 
         try:
@@ -114,7 +114,7 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
             delay_s=DEFAULT_DELAY_S,
             air_snr_db=float(cfg.snr_db),
         )
-    elif getattr(tx, "air_settable", False):  # an emulated Pluto: open_radios set its air
+    elif tx.air_settable:  # an emulated Pluto: open_radios set its air
         info.update(air_snr_db=float(cfg.snr_db))
     else:  # real boards: nobody sets the air; the codec assumes snr_db, the receiver measures
         info.update(
