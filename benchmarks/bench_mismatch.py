@@ -1,6 +1,7 @@
 """When the transmitter's SNR is wrong: every scheme planned from a belief, judged at the truth.
 
-All on Kodak (``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24), CBR 1/16, through
+All on Kodak (the first ``OSNERF_BENCH_MISMATCH_IMAGES``, default all 24, or per part, e.g.
+``24,estimate:6,cbr:4``), CBR 1/16, through
 ``osnerf eval-codec``:
 
 * ``panel``: AWGN, every transmitter planned at :data:`PLAN_SNR_DB` (``--plan-snr-db``),
@@ -239,27 +240,40 @@ def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
     return [f"mismatch/{name}.png" for name, _ in figs]
 
 
+def _image_counts(text: str) -> dict[str, int]:
+    """Part -> Kodak images from ``OSNERF_BENCH_MISMATCH_IMAGES`` (``N`` for every part, or
+    ``N,part:M,...``)."""
+    counts = dict.fromkeys(PARTS, 24)
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        part, _, value = item.rpartition(":")
+        if part and part not in PARTS:
+            raise ValueError(f"OSNERF_BENCH_MISMATCH_IMAGES: unknown part {part!r}; known: {PARTS}")
+        if not value.isdigit() or not 1 <= int(value) <= 24:
+            raise ValueError(f"OSNERF_BENCH_MISMATCH_IMAGES: {item!r} is not a count in 1..24")
+        counts.update({part: int(value)} if part else dict.fromkeys(PARTS, int(value)))
+    return counts
+
+
 def run(out_dir: Path) -> dict:
     torch.set_num_threads(1)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    n = int(os.environ.get("OSNERF_BENCH_MISMATCH_IMAGES", "24"))
+    counts = _image_counts(os.environ.get("OSNERF_BENCH_MISMATCH_IMAGES", "24"))
     parts = [p for p in os.environ.get("OSNERF_BENCH_MISMATCH_PARTS", ",".join(PARTS)).split(",")]
-    base = _common(n)
-    result: dict = {"images": n, "cbr": "1/16", "plan_snr_db": PLAN_SNR_DB}
+    result: dict = {"images": counts, "cbr": "1/16", "plan_snr_db": PLAN_SNR_DB}
     panel: list[dict] = []
     staircase: list[dict] = []
     docs: dict[str, dict] = {}
     if "panel" in parts:
-        argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
+        argv = _common(counts["panel"]) + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
         argv += ["--plan-snr-db", f"{PLAN_SNR_DB:g}", "--schemes", PANEL_SCHEMES]
         docs["panel"] = _eval(out_dir, "panel", argv)
         panel = [_row(r) for r in docs["panel"]["results"]]
         result["panel"] = panel
     if "staircase" in parts:
         for mcs in STAIRCASE_MCS:
-            argv = base + ["--channel", "awgn", "--snr-db", _snrs(PANEL_SNRS)]
-            argv += ["--schemes", "digital_fixed", "--mcs", mcs]
+            argv = _common(counts["staircase"]) + ["--channel", "awgn"]
+            argv += ["--snr-db", _snrs(PANEL_SNRS), "--schemes", "digital_fixed", "--mcs", mcs]
             tag = "staircase_" + mcs.replace("/", "_")
             docs[tag] = _eval(out_dir, tag, argv)
             staircase += [_row(r) for r in docs[tag]["results"]]
@@ -272,7 +286,8 @@ def run(out_dir: Path) -> dict:
             if channel == "rayleigh" and os.environ.get("OSNERF_BENCH_MISMATCH_RAYLEIGH_EXACT"):
                 errors = (SNR_ERROR_DB, 0.0)
             for err in errors:
-                argv = base + ["--channel", channel, "--snr-db", _snrs(ESTIMATE_SNRS)]
+                argv = _common(counts["estimate"]) + ["--channel", channel]
+                argv += ["--snr-db", _snrs(ESTIMATE_SNRS)]
                 argv += ["--draws", str(draws), "--schemes", ESTIMATE_SCHEMES]
                 argv += ["--snr-error-db", f"{err:g}"]
                 tag = f"estimate_{channel}_err{err:g}"
@@ -280,7 +295,8 @@ def run(out_dir: Path) -> dict:
                 rows += [{"channel": channel, **_row(r)} for r in docs[tag]["results"]]
         result["estimate"] = rows
     if "forecast" in parts:
-        argv = base + ["--channel", "awgn", "--snr-db", _snrs(FORECAST_SNRS)]
+        argv = _common(counts["forecast"]) + ["--channel", "awgn"]
+        argv += ["--snr-db", _snrs(FORECAST_SNRS)]
         argv += ["--schemes", "digital"]
         doc = _eval(out_dir, "forecast", argv)
         rows = [
@@ -305,7 +321,12 @@ def run(out_dir: Path) -> dict:
     if "cbr" in parts:
         rows = []
         for cbr in CBRS:
-            argv = _common(n, cbr) + ["--channel", "awgn", "--snr-db", f"{CBR_SNR_DB:g}"]
+            argv = _common(counts["cbr"], cbr) + [
+                "--channel",
+                "awgn",
+                "--snr-db",
+                f"{CBR_SNR_DB:g}",
+            ]
             tag = "cbr_" + cbr.replace("/", "_")
             docs[tag] = _eval(out_dir, tag, argv + ["--schemes", CBR_SCHEMES])
             rows += [{"cbr": cbr, **_row(r)} for r in docs[tag]["results"]]
