@@ -236,6 +236,24 @@ def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
     return [f"mismatch/{name}.png" for name, _ in figs]
 
 
+def _estimate(out_dir: Path, n: int, docs: dict[str, dict]) -> list[dict]:
+    """Each scheme under a Gaussian error on each image's SNR estimate (and exact knowledge
+    beside it where :data:`ESTIMATE_ERRORS` says), on the first ``n`` Kodak images."""
+    rows = []
+    for channel, draws in (("awgn", 1), ("rayleigh", RAYLEIGH_DRAWS)):
+        errors = ESTIMATE_ERRORS[channel]
+        if channel == "rayleigh" and os.environ.get("OSNERF_BENCH_MISMATCH_RAYLEIGH_EXACT"):
+            errors = (SNR_ERROR_DB, 0.0)
+        for err in errors:
+            argv = _common(n) + ["--channel", channel, "--snr-db", _snrs(ESTIMATE_SNRS)]
+            argv += ["--draws", str(draws), "--schemes", ESTIMATE_SCHEMES]
+            argv += ["--snr-error-db", f"{err:g}"]
+            tag = f"estimate_{channel}_err{err:g}"
+            docs[tag] = _eval(out_dir, tag, argv)
+            rows += [{"channel": channel, **_row(r)} for r in docs[tag]["results"]]
+    return rows
+
+
 def _image_counts(text: str) -> dict[str, int]:
     """Part -> Kodak images from ``OSNERF_BENCH_MISMATCH_IMAGES`` (``N`` for every part, or
     ``N,part:M,...``)."""
@@ -276,20 +294,7 @@ def run(out_dir: Path) -> dict:
         result["staircase"] = staircase
     result["findings"] = _findings(panel, staircase)
     if "estimate" in parts:
-        rows = []
-        for channel, draws in (("awgn", 1), ("rayleigh", RAYLEIGH_DRAWS)):
-            errors = ESTIMATE_ERRORS[channel]
-            if channel == "rayleigh" and os.environ.get("OSNERF_BENCH_MISMATCH_RAYLEIGH_EXACT"):
-                errors = (SNR_ERROR_DB, 0.0)
-            for err in errors:
-                argv = _common(counts["estimate"]) + ["--channel", channel]
-                argv += ["--snr-db", _snrs(ESTIMATE_SNRS)]
-                argv += ["--draws", str(draws), "--schemes", ESTIMATE_SCHEMES]
-                argv += ["--snr-error-db", f"{err:g}"]
-                tag = f"estimate_{channel}_err{err:g}"
-                docs[tag] = _eval(out_dir, tag, argv)
-                rows += [{"channel": channel, **_row(r)} for r in docs[tag]["results"]]
-        result["estimate"] = rows
+        result["estimate"] = _estimate(out_dir, counts["estimate"], docs)
     if "forecast" in parts:
         argv = _common(counts["forecast"]) + ["--channel", "awgn"]
         argv += ["--snr-db", _snrs(FORECAST_SNRS)]
