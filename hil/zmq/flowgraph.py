@@ -20,7 +20,6 @@ import time
 from pathlib import Path
 
 from hil.errors import DeviceNotFoundError, HilError
-from hil.ota.config import OtaConfig
 
 FLOWGRAPHS = Path(__file__).resolve().parents[2] / "gnuradio"
 GNURADIO_PYTHON = "/usr/bin/python3"
@@ -74,7 +73,8 @@ def noise_voltage(snr_db: float, signal_power_dbfs: float, occupied_fraction: fl
 def ota_noise_voltage(snr_db: float, cfg=None) -> float:
     """The noise voltage that puts ``osnerf ota``'s frames (``hil.OtaConfig``'s mean power,
     ``phy``'s OFDM: used carriers of the FFT) at ``snr_db`` per symbol."""
-    import phy  # loads torch, which import hil does not
+    import phy
+    from hil.ota.config import OtaConfig
 
     cfg = cfg or OtaConfig()
     fc = phy.FrameConfig()

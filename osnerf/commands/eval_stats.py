@@ -8,10 +8,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common import ms_ssim, psnr
-from renderer import lpips
-from semcodec.links import ssim
-
 ESTIMATE_STREAM = 0x5E57
 """Tag of the SNR-estimate error's random stream (apart from every channel draw)."""
 
@@ -116,6 +112,10 @@ class DrawTally:
 
     def add(self, res, img) -> float:
         """Tally one draw's received images ``res`` against ``img``; returns its PSNR."""
+        from common import ms_ssim, psnr
+        from renderer import lpips
+        from semcodec.links import ssim
+
         value = psnr(res.images, img)
         self.ssim.append(ssim(res.images, img))
         self.ms_ssim.append(ms_ssim(res.images, img))

@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-import phy
 from osnerf.scenes.cameras import MITSUBA_FROM_GL, Intrinsics, pixel_rays
 from osnerf.scenes.geometry import write_ply
 from osnerf.scenes.mitsuba_env import RGB_VARIANT
@@ -57,7 +56,9 @@ class MitsubaRenderer:
     def __init__(
         self, geometry: SceneGeometry, mesh_paths: dict[str, Path], intr: Intrinsics, spp: int = 32
     ):
-        phy.require_llvm()  # points Dr.Jit at a usable LLVM before mitsuba loads
+        import phy  # noqa: F401 - points Dr.Jit at a usable LLVM before mitsuba loads
+
+        phy.require_llvm()
         import mitsuba as mi
 
         if (
