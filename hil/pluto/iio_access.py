@@ -3,6 +3,7 @@ errors onto :class:`hil.HilError`."""
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import os
 
@@ -109,7 +110,58 @@ def import_iio():
         raise DeviceNotFoundError(
             "libiio is not available: install libiio0 (Debian) and pip install pylibiio==0.25"
         ) from e
+    _order_teardown(iio)
     return iio
+
+
+def _address(pointer) -> int:
+    return ctypes.cast(pointer, ctypes.c_void_p).value or 0
+
+
+def _order_teardown(iio) -> None:
+    """Make pylibiio destroy every buffer before its context, whatever order the garbage
+    collector finalises them in.
+
+    An ``iio.Buffer`` holds its context, so reference counting frees it first; but when both
+    are in a reference cycle (pyadi-iio's devices, an exception's frames), the collector calls
+    their ``__del__`` in any order, and a buffer destroyed after its context is a use after
+    free in libiio. Each context here remembers its live buffers (as addresses, holding no
+    Python object) and destroys them before itself; a buffer already destroyed that way skips
+    its own destroy."""
+    if getattr(iio, "_osnerf_ordered_teardown", False):
+        return
+    live: dict[int, set[int]] = {}
+    buffer_init, buffer_del, context_del = (
+        iio.Buffer.__init__,
+        iio.Buffer.__del__,
+        iio.Context.__del__,
+    )
+
+    def init(self, device, *args, **kwargs):
+        self._owner = 0
+        buffer_init(self, device, *args, **kwargs)
+        self._owner = _address(device._ctx._context)
+        live.setdefault(self._owner, set()).add(_address(self._buffer))
+
+    def destroy_buffer(self):
+        pointer = self.__dict__.get("_buffer")
+        owned = live.get(self.__dict__.get("_owner", 0), set())
+        if pointer is not None and _address(pointer) not in owned:
+            self._buffer = None  # its context destroyed it already
+            return
+        owned.discard(_address(pointer) if pointer is not None else 0)
+        buffer_del(self)
+
+    def destroy_context(self):
+        pointer = self.__dict__.get("_context")
+        if pointer is not None:
+            for address in live.pop(_address(pointer), set()):
+                iio._buffer_destroy(ctypes.cast(address, iio._BufferPtr))
+        context_del(self)
+
+    iio.Buffer.__init__, iio.Buffer.__del__ = init, destroy_buffer
+    iio.Context.__del__ = destroy_context
+    iio._osnerf_ordered_teardown = True
 
 
 def release_frames(exc: BaseException) -> None:
