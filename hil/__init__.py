@@ -12,7 +12,7 @@ May import ``common`` and ``phy`` only. Subpackages (each re-exports its public 
 The names a user needs are here at the top::
 
     DEVICES, DeviceKind           the one table of front ends
-    Radio                         what the over-the-air path uses of a front end (a Protocol)
+    Radio, StreamingRadio         what the over-the-air path uses of a front end (Protocols)
     HackRF, find_hackrfs, Pluto, find_plutos, SoapyRadio, ZmqRadio
     open_loopback, loopback_pair  the HackRF driver talking straight to emulated boards
     Emulator, EmulatorProcess, EmulatedPluto, IiodServer, AirChannel, Medium
@@ -57,7 +57,7 @@ from hil.ota import (
     stream_over_the_air,
 )
 from hil.pluto import Pluto, find_plutos
-from hil.radio import Radio
+from hil.radio import Radio, StreamingRadio
 from hil.sigmf_io import Annotation, Recording, SigmfReplay, read_sigmf, write_sigmf
 from hil.soapy import SoapyRadio
 from hil.zmq import ZmqRadio
@@ -87,6 +87,7 @@ __all__ = [
     "StallError",
     "StreamError",
     "StreamRun",
+    "StreamingRadio",
     "TimedOutError",
     "UsbTimeoutError",
     "ZmqRadio",

@@ -115,7 +115,7 @@ def open_radios(
             f"TX and RX are equal, got {ppm[0]:g},{ppm[1]:g}"
         )
     tx, rx = HARDWARE[device].open_pair(tx_serial, rx_serial)
-    if snr_db is not None and getattr(tx, "air_settable", False) and rx is tx:
+    if snr_db is not None and tx.air_settable and rx is tx:
         try:
             tx.set_air(
                 air_channel(device, snr_db, ota_cfg, delay_s, multipath), ppm=ppm[0], seed=seed
@@ -175,7 +175,7 @@ class OtaLink:
     @property
     def air_settable(self) -> bool:
         """Whether the air is ours to set: emulated HackRFs, or an emulated Pluto."""
-        return self.emulator is not None or bool(getattr(self.tx, "air_settable", False))
+        return self.emulator is not None or self.tx.air_settable
 
     def set_air(self, channel, seed: int) -> None:
         """The emulated air from now on: ``channel`` (a ``hil.AirChannel``) and the noise

@@ -23,6 +23,7 @@ import select
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from multiprocessing.connection import Client, Connection, Listener
 from pathlib import Path
 
@@ -30,15 +31,25 @@ import usb.core
 
 from common import tune_malloc
 from hil.emulation.air import AirChannel
-from hil.emulation.hackrf import RadioSpec
+from hil.emulation.hackrf import EmulatedHackRF, RadioSpec
 from hil.emulation.usb_backend import Emulator, EmulatorBackend
 
 START_TIMEOUT_S = 60.0  # the child imports numpy and compiles the resampler once
 _ERRORS = {"USBTimeoutError": usb.core.USBTimeoutError, "USBError": usb.core.USBError}
+CALLS: dict[str, Callable[..., object]] = {
+    "control": EmulatedHackRF.control,
+    "bulk_read": EmulatedHackRF.bulk_read,
+    "bulk_write": EmulatedHackRF.bulk_write,
+    "overrun_samples": lambda radio: radio.overrun_samples,
+    "underrun_samples": lambda radio: radio.underrun_samples,
+    "rx_late_max_s": lambda radio: radio.rx_late_max_s,
+}
+"""What the host may ask of a board in the child: ``name -> (board, *args) -> reply``."""
 
 
 def serve_connection(conn: Connection, emu: Emulator) -> None:
-    """Answer one host thread's calls ``(method, board, args)`` until it hangs up."""
+    """Answer one host thread's calls ``(method, board, args)`` (:data:`CALLS`) until it
+    hangs up."""
     with conn:
         while True:
             try:
@@ -48,10 +59,7 @@ def serve_connection(conn: Connection, emu: Emulator) -> None:
             radio = emu.radios[index]
             reply: tuple
             try:
-                if method == "get":
-                    reply = ("ok", getattr(radio, args[0]))
-                else:
-                    reply = ("ok", getattr(radio, method)(*args))
+                reply = ("ok", CALLS[method](radio, *args))
             except usb.core.USBError as e:
                 reply = ("usb", type(e).__name__, e.strerror, e.backend_error_code, e.errno)
             except Exception as e:  # noqa: BLE001 - re-raised in the host's thread
@@ -117,17 +125,17 @@ class _RemoteRadio:
     @property
     def overrun_samples(self) -> int:
         """Samples this board lost to overruns (the child's count)."""
-        return self.owner.call("get", self.index, "overrun_samples")
+        return self.owner.call("overrun_samples", self.index)
 
     @property
     def underrun_samples(self) -> int:
         """Silence this board sent when the host wrote late (the child's count)."""
-        return self.owner.call("get", self.index, "underrun_samples")
+        return self.owner.call("underrun_samples", self.index)
 
     @property
     def rx_late_max_s(self) -> float:
         """The most a receive transfer came out later than a real board's (the child's)."""
-        return self.owner.call("get", self.index, "rx_late_max_s")
+        return self.owner.call("rx_late_max_s", self.index)
 
 
 class EmulatorProcess:
@@ -187,7 +195,7 @@ class EmulatorProcess:
             _RemoteRadio(self, RadioSpec(s, ppm=float(x)), i)
             for i, (s, x) in enumerate(zip(serials, ppm))
         ]
-        self.backend = EmulatorBackend(self.radios)  # type: ignore[arg-type]  # the same face
+        self.backend = EmulatorBackend(self.radios)
 
     @property
     def serials(self) -> list[str]:

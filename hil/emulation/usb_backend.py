@@ -13,6 +13,8 @@ real hardware::
 from __future__ import annotations
 
 import errno
+from collections.abc import Sequence
+from typing import Protocol
 
 import usb.backend
 import usb.core
@@ -30,10 +32,32 @@ class _Desc:
         self.__dict__.update(fields)
 
 
+class UsbBoard(Protocol):
+    """A board as :class:`EmulatorBackend` serves it: an :class:`EmulatedHackRF`, or the
+    stand-in for one that runs in a process of its own (:class:`hil.EmulatorProcess`)."""
+
+    spec: RadioSpec
+    index: int
+    unplugged: bool
+    configuration: int
+    claimed: bool
+
+    @property
+    def serial(self) -> str: ...
+
+    def control(self, request_type: int, request: int, value: int, index: int, data_or_length):
+        """A control request: the bytes read, or the count written."""
+        ...
+
+    def bulk_read(self, num_bytes: int) -> bytes: ...
+
+    def bulk_write(self, data: bytes) -> int: ...
+
+
 class EmulatorBackend(usb.backend.IBackend):
     """pyusb backend serving emulated HackRFs (pass as ``backend=`` to ``usb.core.find``)."""
 
-    def __init__(self, radios: list[EmulatedHackRF]):
+    def __init__(self, radios: Sequence[UsbBoard]):
         super().__init__()
         self.radios = list(radios)
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Iterator
+from collections.abc import Generator
 
 import numpy as np
 
@@ -45,7 +45,15 @@ class HackRF(HackRFSettings):
     Quantisation: ``lna_gain_db`` rounds down to 8 dB steps (0-40), ``vga_gain_db`` to
     2 dB (0-62), ``txvga_gain_db`` to 1 dB (0-47); ``baseband_filter_hz`` to the largest
     allowed filter <= the value (1.75-28 MHz); ``center_freq_hz`` to 1 Hz.
+
+    As a :class:`hil.StreamingRadio`: a transfer starts at once (``tx_start_latency_s`` 0);
+    the air is never the board's to set (an emulated HackRF's is its :class:`hil.Emulator`'s
+    medium: ``air_settable`` False); overruns are the M0's count in ``last_stats``
+    (``emulated_rx_loss`` None).
     """
+
+    tx_start_latency_s = 0.0  # USB streams from the first transfer
+    emulated_rx_loss: tuple[int, int, int] | None = None  # a HackRF's overruns are the M0's
 
     def __init__(
         self,
@@ -195,6 +203,19 @@ class HackRF(HackRFSettings):
             f"bias_tee_enabled={self._bias_tee_enabled})"
         )
 
+    @property
+    def air_settable(self) -> bool:
+        """False: a HackRF's air is not the board's (emulated boards share a
+        :class:`hil.Emulator`'s medium, which the host sets)."""
+        return False
+
+    def set_air(self, channel, *, ppm: float = 0.0, seed: int = 0) -> None:
+        """``HilError``: a HackRF takes no emulated air of its own."""
+        raise HilError(
+            f"HackRF {self.serial_number}: its air is not the host's to set (emulated "
+            "HackRFs take theirs from their hil.Emulator's medium)"
+        )
+
     # ------------------------------------------------------------------ receive
     @property
     def receiving(self) -> bool:
@@ -328,7 +349,12 @@ class HackRF(HackRFSettings):
             self._save(raw, save_to)
         return from_int8_iq(raw)[None, :]
 
-    def stream(self, chunk_samples: int = 131072) -> Iterator[np.ndarray]:
+    @property
+    def rx_transfer_samples(self) -> int:
+        """Samples of one USB transfer of a receive stream (what the driver may still hold)."""
+        return self.rx_chunk_bytes // 2
+
+    def stream(self, chunk_samples: int = 131072) -> Generator[np.ndarray, None, None]:
         """Yield ``[1, chunk_samples] complex64`` blocks until the generator is closed."""
         self.start_rx()
         try:

@@ -4,10 +4,13 @@ name; setters validate, send the request and keep the value the firmware actuall
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hil.errors import HilError, RequestFailedError, usb_error_to_hil
 from hil.hackrf import protocol as p
+
+if TYPE_CHECKING:
+    from hil.ota.config import OtaConfig
 
 
 class HackRFSettings:
@@ -161,3 +164,11 @@ class HackRFSettings:
         req = p.set_txvga_gain(value)
         self._gain_request(req, "set TX VGA gain")
         self._txvga_gain_db = req.index
+
+    def apply_ota_config(self, cfg: OtaConfig) -> None:
+        """Set rate, frequency and the three gains from a ``hil.OtaConfig``."""
+        self.sample_rate_hz = cfg.sample_rate_hz
+        self.center_freq_hz = cfg.center_freq_hz
+        self.lna_gain_db = cfg.lna_gain_db
+        self.vga_gain_db = cfg.vga_gain_db
+        self.txvga_gain_db = cfg.txvga_gain_db

@@ -24,29 +24,14 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import cast
 
 import numpy as np
 
 from hil.errors import HilError
-from hil.hackrf.settings import HackRFSettings
 from hil.ota.burst import BurstResult, PhyFrames, build_burst
 from hil.ota.config import OtaConfig
 from hil.ota.receiver import receive_burst
 from hil.radio import Radio
-
-
-def _configure(dev: Radio, cfg: OtaConfig) -> None:
-    """Set ``cfg``'s tuning and gains on ``dev`` with the front end's own knobs."""
-    if hasattr(dev, "apply_ota_config"):  # a front end with its own knobs (Pluto)
-        dev.apply_ota_config(cfg)
-        return
-    hackrf = cast(HackRFSettings, dev)  # otherwise a HackRF: one property per knob
-    hackrf.sample_rate_hz = cfg.sample_rate_hz
-    hackrf.center_freq_hz = cfg.center_freq_hz
-    hackrf.lna_gain_db = cfg.lna_gain_db
-    hackrf.vga_gain_db = cfg.vga_gain_db
-    hackrf.txvga_gain_db = cfg.txvga_gain_db
 
 
 def transmit_and_capture(
@@ -78,7 +63,7 @@ def transmit_and_capture(
     thread = threading.Thread(target=receive, name="ota-rx", daemon=True)
     thread.start()
     deadline = time.monotonic() + 5.0  # real radios: let the receiver stream before TX starts
-    while not getattr(rx, "receiving", True) and thread.is_alive() and time.monotonic() < deadline:
+    while not rx.receiving and thread.is_alive() and time.monotonic() < deadline:
         time.sleep(0.001)
     time.sleep(lead_s)
     try:
@@ -154,11 +139,10 @@ def send_blocks(
     cfg = cfg or OtaConfig()
     frames = frames or _default_frames(cfg)
     for dev in (tx, rx) if rx is not tx else (tx,):
-        _configure(dev, cfg)
+        dev.apply_ota_config(cfg)  # each front end's own knobs
     burst, reports, layout = build_burst(blocks, cfg, frames)
     # a front end that needs time to start transmitting (a Pluto's buffer set-up) captures longer
-    late_s = float(getattr(tx, "tx_start_latency_s", 0.0))
-    lead = int((cfg.rx_lead_s + late_s) * cfg.sample_rate_hz)
+    lead = int((cfg.rx_lead_s + tx.tx_start_latency_s) * cfg.sample_rate_hz)
     capture = transmit_and_capture(
         tx,
         rx,

@@ -21,8 +21,7 @@ import numpy as np
 
 from hil.errors import HilError
 from hil.ota.config import OtaConfig
-from hil.ota.link import _configure, _default_frames
-from hil.ota.radio_stream import rx_blocks, transfer_samples
+from hil.ota.link import _default_frames
 from hil.ota.stream import (
     RingBuffer,
     StreamCounts,
@@ -30,6 +29,7 @@ from hil.ota.stream import (
     StreamView,
     stream_block_samples,
 )
+from hil.radio import Radio, StreamingRadio
 
 
 @dataclass
@@ -95,9 +95,13 @@ class StreamRun:
         return out
 
 
-def _produce(rx, ring: RingBuffer, block_samples: int, stop: threading.Event, out: dict) -> None:
-    """The receiver's producer thread: the driver's blocks into the ring until ``stop``."""
-    blocks = rx_blocks(rx, block_samples)
+def _produce(
+    rx: StreamingRadio, ring: RingBuffer, block_samples: int, stop: threading.Event, out: dict
+) -> None:
+    """The receiver's producer thread: the driver's blocks into the ring until ``stop``
+    (a HackRF's blocks are ``block_samples`` long; a Pluto's are its receive buffers, at
+    least ``rx.rx_transfer_samples``: a late reader has four of them to catch up in)."""
+    blocks = rx.stream(block_samples)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -116,7 +120,7 @@ def _produce(rx, ring: RingBuffer, block_samples: int, stop: threading.Event, ou
 
 
 def _transmit(
-    tx, views: list, interval_s: float, start: float, out: dict, stop: threading.Event
+    tx: Radio, views: list, interval_s: float, start: float, out: dict, stop: threading.Event
 ) -> None:
     """The transmitter's thread: view ``v`` at ``start + v * interval_s`` (or as soon as
     the previous one is out); no view goes out once ``stop`` is set."""
@@ -132,8 +136,8 @@ def _transmit(
 
 
 def stream_over_the_air(
-    tx,
-    rx,
+    tx: Radio,
+    rx: StreamingRadio,
     views: list[StreamView],
     cfg: OtaConfig,
     on_view,
@@ -167,7 +171,7 @@ def stream_over_the_air(
     block = stream_block_samples(cfg)
     _check_ring(ring_s, views, cfg, block)
     for dev in (tx, rx) if rx is not tx else (tx,):
-        _configure(dev, cfg)
+        dev.apply_ota_config(cfg)  # each front end's own knobs
     ring = RingBuffer(max(int(ring_s * fs), 1))
     receiver = StreamReceiver(ring, views, cfg, frames, on_view, block_samples=block)
     receiver.warm_up()  # the first frame costs no more than the others
@@ -220,7 +224,9 @@ def _check_ring(ring_s: float, views: list[StreamView], cfg: OtaConfig, block: i
         )
 
 
-def _start_producer(rx, ring: RingBuffer, block: int, stop: threading.Event, out: dict):
+def _start_producer(
+    rx: StreamingRadio, ring: RingBuffer, block: int, stop: threading.Event, out: dict
+):
     """The receiver's thread, started; returns once ``rx`` streams (or the thread ended, or
     after 5 s), before the first view goes out."""
     producer = threading.Thread(
@@ -233,13 +239,15 @@ def _start_producer(rx, ring: RingBuffer, block: int, stop: threading.Event, out
     return producer
 
 
-def _stop_after_last_view(sender, views, cfg: OtaConfig, rx, block: int, receiver, stop) -> None:
+def _stop_after_last_view(
+    sender, views, cfg: OtaConfig, rx: StreamingRadio, block: int, receiver, stop
+) -> None:
     """The stopper's thread: once the last view is sent, wait for it (and what the board and
     the driver still hold) to reach the ring, then stop the stream."""
     sender.join()
     # the last frame, then what the board and the driver still hold, reach the ring
     tail = max(r.num_samples for r in views[-1].reports) + cfg.rx_margin_samples
-    transfer = transfer_samples(rx, block)
+    transfer = max(int(block), rx.rx_transfer_samples)  # what the driver may still hold
     deadline = time.monotonic() + (tail + transfer + 4 * block) / cfg.sample_rate_hz + 0.05
     while time.monotonic() < deadline and receiver.next_view < len(views):
         if stop.wait(0.005):  # ends early once the last view is decoded, or on a stop
@@ -247,7 +255,9 @@ def _stop_after_last_view(sender, views, cfg: OtaConfig, rx, block: int, receive
     stop.set()
 
 
-def _with_what_it_got(stopped: BaseException, rx, ring: RingBuffer, counts, emulator, rx_out):
+def _with_what_it_got(
+    stopped: BaseException, rx: StreamingRadio, ring: RingBuffer, counts, emulator, rx_out
+):
     """``stopped`` with ``stream_run`` (what the stream got until then) and ``capture`` (the
     ring's last samples) attached."""
     try:
@@ -264,8 +274,10 @@ STOP_S = 1.0
 """A stream that is stopped early (Ctrl-C, a board gone) ends its threads within this."""
 
 
-def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: list) -> StreamRun:
-    stats = getattr(rx, "last_stats", None)
+def _run_record(
+    rx: StreamingRadio, ring: RingBuffer, counts: StreamCounts, emulator, caught: list
+) -> StreamRun:
+    stats = rx.last_stats
     if stats is None:
         raise HilError("the receive stream ended without the driver's counters")
     run = StreamRun(
@@ -283,7 +295,7 @@ def _run_record(rx, ring: RingBuffer, counts: StreamCounts, emulator, caught: li
         run.emulator_overrun_samples = int(emulator.radios[1].overrun_samples)
         run.emulator_underrun_samples = int(emulator.radios[0].underrun_samples)
         run.emulator_late_max_s = float(emulator.radios[1].rx_late_max_s)
-    loss = getattr(rx, "emulated_rx_loss", None)  # an emulated Pluto's late-reader losses
+    loss = rx.emulated_rx_loss  # an emulated Pluto's late-reader losses
     if loss is not None:
         run.emulator_overruns, run.emulator_lost_buffers, run.emulator_overrun_samples = loss
     return run

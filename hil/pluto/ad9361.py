@@ -191,3 +191,12 @@ def rf_bandwidth_hz(value_hz: int) -> int:
     if int(value_hz) != value_hz or not lo <= value_hz <= hi:
         raise ValueError(f"rf_bandwidth must be an integer in [{lo}, {hi}] Hz, got {value_hz!r}")
     return int(value_hz)
+
+
+def integer_hz(value: float, name: str) -> int:
+    """A positive frequency as the whole Hz the driver's attributes take (``name`` for the
+    ``ValueError`` otherwise)."""
+    v = float(value)
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{name} must be a positive frequency in Hz, got {value!r}")
+    return int(round(v))

@@ -14,13 +14,14 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Generator
 
 import numpy as np
 
 from hil.errors import DeviceNotFoundError, HilError, StreamError
 from hil.hackrf.stream import StreamStats
 from hil.iq import full_scale_samples
-from hil.pluto.ad9361 import GAIN_CONTROL_MODES, RX_FULL_SCALE, TX_FULL_SCALE
+from hil.pluto.ad9361 import GAIN_CONTROL_MODES, RX_FULL_SCALE, TX_FULL_SCALE, integer_hz
 from hil.pluto.iio_access import (
     air_attribute,
     find_plutos,
@@ -29,6 +30,7 @@ from hil.pluto.iio_access import (
     receive_error,
     release_frames,
 )
+from hil.pluto.stream import PLUTO_BUFFER_SAMPLES, rx_stream
 
 
 class Pluto:
@@ -78,6 +80,7 @@ class Pluto:
         self._sdr = sdr
         self.uri = uri
         self.rx_chunk_samples = int(rx_chunk_samples)
+        self.rx_transfer_samples = PLUTO_BUFFER_SAMPLES  # a stream's: 4 for a late reader
         self.tx_chunk_samples = int(tx_chunk_samples)
         self.kernel_buffers = int(kernel_buffers)
         self.tx_start_latency_s = float(tx_start_latency_s)
@@ -86,6 +89,7 @@ class Pluto:
         self._receiving = False
         self._cyclic = False
         self.last_stats: StreamStats | None = None
+        self.emulated_rx_loss: tuple[int, int, int] | None = None  # set by a stream's end
         self.serial_number = self._context_attr("hw_serial")
         self.product = self._context_attr("hw_model") or "ADALM-Pluto"
         self.firmware_version = self._context_attr("fw_version")
@@ -245,7 +249,7 @@ class Pluto:
 
     @rx_lo_hz.setter
     def rx_lo_hz(self, value: float) -> None:
-        self._set("rx_lo", _hz(value, "rx_lo_hz"), "set RX LO")
+        self._set("rx_lo", integer_hz(value, "rx_lo_hz"), "set RX LO")
 
     @property
     def tx_lo_hz(self) -> int:
@@ -254,7 +258,7 @@ class Pluto:
 
     @tx_lo_hz.setter
     def tx_lo_hz(self, value: float) -> None:
-        self._set("tx_lo", _hz(value, "tx_lo_hz"), "set TX LO")
+        self._set("tx_lo", integer_hz(value, "tx_lo_hz"), "set TX LO")
 
     @property
     def center_freq_hz(self) -> int:
@@ -273,7 +277,7 @@ class Pluto:
 
     @rf_bandwidth_hz.setter
     def rf_bandwidth_hz(self, value: float) -> None:
-        bw = _hz(value, "rf_bandwidth_hz")
+        bw = integer_hz(value, "rf_bandwidth_hz")
         self._set("rx_rf_bandwidth", bw, "set RX RF bandwidth")
         self._set("tx_rf_bandwidth", bw, "set TX RF bandwidth")
 
@@ -319,6 +323,10 @@ class Pluto:
     @property
     def receiving(self) -> bool:
         return self._receiving
+
+    def stream(self, chunk_samples: int) -> Generator[np.ndarray, None, None]:
+        """``[1, n]`` receive buffers of ``chunk_samples`` at least, until closed."""
+        return rx_stream(self, max(int(chunk_samples), self.rx_transfer_samples))
 
     def rx(
         self, num_samples: int, *, save_to=None, max_shortfalls: int | None = None
@@ -440,10 +448,3 @@ class Pluto:
         except Exception as e:  # noqa: BLE001
             warnings.warn(f"Pluto {self.uri}: stop transmit: {e}", stacklevel=2)
         self._cyclic = False
-
-
-def _hz(value: float, name: str) -> int:
-    v = float(value)
-    if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"{name} must be a positive frequency in Hz, got {value!r}")
-    return int(round(v))

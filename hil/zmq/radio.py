@@ -103,7 +103,12 @@ class ZmqRadio:
 
     @property
     def air_settable(self) -> bool:
+        """False: the air is the flowgraph's, not the host's to set."""
         return False
+
+    def set_air(self, channel, *, ppm: float = 0.0, seed: int = 0) -> None:
+        """``HilError``: the air is the flowgraph's."""
+        raise HilError("the ZMQ radio's air is its GNU Radio flowgraph's, not the host's to set")
 
     @property
     def receiving(self) -> bool:

@@ -122,9 +122,11 @@ def add_config_arguments(
 
 
 def config_from_args(cls, args: argparse.Namespace, names: Iterable[str], *, flags=None, **extra):
-    """``cls(**{name: args.name}, **extra)``; a ``ValueError`` naming a field becomes a
-    :class:`UsageError` naming its option."""
+    """``cls(**{name: args.name}, **extra)``, a value in ``extra`` standing for a name's flag
+    as decided by a check (its option still named in errors); a ``ValueError`` naming a field
+    becomes a :class:`UsageError` naming its option."""
+    names = list(names)
     try:
-        return cls(**{n: getattr(args, n) for n in names}, **extra)
+        return cls(**{n: getattr(args, n) for n in names if n not in extra}, **extra)
     except ValueError as e:
         raise checks.flag_error(e, {n: flag_of(n, flags) for n in names}) from None

@@ -47,6 +47,7 @@ from osnerf.commands.ota_args import (
     parse_uri,
     usage_error,
 )
+from osnerf.commands.ota_config import OtaRunConfig
 from osnerf.commands.ota_radios import (
     DEFAULT_MULTIPATH,
     air_is_emulated,
@@ -273,11 +274,8 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     checks.add_allow_untrained(p)
 
 
-# ----------------------------------------------------------------------------- devices
-
-
 # ----------------------------------------------------------------------------- run
-def framed_settings(args, symbols_per_frame: int):
+def framed_settings(opts: OtaRunConfig, symbols_per_frame: int):
     """The scheme's ``semcodec.links.FramedSettings`` from the flags, checked: ``--quality`` in the
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
@@ -287,37 +285,42 @@ def framed_settings(args, symbols_per_frame: int):
     from semcodec.digital import IMAGE_CODECS
     from semcodec.links import ANALOG, DIGITAL, FramedSettings, frame_payload_bytes
 
-    qlo, qhi = IMAGE_CODECS[args.image_codec or "avif"].quality_range
-    if args.quality is not None and not max(qlo, 1) <= args.quality <= qhi:
+    qlo, qhi = IMAGE_CODECS[opts.image_codec or "avif"].quality_range
+    if opts.quality is not None and not max(qlo, 1) <= opts.quality <= qhi:
         raise usage_error(
-            f"--quality of {args.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {args.quality}"
+            f"--quality of {opts.image_codec} must be in [{max(qlo, 1)}, {qhi}], got {opts.quality}"
         )
     cbr, codec = FramedSettings.cbr, None
-    analog = any(LINK_SCHEMES[name].kind == ANALOG for name in args.schemes)
-    if analog and args.cbr is not None:  # an analog scheme sends at --cbr too
+    analog = any(LINK_SCHEMES[name].kind == ANALOG for name in opts.schemes)
+    if analog and opts.cbr is not None:  # an analog scheme sends at --cbr too
         try:
-            cbr = parse_cbr(args.cbr)
+            cbr = parse_cbr(opts.cbr)
         except ValueError as e:
             raise usage_error(f"--{e}") from None
-    if any(LINK_SCHEMES[name].needs_codec for name in args.schemes):
+    if any(LINK_SCHEMES[name].needs_codec for name in opts.schemes):
         try:
-            cbr = parse_cbr(args.cbr)
+            cbr = parse_cbr(opts.cbr)
         except ValueError as e:
             raise usage_error(f"--{e}") from None
-        codec = open_codec(args.codec, args.allow_untrained)
-        if args.snr_db is not None:  # a real air: the encoder's SNR is measured first
-            check_codec_snr(codec, args.snr_db)
+        codec = open_codec(opts.codec, opts.allow_untrained)
+        if opts.snr_db is not None:  # a real air: the encoder's SNR is measured first
+            check_codec_snr(codec, opts.snr_db)
         limits = require_capabilities(codec)  # ota does not refine: nothing is refused
         if limits.line():
             print(f"ota: {limits.line()}", file=sys.stderr)
-    digital = any(LINK_SCHEMES[name].kind == DIGITAL for name in args.schemes)
-    if digital and frame_payload_bytes(symbols_per_frame, args.mcs) < 1:
+    digital = any(LINK_SCHEMES[name].kind == DIGITAL for name in opts.schemes)
+    if digital and frame_payload_bytes(symbols_per_frame, opts.mcs) < 1:
         raise usage_error(
-            f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {args.mcs}"
+            f"--symbols-per-frame {symbols_per_frame} holds no payload at --mcs {opts.mcs}"
         )
-    used = {k: getattr(args, k) for k in ("mcs", "image_codec", "quality", "scale")}
+    used = {
+        "mcs": opts.mcs,
+        "image_codec": opts.image_codec,
+        "quality": opts.quality,
+        "scale": opts.scale,
+    }
     return FramedSettings(
-        snr_db=args.snr_db,
+        snr_db=opts.snr_db,
         symbols_per_frame=symbols_per_frame,
         **{k: v for k, v in used.items() if v is not None},
         cbr=cbr,
@@ -326,21 +329,20 @@ def framed_settings(args, symbols_per_frame: int):
 
 
 def run(args: argparse.Namespace) -> int:
-    from hil import OtaConfig, save_sigmf
+    """Check the flags into an :class:`OtaRunConfig` (exit 2 on a refusal), then send."""
+    from hil import OtaConfig
     from osnerf.cli import inputs_checked
-    from osnerf.commands.ota_record import ota_record, remove_old_captures
-    from osnerf.ota_link import received_blocks
-    from osnerf.provenance import write_json_atomic
-    from semcodec import LINK_SCHEMES
 
     kind, tx_id, rx_id = device_kinds(args)
-    check_scheme_flags(args)
+    scheme_flags = check_scheme_flags(args)
     check_radio_ranges(args, kind, (tx_id, rx_id))
-    check_overruns(args, kind)
-    check_stream_flags(args, kind)
+    max_rx_overruns = check_overruns(args, kind)
+    stream_flags = check_stream_flags(args, kind)
     parse_ppm(args.ppm or "0,0")
     parse_multipath(args.multipath or "none")
-    cfg = config_from_args(OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS)
+    cfg = config_from_args(
+        OtaConfig, args, OTA_CONFIG_FIELDS, flags=OTA_FLAGS, max_rx_overruns=max_rx_overruns
+    )
     inputs = {"--images": args.images}
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
     sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
@@ -348,28 +350,48 @@ def run(args: argparse.Namespace) -> int:
     names, images = load_square_images(
         args.images, args.size, args.max_images, "--images", "--size"
     )
-    resolve_air(args, kind, air_is_emulated(args, kind, tx_id, rx_id))  # asks the board
-    settings = framed_settings(args, cfg.symbols_per_frame)
+    emulated, found_uri = air_is_emulated(kind, tx_id, rx_id)  # asks the board
+    opts = OtaRunConfig.from_args(
+        args,
+        **scheme_flags,
+        max_rx_overruns=max_rx_overruns,
+        **stream_flags,
+        **resolve_air(args, kind, emulated),
+        uri=args.uri if found_uri is None else found_uri,
+    )
+    settings = framed_settings(opts, cfg.symbols_per_frame)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
-    if args.overwrite:  # the whole output set is replaced, captures included
+    return send(opts, cfg, settings, names, images, out, sigmf_dir)
+
+
+def send(opts: OtaRunConfig, cfg, settings, names, images, out: Path, sigmf_dir: Path) -> int:
+    """Send ``images`` as ``opts`` says (a burst per scheme, or a stream) and write the result
+    to ``out``, the captures to ``sigmf_dir``."""
+    from hil import save_sigmf
+    from osnerf.commands.ota_record import ota_record, remove_old_captures
+    from osnerf.ota_link import received_blocks
+    from osnerf.provenance import write_json_atomic
+    from semcodec import LINK_SCHEMES
+
+    if opts.overwrite:  # the whole output set is replaced, captures included
         remove_old_captures(sigmf_dir)
     t0 = time.perf_counter()
     probe: list = []  # a real air: the jscc encoder's SNR is measured first
     if settings.codec is not None and settings.snr_db is None:
-        snr, probe = measured_snr_db(args, cfg, settings, sigmf_dir)
+        snr, probe = measured_snr_db(opts, cfg, settings, sigmf_dir)
         settings = replace(settings, snr_db=snr)
-    if args.stream:  # views one after another to a receiver that never stops
-        return run_stream(args, cfg, settings, names, images, out, t0, probe)
+    if opts.stream:  # views one after another to a receiver that never stops
+        return run_stream(opts, cfg, settings, names, images, out, t0, probe)
     bursts = []
-    for name in args.schemes:
+    for name in opts.schemes:
         scheme = LINK_SCHEMES[name].framed
         blocks, state = scheme.transmit(images, settings)
         print(
             f"ota: {len(names)} image(s), {sum(len(b) for b in blocks)} symbols, scheme {name}",
             file=sys.stderr,
         )
-        base = "ota" if len(args.schemes) == 1 else f"ota_{name}"
-        result, hw = send_over_the_air(args, cfg, blocks, sigmf_dir, base)
+        base = "ota" if len(opts.schemes) == 1 else f"ota_{name}"
+        result, hw = send_over_the_air(opts, cfg, blocks, sigmf_dir, base)
         per_image = scheme.receive(received_blocks(result), state, images, settings)
         for b, rec in enumerate(per_image):  # the receiver's CRC verdicts go with the frames
             for frame, crc_ok in zip(result.block_frames(b), rec.frames_crc_ok):
@@ -379,7 +401,7 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"ota: {name}: {result.frames_lost}/{result.frames_sent} frames lost", file=sys.stderr
         )
-    record = ota_record(args, cfg, settings, names, bursts, t0)
+    record = ota_record(opts, cfg, settings, names, bursts, t0)
     record["sigmf"][:0] = [str(p) for p in probe]
     write_json_atomic(out, record)
     print(f"ota: wrote {out}", file=sys.stderr)

@@ -11,6 +11,10 @@
   receiver measured.
 * Radio ranges: ``--center-freq-hz`` and ``--sample-rate-hz`` within the chosen radio's own
   (``hil.DEVICES``: a Pluto's AD9363 tunes 325 MHz to 3.8 GHz).
+
+The checks read the parsed flags and return the values they decide; the run's
+:class:`osnerf.commands.ota_config.OtaRunConfig` is built from them, and the functions after
+the checks (opening the radios, sending) read that.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from pathlib import Path
 from common import Registry
 from hil import DEVICES as HARDWARE
 from osnerf.commands.ota_args import parse_device, parse_multipath, parse_ppm, usage_error
+from osnerf.commands.ota_config import OtaRunConfig
 
 SIMULATED = ("emulated", "loopback")  # two emulated HackRFs, with or without USB
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
@@ -59,21 +64,22 @@ def radio_of(kind: str):
     return HARDWARE["hackrf" if kind in SIMULATED else kind]
 
 
-def check_scheme_flags(args: argparse.Namespace) -> None:
-    """Refuse a scheme flag for a kind of scheme ``--schemes`` does not send; give the ones
-    left out their default where they are used."""
+def check_scheme_flags(args: argparse.Namespace) -> dict[str, object]:
+    """Refuse a scheme flag for a kind of scheme ``--schemes`` does not send. Returns each
+    scheme flag's value: as given, its default where it is left out and used, else None."""
     from semcodec import LINK_SCHEMES
 
     kinds = {LINK_SCHEMES[name].kind for name in args.schemes}
+    given, values = vars(args), {}
     for dest, (flag, kind, default) in SCHEME_FLAGS.items():
-        value = getattr(args, dest, None)
+        value = given[dest]
         if value is not None and kind not in kinds:
             raise usage_error(
                 f"{flag} applies to {kind} schemes only; --schemes {','.join(args.schemes)} "
                 f"sends none, so it would be recorded and never used: leave it out"
             )
-        if value is None and kind in kinds:
-            setattr(args, dest, default)
+        values[dest] = default if value is None and kind in kinds else value
+    return values
 
 
 def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None:
@@ -83,11 +89,10 @@ def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None
     hw = radio_of(kind)
     _check_gains(args, kind, ids)
     freq_range, rate_range, part = hw.ranges_of(ids)
-    for dest, flag, (lo, hi), unit in (
-        ("center_freq_hz", "--center-freq-hz", freq_range, "Hz"),
-        ("sample_rate_hz", "--sample-rate-hz", rate_range, "S/s"),
+    for value, flag, (lo, hi), unit in (
+        (args.center_freq_hz, "--center-freq-hz", freq_range, "Hz"),
+        (args.sample_rate_hz, "--sample-rate-hz", rate_range, "S/s"),
     ):
-        value = getattr(args, dest)
         if not lo <= value <= hi:
             raise usage_error(
                 f"{flag} {value:g} {unit} is outside the {hw.label}'s range [{lo:g}, {hi:g}] "
@@ -96,7 +101,7 @@ def check_radio_ranges(args: argparse.Namespace, kind: str, ids=(None,)) -> None
 
 
 def _check_gains(args: argparse.Namespace, kind: str, ids) -> None:
-    given = {dest: getattr(args, dest, None) for dest in ("soapy_rx_gain_db", "soapy_tx_gain_db")}
+    given = {"soapy_rx_gain_db": args.soapy_rx_gain_db, "soapy_tx_gain_db": args.soapy_tx_gain_db}
     if all(v is None for v in given.values()):
         return
     if kind != "soapy":
@@ -122,73 +127,76 @@ def _check_gains(args: argparse.Namespace, kind: str, ids) -> None:
             )
 
 
-def check_overruns(args: argparse.Namespace, kind: str) -> None:
+def check_overruns(args: argparse.Namespace, kind: str) -> int | None:
     """``--max-overruns`` (default 0) where the receiver counts its overruns; a Pluto on
-    libiio 0.x counts none, so there it is refused and recorded as null."""
+    libiio 0.x counts none, so there it is refused and recorded as null (None)."""
     if kind != "pluto":
-        args.max_rx_overruns = 0 if args.max_rx_overruns is None else args.max_rx_overruns
-    elif args.max_rx_overruns is not None:
+        return 0 if args.max_rx_overruns is None else args.max_rx_overruns
+    if args.max_rx_overruns is not None:
         raise usage_error(
             "--max-overruns: libiio 0.x reports no receive overruns of a Pluto, so it would "
             "be recorded and never applied: leave it out"
         )
+    return None
 
 
-def air_is_emulated(args: argparse.Namespace, kind: str, uri: str | None, rx_id=None) -> bool:
+def air_is_emulated(kind: str, uri: str | None, rx_id=None) -> tuple[bool, str | None]:
     """Whether the run sets the air: simulated radios, a Pluto that answers as
     ``hil.EmulatedPluto`` (asked once, over libiio; ``hil.HilError`` when none answers), or
-    one SoapySDR device that takes an emulated air (``osnerf hil emulate soapy``).
-    Without ``--uri`` the Pluto found is named in ``args.uri``, and the run uses that one."""
+    one SoapySDR device that takes an emulated air (``osnerf hil emulate soapy``); and,
+    when no Pluto was named (``uri`` None), the URI of the one found, which the run uses
+    (None otherwise)."""
     if kind in SIMULATED:
-        return True
+        return True, None
     if kind == "soapy":
         if rx_id != uri:  # two devices: the air between them is not one board's
-            return False
+            return False, None
         from hil import SoapyRadio
 
         with SoapyRadio.open(uri) as radio:
-            return radio.air_settable
+            return radio.air_settable, None
     if kind != "pluto":
-        return False
+        return False, None
     from hil import Pluto
 
     with Pluto.open(uri, configure=False) as board:
-        if uri is None:  # the first found: this run's board
-            args.uri = board.uri
-        return board.air_settable
+        found = board.uri if uri is None else None  # the first found: this run's board
+        return board.air_settable, found
 
 
-def resolve_air(args: argparse.Namespace, kind: str, emulated: bool) -> None:
+def resolve_air(args: argparse.Namespace, kind: str, emulated: bool) -> dict[str, object]:
     """Refuse air flags a real air cannot take; fill the emulated air's defaults.
 
-    Sets ``args.air`` ("emulated" or "real") and each air flag's value as applied (None
-    for a real air)."""
+    Returns ``air`` ("emulated" or "real") and each air flag's value as applied (None for
+    a real air)."""
     hw = radio_of(kind)
-    args.air = "emulated" if emulated else "real"
+    given = vars(args)
     if not emulated:
-        given = [flag for dest, (flag, _) in AIR_FLAGS.items() if getattr(args, dest) is not None]
-        if given:
+        refused = [flag for dest, (flag, _) in AIR_FLAGS.items() if given[dest] is not None]
+        if refused:
             raise usage_error(
-                f"{given[0]} sets the emulated air, and the air between real {hw.label} "
+                f"{refused[0]} sets the emulated air, and the air between real {hw.label} "
                 f"boards is not ours to set: leave it out (results carry the SNR the "
                 f"receiver measured)"
             )
-        return
+        return {"air": "real", **{dest: given[dest] for dest in AIR_FLAGS}}
     one_board = hw.full_duplex and kind not in SIMULATED
-    for dest, (_, default) in AIR_FLAGS.items():
-        if getattr(args, dest) is None:
-            setattr(args, dest, default)
-    if args.ppm is None:
-        args.ppm = PPM_DEFAULTS["one board" if one_board else "two boards"]
-    tx_ppm, rx_ppm = parse_ppm(args.ppm)
+    values = {
+        dest: default if given[dest] is None else given[dest]
+        for dest, (_, default) in AIR_FLAGS.items()
+    }
+    if values["ppm"] is None:
+        values["ppm"] = PPM_DEFAULTS["one board" if one_board else "two boards"]
+    tx_ppm, rx_ppm = parse_ppm(values["ppm"])
     if one_board and tx_ppm != rx_ppm:
         raise usage_error(
             f"--ppm: one {hw.label} is both ends of the link, on one crystal, so TX and RX "
-            f"are equal (e.g. 20,20), got {args.ppm!r}"
+            f"are equal (e.g. 20,20), got {values['ppm']!r}"
         )
+    return {"air": "emulated", **values}
 
 
-def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
+def measured_snr_db(opts: OtaRunConfig, cfg, settings, sigmf_dir) -> tuple[float, list]:
     """Between real radios, the jscc encoder's SNR: what the receiver measures on one frame
     of QPSK sent first, within the codec's SNR range (a real transmitter knows no more of
     its air than that), and that burst's SigMF paths (``<sigmf-dir>/ota_probe_*``)."""
@@ -200,7 +208,7 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
 
     bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
     block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
-    result, hw = send_over_the_air(args, cfg, [block], sigmf_dir, "ota_probe")
+    result, hw = send_over_the_air(opts, cfg, [block], sigmf_dir, "ota_probe")
     paths = save_sigmf(result, sigmf_dir / "ota_probe", cfg, hw=hw)
     snr = result.snr_db_measured()
     if snr is None:
@@ -211,8 +219,9 @@ def measured_snr_db(args, cfg, settings, sigmf_dir) -> tuple[float, list]:
     return used, paths
 
 
-def device_kinds(args) -> tuple[str, str | None, str | None]:
-    """``(kind, tx_serial, rx_serial)`` of --tx/--rx: "emulated", "loopback" or "hackrf"."""
+def device_kinds(args: argparse.Namespace | OtaRunConfig) -> tuple[str, str | None, str | None]:
+    """``(kind, tx_serial, rx_serial)`` of --tx/--rx: "emulated", "loopback" or "hackrf"
+    (the flags as parsed, or the run's config: the same fields)."""
     tx_kind, tx_serial = parse_device(args.tx, "--tx")
     rx_kind, rx_serial = parse_device(args.rx, "--rx")
     simulated = {"emulated", "loopback"}
@@ -223,12 +232,12 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
             "--tx and --rx must both be simulated (emulated/loopback) or both the same hardware "
             f"({', '.join(HARDWARE)})"
         )
-    uri = getattr(args, "uri", None)
+    uri = args.uri
     if uri is not None and tx_kind != "pluto":
         raise usage_error("--uri needs --tx pluto --rx pluto")
     if tx_kind == "pluto":
         tx_serial, rx_serial = tx_serial or uri, rx_serial or uri
-    soapy_args = getattr(args, "tx_args", None), getattr(args, "rx_args", None)
+    soapy_args = args.tx_args, args.rx_args
     if any(a is not None for a in soapy_args) and tx_kind != "soapy":
         raise usage_error("--tx-args/--rx-args need --tx soapy --rx soapy")
     if tx_kind == "soapy":
@@ -240,40 +249,39 @@ def device_kinds(args) -> tuple[str, str | None, str | None]:
         raise usage_error(
             "--tx and --rx must be the same kind when simulated (both emulated or both loopback)"
         )
-    if getattr(args, "fault", None) and tx_kind not in simulated:
+    if args.fault and tx_kind not in simulated:
         raise usage_error(
             "--fault needs emulated boards (--tx emulated --rx emulated, or loopback)"
         )
     return tx_kind, tx_serial, rx_serial
 
 
-def open_pair(args, ota_cfg):
+def open_pair(opts: OtaRunConfig, ota_cfg):
     """(tx, rx, emulator or None) for the --tx/--rx kinds, the air from the air flags where
-    it is emulated (``args.air``, :func:`osnerf.commands.ota_radios.resolve_air`); --fault is
-    set on the receiver."""
+    it is emulated (``opts.air``, :func:`resolve_air`); --fault is set on the receiver."""
     from hil.emulation import Faults
     from osnerf.ota_link import open_radios
 
-    kind, tx_serial, rx_serial = device_kinds(args)
+    kind, tx_serial, rx_serial = device_kinds(opts)
     air = {}
-    if args.air == "emulated":
+    if opts.air == "emulated":
         air = {
-            "seed": args.seed,
-            "ppm": parse_ppm(args.ppm),
-            "multipath": parse_multipath(args.multipath),
-            "delay_s": args.delay_us * 1e-6,
+            "seed": opts.seed,
+            "ppm": parse_ppm(opts.ppm),
+            "multipath": parse_multipath(opts.multipath),
+            "delay_s": opts.delay_us * 1e-6,
         }
     if kind in HARDWARE:
         ids = {"tx_serial": tx_serial, "rx_serial": rx_serial}
-        return open_radios(kind, args.snr_db, ota_cfg, **air, **ids)
-    tx, rx, emu = open_radios("emulated", args.snr_db, ota_cfg, **air, loopback=kind == "loopback")
-    if getattr(args, "fault", None):  # after the lead-in and half the margin: some capture
+        return open_radios(kind, opts.snr_db, ota_cfg, **air, **ids)
+    tx, rx, emu = open_radios("emulated", opts.snr_db, ota_cfg, **air, loopback=kind == "loopback")
+    if opts.fault:  # after the lead-in and half the margin: some capture
         lead = int(ota_cfg.rx_lead_s * ota_cfg.sample_rate_hz)
-        emu.radios[1].faults = Faults.named(args.fault, lead + ota_cfg.rx_margin_samples // 2)
+        emu.radios[1].faults = Faults.named(opts.fault, lead + ota_cfg.rx_margin_samples // 2)
     return tx, rx, emu
 
 
-def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota"):
+def send_over_the_air(opts: OtaRunConfig, cfg, blocks: list, sigmf_dir: Path, base: str = "ota"):
     """One burst of ``blocks`` over an :class:`osnerf.ota_link.OtaLink` between the --tx/--rx
     radios: (``hil.ota.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
     in one line, with what the receiver got so far saved as SigMF; warnings are printed one
@@ -281,10 +289,10 @@ def send_over_the_air(args, cfg, blocks: list, sigmf_dir: Path, base: str = "ota
     from hil import HilError, save_partial_capture
     from osnerf.ota_link import OtaLink
 
-    kind = device_kinds(args)[0]
-    tx, rx, emu = open_pair(args, cfg)
-    hw = radio_of(kind).label + (" (emulated)" if args.air == "emulated" else "")
-    link = OtaLink(tx, rx, args.snr_db, cfg, emu)
+    kind = device_kinds(opts)[0]
+    tx, rx, emu = open_pair(opts, cfg)
+    hw = radio_of(kind).label + (" (emulated)" if opts.air == "emulated" else "")
+    link = OtaLink(tx, rx, opts.snr_db, cfg, emu)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

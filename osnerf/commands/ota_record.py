@@ -12,14 +12,16 @@ import time
 
 import numpy as np
 
+from osnerf.commands.ota_config import OtaRunConfig
 
-def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
+
+def ota_record(opts: OtaRunConfig, cfg, settings, names, bursts, t0: float) -> dict:
     """The result file's record: per scheme and image, the summary, every frame, the SigMF
     paths. ``bursts``: (scheme, per-image receptions, ``hil.ota.BurstResult``, SigMF paths)."""
     from osnerf.provenance import codec_record, result_header
 
     results, frames, sigmf, by_scheme = [], [], [], {}
-    requested = args.snr_db  # None: a real air
+    requested = opts.snr_db  # None: a real air
     for scheme, per_image, result, paths in bursts:
         rows = []
         for b, (name, rec) in enumerate(zip(names, per_image)):
@@ -51,7 +53,7 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             by_scheme[scheme].update(
                 symbols_sent=sent, symbol_budget=budget, symbols_unused=budget - sent
             )
-    config = {k: v for k, v in vars(args).items() if k not in ("command",)}
+    config = opts.as_record()
     config.update(
         {
             "symbols_per_frame": cfg.symbols_per_frame,
@@ -59,13 +61,13 @@ def ota_record(args, cfg, settings, names, bursts, t0: float) -> dict:
             "tx_power_dbfs": cfg.tx_power_dbfs,
         }
     )
-    record = result_header(config, args.seed)
+    record = result_header(config, opts.seed)
     record["codec"] = None
     if settings.codec is not None:
         from semcodec import capability_record
 
         record["codec"] = {
-            **codec_record(settings.codec, args.codec),
+            **codec_record(settings.codec, opts.codec),
             "encoder_snr_db": settings.snr_db,
             **capability_record(settings.codec, 0),
         }

@@ -38,6 +38,7 @@ import numpy as np
 from common import Registry
 from osnerf.commands import args as checks
 from osnerf.commands.ota_args import usage_error
+from osnerf.commands.ota_config import OtaRunConfig
 
 STREAM_KINDS = ("emulated", "hackrf", "pluto")  # radios whose driver streams
 MAX_VIEWS = 10_000  # every view is framed before the stream starts
@@ -109,14 +110,15 @@ def cpu_list(text: str) -> tuple[int, ...]:
     return tuple(sorted(cpus))
 
 
-def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
-    """Refuse stream flags without ``--stream``, and ``--stream`` where it cannot run;
-    fill the defaults of the flags left out."""
-    if not getattr(args, "stream", False):
+def check_stream_flags(args: argparse.Namespace, kind: str) -> dict[str, object]:
+    """Refuse stream flags without ``--stream``, and ``--stream`` where it cannot run.
+    Returns each stream flag's value: as given, its default where ``--stream`` leaves it out."""
+    given = vars(args)
+    if not args.stream:
         for dest, (flag, _) in STREAM_FLAGS.items():
-            if getattr(args, dest, None) is not None:
+            if given[dest] is not None:
                 raise usage_error(f"{flag} applies to --stream only: add --stream or leave it out")
-        return
+        return {dest: given[dest] for dest in STREAM_FLAGS}
     if kind not in STREAM_KINDS:
         raise usage_error(
             f"--stream needs radios that stream (--tx/--rx {', '.join(STREAM_KINDS)}), got {kind}"
@@ -125,16 +127,17 @@ def check_stream_flags(args: argparse.Namespace, kind: str) -> None:
         raise usage_error(
             f"--stream sends one scheme, got --schemes {','.join(args.schemes)}: run once each"
         )
-    if getattr(args, "fault", None):
+    if args.fault:
         raise usage_error("--fault rehearses a burst's faults: leave it out with --stream")
     if args.emulator_cpus is not None and kind != "emulated":
         raise usage_error("--emulator-cpus places emulated boards: it needs --tx/--rx emulated")
-    for dest, (_, default) in STREAM_FLAGS.items():
-        if getattr(args, dest) is None:
-            setattr(args, dest, default)
+    return {
+        dest: default if given[dest] is None else given[dest]
+        for dest, (_, default) in STREAM_FLAGS.items()
+    }
 
 
-def _open_radios(args, cfg):
+def _open_radios(opts: OtaRunConfig, cfg):
     """(tx, rx, emulator or None): paced emulated HackRFs on the air of the air flags, in a
     process of their own (``hil.EmulatorProcess``: rendering the air does not compete with
     the decoder for the interpreter), or the --tx/--rx boards (an emulated Pluto's air set
@@ -144,14 +147,14 @@ def _open_radios(args, cfg):
     from osnerf.commands.ota_radios import device_kinds, open_pair
     from osnerf.ota_link import air_channel
 
-    kind = device_kinds(args)[0]
+    kind = device_kinds(opts)[0]
     if kind != "emulated":
-        return open_pair(args, cfg)
+        return open_pair(opts, cfg)
     channel = air_channel(
-        "emulated", args.snr_db, cfg, args.delay_us * 1e-6, parse_multipath(args.multipath)
+        "emulated", opts.snr_db, cfg, opts.delay_us * 1e-6, parse_multipath(opts.multipath)
     )
     emu = EmulatorProcess(
-        channel, ppm=parse_ppm(args.ppm), seed=args.seed, paced=True, cpus=args.emulator_cpus
+        channel, ppm=parse_ppm(opts.ppm), seed=opts.seed, paced=True, cpus=opts.emulator_cpus
     )
     try:
         tx = HackRF.open(emu.serials[0], backend=emu.backend)
@@ -165,7 +168,9 @@ def _open_radios(args, cfg):
         raise
 
 
-def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
+def run_stream(
+    opts: OtaRunConfig, cfg, settings, names, images, out, t0: float, probe: list
+) -> int:
     """Stream ``--views`` views of ``images`` and write the result; 1 when samples were
     lost beyond ``--max-overruns``."""
     import torch
@@ -173,28 +178,28 @@ def run_stream(args, cfg, settings, names, images, out, t0: float, probe: list) 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # the decoder keeps to one core; the driver's threads get the rest
     try:
-        return _stream(args, cfg, settings, names, images, out, t0, probe)
+        return _stream(opts, cfg, settings, names, images, out, t0, probe)
     finally:
         torch.set_num_threads(threads)
 
 
-def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> int:
-    from hil import HilError, build_views, stream_over_the_air
+def _stream(opts: OtaRunConfig, cfg, settings, names, images, out, t0: float, probe: list) -> int:
+    from hil import EmulatorProcess, HilError, build_views, stream_over_the_air
     from osnerf.ota_link import received_blocks
     from osnerf.provenance import write_json_atomic
     from semcodec import LINK_SCHEMES
 
-    scheme_name = args.schemes[0]
+    scheme_name = opts.schemes[0]
     scheme = LINK_SCHEMES[scheme_name].framed
-    num_views = args.views or len(names)
+    num_views = opts.views or len(names)
     pick = [v % len(names) for v in range(num_views)]
     first = scheme.transmit(images[pick[0] : pick[0] + 1], settings)  # (blocks, state)
-    check_ring(build_views([first[0][0]], cfg), cfg, args.ring_s)  # before the others
+    check_ring(build_views([first[0][0]], cfg), cfg, opts.ring_s)  # before the others
     encoded = [first, *(scheme.transmit(images[i : i + 1], settings) for i in pick[1:])]
     views = build_views([blocks[0] for blocks, _ in encoded], cfg)
     print(
         f"ota: streaming {num_views} view(s) of scheme {scheme_name}, one every "
-        f"{args.view_interval_s:g} s, {sum(len(v.reports) for v in views)} frames",
+        f"{opts.view_interval_s:g} s, {sum(len(v.reports) for v in views)} frames",
         file=sys.stderr,
     )
     recs: dict[int, object] = {}
@@ -217,7 +222,7 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
     )
     stopped = None
     with _sigterm_as_interrupt():
-        tx, rx, emu = _open_radios(args, cfg)
+        tx, rx, emu = _open_radios(opts, cfg)
         try:
             run = stream_over_the_air(
                 tx,
@@ -225,8 +230,8 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
                 views,
                 cfg,
                 on_view,
-                interval_s=args.view_interval_s,
-                ring_s=args.ring_s,
+                interval_s=opts.view_interval_s,
+                ring_s=opts.ring_s,
                 emulator=emu,
             )
         except (KeyboardInterrupt, HilError) as e:
@@ -236,17 +241,17 @@ def _stream(args, cfg, settings, names, images, out, t0: float, probe: list) -> 
         finally:
             tx.close()
             rx.close()
-            if hasattr(emu, "close"):  # the emulated boards' process
+            if isinstance(emu, EmulatorProcess):  # the emulated boards' own process
                 emu.close()
-    record = _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0)
+    record = _stream_record(opts, cfg, settings, names, pick, views, recs, latency, run, t0)
     record["sigmf"][:0] = [str(p) for p in probe]
     if stopped is not None:
-        return _write_stopped(args, cfg, out, record, stopped, len(recs), len(views))
+        return _write_stopped(opts, cfg, out, record, stopped, len(recs), len(views))
     write_json_atomic(out, record)
-    return _tell_finished(args, out, record, run)
+    return _tell_finished(opts, out, record, run)
 
 
-def _tell_finished(args, out, record: dict, run) -> int:
+def _tell_finished(opts: OtaRunConfig, out, record: dict, run) -> int:
     """A finished stream's lines on stderr (counts, warnings, lost samples); 1 when it lost
     more overruns than ``--max-rx-overruns`` allows."""
     stream, lat = record["stream"], record["stream"]["latency_s"]
@@ -259,10 +264,10 @@ def _tell_finished(args, out, record: dict, run) -> int:
     for line in run.warnings:
         print(f"ota: warning: {line}", file=sys.stderr)
     print(f"ota: wrote {out}", file=sys.stderr)
-    lag = emulator_lag_warning(run.emulator_late_max_s, args.ring_s)
+    lag = emulator_lag_warning(run.emulator_late_max_s, opts.ring_s)
     if lag:
         print(f"ota: warning: {lag}", file=sys.stderr)
-    allowed = args.max_rx_overruns or 0  # None with a Pluto: libiio 0.x counts none
+    allowed = opts.max_rx_overruns or 0  # None with a Pluto: libiio 0.x counts none
     if run.overruns > allowed:  # every lost sample is part of an overrun
         print(
             f"ota: the stream lost {run.dropped_samples} samples in {run.overruns} overrun(s) "
@@ -307,7 +312,9 @@ def _sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, old)
 
 
-def _write_stopped(args, cfg, out, record: dict, stopped: BaseException, decoded: int, sent: int):
+def _write_stopped(
+    opts: OtaRunConfig, cfg, out, record: dict, stopped: BaseException, decoded: int, sent: int
+):
     """Write the result of a stream that stopped early, marked as such, and its capture; 130
     for an interrupt, 1 for a failure."""
     from hil import HilError, save_partial_capture
@@ -319,7 +326,7 @@ def _write_stopped(args, cfg, out, record: dict, stopped: BaseException, decoded
         if interrupted
         else "failed"
     )
-    sigmf_dir = Path(args.sigmf_dir) if args.sigmf_dir else out.with_name(out.stem + "_sigmf")
+    sigmf_dir = Path(opts.sigmf_dir) if opts.sigmf_dir else out.with_name(out.stem + "_sigmf")
     saved = None
     if interrupted:
         stopped = HilError(by, capture=getattr(stopped, "capture", None))
@@ -373,7 +380,9 @@ def _board_overruns(run) -> str:
     return f"{run.device_overruns} overrun(s)"
 
 
-def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, t0) -> dict:
+def _stream_record(
+    opts: OtaRunConfig, cfg, settings, names, pick, views, recs, latency, run, t0
+) -> dict:
     """``ota_record``'s file with one row per view, and the ``stream`` section."""
     from hil.ota import BurstResult
     from osnerf.commands.ota_record import ota_record
@@ -387,7 +396,7 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
     per_view = [recs[v.index] for v in done]
     done_names = [view_names[v.index] for v in done]
     record = ota_record(
-        args, cfg, settings, done_names, [(args.schemes[0], per_view, result, [])], t0
+        opts, cfg, settings, done_names, [(opts.schemes[0], per_view, result, [])], t0
     )
     start = min((v.sent_at for v in views if v.sent_at is not None), default=0.0)
     rows = []
@@ -414,8 +423,8 @@ def _stream_record(args, cfg, settings, names, pick, views, recs, latency, run, 
         "views_sent": sum(v.sent_at is not None for v in views),
         "views_decoded": len(done),
         "views_complete": sum(v.complete for v in views),
-        "view_interval_s": args.view_interval_s,
-        "ring_s": args.ring_s,
+        "view_interval_s": opts.view_interval_s,
+        "ring_s": opts.ring_s,
         # the frame layer's real-time factor on this stream: air time searched per CPU second
         "receiver_realtime_factor": (
             run.counts.samples_searched / cfg.sample_rate_hz / run.counts.receiver_cpu_s

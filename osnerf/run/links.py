@@ -107,7 +107,7 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     report = LinkReport(OTA, radios=radios)
     if emu is not None:
         radios.ppm, radios.delay_s = list(DEFAULT_PPM), DEFAULT_DELAY_S
-    if getattr(cfg, "ota_air", "fixed") == "raytraced":
+    if cfg.ota_air == "raytraced":
         from osnerf.run.ota_air import raytraced_air_links
 
         try:
@@ -120,7 +120,7 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     if emu is not None:
         radios.multipath = [[d, str(g)] for d, g in DEFAULT_MULTIPATH]
         report.air = AirSnr(float(cfg.snr_db))
-    elif getattr(tx, "air_settable", False):  # an emulated Pluto: open_radios set its air
+    elif tx.air_settable:  # an emulated Pluto: open_radios set its air
         report.air = AirSnr(float(cfg.snr_db))
     else:  # real boards: nobody sets the air; the codec assumes snr_db, the receiver measures
         report.air = AirSnr(

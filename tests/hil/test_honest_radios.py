@@ -267,7 +267,13 @@ def test_radios_run_over_a_pluto_records_the_air_it_had(monkeypatch, settable, a
     from osnerf.run.links import build_links
 
     cfg = SimpleNamespace(
-        channel="ota", ota_device="pluto", snr_db=3.0, seed=0, ota_tx_args=None, ota_rx_args=None
+        channel="ota",
+        ota_device="pluto",
+        snr_db=3.0,
+        seed=0,
+        ota_tx_args=None,
+        ota_rx_args=None,
+        ota_air="fixed",
     )
     with serve(12.0, air_settable=settable) as srv:
         monkeypatch.setenv("IIOD_REMOTE", f"{srv.address}:{srv.port}")

@@ -23,3 +23,21 @@ def test_device_flags_are_checked_first(tmp_path, capsys, argv, message):
     out = tmp_path / "ota.json"
     rc = main(["ota", *argv, "--schemes", "digital", "--images", str(tmp_path), "--out", str(out)])
     assert rc == 2 and message in capsys.readouterr().err and not out.exists()
+
+
+def test_the_run_config_holds_every_flag_in_help_order_then_the_air():
+    """`osnerf ota` reads its flags once, into ``OtaRunConfig``, whose fields are the result
+    file's ``config``: every flag of the parser, in its order, then ``air``."""
+    import dataclasses
+
+    from osnerf.cli import build_parser
+    from osnerf.commands.ota_config import OtaRunConfig
+
+    argv = ["ota", "--schemes", "digital", "--images", "x", "--out", "o.json"]
+    args = build_parser("ota").parse_args(argv)
+    flags = [k for k in vars(args) if k != "command"]
+    assert [f.name for f in dataclasses.fields(OtaRunConfig)] == [*flags, "air"]
+    opts = OtaRunConfig.from_args(args, air="real")
+    assert opts.as_record() == {**{k: vars(args)[k] for k in flags}, "air": "real"}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        opts.snr_db = 3.0  # type: ignore[misc]

@@ -114,7 +114,7 @@ def test_the_boards_process_ends_quietly_when_its_host_goes_away():
             self.calls += 1
             if self.calls > 1:
                 raise EOFError
-            return ("get", 0, ("overrun_samples",))
+            return ("overrun_samples", 0, ())
 
         def send(self, reply):
             raise BrokenPipeError(32, "Broken pipe")
