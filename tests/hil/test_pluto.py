@@ -190,14 +190,15 @@ def test_a_tx_buffer_fed_late_underruns_instead_of_stalling_the_receiver(server)
     tone = np.full(1 << 14, 8000 + 0j)  # -12 dBFS: about 17 dB above the noise here
     sdr.tx(tone)  # TX open and streaming, then nothing
     t0 = time.monotonic()
-    first = [np.mean(np.abs(sdr.rx()) ** 2) for _ in range(8)]
+    first = np.concatenate([sdr.rx() for _ in range(8)])
     assert time.monotonic() - t0 < 10 and server.board.tx_underruns == 1
     sdr.tx(tone)  # fed again, late
-    later = [np.mean(np.abs(sdr.rx()) ** 2) for _ in range(8)]
+    later = np.concatenate([sdr.rx() for _ in range(8)])
     sdr.tx_destroy_buffer()
-    noise = min(first + later)
-    assert sum(p > 10 * noise for p in first) == 1  # the first buffer's worth, then silence
-    assert sum(p > 10 * noise for p in later) == 1  # the late one arrives, once
+    noise = np.median(np.abs(np.concatenate([first, later])) ** 2)  # mostly silence
+    heard = [int(np.sum(np.abs(x) ** 2 > 10 * noise)) for x in (first, later)]
+    # each burst once and whole (then silence), wherever it falls across the receive buffers
+    assert heard == [pytest.approx(tone.size, rel=0.05)] * 2
 
 
 def test_a_transmission_starting_during_a_receive_read_is_heard_whole():
