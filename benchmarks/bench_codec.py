@@ -35,9 +35,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
+import phy
 from common import write_text
 from osnerf.anchors import KODAK, KODAK_CBR, at_own_snr, capacity_anchor
+from osnerf.cli import main
+from osnerf.paths import shared_data_dir
+from osnerf.provenance import git_commit
+from semcodec import load_codec
+from semcodec.jscc.focus_eval import focus_gain
+from semcodec.jscc.model import make_model
 from semcodec.links.schemes import DIGITAL, IDEAL, JSCC, LINK_SCHEMES
+from semcodec.training.loop import forward_train
 
 
 def _speed(codec) -> dict:
@@ -55,8 +63,6 @@ def _speed(codec) -> dict:
             enc = codec.encode(x, 10.0, cbr)
             codec.decode(enc.symbols, enc.meta, 10.0)
         out[f"encode_decode_images_per_s_{name}"] = shape[0] * reps / (time.perf_counter() - t)
-    from semcodec.jscc.model import make_model
-    from semcodec.training.loop import forward_train
 
     model = make_model(codec.model.cfg.name)
     opt = torch.optim.Adam(model.parameters(), 1e-4)
@@ -108,9 +114,6 @@ def _anchors_at(channel: str, snr_db: float) -> dict[str, float]:
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
     """One ``osnerf eval-codec`` run, reused when its result file has the same config and
     was made by the same code (git commit of a clean tree)."""
-    from osnerf.cli import main
-    from osnerf.provenance import git_commit
-
     path = out_dir / f"codec_{tag}.json"
     want = argv + ["--out", str(path)]
     if path.exists():
@@ -135,8 +138,6 @@ def _codec_table(
     """Images x channels x SNR (default Kodak and :data:`CHANNELS`): jscc (each checkpoint),
     digital, digital_genie, ideal, with the anchors beside each row. ``photos``: a folder
     of the shared data instead; ``prefix`` keeps its eval-codec result files apart."""
-    from osnerf.paths import shared_data_dir
-
     n = int(os.environ.get("OSNERF_BENCH_CODEC_IMAGES", "24"))
     ckpts = [p for p in os.environ.get("OSNERF_BENCH_CODEC_CHECKPOINTS", "").split(os.pathsep) if p]
     ckpts = ckpts or [None]
@@ -203,8 +204,6 @@ def _jscc_docs(out_dir: Path, tag: str, channel: str, base: list[str], ckpts, co
     """The eval-codec results of jscc for each checkpoint (and jscc_refined on
     :data:`REFINED_CHANNELS`), each row's scheme named by its codec; ``codecs`` gets each
     label's checkpoint."""
-    from semcodec import load_codec
-
     docs = []
     for ck in ckpts:
         codec = load_codec(ck)
@@ -269,8 +268,6 @@ def _rate_curve(out_dir: Path) -> dict:
     """Kodak on AWGN at every CBR of :data:`RATE_CBRS`: jscc (with the analog refinement
     layer where it pays), its learned channels alone and honest digital; checks that jscc
     rises with the rate at every SNR and that CBR 1/3 is 2 dB above CBR 1/6 at 10 dB."""
-    from osnerf.paths import shared_data_dir
-
     n = int(os.environ.get("OSNERF_BENCH_CODEC_RATE_IMAGES", "12"))
     folder = str(shared_data_dir() / "kodak")
     curve: dict = {}
@@ -296,10 +293,6 @@ def _rate_curve(out_dir: Path) -> dict:
 
 def _focus(codec) -> dict:
     from PIL import Image
-
-    import phy
-    from osnerf.paths import shared_data_dir
-    from semcodec.jscc.focus_eval import focus_gain
 
     link = phy.FlatLink(phy.make_channel("awgn"))
     recs = []
@@ -342,8 +335,6 @@ def _focus(codec) -> dict:
 
 
 def run(out_dir: Path) -> dict:
-    from semcodec import load_codec
-
     torch.set_num_threads(min(2, os.cpu_count() or 1))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

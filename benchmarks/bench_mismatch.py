@@ -47,8 +47,23 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from common import write_text
+import phy
+from common import write_figure, write_text
+from osnerf.cli import main
+from osnerf.paths import shared_data_dir
+from osnerf.plots import (
+    eval_record,
+    outage_entries,
+    plot_digital_cliff,
+    plot_mismatch,
+    plot_outage_cdf,
+    plot_psnr_vs_cbr,
+)
 from osnerf.plots.rows import is_bound
+from osnerf.provenance import git_commit
+from osnerf.results import result_rows
+from phy.digital import codeword_layout, payload_capacity_bits, transmit_bytes
+from semcodec.digital.calibration import load_calibration
 
 PLAN_SNR_DB = 4.0
 PANEL_SNRS = (-2.0, 0.0, 2.0, 4.0, 7.0, 10.0, 13.0)
@@ -81,10 +96,6 @@ PARTS = ("panel", "staircase", "estimate", "forecast", "cbr", "blocks")
 
 def _blocks(trials: int) -> list[dict]:
     """Image loss of whole blocks of random payload against the calibration's forecast."""
-    import phy
-    from phy.digital import codeword_layout, payload_capacity_bits, transmit_bytes
-    from semcodec.digital.calibration import load_calibration
-
     cal = load_calibration()
     n = phy.num_symbols_for_cbr(1 / 16, 512, 768)  # a Kodak image's budget
     link = phy.channel_link("awgn")
@@ -112,9 +123,6 @@ def _blocks(trials: int) -> list[dict]:
 def _eval(out_dir: Path, tag: str, argv: list[str]) -> dict:
     """One ``osnerf eval-codec`` run, reused when its file has the same arguments and a clean
     tree of the same commit made it."""
-    from osnerf.cli import main
-    from osnerf.provenance import git_commit
-
     path = out_dir / f"mismatch_{tag}.json"
     if path.exists():
         doc = json.loads(path.read_text())
@@ -158,8 +166,6 @@ def _row(r: dict) -> dict:
 
 
 def _common(n: int, cbr: str = "1/16") -> list[str]:
-    from osnerf.paths import shared_data_dir
-
     folder = os.environ.get("OSNERF_BENCH_MISMATCH_FOLDER") or str(shared_data_dir() / "kodak")
     return ["--images", folder, "--max-images", str(n), "--cbr", cbr, "--no-lpips"]
 
@@ -206,16 +212,6 @@ def _findings(panel: list[dict], staircase: list[dict]) -> list[str]:
 
 def _figures(out_dir: Path, docs: dict[str, dict]) -> list[str]:
     """The figure set from the eval-codec files of this run, as PNGs under ``mismatch/``."""
-    from common import write_figure
-    from osnerf.plots import (
-        eval_record,
-        outage_entries,
-        plot_digital_cliff,
-        plot_mismatch,
-        plot_outage_cdf,
-        plot_psnr_vs_cbr,
-    )
-    from osnerf.results import result_rows
 
     def rows(*tags):
         return result_rows([eval_record(docs[t]) for t in tags if t in docs])

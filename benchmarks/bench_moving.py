@@ -22,6 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.bench_pipeline import _run
+from osnerf.report import Report
+
 SPEEDS_M_S = (0, 15)
 CSI = ("perfect", "ls", "lmmse")
 SNR_DB = 5
@@ -54,9 +57,6 @@ def _argv(speed: float, csi: str) -> list[str]:
 
 
 def _one(out: Path, speed: float, csi: str) -> dict:
-    from benchmarks.bench_pipeline import _run
-    from osnerf.report import Report
-
     run_dir = out / (f"moving_{speed:g}ms" + ("" if csi == "perfect" else f"_{csi}"))
     argv = _argv(speed, csi)
     wall = _run(run_dir, argv)

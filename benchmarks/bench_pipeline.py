@@ -32,6 +32,11 @@ import os
 import time
 from pathlib import Path
 
+from common import write_text
+from osnerf.cli import main
+from osnerf.provenance import git_commit
+from osnerf.report import Report
+
 OTA_SEEDS = (0, 1, 2)
 OTA_SNRS_DB = (0, -5, -10)
 OTA_GOAL_DB = 3.0
@@ -44,8 +49,6 @@ PARTS = ("demo", "ota", "variants", "ota_box")
 
 def _reusable(run_dir: Path, argv: list[str]) -> bool:
     """A report in ``run_dir`` that this clean commit made with these arguments."""
-    from osnerf.provenance import git_commit
-
     path = run_dir / "report.json"
     if not path.is_file():
         return False
@@ -59,9 +62,6 @@ def _reusable(run_dir: Path, argv: list[str]) -> bool:
 
 def _run(run_dir: Path, argv: list[str]) -> float:
     """``osnerf run`` into ``run_dir`` (reused when :func:`_reusable`); wall seconds."""
-    from common import write_text
-    from osnerf.cli import main
-
     if _reusable(run_dir, argv):
         return 0.0
     t = time.perf_counter()
@@ -76,8 +76,6 @@ def _run(run_dir: Path, argv: list[str]) -> float:
 
 def _over_the_air(out_dir: Path, box: bool = False) -> dict:
     """The tiny scene over the air (with digital sending the box when ``box``)."""
-    from osnerf.report import Report
-
     rows = []
     for snr, seed in ((s, n) for s in OTA_SNRS_DB for n in OTA_SEEDS):
         tag = "ota_box" if box else "ota"
@@ -121,8 +119,6 @@ def _over_the_air(out_dir: Path, box: bool = False) -> dict:
 
 def _variants(out_dir: Path) -> dict:
     """The demo at seeds 0-2 with exact knowledge, a 2 dB estimate error and digital's box."""
-    from osnerf.report import Report
-
     rows = []
     for variant, flags in VARIANTS.items():
         for seed in OTA_SEEDS:
@@ -151,8 +147,6 @@ def _variants(out_dir: Path) -> dict:
 def _demo(out_dir: Path) -> dict:
     """The default run (what `make demo` does), timed."""
     from dataclasses import asdict
-
-    from osnerf.report import Report
 
     run_dir = Path(out_dir) / "pipeline_demo"
     load_before = os.getloadavg()

@@ -49,6 +49,7 @@ import torch.nn.functional as F
 from common import write_figure
 from osnerf import result_header, write_json_atomic
 from osnerf.commands.args import RESOLUTION_PX_RANGE
+from osnerf.commands.render import renderer_config
 from osnerf.paths import shared_data_dir
 from renderer import (
     RENDERERS,
@@ -238,8 +239,6 @@ def _cli_config(name: str, px: int):
     """The renderer's settings as ``osnerf render --renderer NAME --resolution PX`` picks
     them (``--renderer-steps`` from OSNERF_FEATURES_STEPS, ``--renderer-refine`` from
     OSNERF_FEATURES_REFINE), without the progress bar."""
-    from osnerf.commands.render import renderer_config
-
     steps = os.environ.get("OSNERF_FEATURES_STEPS")
     refine = os.environ.get("OSNERF_FEATURES_REFINE")
     args = argparse.Namespace(

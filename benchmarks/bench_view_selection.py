@@ -21,6 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from common import write_figure
+from osnerf.cli import main
+from osnerf.scenes import RenderConfig
+from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
+
 SCENE = "firefighter_shadow"
 SNRS_DB = (10.0, 0.0)
 MAX_VIEWS = 6
@@ -52,8 +57,6 @@ def _argv(selection: str, seed: int, snr_db: float) -> list[str]:
 
 
 def _one(run_dir: Path, selection: str, seed: int, snr_db: float) -> dict:
-    from osnerf.cli import main
-
     argv = _argv(selection, seed, snr_db)
     t = time.perf_counter()
     if main([*argv, "--out", str(run_dir), "--overwrite"]) != 0:
@@ -80,10 +83,6 @@ def _one(run_dir: Path, selection: str, seed: int, snr_db: float) -> dict:
 
 
 def _picture(out: Path, rows: list[dict]) -> str:
-    from common import write_figure
-    from osnerf.scenes import RenderConfig
-    from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
-
     rm = scene_radio_map(SCENE, None, RenderConfig())
     marked = {s: next(r["views"] for r in rows if r["selection"] == s) for s in SELECTIONS}
     fig = plot_radio_map(rm, {f"{s} ({MAX_VIEWS} views)": v for s, v in marked.items()})

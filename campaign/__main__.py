@@ -16,8 +16,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from campaign.store import at_work
+from campaign.pack import PACK, is_pack, pack
+from campaign.promotion import add_arguments, run
+from campaign.store import Campaign, at_work
 from common import InputError
+from osnerf.paths import shared_data_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 HERE = Path(__file__).resolve().parent
@@ -90,14 +93,10 @@ def _add_continue(sub) -> None:
 
 
 def _add_promote(sub) -> None:
-    from campaign.promotion import add_arguments
-
     add_arguments(sub.add_parser("promote", help="compare a candidate with the shipped default"))
 
 
 def _add_pack(sub) -> None:
-    from campaign.pack import PACK
-
     p = sub.add_parser("pack", help="write the folder a GPU machine needs (carry it)")
     p.add_argument("--bsds", default=None, help="BSDS500 folder (default: the shared data's)")
     p.add_argument("--out", default=str(ROOT / PACK), help=f"folder to write (default {PACK})")
@@ -115,9 +114,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _data_defaults(args) -> tuple[list[Path], Path]:
-    from campaign.pack import PACK, is_pack
-    from osnerf.paths import shared_data_dir
-
     packed = ROOT / PACK / "data"
     base = packed if is_pack(ROOT / PACK) else shared_data_dir() / "bsds500"
     data = [Path(d) for d in args.data] if args.data else [base / "train", base / "val"]
@@ -131,7 +127,6 @@ def _data_defaults(args) -> tuple[list[Path], Path]:
 def _continue(args) -> int:
     import tempfile
 
-    from campaign.store import Campaign
     from campaign.stretch import StretchOptions, continue_line, resolve_device
 
     camp = Campaign.open(args.campaign)
@@ -194,8 +189,6 @@ def _check_channels(*mixtures: str) -> None:
 
 
 def _status(args) -> int:
-    from campaign.store import Campaign
-
     camp = Campaign.open(args.campaign)
     for name, line in camp.doc["lines"].items():
         best = line.get("best")
@@ -218,14 +211,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.verb == "continue":
             return _continue(args)
         if args.verb == "promote":
-            from campaign.promotion import run
-
             return run(args)
         if args.verb == "pack":
-            from campaign.pack import pack
-            from campaign.store import Campaign
-            from osnerf.paths import shared_data_dir
-
             bsds = Path(args.bsds) if args.bsds else shared_data_dir() / "bsds500"
             count = Campaign.open().doc["validation"]["count"]
             print(pack(bsds, Path(args.out), int(count)))

@@ -16,7 +16,7 @@ import importlib.util
 import shutil
 from pathlib import Path
 
-from common import list_images
+from common import InputError, list_images
 
 PACK = ".campaign-carry"
 """The carried folder, relative to the repository root."""
@@ -58,8 +58,6 @@ def pack(bsds: Path, out: Path, val_count: int) -> dict:
     """
     import os
     import tempfile
-
-    from common import InputError
 
     for split in ("train", "val", "test"):
         if not (bsds / split).is_dir():

@@ -22,8 +22,12 @@ import tempfile
 from pathlib import Path
 from statistics import mean
 
+from benchmarks import results as pages
+from campaign.store import Campaign, at_work, card_of, now_utc
 from campaign.swap import swap
-from common import InputError
+from common import InputError, to_json
+from osnerf import result_header
+from osnerf.paths import shared_data_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 RULE = {"max_loss_db": 0.1, "min_mean_gain_db": 0.2, "ota_max_loss_db": 0.1}
@@ -173,8 +177,6 @@ def compare(args, candidate: Path, baseline: Path) -> tuple[list[dict], list[dic
 def narrowed(args) -> list[str]:
     """The options that make a comparison narrower than the rule's full one (another
     baseline, images, channels, CBRs, SNRs, seeds or sizes); a promotion needs none."""
-    from osnerf.paths import shared_data_dir
-
     full = {
         "--channels": (args.channels, CHANNELS),
         "--cbrs": (args.cbrs, CBRS),
@@ -200,8 +202,6 @@ def default_checkpoint() -> Path:
 
 
 def _checkpoint(text: str, flag: str) -> tuple[Path, dict]:
-    from campaign.store import card_of
-
     path = Path(text)
     try:
         card = card_of(path)
@@ -214,8 +214,6 @@ def _checkpoint(text: str, flag: str) -> tuple[Path, dict]:
 
 def _candidate(args) -> Path:
     """The candidate's file: a path, or a campaign line's best."""
-    from campaign.store import Campaign
-
     cand = Path(args.candidate)
     if cand.is_file():
         return cand
@@ -236,7 +234,6 @@ def _resolve(args) -> tuple[Path, Path, dict, dict]:
     """(candidate, baseline, their cards); a line name means that line's best. Every option
     is checked here, before any comparison."""
     import phy
-    from osnerf.paths import shared_data_dir
     from semcodec.links import eval_channels
 
     if not 1 <= args.max_images <= 1000 or not 8 <= args.ota_size <= 1024:
@@ -268,8 +265,6 @@ def _resolve(args) -> tuple[Path, Path, dict, dict]:
 def record_path(folder: Path, sha: str) -> Path:
     """A new promotion record's path: the candidate's hash and the time, never an earlier
     record's name."""
-    from campaign.store import now_utc
-
     stem = f"promotion_{sha[:12]}_{now_utc().replace('-', '').replace(':', '')}"
     path, n = folder / f"{stem}.json", 1
     while path.exists():
@@ -284,9 +279,6 @@ def run(args) -> int:
     A promotion needs the rule's full comparison against the shipped default: any narrower
     setting is refused (exit 2) before any work unless ``--dry-run``."""
     import sys
-
-    from campaign.store import at_work
-    from osnerf import result_header
 
     if not args.dry_run and (flags := narrowed(args)):
         raise InputError(
@@ -316,8 +308,6 @@ def run(args) -> int:
     }
     path = record_path(Path(args.out), cand_card["sha256"])
     if decision["promote"] and not args.dry_run:
-        from campaign.store import Campaign
-
         doc["promoted"] = True
         with Campaign.open(args.campaign).locked():  # no stretch saves between stage and swap
             files = at_work(stage_promotion, args, cand, path, decision)
@@ -340,8 +330,6 @@ def run(args) -> int:
 
 
 def _json_bytes(doc: dict) -> bytes:
-    from common import to_json
-
     return (to_json(doc) + "\n").encode()
 
 
@@ -354,8 +342,6 @@ def recard(src: Path, update: dict) -> tuple[bytes, dict]:
     stored), and the card."""
     from safetensors.torch import load_file, save
 
-    from campaign.store import card_of
-
     card = {**card_of(src), **update}
     state = load_file(str(src))
     return save(state, metadata={"model_card": json.dumps(card, sort_keys=True)}), card
@@ -367,10 +353,6 @@ def stage_promotion(args, cand: Path, record: Path, decision: dict) -> dict[Path
     codec table's jscc rows for the new default (the old default's removed), ``README.md`` and
     ``docs/results.md`` regenerated from those. Returns path -> new bytes (None: removed),
     for :func:`swap`."""
-    from benchmarks import results as pages
-    from campaign.store import Campaign, card_of
-    from common import to_json
-
     default = default_checkpoint()
     ck = default.parent
     old = card_of(default)
@@ -433,7 +415,6 @@ def _codec_table(images: int, codec: Path, folder: Path, new_sha: str) -> dict[s
     benchmarks codec`` writes for it), evaluated into ``folder``: file name -> JSON text."""
     from benchmarks.bench_codec import CHANNELS as TABLE_CHANNELS
     from benchmarks.bench_codec import TABLE_SNRS
-    from osnerf.paths import shared_data_dir
 
     out = {}
     for channel, draws in TABLE_CHANNELS:

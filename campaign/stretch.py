@@ -20,7 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from campaign.store import Campaign, next_lrs, now_utc
+from campaign.store import Campaign, images_sha256, next_lrs, now_utc
+from campaign.worker import train_one
+from common import list_images, read_image
+from osnerf import git_commit
+from semcodec import make_codec
+from semcodec.training import validate
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -76,8 +81,6 @@ def load_validation(folder: Path, count: int, side_px: int):
     """
     import torch
 
-    from common import list_images, read_image
-
     imgs = [read_image(p) for p in list_images(folder, "--val")[:count]]
     side = min(side_px, min(min(im.shape[:2]) for im in imgs)) // 4 * 4
     if side < 16:
@@ -89,9 +92,6 @@ def load_validation(folder: Path, count: int, side_px: int):
 def score(path: Path, validation: dict, images, device: str) -> tuple[dict, float]:
     """(per channel and SNR PSNR, their mean: the campaign's score) of a JSCC checkpoint on
     the held-out ``images`` ([batch, 3, height, width] float32), noise from a fixed seed."""
-    from semcodec import make_codec
-    from semcodec.training import validate
-
     codec = make_codec(f"jscc:{path}")
     codec.module.to(device)
     metrics = validate(
@@ -145,8 +145,6 @@ def _run_specs(camp: Campaign, name: str, line: dict, opts: StretchOptions, devi
 
 def _train_all(specs: list[dict], jobs: int) -> list[dict]:
     """Train every spec (``jobs`` at a time as processes, or here when 1); their results."""
-    from campaign.worker import train_one
-
     if jobs == 1:
         return [train_one(s) for s in specs]
     env = {
@@ -182,8 +180,6 @@ def _train_all(specs: list[dict], jobs: int) -> list[dict]:
 def _held_out(camp: Campaign, opts: StretchOptions):
     """(the held-out images, their set as logged); the set is the campaign's own when its
     sha256 is the one ``validation.images_sha256`` pins (pinned by the first stretch)."""
-    from campaign.store import images_sha256
-
     val = camp.doc["validation"]
     images = load_validation(opts.val, int(val["count"]), int(val["side_px"]))
     sha = images_sha256(images)
@@ -277,8 +273,6 @@ def _provenance(rec: dict) -> dict:
 def _records(name, line, specs, results, winner, kept, machine, jobs, wall_min) -> list[dict]:
     """The log's records of a stretch's runs (minutes of this run, and of its lineage: the
     line's best it started from plus this run)."""
-    from osnerf import git_commit
-
     best = line.get("best")
     incumbent = best["score"] if best else -math.inf
     on_gpu = specs[0]["config"]["device"].startswith("cuda")

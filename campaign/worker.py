@@ -8,14 +8,14 @@ import sys
 import time
 from pathlib import Path
 
+from campaign.store import card_of
+from semcodec import TrainConfig, train
+
 
 def train_one(spec: dict) -> dict:
     """Train ``spec["config"]`` (a :class:`semcodec.TrainConfig`'s fields) from ``spec["init"]``
     into a fresh ``spec["out"]``; returns ``{"out", "lr", "sha256", "wall_s", "summary"}``."""
     import torch
-
-    from campaign.store import card_of
-    from semcodec import TrainConfig, train
 
     cfg = TrainConfig(**spec["config"])
     out = Path(spec["out"])

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common.errors import InputError
+
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".webp", ".bmp", ".tif", ".tiff")
 """Files the project reads as images (case-insensitive), in every command."""
 
@@ -150,8 +152,6 @@ def load_square_images(
         FileNotFoundError: from :func:`list_images`.
     """
     from PIL import Image
-
-    from common.errors import InputError
 
     files = list_images(path, what)[:max_images]
     out = []

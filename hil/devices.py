@@ -10,10 +10,20 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from common import Registry
-from hil.emulation.iiod import IIOD_PORT
+from hil.emulation.iiod import IIOD_PORT, IiodServer
+from hil.emulation.pluto import EmulatedPluto
+from hil.emulation.soapy_device import EmulatedSoapyDevice
+from hil.emulation.soapy_remote import SoapyRemoteServer
 from hil.emulation.soapy_rpc import DEFAULT_PORT as SOAPY_REMOTE_PORT
+from hil.errors import DeviceNotFoundError
 from hil.hackrf import protocol
+from hil.hackrf.driver import HackRF
+from hil.hackrf.usb_transport import find_hackrfs
 from hil.pluto import ad9361
+from hil.pluto.driver import Pluto
+from hil.pluto.iio_access import find_plutos
+from hil.soapy.driver import SoapyRadio, find_soapy_devices
+from hil.zmq.radio import ZmqRadio
 
 
 @dataclass(frozen=True)
@@ -78,8 +88,6 @@ class DeviceKind:
         Raises:
             DeviceNotFoundError: a board is missing (only one half-duplex board present).
         """
-        from hil.errors import DeviceNotFoundError
-
         if self.open_link is not None:
             return self.open_link(tx_id, rx_id)
         tx = self.open(tx_id)
@@ -103,82 +111,56 @@ class DeviceKind:
 
 
 def _find_hackrfs() -> list:
-    from hil.hackrf.usb_transport import find_hackrfs
-
     return [d.serial_number for d in find_hackrfs()]
 
 
 def _open_hackrf(serial=None):
-    from hil.hackrf.driver import HackRF
-
     return HackRF.open(serial)
 
 
 def _emulated_pluto(snr_db: float, **kwargs):
-    from hil.emulation.pluto import EmulatedPluto
-
     return EmulatedPluto.for_link(snr_db, **kwargs)
 
 
 def _serve_iiod(board, address: str, port: int):
-    from hil.emulation.iiod import IiodServer
-
     return IiodServer(board, address, port)
 
 
 def _find_plutos() -> list:
-    from hil.pluto.iio_access import find_plutos
-
     return [uri for uri, _ in find_plutos()]
 
 
 def _open_pluto(uri=None):
-    from hil.pluto.driver import Pluto
-
     return Pluto.open(uri)
 
 
 def _find_soapy() -> list:
-    from hil.soapy.driver import find_soapy_devices
-
     return find_soapy_devices()
 
 
 def _open_soapy(args=None):
-    from hil.soapy.driver import SoapyRadio
-
     return SoapyRadio.open(args)
 
 
 def _soapy_ranges(args) -> dict:
-    from hil.soapy.driver import SoapyRadio
-
     with SoapyRadio.open(args) as radio:
         r = radio.ranges()
         return {**r, "part": f"{radio.hardware_key} via SoapySDR driver {radio.driver_key}"}
 
 
 def _emulated_soapy(snr_db: float, **kwargs):
-    from hil.emulation.soapy_device import EmulatedSoapyDevice
-
     return EmulatedSoapyDevice.for_link(snr_db, **kwargs)
 
 
 def _serve_soapy_remote(device, address: str, port: int):
-    from hil.emulation.soapy_remote import SoapyRemoteServer
-
     return SoapyRemoteServer(device, address, port)
 
 
 def _open_zmq(endpoint=None):
-    from hil.zmq.radio import ZmqRadio
-
     return ZmqRadio(endpoint, None)
 
 
 def _open_zmq_link(tx_endpoint, rx_endpoint):
-    from hil.zmq.radio import ZmqRadio
-
     radio = ZmqRadio(tx_endpoint, rx_endpoint)
     return radio, radio
 

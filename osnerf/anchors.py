@@ -14,6 +14,8 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
+from osnerf.paths import shared_data_dir
+
 KODAK_CBR = 1 / 16
 """The CBR of :data:`KODAK`."""
 STANDARD_SNRS_DB = (1, 4, 7, 10, 13)
@@ -77,8 +79,6 @@ def capacity_anchor(
     """Codec + ideal channel code (Kodak, AWGN) from the shared CSV: vs SNR at ``cbr`` (within
     2 %) or vs CBR at ``snr_db``. Empty when the file is not there."""
     if data_dir is None:
-        from osnerf.paths import shared_data_dir
-
         data_dir = shared_data_dir()
     path = Path(data_dir) / CAPACITY_CSV
     if not path.is_file():

@@ -19,6 +19,7 @@ import sys
 
 from common import InputError, Registry, tune_malloc
 from osnerf.provenance import git_commit
+from osnerf.version import __version__
 
 # name -> (module, one-line help). One table; `osnerf sweep` uses it too.
 COMMANDS = Registry[tuple[str, str]](
@@ -93,8 +94,6 @@ def available_commands() -> dict[str, tuple[str, str]]:
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    from osnerf.version import __version__
-
     parser = _Parser(prog="osnerf", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"osnerf {__version__}")
     parser._negative_number_matcher = _NEGATIVE_LIST

@@ -25,9 +25,12 @@ import numpy as np
 import torch
 
 from hil import DEVICES as _HARDWARE
+from hil import AirChannel, Emulator, HackRF, HilError, open_loopback, send_blocks
+from phy import LinkOutput
+from semcodec.links import ReceivedBlock
 
 if TYPE_CHECKING:
-    from hil import Emulator, OtaConfig, Radio
+    from hil import OtaConfig, Radio
 
 DEVICES = ("emulated", *_HARDWARE)  # emulated HackRFs, then hil's table of real front ends
 DEFAULT_PPM = (0.0, 20.0)
@@ -45,8 +48,6 @@ def air_channel(device: str, snr_db: float, ota_cfg, delay_s: float, multipath, 
     of ``device`` ("emulated" HackRFs, an emulated "pluto" or "soapy" device), with the fixed
     ``multipath`` taps or, given ``path_segments`` (``hil.emulation.PathSegment`` s), those
     paths' gains as they are."""
-    from hil import AirChannel
-
     if device in ("pluto", "soapy"):  # an emulated SoapySDR device is an AD9363 too
         txvga, rx_gain = ota_cfg.ad9361_tx_gain_db, ota_cfg.ad9361_rx_gain_db
     else:
@@ -91,9 +92,6 @@ def open_radios(
     Raises:
         ValueError: ``ppm`` with TX and RX apart for one full-duplex board.
     """
-    from hil import DEVICES as HARDWARE
-    from hil import Emulator, HackRF, open_loopback
-
     if device not in DEVICES:
         raise ValueError(f"ota device must be one of {', '.join(DEVICES)}, got {device!r}")
     if device == "emulated":
@@ -107,14 +105,14 @@ def open_radios(
             HackRF.open(emu.serials[1], backend=emu.backend),
             emu,
         )
-    one_board = HARDWARE[device].full_duplex and rx_serial in (None, tx_serial)
+    one_board = _HARDWARE[device].full_duplex and rx_serial in (None, tx_serial)
     ppm = (ONE_BOARD_PPM if one_board else DEFAULT_PPM) if ppm is None else tuple(ppm)
     if one_board and ppm[0] != ppm[1]:
         raise ValueError(
-            f"ppm: one {HARDWARE[device].label} is both ends of the link on one crystal, so "
+            f"ppm: one {_HARDWARE[device].label} is both ends of the link on one crystal, so "
             f"TX and RX are equal, got {ppm[0]:g},{ppm[1]:g}"
         )
-    tx, rx = HARDWARE[device].open_pair(tx_serial, rx_serial)
+    tx, rx = _HARDWARE[device].open_pair(tx_serial, rx_serial)
     if snr_db is not None and tx.air_settable and rx is tx:
         try:
             tx.set_air(
@@ -161,8 +159,6 @@ class OtaLink:
             ``hil.ota.FrameReport`` per frame (``hil.HilError`` and subclasses propagate, with what
             was captured).
         """
-        from hil import send_blocks
-
         if self.emulator is not None:  # deterministic: receivers wait for this next burst
             medium = self.emulator.medium
             medium.wait_for_bursts = medium.bursts_completed + 1
@@ -184,8 +180,6 @@ class OtaLink:
         Raises:
             ``hil.HilError``: real boards (their air is not the host's to set).
         """
-        from hil import HilError
-
         if self.emulator is not None:
             self.emulator.medium.set_channel(channel, seed)
         elif self.air_settable:
@@ -207,8 +201,6 @@ class OtaLink:
     def transmit(self, x: torch.Tensor):
         """``x`` [batch, num_symbols] complex64 as one burst -> ``phy.LinkOutput`` (the air
         as it is set, whatever SNR it has)."""
-        from phy import LinkOutput
-
         x = torch.as_tensor(x)
         if x.dim() != 2:
             raise ValueError(f"x must be [batch, num_symbols] complex64, got {tuple(x.shape)}")
@@ -230,8 +222,6 @@ class OtaLink:
 def received_blocks(result) -> list:
     """``hil.ota.BurstResult`` -> one ``semcodec.links.ReceivedBlock`` per block sent: its symbols,
     noise variance, which of its frames were detected and its measured SNR."""
-    from semcodec.links import ReceivedBlock
-
     return [
         ReceivedBlock(
             np.asarray(x_hat, np.complex64),

@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+from osnerf.schemes import SCHEMES
+from semcodec import LINK_SCHEMES
 from semcodec.links import DIGITAL
 
 
@@ -53,9 +55,6 @@ def scheme_entry(row: dict[str, Any]):
     """The table entry of a row's scheme: ``semcodec.LINK_SCHEMES`` for the link-level
     commands (``eval-codec``, ``ota``), ``osnerf.schemes.SCHEMES`` for ``run``; a row
     without a command is looked up in both (the names they share have the same kind)."""
-    from osnerf.schemes import SCHEMES
-    from semcodec import LINK_SCHEMES
-
     name = row.get("scheme")
     if name is None:
         return None

@@ -33,9 +33,12 @@ from collections.abc import Mapping
 import numpy as np
 import torch
 
+import phy
+import semcodec
 from common import Registry
 from osnerf.scheme_types import RunContext, Scheme, SendSettings, Transmission, scheme_seed
 from osnerf.semantic_send import send_views
+from semcodec.jscc import focus_pixel_masks
 from semcodec.links import ANALOG, DIGITAL, IDEAL, JSCC
 
 ENTRY_POINT_GROUP = "osnerf.schemes"
@@ -142,9 +145,6 @@ class Digital(Scheme):
         return send.mcs
 
     def transmit(self, ctx, plans, images):
-        import phy
-        import semcodec
-
         cfg = ctx.send
         channel = phy.assumed_channel(cfg.channel)
         out, failed, arrived = [], 0, []
@@ -200,8 +200,6 @@ def object_box(image: torch.Tensor, background) -> tuple[int, int, int, int]:
     """(top, left, rows, cols) of the demanded objects in a masked view [3, height, width]
     (every pixel off the background colour), grown as ``semcodec.contract.mask_box`` grows a focus
     box; the whole view when nothing differs."""
-    import semcodec
-
     bg = torch.as_tensor(np.asarray(background, np.float32)).reshape(3, 1, 1)
     mask = ((image - bg).abs().amax(dim=0) > 0.5 / 255).float()  # [height, width]
     return semcodec.contract.mask_box(mask[None, None], *image.shape[-2:])
@@ -239,8 +237,6 @@ class Analog(Scheme):
     help = "uncoded analog pixels, same views and budget as jscc"
 
     def transmit(self, ctx, plans, images):
-        import semcodec
-
         return _linear_analog(semcodec.links.transmit_analog, ctx, plans, images)
 
 
@@ -255,8 +251,6 @@ class SoftCast(Scheme):
     help = "SoftCast: training-free linear analog (DCT chunks, LLSE), same views and budget"
 
     def transmit(self, ctx, plans, images):
-        import semcodec
-
         return _linear_analog(semcodec.links.transmit_softcast, ctx, plans, images)
 
 
@@ -306,8 +300,6 @@ class GroundTruth(Scheme):
     help = "bound: the on-demand views undistorted (ceiling)"
 
     def transmit(self, ctx, plans, images):
-        from semcodec.jscc import focus_pixel_masks
-
         masks = ctx.routing[0].amax(dim=1).numpy() if ctx.routing is not None else None
         rx = None
         if masks is not None:  # what jscc's receiver would know over a perfect channel

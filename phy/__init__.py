@@ -30,6 +30,7 @@ from phy.channels import (  # noqa: E402
     RicianFading,
     make_channel,
 )
+from phy.channels.tr38901 import CDLChannel, TDLChannel  # noqa: E402
 from phy.conventions import (  # noqa: E402
     SNR_DB_RANGE,
     cbr,
@@ -84,16 +85,6 @@ from phy.ofdm import (  # noqa: E402
 )
 from phy.receiver import FrameResult, find_frames, receive_frame, receive_frames  # noqa: E402
 from phy.theory import THEORY_CHANNELS, ber_theory, ser_theory  # noqa: E402
-
-
-def __getattr__(name: str):
-    """TDLChannel / CDLChannel on first use (they import sionna, which is slow to import)."""
-    if name in ("TDLChannel", "CDLChannel"):
-        from phy.channels import tr38901
-
-        return getattr(tr38901, name)
-    raise AttributeError(f"module 'phy' has no attribute {name!r}")
-
 
 __all__ = [
     "SNR_DB_RANGE",

@@ -36,6 +36,7 @@ import scipy.fft
 from scipy import stats
 
 from phy import _kernels
+from phy.frame import sync_sequence
 
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
 # sample passes it, high enough that few noise samples reach the coherent check
@@ -150,8 +151,6 @@ def _shift_matrix(base_bytes: bytes) -> np.ndarray:
 def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(base [L] complex64, cover [K] float64, comb [K - 1] complex64): the differential
     comb ``g[k] = s_k s_{k+1}``, one tap per segment."""
-    from phy.frame import sync_sequence
-
     base, cover = sync_sequence(cfg)
     return base.astype(np.complex64), cover, (cover[1:] * cover[:-1]).astype(np.complex64)
 
@@ -273,8 +272,6 @@ def _cfo_cycles(spec_row: np.ndarray, v_bin: int, seg: int) -> float:
 @functools.lru_cache(maxsize=16)
 def _half_sample_base(cfg) -> np.ndarray:
     """[L] complex64: the periodic base sequence delayed by half a sample (band-limited)."""
-    from phy.frame import sync_sequence
-
     base, _ = sync_sequence(cfg)
     seg = base.size
     j = np.fft.fftfreq(seg) * seg  # signed line index

@@ -13,6 +13,7 @@ from skimage.metrics import structural_similarity
 from torch import Tensor
 
 from common import psnr  # the project's one PSNR, re-exported as renderer.psnr
+from renderer.perceptual import lpips
 
 
 def _np(x) -> np.ndarray:
@@ -59,8 +60,6 @@ def image_metrics(preds, targets, masks=None, with_lpips: bool = False) -> dict:
         vals = [v for v in vals if not math.isnan(v)]
         out["masked_psnr"] = float(np.mean(vals)) if vals else math.nan
     if with_lpips:
-        from renderer.perceptual import lpips
-
         per_view_lpips = [float(v) for v in lpips(preds, targets)]
         out["lpips"] = float(np.mean(per_view_lpips))
         out["lpips_per_view"] = per_view_lpips

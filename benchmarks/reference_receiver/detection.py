@@ -15,6 +15,7 @@ import numpy as np
 import scipy.fft
 
 from phy.detection import Detection
+from phy.frame import sync_sequence
 from phy.sync import correct_cfo
 
 SEARCH_THRESHOLD = 11.0  # S above this is a candidate: low enough that a frame at -10 dB per
@@ -78,8 +79,6 @@ def _shift_matrix(base_bytes: bytes) -> np.ndarray:
 def _search_plan(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(base [L] complex64, cover [K] float64, comb [K - 1] complex64): the differential
     comb ``g[k] = s_k s_{k+1}``, one tap per segment."""
-    from phy.frame import sync_sequence
-
     base, cover = sync_sequence(cfg)
     return base.astype(np.complex64), cover, (cover[1:] * cover[:-1]).astype(np.complex64)
 
@@ -201,8 +200,6 @@ def _segment_sums(c: np.ndarray, lags: np.ndarray, cover: np.ndarray, seg: int, 
 @functools.lru_cache(maxsize=16)
 def _half_sample_base(cfg) -> np.ndarray:
     """[L] complex64: the periodic base sequence delayed by half a sample (band-limited)."""
-    from phy.frame import sync_sequence
-
     base, _ = sync_sequence(cfg)
     seg = base.size
     j = np.fft.fftfreq(seg) * seg  # signed line index

@@ -29,6 +29,7 @@ from hil.hackrf.settings import HackRFSettings
 from hil.hackrf.stream import RxThread, StreamStats
 from hil.hackrf.usb_transport import UsbTransport, find_hackrfs
 from hil.iq import from_int8_iq, full_scale_samples, to_int8_iq
+from hil.sigmf_io import write_sigmf
 
 
 class HackRF(HackRFSettings):
@@ -367,8 +368,6 @@ class HackRF(HackRFSettings):
                 self.stop_rx()
 
     def _save(self, raw: np.ndarray, path, note: str | None = None):
-        from hil.sigmf_io import write_sigmf
-
         return write_sigmf(
             path,
             raw,

@@ -35,7 +35,7 @@ class PhyFrames:
     """
 
     def __init__(self, frame_config=None, **frame_kwargs):
-        import phy
+        import phy  # loads torch, which import hil does not
 
         missing = [
             n
@@ -158,7 +158,7 @@ def build_burst(
     """
     import torch
 
-    from phy import clip_papr
+    from phy import clip_papr  # loads torch, which import hil does not
 
     reports, layout, parts = [], [], [np.zeros(cfg.gap_samples, np.complex64)]
     # one scale for every frame: a frame of unit-power symbols has mean power p_nominal and

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from hil.hackrf.protocol import FREQ_RANGE_HZ
 from hil.ota.header import HEADER_BITS
 from hil.pluto.ad9361 import DEFAULT_RX_GAIN_DB, DEFAULT_TX_GAIN_DB
 
@@ -56,8 +57,6 @@ class OtaConfig:
     soapy_tx_gain_db: float | None = None
 
     def __post_init__(self):
-        from hil.hackrf.protocol import FREQ_RANGE_HZ
-
         if not 2e6 <= self.sample_rate_hz <= 20e6:
             raise ValueError(f"sample_rate_hz must be in [2e6, 20e6], got {self.sample_rate_hz!r}")
         lo, hi = FREQ_RANGE_HZ

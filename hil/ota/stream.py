@@ -24,9 +24,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common import one_blas_thread
-from hil.ota.burst import BurstResult, FrameReport, as_numpy
+from hil.ota.burst import BurstResult, FrameReport, as_numpy, build_burst
 from hil.ota.config import OtaConfig
 from hil.ota.header import MAX_FRAMES, decode_header
+from hil.ota.link import _default_frames
 from hil.ota.receiver import ERASED_NOISE_VAR
 
 
@@ -186,9 +187,6 @@ def build_views(blocks: list, cfg: OtaConfig, frames=None) -> list[StreamView]:
         blocks: one [num_symbols] complex64 array per view, unit mean power each.
         frames: the frame layer (default ``phy``'s, as :func:`hil.send_blocks`).
     """
-    from hil.ota.burst import build_burst
-    from hil.ota.link import _default_frames
-
     frames = frames or _default_frames(cfg)
 
     views, number = [], 0

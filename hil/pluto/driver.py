@@ -22,6 +22,7 @@ from hil.errors import DeviceNotFoundError, HilError, StreamError
 from hil.hackrf.stream import StreamStats
 from hil.iq import full_scale_samples
 from hil.pluto.ad9361 import GAIN_CONTROL_MODES, RX_FULL_SCALE, TX_FULL_SCALE, integer_hz
+from hil.pluto.context import air_setting
 from hil.pluto.iio_access import (
     air_attribute,
     find_plutos,
@@ -31,6 +32,7 @@ from hil.pluto.iio_access import (
     release_frames,
 )
 from hil.pluto.stream import PLUTO_BUFFER_SAMPLES, rx_stream
+from hil.sigmf_io import write_sigmf
 
 
 class Pluto:
@@ -171,8 +173,6 @@ class Pluto:
     def set_air(self, channel, *, ppm: float = 0.0, seed: int = 0) -> None:
         """Set an emulated board's air (``hil.AirChannel`` from its TX to its RX), its
         crystal error (ppm) and noise seed, between bursts; ``HilError`` on a real board."""
-        from hil.pluto.context import air_setting
-
         if not self.air_settable:
             raise HilError(f"{self.uri} is a real board: its air is not the host's to set")
         try:
@@ -384,8 +384,6 @@ class Pluto:
         return iq[None, :]
 
     def _save(self, iq, path, sample_rate_hz: float, center_freq_hz: float, note=None):
-        from hil.sigmf_io import write_sigmf
-
         return write_sigmf(
             path,
             iq,

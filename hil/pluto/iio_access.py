@@ -14,6 +14,7 @@ from hil.errors import (
     RequestFailedError,
     TimedOutError,
 )
+from hil.pluto.context import AIR_ATTR, DEVICE_NAMES, OVERRUN_ATTR, PHY, RX_DEV
 
 _GONE = {
     errno.EPIPE,
@@ -56,8 +57,6 @@ def receive_error(exc: BaseException, waited_s: float, timeout_ms: int) -> HilEr
 def air_attribute(sdr):
     """The debug attribute through which an emulated board's air is set
     (``hil.pluto.context.AIR_ATTR`` of its ``ad9361-phy``), or None on a real board."""
-    from hil.pluto.context import AIR_ATTR, DEVICE_NAMES, PHY
-
     try:
         return sdr.ctx.find_device(DEVICE_NAMES[PHY]).debug_attrs.get(AIR_ATTR)
     except Exception:  # noqa: BLE001 - no such device or attribute: not our emulator
@@ -68,8 +67,6 @@ def rx_overrun_counts(sdr) -> tuple[int, int, int] | None:
     """``(overruns, lost_blocks, lost_samples)`` of an emulated board's last receive buffer
     (``hil.pluto.context.OVERRUN_ATTR`` of its ``cf-ad9361-lpc``), or None on a real board
     (libiio 0.x reports no overruns)."""
-    from hil.pluto.context import DEVICE_NAMES, OVERRUN_ATTR, RX_DEV
-
     try:
         attr = sdr.ctx.find_device(DEVICE_NAMES[RX_DEV]).debug_attrs.get(OVERRUN_ATTR)
         if attr is None:

@@ -26,6 +26,7 @@ import numpy as np
 from hil.errors import DeviceNotFoundError, HilError, StreamError, TimedOutError
 from hil.hackrf.stream import StreamStats
 from hil.iq import full_scale_samples
+from hil.pluto.context import air_setting
 from hil.soapy.binding import args_string, soapysdr
 
 AIR_SETTING = "emulated_air"  # hil.emulation.soapy_device.AIR_SETTING, a device setting
@@ -249,8 +250,6 @@ class SoapyRadio:
     def set_air(self, channel, *, ppm: float = 0.0, seed: int = 0) -> None:
         """The emulated device's air from now on (a ``hil.AirChannel``), its crystal error
         and noise seed. Raises ``HilError`` on a real device."""
-        from hil.pluto.context import air_setting
-
         if not self.air_settable:
             raise HilError(f"{self.args}: a real device; its air is not the host's to set")
         text = air_setting(channel, ppm, seed)

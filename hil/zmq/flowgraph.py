@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from hil.errors import DeviceNotFoundError, HilError
+from hil.ota.config import OtaConfig
 
 FLOWGRAPHS = Path(__file__).resolve().parents[2] / "gnuradio"
 GNURADIO_PYTHON = "/usr/bin/python3"
@@ -73,8 +74,7 @@ def noise_voltage(snr_db: float, signal_power_dbfs: float, occupied_fraction: fl
 def ota_noise_voltage(snr_db: float, cfg=None) -> float:
     """The noise voltage that puts ``osnerf ota``'s frames (``hil.OtaConfig``'s mean power,
     ``phy``'s OFDM: used carriers of the FFT) at ``snr_db`` per symbol."""
-    import phy
-    from hil.ota.config import OtaConfig
+    import phy  # loads torch, which import hil does not
 
     cfg = cfg or OtaConfig()
     fc = phy.FrameConfig()

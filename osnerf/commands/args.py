@@ -20,7 +20,7 @@ import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from common import MAX_BUDGET_S, SEED_RANGE, Bound
+from common import MAX_BUDGET_S, SEED_RANGE, Bound, path_kind
 from osnerf.cli import UsageError
 
 THREADS_RANGE = (1, 256)
@@ -205,8 +205,6 @@ def _check_parent(path: Path, flag: str) -> None:
 def _kind(p: Path, flag: str, want: str) -> str | None:
     """What ``p`` names (``common.path_kind``); anything but a regular file or folder is
     refused: a device node, FIFO or symlink would be replaced by the atomic rename."""
-    from common import path_kind
-
     kind = path_kind(p)
     if kind not in (None, "a file", "a folder"):
         raise UsageError(f"{flag} {str(p)!r} is {kind}, not a regular file or folder; give {want}")

@@ -12,16 +12,25 @@ import math
 import sys
 import time
 
-from osnerf.cli import UsageError
+import phy
+from common import write_figure
+from osnerf.cli import UsageError, inputs_checked
 from osnerf.commands import args as checks
+from osnerf.provenance import result_header, write_json_atomic
+from phy import (
+    MODULATIONS,
+    ber_theory,
+    bits_per_symbol,
+    ser_theory,
+    simulate_uncoded,
+    snr_db_to_ebno_db,
+)
+from phy import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
 
 MAX_NUM_BITS = 10**9
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from phy import MODULATIONS
-    from phy import THEORY_CHANNELS as CHANNEL_CHOICES  # channels with a closed form
-
     p.add_argument(
         "--channel",
         default="awgn",
@@ -58,9 +67,6 @@ def parse_snr_list(text) -> list[float]:
 
 
 def parse_args(args: argparse.Namespace) -> dict:
-    from phy import MODULATIONS
-    from phy import THEORY_CHANNELS as CHANNEL_CHOICES
-
     if args.channel not in CHANNEL_CHOICES:
         raise UsageError(
             f"--channel must be one of {', '.join(CHANNEL_CHOICES)}, got {args.channel!r}"
@@ -101,17 +107,12 @@ def parse_args(args: argparse.Namespace) -> dict:
 
 def _channel(name: str):
     """The channel of ``--channel``: AWGN, or fast Rayleigh (one h per symbol)."""
-    import phy
-
     return phy.AWGN() if name == "awgn" else phy.RayleighFading(mode="fast")
 
 
 def simulate(config: dict, seed: int) -> list[dict]:
     import torch
     from tqdm import tqdm
-
-    import phy
-    from phy import ber_theory, bits_per_symbol, ser_theory, simulate_uncoded, snr_db_to_ebno_db
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
     link = phy.FlatLink(_channel(config["channel"]), csi="perfect", equalizer="zf")
@@ -163,8 +164,6 @@ def plot(config: dict, results: list[dict], path: str) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from phy import ber_theory
-
     snrs = [r["snr_db"] for r in results]
     lo, hi = min(snrs), max(snrs)
     grid = np.linspace(lo - 1, hi + 1, 200)
@@ -181,16 +180,12 @@ def plot(config: dict, results: list[dict], path: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    from common import write_figure
 
     write_figure(path, fig, dpi=120)
     plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import inputs_checked
-    from osnerf.provenance import result_header, write_json_atomic
-
     config = parse_args(args)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     results = simulate(config, args.seed)

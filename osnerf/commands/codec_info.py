@@ -16,8 +16,11 @@ import argparse
 import json
 import sys
 
-from common import median_seconds
+from common import median_seconds, write_text
+from osnerf.cli import inputs_checked
 from osnerf.commands import args as checks
+from osnerf.paths import shared_data_dir
+from osnerf.provenance import open_codec, result_header
 
 MAX_REPEATS = 100
 
@@ -110,8 +113,6 @@ def codec_complexity(codec, image, snr_db: float, cbr: float, repeats: int) -> d
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from osnerf.cli import inputs_checked
-    from osnerf.provenance import open_codec, result_header
     from phy import parse_cbr
     from semcodec.links import load_image_folder
 
@@ -120,8 +121,6 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         raise ValueError(f"--{e}") from None
     if args.image is None:
-        from osnerf.paths import shared_data_dir
-
         kodak = shared_data_dir() / "kodak"
         names, images = load_image_folder(sorted(kodak.glob("*.png"))[0])
     else:
@@ -155,8 +154,6 @@ def run(args: argparse.Namespace) -> int:
         doc["digital"] = digital_timing(image, args.snr_db, n, args.repeats)
     text = json.dumps(doc, indent=1)
     if args.out:
-        from common import write_text
-
         write_text(args.out, text)
     print(text)
     c = doc["complexity"]

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 
+from osnerf.cli import main
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="runs/demo", help="output folder (default: runs/demo)")
@@ -20,7 +22,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import main
-
     argv = ["run", "--channel", "rayleigh", "--snr-db", "0", "--seed", "0", "--out", args.out]
     return main(argv + (["--overwrite"] if args.overwrite else []))

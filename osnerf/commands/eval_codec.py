@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from common import write_figure
+from osnerf.cli import inputs_checked
 from osnerf.commands import args as checks
 from osnerf.commands.eval_inputs import checked_inputs
 from osnerf.commands.eval_partial import partial_path, resumable
@@ -52,6 +53,11 @@ from osnerf.commands.eval_stats import (
     outage_stats,
     snr_belief,
 )
+from osnerf.provenance import codec_record, result_header, write_json_atomic
+from phy import channel_record
+from semcodec import LINK_SCHEMES, EvalContext, capability_record, codec_names
+from semcodec.jscc import REFINE_STEPS
+from semcodec.links import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
 
 MAX_DRAWS = 10_000
 MAX_IMAGES = 100_000
@@ -67,8 +73,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_link_arguments(p: argparse.ArgumentParser) -> None:
     """--images, --channel, --draws, --snr-db, --cbr, --schemes, --mcs, --refine-steps, --seed."""
-    from semcodec.links import EVAL_MIN_SIDE_PX, eval_channels, schemes_help
-
     side = f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} px"
     p.add_argument(
         "--images",
@@ -109,7 +113,6 @@ def _add_link_arguments(p: argparse.ArgumentParser) -> None:
         help=f"comma-separated: {schemes_help()}",
     )
     p.add_argument("--mcs", default=None, help="MCS of digital_fixed (default 16qam-1/2)")
-    from semcodec.jscc import REFINE_STEPS
 
     p.add_argument(
         "--refine-steps",
@@ -148,7 +151,6 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--plot", default=None, help="optional PNG plot of PSNR vs SNR")
     checks.add_overwrite(p, "--out and --plot (and an OUT.partial of another evaluation)")
-    from semcodec import codec_names
 
     p.add_argument(
         "--codec",
@@ -179,10 +181,6 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import inputs_checked
-    from osnerf.provenance import codec_record, result_header, write_json_atomic
-    from semcodec import LINK_SCHEMES, EvalContext, capability_record
-
     out, schemes, snrs, cbr, mcs, codec, names, images, score_lpips = checked_inputs(args)
     ctx = EvalContext(
         channel=args.channel,
@@ -192,7 +190,6 @@ def run(args: argparse.Namespace) -> int:
         refine_seed=args.seed + 1_000_000_007,  # its own stream, never an evaluation draw's
         snr_error_db=args.snr_error_db,
     )
-    from phy import channel_record
 
     link = ctx.link()  # builds the channel (bad channel settings fail before any work)
     config = {
@@ -274,8 +271,6 @@ def _point(
     """One (scheme, SNR) row of the result: every image over ``args.draws`` draws."""
     import torch
 
-    from semcodec import LINK_SCHEMES
-
     tally, t0 = DrawTally(score_lpips), time.perf_counter()
     for ii, img in enumerate(images):
         row, believed = [], []
@@ -296,8 +291,6 @@ def _result_row(
     tally: DrawTally, scheme: str, snr: float, cbr: float, num_images: int, args, t0: float
 ) -> dict:
     """The result row of a tallied point, and its line on stderr."""
-    from semcodec import LINK_SCHEMES
-
     ps, ss, ms, ls, extra = tally.psnr, tally.ssim, tally.ms_ssim, tally.lpips, tally.extra
     flat = [v for row in ps for v in row]
     mean, lo, hi = mean_ci95(flat)
@@ -351,8 +344,6 @@ def _result_row(
 def _within_codec(ctx, scheme: str, plan: float | None) -> float | None:
     """A belief outside the semantic codec's SNR range is clipped to it (an encoder is told
     only SNRs it was trained for); other schemes take it as it is."""
-    from semcodec import LINK_SCHEMES
-
     if plan is None or not LINK_SCHEMES[scheme].needs_codec:
         return plan
     lo, hi = ctx.codec.snr_range_db

@@ -8,15 +8,19 @@ import sys
 
 from osnerf.commands import args as checks
 from osnerf.commands.eval_partial import check_partial_kind
+from osnerf.provenance import open_codec
+from osnerf.schemes import parse_schemes
+from phy import num_symbols_for_cbr, parse_cbr
+from phy.digital import MCS_TABLE
+from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
+from semcodec import LINK_SCHEMES, require_capabilities
+from semcodec.links import DEFAULT_FIXED_MCS, eval_channels, load_image_folder
 
 
 def checked_inputs(args: argparse.Namespace):
     """Every input checked before any work: (out path, schemes, SNRs, CBR, fixed MCS, codec or
     None, image names, images, whether LPIPS is scored)."""
     import torch
-
-    from phy import parse_cbr
-    from semcodec.links import eval_channels
 
     inputs = {"--images": args.images}
     out = checks.output_file(args.out, "--out", overwrite=args.overwrite, inputs=inputs)
@@ -41,9 +45,6 @@ def checked_inputs(args: argparse.Namespace):
 
 
 def _schemes(args: argparse.Namespace) -> list[str]:
-    from osnerf.schemes import parse_schemes
-    from semcodec import LINK_SCHEMES
-
     try:
         return parse_schemes(args.schemes, LINK_SCHEMES)
     except ValueError as e:
@@ -52,9 +53,6 @@ def _schemes(args: argparse.Namespace) -> list[str]:
 
 def _fixed_mcs(args: argparse.Namespace, schemes: list[str]) -> str:
     """``--mcs`` (else the default), refused without a fixed-MCS scheme or outside the table."""
-    from semcodec import LINK_SCHEMES
-    from semcodec.links import DEFAULT_FIXED_MCS
-
     mcs = DEFAULT_FIXED_MCS if args.mcs is None else args.mcs
     fixed = [s for s in schemes if LINK_SCHEMES[s].mcs == "fixed"]
     if args.mcs is not None and not fixed:
@@ -64,8 +62,6 @@ def _fixed_mcs(args: argparse.Namespace, schemes: list[str]) -> str:
             f"{','.join(schemes)}: add one or leave --mcs out"
         )
     if fixed:
-        from phy.digital import MCS_TABLE
-
         if mcs not in MCS_TABLE:
             raise KeyError(f"--mcs must be one of {', '.join(MCS_TABLE)}, got {mcs!r}")
     return mcs
@@ -74,11 +70,8 @@ def _fixed_mcs(args: argparse.Namespace, schemes: list[str]) -> str:
 def _codec(args: argparse.Namespace, schemes: list[str], cbr: float, snrs: list[float]):
     """The semantic codec when a scheme needs one (else None), its CBR and SNR ranges
     covering ``--cbr`` and ``--snr-db``."""
-    from semcodec import LINK_SCHEMES, require_capabilities
-
     if not any(LINK_SCHEMES[s].needs_codec for s in schemes):
         return None
-    from osnerf.provenance import open_codec
 
     codec = open_codec(args.codec, args.allow_untrained)
     refine = [s for s in schemes if LINK_SCHEMES[s].refines]
@@ -102,10 +95,6 @@ def _codec(args: argparse.Namespace, schemes: list[str], cbr: float, snrs: list[
 def _images(args: argparse.Namespace, cbr: float):
     """(names, images, whether LPIPS is scored): every image gets a channel symbol at ``cbr``;
     LPIPS needs every image at least its smallest side, and its weights."""
-    from phy import num_symbols_for_cbr
-    from renderer import LPIPS_MIN_SIDE_PX, lpips_weights
-    from semcodec.links import load_image_folder
-
     names, images = load_image_folder(args.images)
     if args.max_images is not None:
         names, images = names[: args.max_images], images[: args.max_images]

@@ -13,6 +13,7 @@ import json
 import sys
 from pathlib import Path
 
+from common import path_kind
 from osnerf.cli import UsageError
 
 IDENTITY = ("config", "seed", "checkpoint")
@@ -30,8 +31,6 @@ def check_partial_kind(out: Path) -> None:
     Raises:
         UsageError: naming ``--out``, the partial path and what it is.
     """
-    from common import path_kind
-
     partial = partial_path(out)
     kind = path_kind(partial)
     if kind not in (None, "a file"):

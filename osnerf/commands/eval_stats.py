@@ -8,6 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from common import ms_ssim, psnr
+from renderer import lpips
+from semcodec.links import ssim
+
 ESTIMATE_STREAM = 0x5E57
 """Tag of the SNR-estimate error's random stream (apart from every channel draw)."""
 
@@ -112,10 +116,6 @@ class DrawTally:
 
     def add(self, res, img) -> float:
         """Tally one draw's received images ``res`` against ``img``; returns its PSNR."""
-        from common import ms_ssim, psnr
-        from renderer import lpips
-        from semcodec.links import ssim
-
         value = psnr(res.images, img)
         self.ssim.append(ssim(res.images, img))
         self.ms_ssim.append(ms_ssim(res.images, img))

@@ -8,6 +8,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from osnerf.cli import UsageError as usage_error
+from osnerf.commands import args as checks
+
 FAULT_AFTER_SAMPLES = 50_000  # --fault-after-samples' default
 
 
@@ -65,7 +68,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_gnuradio_arguments(p: argparse.ArgumentParser) -> None:
     from hil.zmq import FLOWGRAPHS
-    from osnerf.commands import args as checks
 
     shipped = ", ".join(sorted(f.stem for f in FLOWGRAPHS.glob("*.grc")))
     p.add_argument("flowgraph", help=f"a .grc file, or a shipped one: {shipped}")
@@ -91,7 +93,6 @@ def _gnuradio(args: argparse.Namespace) -> int:
     import threading
 
     from hil.zmq import Flowgraph, ota_noise_voltage
-    from osnerf.cli import UsageError as usage_error
 
     params = {}
     for item in args.set:
@@ -131,7 +132,6 @@ def _gnuradio(args: argparse.Namespace) -> int:
 def _add_emulate_arguments(p: argparse.ArgumentParser) -> None:
     from hil import DEVICES
     from hil.emulation import AIR_SNR_DB_RANGE, NETWORK_FAULTS, SOAPY_FAULTS
-    from osnerf.commands import args as checks
 
     served = [k for k, v in DEVICES.items() if v.emulator is not None]
     ports = ", ".join(f"{k} {DEVICES[k].default_port}" for k in served)
@@ -185,7 +185,6 @@ def _emulate(args: argparse.Namespace) -> int:
 
     from hil import DEVICES
     from hil.emulation import NETWORK_FAULTS, SOAPY_FAULTS
-    from osnerf.cli import UsageError as usage_error
     from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH
 
     if args.fault is None and args.fault_after_samples is not None:

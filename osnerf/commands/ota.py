@@ -37,6 +37,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from common import load_square_images
+from hil import OtaConfig, save_sigmf
+from hil.emulation import AIR_SNR_DB_RANGE, FAULT_NAMES, MAX_DELAY_S
+from hil.hackrf import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
+from osnerf.cli import inputs_checked
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, finite
 from osnerf.commands.ota_args import (
@@ -59,7 +63,15 @@ from osnerf.commands.ota_radios import (
     resolve_air,
     send_over_the_air,
 )
+from osnerf.commands.ota_record import ota_record, remove_old_captures
 from osnerf.commands.ota_stream import add_stream_arguments, check_stream_flags, run_stream
+from osnerf.ota_link import received_blocks
+from osnerf.provenance import open_codec, write_json_atomic
+from phy import parse_cbr
+from phy.digital import MCS_TABLE
+from semcodec import LINK_SCHEMES, codec_names, require_capabilities
+from semcodec.digital import IMAGE_CODECS, SCALES
+from semcodec.links import ANALOG, DIGITAL, FramedSettings, frame_payload_bytes
 
 MAX_IMAGES = 10_000
 OTA_CONFIG_FIELDS = (
@@ -93,9 +105,6 @@ def check_codec_snr(codec, snr_db: float) -> None:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The options, in ``--help`` order: the radios, what is sent, the emulated air, the
     images, each scheme's settings, the radio configuration, the stream."""
-    from hil.emulation import AIR_SNR_DB_RANGE
-    from semcodec import LINK_SCHEMES
-
     _add_radio_arguments(p)
     framed = [k for k, v in LINK_SCHEMES.items() if v.over_the_air]
     p.add_argument(
@@ -168,10 +177,6 @@ def _add_radio_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_ota_config_arguments(p: argparse.ArgumentParser) -> None:
     """The radio configuration (:class:`hil.OtaConfig`'s fields) and an emulated fault."""
-    from hil import OtaConfig
-    from hil.emulation import FAULT_NAMES
-    from hil.hackrf import FREQ_RANGE_HZ, SAMPLE_RATE_RANGE_HZ
-
     add_config_arguments(
         p,
         OtaConfig,
@@ -202,8 +207,6 @@ def _add_ota_config_arguments(p: argparse.ArgumentParser) -> None:
 def _add_air_arguments(p: argparse.ArgumentParser) -> None:
     """The emulated air between the boards: seed, crystal errors, echoes, delay (refused
     with real radios, :mod:`osnerf.commands.ota_radios`)."""
-    from hil.emulation import MAX_DELAY_S
-
     p.add_argument(
         "--seed", type=checks.seed, default=None, help="seed of the emulated air (default 0)"
     )
@@ -228,9 +231,6 @@ def _add_air_arguments(p: argparse.ArgumentParser) -> None:
 
 def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     """The options of the digital scheme (MCS, image codec, quality) and of jscc (CBR, codec)."""
-    from phy.digital import MCS_TABLE
-    from semcodec.digital import IMAGE_CODECS, SCALES
-
     p.add_argument(
         "--mcs",
         default=None,
@@ -261,7 +261,6 @@ def _add_scheme_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--cbr", default=None, help="jscc: channel symbols per source value (default 1/16)"
     )
-    from semcodec import codec_names
 
     p.add_argument(
         "--codec",
@@ -279,12 +278,6 @@ def framed_settings(opts: OtaRunConfig, symbols_per_frame: int):
     """The scheme's ``semcodec.links.FramedSettings`` from the flags, checked: ``--quality`` in the
     image codec's range; jscc: ``--cbr`` and the codec (``--snr-db`` within its range);
     digital: a frame holds payload at ``--mcs``."""
-    from osnerf.provenance import open_codec
-    from phy import parse_cbr
-    from semcodec import LINK_SCHEMES, require_capabilities
-    from semcodec.digital import IMAGE_CODECS
-    from semcodec.links import ANALOG, DIGITAL, FramedSettings, frame_payload_bytes
-
     qlo, qhi = IMAGE_CODECS[opts.image_codec or "avif"].quality_range
     if opts.quality is not None and not max(qlo, 1) <= opts.quality <= qhi:
         raise usage_error(
@@ -330,9 +323,6 @@ def framed_settings(opts: OtaRunConfig, symbols_per_frame: int):
 
 def run(args: argparse.Namespace) -> int:
     """Check the flags into an :class:`OtaRunConfig` (exit 2 on a refusal), then send."""
-    from hil import OtaConfig
-    from osnerf.cli import inputs_checked
-
     kind, tx_id, rx_id = device_kinds(args)
     scheme_flags = check_scheme_flags(args)
     check_radio_ranges(args, kind, (tx_id, rx_id))
@@ -367,12 +357,6 @@ def run(args: argparse.Namespace) -> int:
 def send(opts: OtaRunConfig, cfg, settings, names, images, out: Path, sigmf_dir: Path) -> int:
     """Send ``images`` as ``opts`` says (a burst per scheme, or a stream) and write the result
     to ``out``, the captures to ``sigmf_dir``."""
-    from hil import save_sigmf
-    from osnerf.commands.ota_record import ota_record, remove_old_captures
-    from osnerf.ota_link import received_blocks
-    from osnerf.provenance import write_json_atomic
-    from semcodec import LINK_SCHEMES
-
     if opts.overwrite:  # the whole output set is replaced, captures included
         remove_old_captures(sigmf_dir)
     t0 = time.perf_counter()

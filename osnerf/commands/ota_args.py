@@ -10,13 +10,13 @@ import re
 import numpy as np
 
 from hil import DEVICES as HARDWARE
+from hil.emulation import MAX_MULTIPATH_DELAY, PPM_RANGE
+from osnerf.cli import UsageError
 
 DEVICE_KINDS = ("emulated", "loopback", *HARDWARE)  # simulated kinds, then hil's table
 
 
 def usage_error(msg: str):
-    from osnerf.cli import UsageError
-
     return UsageError(msg)
 
 
@@ -50,7 +50,6 @@ def parse_uri(text: str) -> str:
 def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
     if value.strip().lower() in ("", "none"):
         return ()
-    from hil.emulation import MAX_MULTIPATH_DELAY
 
     out = []
     try:
@@ -68,8 +67,6 @@ def parse_multipath(value: str) -> tuple[tuple[int, complex], ...]:
 
 
 def parse_ppm(value: str) -> tuple[float, float]:
-    from hil.emulation import PPM_RANGE
-
     lo, hi = PPM_RANGE
     try:
         a, b = (float(v) for v in value.split(","))

@@ -26,8 +26,12 @@ from pathlib import Path
 
 from common import Registry
 from hil import DEVICES as HARDWARE
+from hil import HilError, Pluto, SoapyRadio, save_partial_capture, save_sigmf
+from hil.emulation import Faults
 from osnerf.commands.ota_args import parse_device, parse_multipath, parse_ppm, usage_error
 from osnerf.commands.ota_config import OtaRunConfig
+from osnerf.ota_link import OtaLink, open_radios
+from semcodec import LINK_SCHEMES
 
 SIMULATED = ("emulated", "loopback")  # two emulated HackRFs, with or without USB
 DEFAULT_MULTIPATH = "2:0.4,5:0.2j"
@@ -67,8 +71,6 @@ def radio_of(kind: str):
 def check_scheme_flags(args: argparse.Namespace) -> dict[str, object]:
     """Refuse a scheme flag for a kind of scheme ``--schemes`` does not send. Returns each
     scheme flag's value: as given, its default where it is left out and used, else None."""
-    from semcodec import LINK_SCHEMES
-
     kinds = {LINK_SCHEMES[name].kind for name in args.schemes}
     given, values = vars(args), {}
     for dest, (flag, kind, default) in SCHEME_FLAGS.items():
@@ -151,13 +153,11 @@ def air_is_emulated(kind: str, uri: str | None, rx_id=None) -> tuple[bool, str |
     if kind == "soapy":
         if rx_id != uri:  # two devices: the air between them is not one board's
             return False, None
-        from hil import SoapyRadio
 
         with SoapyRadio.open(uri) as radio:
             return radio.air_settable, None
     if kind != "pluto":
         return False, None
-    from hil import Pluto
 
     with Pluto.open(uri, configure=False) as board:
         found = board.uri if uri is None else None  # the first found: this run's board
@@ -203,8 +203,6 @@ def measured_snr_db(opts: OtaRunConfig, cfg, settings, sigmf_dir) -> tuple[float
     import sys
 
     import numpy as np
-
-    from hil import HilError, save_sigmf
 
     bits = np.random.default_rng(0).integers(0, 4, settings.symbols_per_frame)
     block = np.exp(1j * (np.pi / 4 + np.pi / 2 * bits)).astype(np.complex64)
@@ -259,9 +257,6 @@ def device_kinds(args: argparse.Namespace | OtaRunConfig) -> tuple[str, str | No
 def open_pair(opts: OtaRunConfig, ota_cfg):
     """(tx, rx, emulator or None) for the --tx/--rx kinds, the air from the air flags where
     it is emulated (``opts.air``, :func:`resolve_air`); --fault is set on the receiver."""
-    from hil.emulation import Faults
-    from osnerf.ota_link import open_radios
-
     kind, tx_serial, rx_serial = device_kinds(opts)
     air = {}
     if opts.air == "emulated":
@@ -286,9 +281,6 @@ def send_over_the_air(opts: OtaRunConfig, cfg, blocks: list, sigmf_dir: Path, ba
     radios: (``hil.ota.BurstResult``, the hardware in words). A ``hil.HilError`` is raised again
     in one line, with what the receiver got so far saved as SigMF; warnings are printed one
     line each."""
-    from hil import HilError, save_partial_capture
-    from osnerf.ota_link import OtaLink
-
     kind = device_kinds(opts)[0]
     tx, rx, emu = open_pair(opts, cfg)
     hw = radio_of(kind).label + (" (emulated)" if opts.air == "emulated" else "")

@@ -13,13 +13,13 @@ import time
 import numpy as np
 
 from osnerf.commands.ota_config import OtaRunConfig
+from osnerf.provenance import codec_record, result_header
+from semcodec import capability_record
 
 
 def ota_record(opts: OtaRunConfig, cfg, settings, names, bursts, t0: float) -> dict:
     """The result file's record: per scheme and image, the summary, every frame, the SigMF
     paths. ``bursts``: (scheme, per-image receptions, ``hil.ota.BurstResult``, SigMF paths)."""
-    from osnerf.provenance import codec_record, result_header
-
     results, frames, sigmf, by_scheme = [], [], [], {}
     requested = opts.snr_db  # None: a real air
     for scheme, per_image, result, paths in bursts:
@@ -64,8 +64,6 @@ def ota_record(opts: OtaRunConfig, cfg, settings, names, bursts, t0: float) -> d
     record = result_header(config, opts.seed)
     record["codec"] = None
     if settings.codec is not None:
-        from semcodec import capability_record
-
         record["codec"] = {
             **codec_record(settings.codec, opts.codec),
             "encoder_snr_db": settings.snr_db,

@@ -35,10 +35,18 @@ from pathlib import Path
 
 import numpy as np
 
+import hil
 from common import Registry
+from hil import EmulatorProcess, HackRF, HilError, build_views, save_partial_capture
+from hil.ota import BurstResult, StreamReceiver
 from osnerf.commands import args as checks
-from osnerf.commands.ota_args import usage_error
+from osnerf.commands.ota_args import parse_multipath, parse_ppm, usage_error
 from osnerf.commands.ota_config import OtaRunConfig
+from osnerf.commands.ota_radios import device_kinds, open_pair
+from osnerf.commands.ota_record import ota_record
+from osnerf.ota_link import air_channel, received_blocks
+from osnerf.provenance import write_json_atomic
+from semcodec import LINK_SCHEMES
 
 STREAM_KINDS = ("emulated", "hackrf", "pluto")  # radios whose driver streams
 MAX_VIEWS = 10_000  # every view is framed before the stream starts
@@ -142,11 +150,6 @@ def _open_radios(opts: OtaRunConfig, cfg):
     process of their own (``hil.EmulatorProcess``: rendering the air does not compete with
     the decoder for the interpreter), or the --tx/--rx boards (an emulated Pluto's air set
     from the air flags, as for a burst)."""
-    from hil import EmulatorProcess, HackRF
-    from osnerf.commands.ota_args import parse_multipath, parse_ppm
-    from osnerf.commands.ota_radios import device_kinds, open_pair
-    from osnerf.ota_link import air_channel
-
     kind = device_kinds(opts)[0]
     if kind != "emulated":
         return open_pair(opts, cfg)
@@ -184,11 +187,6 @@ def run_stream(
 
 
 def _stream(opts: OtaRunConfig, cfg, settings, names, images, out, t0: float, probe: list) -> int:
-    from hil import EmulatorProcess, HilError, build_views, stream_over_the_air
-    from osnerf.ota_link import received_blocks
-    from osnerf.provenance import write_json_atomic
-    from semcodec import LINK_SCHEMES
-
     scheme_name = opts.schemes[0]
     scheme = LINK_SCHEMES[scheme_name].framed
     num_views = opts.views or len(names)
@@ -224,7 +222,7 @@ def _stream(opts: OtaRunConfig, cfg, settings, names, images, out, t0: float, pr
     with _sigterm_as_interrupt():
         tx, rx, emu = _open_radios(opts, cfg)
         try:
-            run = stream_over_the_air(
+            run = hil.stream_over_the_air(
                 tx,
                 rx,
                 views,
@@ -282,8 +280,6 @@ def _tell_finished(opts: OtaRunConfig, out, record: dict, run) -> int:
 def check_ring(views: list, cfg, ring_s: float) -> None:
     """Refuse a ``--ring-s`` that cannot hold one frame with its search window (nothing
     could ever be decoded), before any radio opens."""
-    from hil.ota import StreamReceiver
-
     fs = cfg.sample_rate_hz
     need = StreamReceiver.ring_samples_needed(views, cfg)
     if ring_s * fs < need:
@@ -317,9 +313,6 @@ def _write_stopped(
 ):
     """Write the result of a stream that stopped early, marked as such, and its capture; 130
     for an interrupt, 1 for a failure."""
-    from hil import HilError, save_partial_capture
-    from osnerf.provenance import write_json_atomic
-
     interrupted = isinstance(stopped, KeyboardInterrupt)
     by = (
         f"interrupted ({stopped.args[0] if stopped.args else 'Ctrl-C'})"
@@ -384,9 +377,6 @@ def _stream_record(
     opts: OtaRunConfig, cfg, settings, names, pick, views, recs, latency, run, t0
 ) -> dict:
     """``ota_record``'s file with one row per view, and the ``stream`` section."""
-    from hil.ota import BurstResult
-    from osnerf.commands.ota_record import ota_record
-
     view_names = [f"{names[i]}#{v}" for v, i in enumerate(pick)]
     done = [v for v in views if v.index in recs]  # all of them unless the stream stopped early
     reports = [replace(r, block=b) for b, v in enumerate(done) for r in v.reports]

@@ -12,6 +12,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from osnerf.cli import inputs_checked
+from osnerf.commands import args as checks
+from osnerf.sweeps import read_results
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
@@ -40,8 +44,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import inputs_checked
-    from osnerf.commands import args as checks
     from osnerf.plots import make_plots
 
     checks.output_dir(args.out, "--out", overwrite=args.overwrite)
@@ -66,7 +68,6 @@ def _records(path: str) -> list[dict]:
     from pathlib import Path
 
     from osnerf.plots import eval_record
-    from osnerf.sweeps import read_results
 
     p = Path(path)
     if p.suffix == ".json" and p.is_file():

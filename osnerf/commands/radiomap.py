@@ -21,12 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
+import phy.raytrace as prt
+from common import InputError, to_json, write_files
+from osnerf.cli import inputs_checked
+from osnerf.collect import Demand
 from osnerf.commands import args as checks
+from osnerf.provenance import result_header
+from osnerf.scenes import DEFAULT_SCENE, RADIUS_SCALE_RANGE, RenderConfig, check_demand, get_scene
+from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from osnerf.scenes import RADIUS_SCALE_RANGE, RenderConfig
-
     p.add_argument("--scene", default=None, help="built-in scene (default: the default scene)")
     p.add_argument(
         "--demand",
@@ -82,9 +87,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _target(scene: str, text: str | None) -> tuple[str, ...] | None:
-    from osnerf.collect import Demand
-    from osnerf.scenes import check_demand
-
     if text is None:
         return None
     try:
@@ -103,8 +105,6 @@ def _finite_or_none(a: np.ndarray) -> list:
 
 def _result(rm, args: argparse.Namespace) -> dict:
     """radiomap.json: provenance, the map's settings and each candidate's gains."""
-    from osnerf.provenance import result_header
-
     m = rm.map
     config = {
         "scene": rm.scene,
@@ -161,12 +161,6 @@ def samples_count(text: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    import phy.raytrace as prt
-    from common import InputError, to_json, write_files
-    from osnerf.cli import inputs_checked
-    from osnerf.scenes import DEFAULT_SCENE, RenderConfig, get_scene
-    from osnerf.scenes.radiomap import plot_radio_map, scene_radio_map
-
     scene = args.scene or DEFAULT_SCENE
     try:
         get_scene(scene)

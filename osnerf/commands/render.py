@@ -21,8 +21,9 @@ import time
 from pathlib import Path
 
 from common import atomic_path, write_png
-from osnerf.cli import UsageError
+from osnerf.cli import UsageError, inputs_checked
 from osnerf.commands import args as checks
+from osnerf.provenance import result_header, write_json_atomic
 
 VIDEOS = ("mp4", "gif", "none")
 
@@ -158,8 +159,6 @@ def _path_poses(path: Path):
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from osnerf.cli import inputs_checked
-    from osnerf.provenance import result_header, write_json_atomic
     from renderer import make_renderer
 
     model_path, model = _checked_model(args)

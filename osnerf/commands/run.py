@@ -16,8 +16,16 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
+import phy
+from osnerf.cli import UsageError, inputs_checked
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args
+from osnerf.report import write_report
+from osnerf.scenes.dataset import default_cache_dir
+from osnerf.schemes import SCHEMES, parse_schemes
+from osnerf.scu import VIEW_SELECTIONS
+from phy.digital import MCS_TABLE
+from semcodec.digital import IMAGE_CODECS
 
 # RunConfig fields that are options, in --help order, and the options named otherwise.
 CONFIG_FIELDS = (
@@ -88,17 +96,12 @@ def _schemes(text: str, parse) -> tuple[str, ...]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    import phy
     from osnerf.ota_link import DEVICES as OTA_DEVICES
     from osnerf.ota_link import OTA_AIRS
     from osnerf.run.config import (
         RUN_CHANNELS,
         RunConfig,
     )
-    from osnerf.schemes import SCHEMES, parse_schemes
-    from osnerf.scu import VIEW_SELECTIONS
-    from phy.digital import MCS_TABLE
-    from semcodec.digital import IMAGE_CODECS
 
     add_config_arguments(
         p,
@@ -155,7 +158,6 @@ def run_config(args: argparse.Namespace):
     import dataclasses
 
     from osnerf.run import RunConfig
-    from osnerf.schemes import SCHEMES
 
     digital = [n for n in args.schemes if n in SCHEMES and hasattr(SCHEMES[n], "mcs")]
     filled = argparse.Namespace(**vars(args))
@@ -164,8 +166,6 @@ def run_config(args: argparse.Namespace):
         if getattr(args, dest, None) is None:
             setattr(filled, dest, defaults[dest])
         elif not digital:
-            from osnerf.cli import UsageError
-
             known = ", ".join(n for n in SCHEMES if hasattr(SCHEMES[n], "mcs"))
             raise UsageError(
                 f"{flag} applies to the digital schemes ({known}), not to --schemes "
@@ -184,8 +184,6 @@ def check_args(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import inputs_checked
-    from osnerf.report import write_report
     from osnerf.run import run_pipeline
     from osnerf.run.cache import check_stage_files
     from osnerf.run.pipeline import prepare
@@ -197,7 +195,6 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         resumable=lambda d: (d / "cache" / cfg.key()).is_dir(),  # this config's own run
     )
-    from osnerf.scenes.dataset import default_cache_dir
 
     cache_flag = "--cache-dir" if args.cache_dir else "$OSNERF_CACHE"
     cache = args.cache_dir or (os.environ.get("OSNERF_CACHE") and default_cache_dir())

@@ -12,6 +12,7 @@ import argparse
 import sys
 
 from osnerf.commands import args as checks
+from osnerf.sweeps import errors_path, load_spec, run_sweep
 from osnerf.sweeps.spec import MAX_POINTS
 
 MAX_POINTS_LIMIT = 10_000_000
@@ -73,8 +74,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.sweeps import errors_path, load_spec, run_sweep
-
     checks.output_file(args.out, "--out", resume=True, inputs={"SPEC": args.spec})
     if args.keep_outputs:
         checks.output_dir(args.keep_outputs, "--keep-outputs", resumable=lambda _: True)

@@ -25,10 +25,21 @@ import os
 import sys
 from pathlib import Path
 
-from osnerf.cli import UsageError
+from osnerf.cli import UsageError, inputs_checked
 from osnerf.commands import args as checks
 from osnerf.commands.config_cli import add_config_arguments, config_from_args, flag_of
 from osnerf.paths import shared_data_dir
+from osnerf.provenance import codec_record, result_header, write_json_atomic
+from semcodec import TrainConfig, open_codec, parse_codec_spec, train
+from semcodec.training import (
+    ResumeRefused,
+    build_codec,
+    check_resume,
+    describe_changes,
+    load_train_state,
+    train_inputs,
+    with_architecture,
+)
 
 # TrainConfig fields that are options, in --help order; all but num_threads keep their name.
 CONFIG_FIELDS = (
@@ -59,8 +70,6 @@ FLAGS = {"num_threads": "--threads"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from semcodec import TrainConfig
-
     p.add_argument(
         "--data",
         action="append",
@@ -116,8 +125,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from osnerf.cli import inputs_checked
-
     cfg, data, val, init, out, resume = parse(args)
     inputs_checked()  # from here on a failure is a runtime failure (exit 1)
     summary = train_codec(cfg, data, val, init, out, resume=resume)
@@ -128,9 +135,6 @@ def run(args: argparse.Namespace) -> int:
 def parse(args: argparse.Namespace):
     """Check every input before any work: (config, data folders, validation folder, init
     checkpoint or None, output folder, whether to resume the training there)."""
-    from semcodec import TrainConfig
-    from semcodec.training import build_codec, with_architecture
-
     cfg = config_from_args(TrainConfig, args, CONFIG_FIELDS, flags=FLAGS)
     cfg = with_architecture(cfg)  # --model left out: the codec's own first architecture
     _check_backend(cfg)
@@ -189,14 +193,6 @@ def _resumable(args, cfg, data, init, out: Path) -> bool:
             change (``semcodec.training.RESUMABLE_FIELDS``), named with its flag, without
             --overwrite.
     """
-    from semcodec.training import (
-        ResumeRefused,
-        check_resume,
-        describe_changes,
-        load_train_state,
-        train_inputs,
-    )
-
     state = out / "last_state.pt"
     if not state.exists():
         return False
@@ -228,9 +224,6 @@ def _resumable(args, cfg, data, init, out: Path) -> bool:
 
 def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
     """Train (resuming when asked and possible); the summary with its result header."""
-    from osnerf.provenance import result_header
-    from semcodec import train
-
     try:
         summary = train(
             cfg,
@@ -249,16 +242,11 @@ def train_codec(cfg, data, val, init, out, resume: bool) -> dict:
 def trained_codec(cfg, out: Path) -> dict:
     """The record (:func:`osnerf.provenance.codec_record`) of ``OUT/best.safetensors``, loaded
     through the codec's own factory: its sha256 and, for a plugin, its distribution."""
-    from osnerf.provenance import codec_record
-    from semcodec import open_codec, parse_codec_spec
-
     spec = f"{parse_codec_spec(cfg.codec)[0]}:{out / 'best.safetensors'}"
     return codec_record(open_codec(spec, allow_untrained=True), spec)
 
 
 def report(cfg, summary: dict, out: Path) -> None:
-    from osnerf.provenance import write_json_atomic
-
     if int(os.environ.get("RANK", "0")) != 0:  # under torchrun, rank 0 writes
         return
     if summary.get("nothing_to_do"):  # a finished training: its files stay as they are

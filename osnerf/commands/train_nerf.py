@@ -14,8 +14,9 @@ import sys
 from pathlib import Path
 
 from common import write_png
-from osnerf.cli import UsageError
+from osnerf.cli import UsageError, inputs_checked
 from osnerf.commands import args as checks
+from osnerf.provenance import result_header, write_json_atomic
 
 FIELDS = ("grid", "mlp")
 CLOCKS = ("wall", "cpu")
@@ -80,8 +81,6 @@ def _background(text: str | None):
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from osnerf.cli import inputs_checked
-    from osnerf.provenance import write_json_atomic
     from renderer import (
         TrainConfig,
         image_metrics,
@@ -139,7 +138,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_run(run_dir: Path, args, data: Path, train_set, config, result, out, metrics) -> dict:
     """Write the test renders and ``model.pt``; return the ``metrics.json`` record."""
-    from osnerf.provenance import result_header
     from renderer import save_model, to_uint8
 
     (run_dir / "test").mkdir(parents=True, exist_ok=True)

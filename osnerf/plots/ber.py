@@ -14,6 +14,7 @@ from osnerf.plots.rows import (
     series_label,
     series_of,
 )
+from phy import ber_theory
 
 
 def plot_ber(rows: list[dict], theory: bool = True) -> Figure:
@@ -59,11 +60,6 @@ def plot_ber(rows: list[dict], theory: bool = True) -> Figure:
 def _ber_theory_curve(modulation, channel, lo, hi, group) -> tuple[list[float], list[float]]:
     try:
         import numpy as np
-
-        try:
-            from phy import ber_theory
-        except ImportError:  # before phy re-exports it
-            from phy import ber_theory
 
         grid = np.linspace(lo, hi, 61)
         ys = np.asarray(

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from common import write_bytes
+from osnerf.provenance import write_json_atomic
 
 
 class StageCacheError(ValueError):
@@ -62,8 +63,6 @@ class StageCache:
         return arrays, info
 
     def save(self, stage: str, arrays: dict, info: dict) -> None:
-        from osnerf.provenance import write_json_atomic
-
         buf = io.BytesIO()
         np.savez_compressed(buf, **arrays)
         self.root.mkdir(parents=True, exist_ok=True)

@@ -12,6 +12,7 @@ from common import MAX_BUDGET_S, SEED_RANGE, bound, bound_of, check_bounds
 from osnerf.collect import Demand
 from osnerf.ota_link import DEVICES as OTA_DEVICES
 from osnerf.ota_link import OTA_AIRS
+from osnerf.provenance import open_codec
 from osnerf.scenes import (
     DEFAULT_SCENE,
     RenderConfig,
@@ -19,7 +20,10 @@ from osnerf.scenes import (
     get_scene,
 )
 from osnerf.scheme_types import NerfBudget, SendSettings
-from osnerf.schemes import DEFAULT_SCHEMES
+from osnerf.schemes import DEFAULT_SCHEMES, SCHEMES
+from osnerf.scu import VIEW_SELECTIONS
+from phy.digital import MCS_TABLE
+from semcodec.digital import IMAGE_CODECS
 
 OTA = "ota"
 RUN_CHANNELS = (*phy.CHANNELS, OTA)
@@ -208,8 +212,6 @@ class RunConfig:
         return self.plan_snr_db is not None or self.snr_error_db > 0
 
     def __post_init__(self):
-        from osnerf.schemes import SCHEMES
-
         get_scene(self.scene)
         if self.channel not in RUN_CHANNELS:
             raise ValueError(
@@ -299,8 +301,6 @@ class RunConfig:
             )
 
     def _check_selection(self) -> None:
-        from osnerf.scu import VIEW_SELECTIONS
-
         if self.view_selection not in VIEW_SELECTIONS:
             raise ValueError(
                 f"view_selection must be one of {', '.join(VIEW_SELECTIONS)}, "
@@ -313,9 +313,6 @@ class RunConfig:
             )
 
     def _check_digital(self) -> None:
-        from phy.digital import MCS_TABLE
-        from semcodec.digital import IMAGE_CODECS
-
         if self.mcs != "auto" and self.mcs not in MCS_TABLE:
             raise ValueError(
                 f"mcs must be 'auto' or one of {', '.join(MCS_TABLE)}, got {self.mcs!r}"
@@ -368,8 +365,6 @@ class RunConfig:
     @cached_property
     def _codec_sha256(self) -> tuple[str, str]:
         """(transmitter, receiver) codec weights' sha256 (opening a codec reads its checkpoint)."""
-        from osnerf.provenance import open_codec
-
         allow = self.allow_untrained
         tx = open_codec(self.codec, allow, warn=False).sha256
         rx = tx

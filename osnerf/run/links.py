@@ -12,11 +12,11 @@ with ``ota_air`` "raytraced", each view's ray-traced channel: :mod:`osnerf.run.o
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 import phy
+from hil import OtaConfig
 from osnerf.link_report import (
     AirSnr,
     FrameCounts,
@@ -27,10 +27,12 @@ from osnerf.link_report import (
     Receiver,
     Trace,
 )
+from osnerf.ota_link import DEFAULT_DELAY_S, DEFAULT_MULTIPATH, DEFAULT_PPM, OtaLink, open_radios
 from osnerf.run.config import OTA, RunConfig
-
-if TYPE_CHECKING:  # annotations only
-    from osnerf.ota_link import OtaLink
+from osnerf.run.ota_air import raytraced_air_links
+from osnerf.scenes import drone_channels, flight_velocities
+from phy.ofdm import LMMSEEstimator
+from phy.raytrace import RETRACE_WAVELENGTHS, PerPositionChannel, max_doppler_hz
 
 
 @dataclass
@@ -77,15 +79,6 @@ def build_links(cfg: RunConfig, views, indices) -> RunLinks:
 
 
 def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
-    from hil import OtaConfig
-    from osnerf.ota_link import (
-        DEFAULT_DELAY_S,
-        DEFAULT_MULTIPATH,
-        DEFAULT_PPM,
-        OtaLink,
-        open_radios,
-    )
-
     ota_cfg = OtaConfig()
     tx_args, rx_args = cfg.ota_tx_args, cfg.ota_rx_args
     tx, rx, emu = open_radios(
@@ -108,8 +101,6 @@ def _ota_links(cfg: RunConfig, views, idx: list[int], snr: dict) -> RunLinks:
     if emu is not None:
         radios.ppm, radios.delay_s = list(DEFAULT_PPM), DEFAULT_DELAY_S
     if cfg.ota_air == "raytraced":
-        from osnerf.run.ota_air import raytraced_air_links
-
         try:
             links, snrs, outage, air = raytraced_air_links(cfg, views, idx, link, cfg.ota_device)
         except BaseException:
@@ -151,8 +142,6 @@ def raytraced_link(cfg: RunConfig, h, mover, estimator=None) -> phy.Link:
         h: [fft_size] complex64 response at t = 0 on the grid's subcarriers.
         mover: the drone's ``phy.raytrace.MovingTransmitter`` (or None: at rest).
     """
-    from phy.raytrace import PerPositionChannel
-
     g = RAYTRACED_GRID
     channel = PerPositionChannel(
         h,
@@ -171,7 +160,6 @@ def raytraced_estimator(cfg: RunConfig, carrier_frequency_hz: float):
     :data:`LMMSE_DELAY_SPREAD_S` in frequency, Jakes at the drones' speed in time."""
     if cfg.csi != "lmmse":
         return None
-    from phy.ofdm import LMMSEEstimator
 
     return LMMSEEstimator(
         RAYTRACED_GRID, float(cfg.drone_speed_m_s), carrier_frequency_hz, LMMSE_DELAY_SPREAD_S
@@ -179,8 +167,6 @@ def raytraced_estimator(cfg: RunConfig, carrier_frequency_hz: float):
 
 
 def _raytraced_links(cfg: RunConfig, views, idx: list[int]) -> RunLinks:
-    from osnerf.scenes import drone_channels, flight_velocities
-
     pos = views.drone_positions_m[idx]
     meta = views.meta
     if cfg.ground_station_m is not None:  # the radio end moved; the drones and views stay
@@ -329,8 +315,6 @@ def _csi_info(cfg: RunConfig, moving: bool) -> Receiver:
 
 def _motion_info(cfg: RunConfig, meta: dict, ch, idx: list[int]) -> Motion:
     """What the report says about the drones' motion: speed, Doppler, symbol timing."""
-    from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
-
     when = (
         "symbol i of a view is sent at i / symbol_rate_hz and rides subcarrier i mod "
         "num_subcarriers, from the view's position at t = 0"

@@ -23,7 +23,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from hil import burst_num_samples
+from hil.emulation import segments_from_arrays
 from osnerf.link_report import TracedAir
+from osnerf.ota_link import DEFAULT_DELAY_S, air_channel
+from osnerf.scenes import drone_channels, flight_velocities
+from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
 
 if TYPE_CHECKING:  # annotations only
     from osnerf.ota_link import OtaLink
@@ -59,17 +64,12 @@ class ViewAirLink:
 
     def air(self, num_samples: int):
         """The ``hil.AirChannel`` of a burst of ``num_samples`` samples."""
-        from hil.emulation import segments_from_arrays
-        from osnerf.ota_link import DEFAULT_DELAY_S, air_channel
-
         cfg = self.ota.ota_cfg
         cir = self.mover.cir(num_samples / cfg.sample_rate_hz)
         segs = segments_from_arrays(cir.a * self.scale, cir.tau_s, cir.doppler_hz, cir.start_s)
         return air_channel(self.device, self.air_snr_db, cfg, DEFAULT_DELAY_S, (), segs)
 
     def __call__(self, x, snr_db=None, generator: torch.Generator | None = None):
-        from hil import burst_num_samples
-
         if snr_db is not None and abs(float(snr_db) - self.snr_db) > 1e-9:
             raise ValueError(
                 f"view {self.view}'s air runs at {self.snr_db:g} dB, asked for {float(snr_db):g} dB"
@@ -95,9 +95,6 @@ def raytraced_air_links(cfg, views, idx: list[int], ota, device: str) -> tuple:
     Raises:
         ValueError: ``ota``'s boards are real (their air is not ours to set).
     """
-    from osnerf.scenes import drone_channels, flight_velocities
-    from phy.raytrace import RETRACE_WAVELENGTHS, max_doppler_hz
-
     if not ota.air_settable:
         raise ValueError(
             "ota_air raytraced: the air between real boards is not the host's to set; use "

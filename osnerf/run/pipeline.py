@@ -18,8 +18,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+import renderer
+import semcodec
+from common import write_png
 from osnerf.collect import Collection, Demand
 from osnerf.plan import RunPlan
+from osnerf.provenance import codec_record, open_codec
 from osnerf.report import Report, SchemeReport, ViewsSummary, codec_use_line
 from osnerf.run.cache import StageCache
 from osnerf.run.compare import comparisons
@@ -31,6 +35,7 @@ from osnerf.scenes import SceneViews, build_scene_dataset, load_scene_views
 from osnerf.scheme_types import NerfBudget, RunContext, Scheme, Transmission, scheme_seed
 from osnerf.schemes import get_scheme
 from osnerf.scu import RatePolicy, SemanticControlUnit
+from osnerf.scu.selection import radio_tie
 from semcodec import SemanticCodec
 
 METRIC_NOTES = (
@@ -71,9 +76,6 @@ def prepare(cfg: RunConfig) -> Prepared:
     scu = SemanticControlUnit(demand, rate_policy=RatePolicy())
     codec = rx = None
     if any(s.needs_codec for s in schemes.values()):
-        import semcodec
-        from osnerf.provenance import open_codec
-
         codec = open_codec(cfg.codec, cfg.allow_untrained)
         lo, hi = (float(v) for v in codec.snr_range_db)
         if not lo <= cfg.snr_db <= hi:
@@ -186,9 +188,6 @@ def reconstruct_and_score(
 
 def export_views(folder: Path, ds) -> None:
     """The views a scheme received, as a nerfstudio folder (for people and other tools)."""
-    import renderer
-    from common import write_png
-
     (folder / "images").mkdir(parents=True, exist_ok=True)
     names = []
     for k in range(ds.num_views):
@@ -301,7 +300,6 @@ def choose_views(
     the default (sight, no count) keeps every view untouched."""
     if selection == "sight" and max_views is None:
         return col
-    from osnerf.scu.selection import radio_tie
 
     tie = radio_tie(selection, [snr_db[int(v)] for v in col.indices if int(v) in snr_db])
     if tie is not None:
@@ -341,8 +339,6 @@ def codec_summary(prep: Prepared, codec_spec: str | None, receiver_spec: str | N
     """The codec as the report shows it: its record (:func:`osnerf.provenance.codec_record`:
     knowledge-base identity, trained or not, a plugin's distribution), its ranges, and the
     receiver's record when ``receiver_spec`` names one (None: the same codec)."""
-    from osnerf.provenance import codec_record
-
     codec = prep.codec
     assert codec is not None  # called for runs with a codec only
     receiver = None

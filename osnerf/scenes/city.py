@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+import phy
 from osnerf.scenes import textures as tx
 from osnerf.scenes.geometry import Mesh, disk, merge, planar_uv
 from osnerf.scenes.spec import Part, SceneGeometry
@@ -47,8 +48,6 @@ def _surface_height_m(scene, x: float, y: float) -> float:
 
 def build_munich() -> SceneGeometry:
     """The Frauenkirche (object ``frauenkirche``), nearby buildings (``neighbours``), ground."""
-    import phy
-
     phy.require_llvm()  # before sionna.rt: a clear error instead of a Dr.Jit crash
     import sionna.rt as rt
 

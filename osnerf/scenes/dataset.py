@@ -33,7 +33,9 @@ import numpy as np
 from common import bound, check_bounds, read_image, write_png
 from osnerf.provenance import write_json_atomic
 from osnerf.scenes.cameras import Intrinsics, intrinsics_from_fov, look_at, ring_positions
+from osnerf.scenes.radio import write_radio_scene
 from osnerf.scenes.registry import get_scene
+from osnerf.scenes.render import MitsubaRenderer, background_rgb, write_meshes
 from osnerf.scenes.spec import SceneGeometry
 
 FORMAT_VERSION = 2
@@ -209,8 +211,6 @@ def build_scene_dataset(
     )
     if (root / "transforms.json").exists():
         return root
-    from osnerf.scenes.radio import write_radio_scene
-    from osnerf.scenes.render import MitsubaRenderer, write_meshes
 
     t0 = time.perf_counter()
     tmp = root.with_name(root.name + f".partial-{os.getpid()}")
@@ -281,8 +281,6 @@ def _render_frame(renderer, geometry, k: int, split: str, pos, centre, mask_spp:
 def _camera_and_scene_fields(geometry: SceneGeometry, intr: Intrinsics, info) -> dict:
     """The pinhole camera (nerfstudio's fields), the bounds (``aabb`` padded by 5 % of the
     largest side), the background, the ground station and the radio scene."""
-    from osnerf.scenes.render import background_rgb
-
     b = geometry.bounds_m
     pad = 0.05 * (b[1] - b[0]).max()
     return {

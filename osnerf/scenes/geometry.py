@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from common import write_bytes
+from osnerf.scenes.mitsuba_env import import_mitsuba
 
 
 @dataclass(frozen=True, eq=False)
@@ -226,8 +227,6 @@ def read_ply(path: str | Path) -> Mesh:
 
     Meshes without texture coordinates get :func:`planar_uv` with a 1 m tile.
     """
-    from osnerf.scenes.mitsuba_env import import_mitsuba
-
     mi = import_mitsuba()
     with mi.util.scoped_set_variant("scalar_rgb"):
         shape = mi.load_dict({"type": "ply", "filename": str(path), "face_normals": True})

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import phy
+
 RGB_VARIANT = "llvm_ad_rgb"
 RT_VARIANT = "llvm_ad_mono_polarized"  # sionna-rt's; keeping it global keeps sionna.rt working
 
@@ -12,8 +14,6 @@ def import_mitsuba():
     (``mi.util.scoped_set_variant`` cannot restore "no variant", and sionna.rt fails when the
     global variant is an RGB one, so renders switch to RGB only inside a scope.)
     """
-    import phy
-
     phy.require_llvm()
     import mitsuba as mi
 

@@ -19,6 +19,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+import phy.raytrace as prt
 from common import write_text
 from osnerf.scenes.geometry import write_ply
 from osnerf.scenes.spec import TERRAIN_MATERIAL, SceneGeometry
@@ -150,8 +151,6 @@ def drone_channels(
         :class:`DroneChannels` with the absolute (path-loss included) CFR per position at
         t = 0, the Doppler statistics and, for moving drones, their movers.
     """
-    import phy.raytrace as prt
-
     freqs = subcarrier_frequencies(num_subcarriers, subcarrier_spacing_hz)
     tracer = prt.RayTracer(
         radio_scene_path(folder, meta),

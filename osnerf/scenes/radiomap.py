@@ -19,9 +19,18 @@ from pathlib import Path
 
 import numpy as np
 
+import phy.raytrace as prt
 from common import InputError
 from osnerf.scenes.dataset import RenderConfig, check_demand, trajectory
+from osnerf.scenes.radio import (
+    NUM_SUBCARRIERS,
+    SUBCARRIER_SPACING_HZ,
+    band_gain_db,
+    subcarrier_frequencies,
+    write_radio_scene,
+)
 from osnerf.scenes.registry import get_scene
+from osnerf.scenes.render import write_meshes
 from osnerf.scenes.spec import SceneGeometry
 
 MAP_MARGIN_M = 0.15
@@ -95,16 +104,6 @@ def scene_radio_map(
         ground_station_m: (x, y, z) metres in place of the scene's own ground station (as
             ``osnerf run --ground-station``); None: the scene's.
     """
-    import phy.raytrace as prt
-    from osnerf.scenes.radio import (
-        NUM_SUBCARRIERS,
-        SUBCARRIER_SPACING_HZ,
-        band_gain_db,
-        subcarrier_frequencies,
-        write_radio_scene,
-    )
-    from osnerf.scenes.render import write_meshes
-
     info = get_scene(scene)
     target = check_demand(scene, target or info.default_demand)
     render = render or RenderConfig()

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+import phy
 from osnerf.scenes.cameras import MITSUBA_FROM_GL, Intrinsics, pixel_rays
 from osnerf.scenes.geometry import write_ply
 from osnerf.scenes.mitsuba_env import RGB_VARIANT
@@ -56,9 +57,7 @@ class MitsubaRenderer:
     def __init__(
         self, geometry: SceneGeometry, mesh_paths: dict[str, Path], intr: Intrinsics, spp: int = 32
     ):
-        import phy  # noqa: F401 - points Dr.Jit at a usable LLVM before mitsuba loads
-
-        phy.require_llvm()
+        phy.require_llvm()  # points Dr.Jit at a usable LLVM before mitsuba loads
         import mitsuba as mi
 
         if (

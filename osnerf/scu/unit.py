@@ -14,10 +14,11 @@ import numpy as np
 import torch
 
 import phy
-from osnerf.collect import Collection, CollectorConfig, Demand
+from osnerf.collect import Collection, CollectorConfig, Demand, collect
 from osnerf.plan import Allocation, RunPlan, ViewLink, ViewPlan
 from osnerf.scheme_types import scheme_seed
 from osnerf.scu.policy import RatePolicy, combined_snr_db, transmitter_estimate
+from osnerf.scu.selection import choose_views
 from semcodec import KnowledgeBaseMismatch as KnowledgeBaseError  # the one error
 from semcodec.contract import box_side_symbols
 from semcodec.jscc import BLOCK_PX, focus_coverage, full_rate_symbols
@@ -55,8 +56,6 @@ class SemanticControlUnit:
     def collect(self, views) -> Collection:
         """The on-demand collector's views for the demand, with why each other view is not
         sent (logged)."""
-        from osnerf.collect import collect
-
         col = collect(views, self.demand, self.collector_settings())
         for v, why in sorted(col.reasons.items()):
             self.log("collector", f"view {v}: not sent", view=v, reason=why)
@@ -72,8 +71,6 @@ class SemanticControlUnit:
     ) -> Collection:
         """At most ``max_views`` of the collection's views by ``rule``, each logged with why
         (:func:`osnerf.scu.selection.choose_views`)."""
-        from osnerf.scu.selection import choose_views
-
         return choose_views(self.log, collection, snr_db, directions_m, rule, max_views)
 
     def check_knowledge_base(self, transmitter_sha256: str, receiver_sha256: str) -> None:

@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+import osnerf.cli
 from common import Registry
 
 Task = dict[str, Any]  # plain data, picklable: what a worker needs to run one point
@@ -56,8 +57,6 @@ def execute_point(task: Task) -> Outcome:
     Raises:
         KeyboardInterrupt: the command was interrupted (the sweep stops).
     """
-    import osnerf.cli
-
     t0 = time.perf_counter()
     if task.get("threads"):
         n = str(task["threads"])

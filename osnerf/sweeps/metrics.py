@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from common import Registry
+from osnerf.report import Report
 
 HEADER_KEYS = ("config", "seed", "git_commit", "versions")
 
@@ -73,8 +74,6 @@ def _train_nerf(result: dict[str, Any]) -> dict[str, Any]:
 
 def _run(result: dict[str, Any]) -> dict[str, Any]:
     from dataclasses import asdict
-
-    from osnerf.report import Report
 
     report = Report.from_dict(result)
     return {"schemes": {n: asdict(s) for n, s in report.schemes.items()}}

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from osnerf import cli
+
 
 def option_name(name: str) -> str:
     """A spec's option name as argparse's dest (``snr-db`` and ``snr_db`` both ``snr_db``)."""
@@ -22,18 +24,16 @@ def _raise(msg: str):
 
 def command_parser(command: str) -> argparse.ArgumentParser:
     """The argparse sub-parser of ``osnerf <command>`` (errors raise instead of exiting)."""
-    from osnerf.cli import COMMANDS, build_parser
-
-    if command not in COMMANDS:
+    if command not in cli.COMMANDS:
         raise KeyError(
-            f"unknown command {command!r} in spec field 'command'; known: {sorted(COMMANDS)}"
+            f"unknown command {command!r} in spec field 'command'; known: {sorted(cli.COMMANDS)}"
         )
-    top = build_parser(command)
+    top = cli.build_parser(command)
     sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
     if command not in sub.choices:
         raise ValueError(
             f"command {command!r} is not available in this checkout (its module "
-            f"{COMMANDS[command][0]} is missing)"
+            f"{cli.COMMANDS[command][0]} is missing)"
         )
     p = sub.choices[command]
     p.error = _raise  # one-line ValueError instead of printing usage and exiting
@@ -81,6 +81,4 @@ def command_check(command: str):
     None."""
     import importlib
 
-    from osnerf.cli import COMMANDS
-
-    return getattr(importlib.import_module(COMMANDS[command][0]), "check_args", None)
+    return getattr(importlib.import_module(cli.COMMANDS[command][0]), "check_args", None)

@@ -24,6 +24,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from osnerf import cli
+from osnerf.provenance import git_commit
 from osnerf.sweeps.executors import Outcome, Task, get_executor
 from osnerf.sweeps.metrics import channel_params, metric_rule
 from osnerf.sweeps.spec import Point, SweepSpec, command_options, command_parser, expand, point_key
@@ -165,15 +167,13 @@ class _Sweep:
 
 
 def _tasks(run: _Sweep, todo: list[Point]) -> list[tuple[str, Task]]:
-    from osnerf.cli import COMMANDS
-
     threads = max(1, run.cpus // run.workers) if run.executor == "local" else None  # Ray: its own
     return [
         (
             p.key,
             {
                 "command": run.spec.command,
-                "module": COMMANDS[run.spec.command][0],
+                "module": cli.COMMANDS[run.spec.command][0],
                 "argv": list(p.argv),
                 "out_kind": run.rule.out_kind,
                 "json_name": run.rule.json_name,
@@ -225,8 +225,6 @@ def _run_points(run: _Sweep, points, out, ray_address, ray_runtime_env) -> Sweep
 
 def _record(run: _Sweep, p: Point, outcome: Outcome, out, errors, summary, bar) -> None:
     """Append one finished point to ``out`` (or its failure to ``errors``)."""
-    from osnerf.provenance import git_commit
-
     spec, rule = run.spec, run.rule
     if outcome["ok"]:
         result = outcome["result"]

@@ -15,10 +15,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from common import json_default
+
 
 def _dumps(record: dict[str, Any]) -> str:
-    from common import json_default
-
     return json.dumps(record, default=json_default, allow_nan=True, separators=(",", ":"))
 
 

@@ -14,13 +14,18 @@ from pathlib import Path
 from typing import Any
 
 from common import Registry
+from osnerf.scenes import SCENES
+from osnerf.schemes import parse_schemes
+from phy import THEORY_CHANNELS
+from phy.digital import MCS_TABLE
+from renderer import RENDERERS
+from semcodec import LINK_SCHEMES, TrainConfig, codec_names, parse_codec_spec
+from semcodec.links import eval_channels
 
 
 def _codec(command: str, value: str) -> None:
     """``NAME``, ``NAME:CHECKPOINT`` of ``semcodec.CODECS`` (the checkpoint a file), or a
     checkpoint path."""
-    from semcodec import codec_names, parse_codec_spec
-
     names = codec_names()
     if ":" not in value and value not in names:
         if Path(value).is_file():
@@ -46,14 +51,10 @@ def _channel(command: str, value: str) -> None:
     if command == "run":
         from osnerf.run.config import RUN_CHANNELS as known
     elif command == "eval-codec":
-        from semcodec.links import eval_channels
-
         known = eval_channels()
     elif command == "ber":
-        from phy import THEORY_CHANNELS as known
+        known = THEORY_CHANNELS
     elif command == "train-codec":
-        from semcodec import TrainConfig
-
         TrainConfig(channel=value)
     if known and value not in known:
         raise ValueError(f"unknown channel {value!r}; known: {', '.join(known)}")
@@ -62,31 +63,22 @@ def _channel(command: str, value: str) -> None:
 def _schemes(command: str, value: str) -> None:
     """eval-codec's schemes (``semcodec.LINK_SCHEMES``); others parse theirs themselves."""
     if command == "eval-codec":
-        from osnerf.schemes import parse_schemes
-        from semcodec import LINK_SCHEMES
-
         parse_schemes(value, LINK_SCHEMES)
 
 
 def _mcs(command: str, value: str) -> None:
     """An MCS of ``phy.digital.MCS_TABLE``."""
-    from phy.digital import MCS_TABLE
-
     if value not in MCS_TABLE:
         raise ValueError(f"unknown MCS {value!r}; known: {', '.join(MCS_TABLE)}")
 
 
 def _renderer(command: str, value: str) -> None:
     """A renderer of ``renderer.RENDERERS``."""
-    from renderer import RENDERERS
-
     RENDERERS[value]
 
 
 def _scene(command: str, value: str) -> None:
     """A scene of ``osnerf.scenes.SCENES``."""
-    from osnerf.scenes import SCENES
-
     SCENES[value]
 
 

@@ -9,11 +9,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from phy._llvm import require_llvm
+
 
 def import_rt():
     """Import ``sionna.rt`` after checking that Dr.Jit has an LLVM (RuntimeError if not)."""
-    from phy._llvm import require_llvm
-
     require_llvm()
     import sionna.rt as rt
 

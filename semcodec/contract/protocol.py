@@ -67,6 +67,8 @@ from typing import Protocol, runtime_checkable
 import torch
 from torch import Tensor, nn
 
+from phy import validate_snr_db
+
 MIN_SIDE_PX = 8  # the smallest image side a codec must accept
 FOCUS_FILL = 0.5  # what the receiver shows outside the focus box
 SIDE_BITS_PER_SYMBOL = 0.5  # side information at QPSK with a rate-1/4 code
@@ -425,8 +427,6 @@ def symbol_budget(cbr: float, height: int, width: int) -> int:
 def snr_per_image(snr_db, batch: int) -> Tensor:
     """``snr_db`` (float or [batch]) as [batch] float32 dB; ValueError for another count or a
     value outside ``phy``'s SNR range."""
-    from phy import validate_snr_db
-
     validate_snr_db(snr_db)
     s = torch.as_tensor(snr_db, dtype=torch.float32).flatten()
     if s.numel() not in (1, batch):

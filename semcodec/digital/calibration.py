@@ -58,6 +58,8 @@ import numpy as np
 
 from common import psnr, write_text
 from phy import OFDM_CHANNELS
+from phy.digital import MCS_TABLE, MOTHER_RATE, codeword_layout, get_mcs, payload_capacity_bits
+from semcodec.digital.image_codecs import IMAGE_CODECS, usable_scales
 from semcodec.digital.measurement import (
     QUALITIES,
     kodak_images,
@@ -104,8 +106,6 @@ def measured_lengths(channel: str, mcs: str) -> list[int]:
     """Codeword lengths E measured for ``mcs`` on ``channel``: :data:`MEASURED`'s, or below
     rate 1/5 the lengths whose mother codewords have that many bits (the same information
     bits per codeword as at rate 1/5)."""
-    from phy.digital import MOTHER_RATE, get_mcs
-
     m = get_mcs(mcs)
     scale = max(MOTHER_RATE / m.code_rate, 1)
     out = []
@@ -221,8 +221,6 @@ class DigitalCalibration:
     def _image_bler(
         self, channel: str, mcs: str, snr_db: float, num_symbols: int, snr_error_db: float
     ) -> float:
-        from phy.digital import codeword_layout
-
         self.source(channel)
         if snr_error_db < 0:
             raise ValueError(f"snr_error_db must be >= 0, got {snr_error_db}")
@@ -289,8 +287,6 @@ class DigitalCalibration:
         table, at least one byte each. ``snr_error_db``: the estimate's error (BLER averaged
         over it, :meth:`image_bler`).
         """
-        from phy.digital import payload_capacity_bits
-
         if not self.fits(mcs, num_symbols, image_codec, min_bytes):
             return self.lost_psnr_db
         cap = payload_capacity_bits(int(num_symbols), mcs)
@@ -308,8 +304,6 @@ class DigitalCalibration:
         return bool(self._fitting(mcs, num_symbols, image_codec, min_bytes))
 
     def _fitting(self, mcs, num_symbols, image_codec, min_bytes) -> list[int]:
-        from phy.digital import payload_capacity_bits
-
         if min_bytes is None:
             smallest = {int(s): 1 for s in self.rd.get(image_codec, {1: None})}
         elif isinstance(min_bytes, Mapping):
@@ -351,8 +345,6 @@ class DigitalCalibration:
         ``snr_db`` is what the transmitter believes; ``snr_error_db`` the standard deviation
         of its belief's error (0: it plans as if it were exact). Answers are memoised per
         argument set."""
-        from phy.digital import MCS_TABLE
-
         smallest = tuple(sorted(min_bytes.items())) if isinstance(min_bytes, Mapping) else min_bytes
         key = (
             channel,
@@ -386,8 +378,6 @@ def load_calibration(path: str | None = None) -> DigitalCalibration:
 def main(argv: list[str] | None = None) -> int:
     """Recompute the table: ``python -m semcodec.digital.calibration --out PATH``."""
     import torch
-
-    from phy.digital import MCS_TABLE
 
     p = argparse.ArgumentParser(prog="python -m semcodec.digital.calibration")
     p.add_argument("--out", required=True, help=f"JSON path (the shipped one: {CALIBRATION_PATH})")
@@ -426,8 +416,6 @@ def main(argv: list[str] | None = None) -> int:
                     )
                     write_text(out, json.dumps(doc, indent=1))
     if args.part in ("all", "rd"):
-        from semcodec.digital.image_codecs import IMAGE_CODECS, usable_scales
-
         imgs = kodak_images(Path(args.kodak), args.max_images)
         scales = usable_scales(*imgs[0].shape[1:])
         doc["rate_distortion"] = {

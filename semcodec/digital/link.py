@@ -26,8 +26,11 @@ import torch
 from torch import Tensor
 
 from common import psnr
+from phy import assumed_channel, channel_kind
+from phy.digital import MCS_TABLE, get_mcs, payload_capacity_bits, transmit_bytes
 from semcodec.contract.protocol import check_images
 from semcodec.contract.transmit import TransmitResult, check_num_symbols, grey
+from semcodec.digital.calibration import load_calibration
 from semcodec.digital.image_codecs import (
     IMAGE_CODECS,
     RESAMPLE_FILTER,
@@ -110,8 +113,6 @@ def _lost(img: Tensor, mcs, why: str, failed: int = 0) -> tuple[Tensor, bool, di
 def _send_digital(img: Tensor, mcs: str, link, snr_db, n: int, image_codec: str, seed: int):
     """One image at one MCS, one shot. Returns (received [3,H,W], ok, info); ``info["lost"]``
     is None, ``"budget"`` (nothing fitted) or ``"channel"`` (a payload codeword failed)."""
-    from phy.digital import payload_capacity_bits, transmit_bytes
-
     budget = payload_capacity_bits(n, mcs) // 8
     data, q, scale = encode_scaled_to_budget(img, budget, image_codec)
     if data is None:
@@ -257,7 +258,6 @@ def _calibration_of(kind: str | None):
     """(the calibration table, how ``kind`` is calibrated), or (None, None) without a kind."""
     if kind is None:
         return None, None
-    from semcodec.digital.calibration import load_calibration
 
     table = load_calibration()
     return table, table.source(kind)
@@ -293,8 +293,6 @@ def _send_image(
     ``snr_error_db``); or the genie's search from that choice (from the lowest MCS without a
     ``kind``). Returns :func:`_send_digital`'s (received, ok, info), with
     ``info["expected_psnr"]`` and ``info["forecast_loss"]`` where the table chose."""
-    from phy.digital import MCS_TABLE
-
     if mode not in MCS_MODES:
         return _send_digital(img, mode, link, snr_db, n, image_codec, seed)
     names = list(MCS_TABLE)
@@ -322,8 +320,6 @@ def _send_image(
 def _mcs_mode(mcs: str) -> str:
     """``"auto"``, ``"genie"`` (also for its old name ``"envelope"``) or a fixed MCS name;
     KeyError listing the choices for anything else."""
-    from phy.digital import MCS_TABLE, get_mcs
-
     mode = GENIE if mcs == ENVELOPE else mcs
     if mode not in MCS_MODES:
         try:
@@ -338,8 +334,6 @@ def _calibrated_channel(mode: str, link, channel: str | None) -> str | None:
     """The calibration table's channel kind the MCS is chosen for: ``"auto"`` needs one
     (KeyError when the link does not tell), the genie uses it when there is one (without it
     the genie searches from the lowest MCS), a fixed MCS none."""
-    from phy import assumed_channel, channel_kind
-
     if mode == AUTO:
         return assumed_channel(channel or channel_kind(link))
     if mode == GENIE:

@@ -9,7 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+import phy
 from common import psnr, read_image
+from phy.digital import MCS_TABLE, codeword_errors
+from semcodec.digital.image_codecs import decode_scaled, downscale, encode_image
 
 
 def q_function(x):
@@ -39,8 +42,6 @@ def fit_probit(snr_db, errors, trials) -> tuple[float, float]:
 
 
 def _link(channel: str):
-    import phy
-
     return phy.FlatLink(phy.make_channel(channel), csi="perfect", equalizer="zf")
 
 
@@ -52,8 +53,6 @@ def measure_curve(
     Bisection for the 50 % point (40 codewords a step), then points around it (80 each).
     """
     import torch
-
-    from phy.digital import MCS_TABLE, codeword_errors
 
     m = MCS_TABLE[mcs]
     cap_db = 10 * math.log10(2.0**m.spectral_efficiency - 1.0)
@@ -87,8 +86,6 @@ def measure_rate_distortion(images, image_codec: str, qualities, scale: int = 1)
     """Mean bpp (wire bytes: container stripped, per pixel of the full image) and mean PSNR
     (upscaled against the full image) per quality over ``images`` ([3, H, W] float tensors)
     sent downscaled by ``scale``."""
-    from semcodec.digital.image_codecs import decode_scaled, downscale, encode_image
-
     out = []
     for q in qualities:
         bpps, psnrs = [], []

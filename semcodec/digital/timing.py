@@ -7,6 +7,9 @@ import torch
 from torch import Tensor
 
 from common import median_seconds
+from phy.digital import decode_symbols, encode_bytes, payload_capacity_bits
+from semcodec.digital import image_codecs
+from semcodec.digital.calibration import load_calibration
 
 
 def digital_timing(image: Tensor, snr_db: float, num_symbols: int, repeats: int = 5) -> dict:
@@ -22,10 +25,6 @@ def digital_timing(image: Tensor, snr_db: float, num_symbols: int, repeats: int 
         "ldpc_encode_seconds", "ldpc_decode_seconds" (CRC + rate matching + belief
         propagation on the file's codewords at ``snr_db``)}.
     """
-    from phy.digital import decode_symbols, encode_bytes, payload_capacity_bits
-    from semcodec.digital import image_codecs
-    from semcodec.digital.calibration import load_calibration
-
     img = image[0]
     smallest = image_codecs.smallest_files(img, "avif")
     mcs, _ = load_calibration().choose_mcs(

@@ -22,6 +22,7 @@ import torch
 from torch import Tensor
 
 from common import Registry
+from phy import channel_link, channel_record
 from semcodec.jscc.model import lmmse_input, side_info
 
 TRAIN_CHANNELS = Registry[tuple[str, str]](
@@ -51,8 +52,6 @@ def _link(channel: str) -> torch.nn.Module:
     """The phy link (channel + unbiased one-tap receiver) of a training channel, built once."""
     name, csi = TRAIN_CHANNELS[channel]
     if (name, csi) not in _LINKS:
-        from phy import channel_link
-
         if csi == "ofdm":
             kwargs = {"model": "A", "delay_spread_s": 100e-9} if name == "tdl" else {}
             link = channel_link(name, ofdm=True, csi="ls", **kwargs)
@@ -66,8 +65,6 @@ def train_channel_records(spec: str) -> dict[str, dict]:
     """What a model card records of each channel of the mixture ``spec``: ``phy``'s record
     of its link (``phy.channel_record``; TDL: profile, delay spread and the pinned TR 38.901
     ``spec_version``)."""
-    from phy import channel_record
-
     return {name: channel_record(_link(name)) for name in parse_train_channels(spec)}
 
 

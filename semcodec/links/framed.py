@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from common import psnr
+from phy.digital import decode_symbols, encode_bytes, get_mcs, payload_capacity_bits
 from semcodec.contract.box_focus import decode_received, encode_with_focus
 from semcodec.contract.protocol import symbol_budget
 from semcodec.digital.image_codecs import SCALES, downscale, encode_image
@@ -123,16 +124,12 @@ class FramedScheme:
 
 def frame_payload_bytes(symbols_per_frame: int, mcs: str) -> int:
     """Payload bytes one digital frame carries (CRC and LDPC included in the frame)."""
-    from phy.digital import get_mcs, payload_capacity_bits
-
     return payload_capacity_bits(symbols_per_frame, get_mcs(mcs)) // 8
 
 
 def _digital_transmit(images, settings: FramedSettings):
     """Per image: its codec bytes in frame-sized chunks, one LDPC block each. The state is
     each image's chunk sizes in bytes (the receiver's side information)."""
-    from phy.digital import encode_bytes, get_mcs
-
     mcs = get_mcs(settings.mcs)
     spf = settings.symbols_per_frame
     per_frame = frame_payload_bytes(spf, settings.mcs)
@@ -151,8 +148,6 @@ def _digital_transmit(images, settings: FramedSettings):
 
 def _digital_frames(block: ReceivedBlock, sizes: list[int], settings: FramedSettings):
     """Decode each frame of one block: (the payload bytes of those that passed, CRC verdicts)."""
-    from phy.digital import decode_symbols
-
     spf = settings.symbols_per_frame
     payloads, crc_ok = [], []
     for i, num_bytes in enumerate(sizes):

@@ -21,8 +21,9 @@ from pathlib import Path
 
 import torch
 
+import phy
 from common import Registry, list_images, read_image
-from phy import num_symbols_for_cbr
+from phy import channel_link, num_symbols_for_cbr, receiver_description
 from semcodec.contract.box_focus import encode_with_focus
 from semcodec.contract.protocol import MIN_SIDE_PX
 from semcodec.contract.transmit import TransmitResult
@@ -38,8 +39,6 @@ DEFAULT_FIXED_MCS = "16qam-1/2"
 
 def eval_channels() -> list[str]:
     """The channels ``eval-codec`` accepts: every name of ``phy.CHANNELS``."""
-    import phy
-
     return list(phy.CHANNELS)
 
 
@@ -68,16 +67,12 @@ class EvalContext:
     def link(self):
         """The ``phy`` link of ``channel`` (built once, ``phy.channel_link``)."""
         if "zf" not in self.links:
-            from phy import channel_link
-
             self.links["zf"] = channel_link(self.channel)
         return self.links["zf"]
 
     @property
     def receiver(self) -> str:
         """The receiver in words (for result files)."""
-        from phy import receiver_description
-
         return receiver_description(self.channel)
 
 
