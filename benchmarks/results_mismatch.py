@@ -9,9 +9,25 @@ from pathlib import Path
 from benchmarks.results_common import RESULTS, commit_of, load_json, markdown_table
 
 
+PARTS = ("panel", "staircase", "estimate", "forecast", "cbr")
+
+
 def load(folder: Path = RESULTS) -> dict | None:
+    """``mismatch.json`` with ``part_commits``: each part's commits, read from the eval-codec
+    files beside it (``mismatch_<part>*.json``; a part may be reused from an older commit)."""
     path = folder / "mismatch.json"
-    return load_json(path) if path.is_file() else None
+    if not path.is_file():
+        return None
+    doc = load_json(path)
+    doc["part_commits"] = {
+        part: sorted({commit_of(load_json(f)) for f in folder.glob(f"mismatch_{part}*.json")})
+        for part in PARTS
+    }
+    return doc
+
+
+def _commits(doc: dict, part: str) -> str:
+    return ", ".join(doc.get("part_commits", {}).get(part) or [commit_of(doc)])
 
 
 def _psnr(r: dict | None) -> str:
@@ -42,7 +58,7 @@ def headline_rows(doc: dict | None) -> list[list[str]]:
                 _psnr(by["jscc", snr]),
                 _psnr(by["digital", snr]),
                 "ideal " + _psnr(by.get(("ideal", snr))),
-                commit_of(doc),
+                _commits(doc, "panel"),
             ]
         )
     return rows
@@ -69,11 +85,10 @@ def section(doc: dict | None, folder: Path = RESULTS) -> list[str]:
         )
         if rows
     }
-    told = ", ".join(f"{p} {'/'.join(map(str, n))}" for p, n in counts.items())
+    told = ", ".join(f"{p} {'/'.join(map(str, n))} ({_commits(doc, p)})" for p, n in counts.items())
     lines.append(
-        f"`python -m benchmarks mismatch`, Kodak images per part: {told}; CBR 1/16 except in the "
-        f"CBR part, commit "
-        f"{commit_of(doc)}. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
+        f"`python -m benchmarks mismatch`, Kodak images per part (commit): {told}; CBR 1/16 "
+        "except in the CBR part. Mean of per-image PSNR (dB); `lost`: images that did not arrive."
     )
     lines.append("")
     if "panel" in res:
