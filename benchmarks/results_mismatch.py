@@ -8,7 +8,6 @@ from pathlib import Path
 
 from benchmarks.results_common import RESULTS, commit_of, load_json, markdown_table
 
-
 PARTS = ("panel", "staircase", "estimate", "forecast", "cbr")
 
 
