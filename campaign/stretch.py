@@ -22,7 +22,7 @@ import numpy as np
 
 from campaign.store import Campaign, images_sha256, next_lrs, now_utc
 from campaign.worker import train_one
-from common import list_images, read_image
+from common import list_images, read_image, to_chw
 from osnerf import git_commit
 from semcodec import make_codec
 from semcodec.training import validate
@@ -79,14 +79,13 @@ def load_validation(folder: Path, count: int, side_px: int):
     Returns:
         [count, 3, side, side] float32 in [0, 1].
     """
-    import torch
 
     imgs = [read_image(p) for p in list_images(folder, "--val")[:count]]
     side = min(side_px, min(min(im.shape[:2]) for im in imgs)) // 4 * 4
     if side < 16:
         raise ValueError(f"--val: images of {folder} are under 16 px a side")
     arr = np.stack([np.round(im[:side, :side] * 255.0) / 255.0 for im in imgs])
-    return torch.from_numpy(arr.astype(np.float32)).permute(0, 3, 1, 2).contiguous()
+    return to_chw(arr.astype(np.float32))
 
 
 def score(path: Path, validation: dict, images, device: str) -> tuple[dict, float]:

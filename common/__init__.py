@@ -35,7 +35,14 @@ from common.files import (
     write_text,
     write_torch,
 )
-from common.images import IMAGE_SUFFIXES, list_images, load_square_images, read_image
+from common.images import (
+    IMAGE_SUFFIXES,
+    list_images,
+    load_square_images,
+    read_image,
+    to_chw,
+    to_hwc,
+)
 from common.jit import lazy_njit
 from common.memory import trim_heap, tune_malloc
 from common.plugins import load_plugins
@@ -69,6 +76,8 @@ __all__ = [
     "path_kind",
     "psnr",
     "read_image",
+    "to_chw",
+    "to_hwc",
     "to_json",
     "trim_heap",
     "tune_malloc",

@@ -111,6 +111,21 @@ def read_image(path: str | os.PathLike, channels: int | None = 3) -> np.ndarray:
     return np.ascontiguousarray(_orient(out, orientation))
 
 
+def to_chw(images: np.ndarray):
+    """Images as the codecs and fields take them: ``[..., height, width, channels]`` (this
+    module's layout) -> a contiguous ``[..., channels, height, width]`` torch tensor of the
+    same dtype and values."""
+    import torch
+
+    return torch.from_numpy(np.ascontiguousarray(images)).movedim(-1, -3).contiguous()
+
+
+def to_hwc(images) -> np.ndarray:
+    """The inverse of :func:`to_chw`: a ``[..., channels, height, width]`` tensor -> a
+    contiguous ``[..., height, width, channels]`` numpy array of the same dtype and values."""
+    return np.ascontiguousarray(images.detach().movedim(-3, -1).cpu().numpy())
+
+
 def list_images(path: str | os.PathLike, what: str = "images") -> list[Path]:
     """The image files that ``path`` names: itself when it is an image file, else the files of
     :data:`IMAGE_SUFFIXES` in that folder, sorted by name (not recursive).

@@ -20,7 +20,7 @@ import torch
 
 import renderer
 import semcodec
-from common import write_png
+from common import to_hwc, write_png
 from osnerf.collect import Collection, Demand
 from osnerf.plan import RunPlan
 from osnerf.provenance import codec_record, open_codec
@@ -164,7 +164,7 @@ def reconstruct_and_score(
         },
     }
     sent = col.images if scheme.object_routed else views.images[ids]
-    received = tx.images.permute(0, 2, 3, 1).numpy()
+    received = to_hwc(tx.images)
     report = SchemeReport(
         symbols_sent=n_sym,
         views_sent=len(ids),
@@ -242,7 +242,7 @@ def run_pipeline(
             results[name], rec = reconstruct_and_score(
                 scheme, tx, ctx, budget, prep, views, col, cache, out_dir
             )
-            received[name], renders[name] = tx.images.permute(0, 2, 3, 1).numpy(), rec.rgb
+            received[name], renders[name] = to_hwc(tx.images), rec.rgb
             _log(
                 f"{name}: psnr_object {results[name].psnr_object}, symbols "
                 f"{results[name].symbols_sent}"

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from common import psnr
+from common import psnr, to_chw
 from phy import assumed_channel, channel_kind
 from phy.digital import MCS_TABLE, get_mcs, payload_capacity_bits, transmit_bytes
 from semcodec.contract.protocol import check_images
@@ -51,7 +51,7 @@ def decode_or_grey(
         a = decode_scaled(data, image_codec, shape[1], shape[2], scale)
     except ValueError:
         return grey(shape), False
-    return torch.from_numpy(a.astype(np.float32) / 255.0).permute(2, 0, 1), True
+    return to_chw(a.astype(np.float32) / 255.0), True
 
 
 def _check_codec(image_codec: str) -> str:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import phy
-from common import psnr, read_image
+from common import psnr, read_image, to_chw, to_hwc
 from phy.digital import MCS_TABLE, codeword_errors
 from semcodec.digital.image_codecs import decode_scaled, downscale, encode_image
 
@@ -93,7 +93,7 @@ def measure_rate_distortion(images, image_codec: str, qualities, scale: int = 1)
             data = encode_image(downscale(img, scale), image_codec, q)
             h, w = img.shape[1:]
             rec = decode_scaled(data, image_codec, h, w, scale).astype(np.float64) / 255.0
-            ref = np.round(img.permute(1, 2, 0).numpy() * 255) / 255.0
+            ref = np.round(to_hwc(img) * 255) / 255.0
             bpps.append(8 * len(data) / (h * w))
             psnrs.append(psnr(rec, ref))
         out.append(
@@ -107,10 +107,9 @@ def measure_rate_distortion(images, image_codec: str, qualities, scale: int = 1)
 
 
 def kodak_images(folder: Path, limit: int | None):
-    import torch
 
     paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".png")[:limit]
-    return [torch.from_numpy(read_image(p)).permute(2, 0, 1) for p in paths]
+    return [to_chw(read_image(p)) for p in paths]
 
 
 QUALITIES = {

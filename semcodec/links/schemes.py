@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 import phy
-from common import Registry, list_images, read_image
+from common import Registry, list_images, read_image, to_chw, to_hwc
 from phy import channel_link, num_symbols_for_cbr, receiver_description
 from semcodec.contract.box_focus import encode_with_focus
 from semcodec.contract.protocol import MIN_SIDE_PX
@@ -296,7 +296,7 @@ def load_image_folder(folder: str | Path) -> tuple[list[str], list[torch.Tensor]
                 f"{EVAL_MIN_SIDE_PX}x{EVAL_MIN_SIDE_PX} (SSIM's Gaussian window)"
             )
         names.append(p.name)
-        images.append(torch.from_numpy(a).permute(2, 0, 1)[None].contiguous())
+        images.append(to_chw(a[None]))
     return names, images
 
 
@@ -310,8 +310,8 @@ def ssim(x: torch.Tensor, y: torch.Tensor) -> float:
     """SSIM (scikit-image, Gaussian weights as Wang et al.) of one image pair [1, 3, H, W]."""
     from skimage.metrics import structural_similarity
 
-    a = x[0].clamp(0, 1).permute(1, 2, 0).numpy()
-    b = y[0].permute(1, 2, 0).numpy()
+    a = to_hwc(x[0].clamp(0, 1))
+    b = to_hwc(y[0])
     return float(
         structural_similarity(
             a,

@@ -11,16 +11,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from common import list_images, read_image
+from common import list_images, read_image, to_chw
 
 
 def load_uint8_images(paths: list[Path]) -> list[torch.Tensor]:
     """RGB images (:func:`common.read_image`: 16-bit, palette, EXIF orientation) as
     [3, height, width] uint8 tensors."""
-    return [
-        torch.from_numpy(np.round(read_image(p) * 255.0).astype(np.uint8)).permute(2, 0, 1)
-        for p in paths
-    ]
+    return [to_chw(np.round(read_image(p) * 255.0).astype(np.uint8)) for p in paths]
 
 
 def files_sha256(paths: list[Path]) -> str:

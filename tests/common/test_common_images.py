@@ -56,3 +56,21 @@ def test_a_corrupt_file_is_named(tmp_path):
     (tmp_path / "bad.png").write_bytes(b"\x89PNG not really")
     with pytest.raises(ValueError, match="bad.png: not a readable image"):
         read_image(tmp_path / "bad.png")
+
+
+def test_to_chw_and_back_moves_only_the_channel_axis():
+    import torch
+
+    from common import to_chw, to_hwc
+
+    rng = np.random.default_rng(0)
+    hwc = rng.random((2, 5, 7, 3), dtype=np.float32)
+    chw = to_chw(hwc)
+    assert chw.shape == (2, 3, 5, 7) and chw.dtype == torch.float32 and chw.is_contiguous()
+    assert chw[1, 2, 4, 6] == hwc[1, 4, 6, 2] and chw[0, 0, 3, 1] == hwc[0, 3, 1, 0]
+    back = to_hwc(chw)
+    assert back.flags.c_contiguous and np.array_equal(back, hwc)
+    one = (rng.random((4, 6, 3)) * 255).astype(np.uint8)  # one image, any dtype
+    assert to_chw(one).shape == (3, 4, 6) and to_chw(one).dtype == torch.uint8
+    assert np.array_equal(to_hwc(to_chw(one)), one)
+    assert np.array_equal(to_hwc(chw[:, :, ::2].transpose(-1, -2)), hwc[:, ::2].swapaxes(1, 2))
