@@ -25,6 +25,7 @@ from hil.pluto.ad9361 import GAIN_CONTROL_MODES, RX_FULL_SCALE, TX_FULL_SCALE, i
 from hil.pluto.context import air_setting
 from hil.pluto.iio_access import (
     air_attribute,
+    destroy_buffers,
     find_plutos,
     iio_error_to_hil,
     import_iio,
@@ -186,11 +187,7 @@ class Pluto:
         if self._closed:
             return
         self._closed = True
-        for stop in (self._sdr.tx_destroy_buffer, self._sdr.rx_destroy_buffer):
-            try:
-                stop()
-            except Exception:  # noqa: BLE001 - closing is best effort
-                pass
+        destroy_buffers(self._sdr.tx_destroy_buffer, self._sdr.rx_destroy_buffer)
         sdr, self._sdr = self._sdr, None
         vars(sdr).clear()  # pyadi-iio's devices hold the context: it is destroyed now
 
@@ -373,10 +370,7 @@ class Pluto:
             raise err from e
         finally:
             self._receiving = False
-            try:
-                sdr.rx_destroy_buffer()
-            except Exception:  # noqa: BLE001 - the connection may be gone already
-                pass
+            destroy_buffers(sdr.rx_destroy_buffer)
         iq = np.concatenate(parts)[:num_samples]
         self.last_stats = StreamStats("rx", num_samples)
         if save_to is not None:

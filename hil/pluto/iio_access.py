@@ -161,6 +161,16 @@ def _order_teardown(iio) -> None:
     iio._osnerf_ordered_teardown = True
 
 
+def destroy_buffers(*destroys) -> None:
+    """Call pyadi-iio's ``tx_destroy_buffer`` / ``rx_destroy_buffer`` methods given, each
+    whatever the others do: stopping is best effort, the connection may be gone already."""
+    for destroy in destroys:
+        try:
+            destroy()
+        except Exception:  # noqa: BLE001 - libiio raises OSError, pyadi Exception
+            pass
+
+
 def release_frames(exc: BaseException) -> None:
     """Drop the locals of the frames in ``exc``'s traceback: pyadi-iio's frames hold its
     ``iio.Buffer``, which must be destroyed before its context (libiio frees the buffer

@@ -18,7 +18,12 @@ import numpy as np
 
 from hil.hackrf.stream import StreamStats
 from hil.pluto.ad9361 import RX_FULL_SCALE
-from hil.pluto.iio_access import receive_error, release_frames, rx_overrun_counts
+from hil.pluto.iio_access import (
+    destroy_buffers,
+    receive_error,
+    release_frames,
+    rx_overrun_counts,
+)
 
 if TYPE_CHECKING:
     from hil.pluto.driver import Pluto
@@ -47,9 +52,6 @@ def rx_stream(board: Pluto, block_samples: int) -> Generator[np.ndarray, None, N
         raise receive_error(e, time.monotonic() - asked, board.timeout_ms) from e
     finally:
         board._receiving = False
-        try:
-            sdr.rx_destroy_buffer()
-        except Exception:  # noqa: BLE001 - the connection may be gone already
-            pass
+        destroy_buffers(sdr.rx_destroy_buffer)
         board.emulated_rx_loss = rx_overrun_counts(sdr)
         board.last_stats = StreamStats("rx", delivered)
